@@ -1,0 +1,108 @@
+// physics layer — the fixed description of one four-omniwheel platform (seed 002, ch. 4).
+//
+// Plain data, the mjModel of our own stack: everything here is fixed for a run and comes
+// from one parameter file (models/platform/omni4.yaml) that scenarios may override key by
+// key. Nothing in this header changes while a run steps; changing state lives elsewhere
+// (PlatformSim for the physics, the drive-chain structs for the electronics).
+// All quantities are SI unless the field name says otherwise.
+#pragma once
+
+#include <array>
+#include <string>
+
+namespace omnitwin::physics {
+
+// Which MJCF the generator produces from the parameters.
+enum class ModelVariant {
+  rollers,  // passive capsule rollers on hinges: omni motion from contact alone (reference)
+  capsule,  // one capsule per wheel + anisotropic-friction floor pair: cheap, for sweeps
+};
+
+struct GeometryParams {
+  double L = 0.25;                                 // wheel-to-centre distance [m]
+  double r = 0.05;                                 // wheel (outer roller envelope) radius [m]
+  std::array<double, 3> chassis_size{0.30, 0.30, 0.08};  // full box extents [m]
+  double chassis_mass = 12.0;                      // [kg]
+  double hub_mass = 0.25;                          // per wheel [kg]
+  double wheel_width = 0.04;                       // hub visual width [m]
+};
+
+struct RollerParams {
+  int rows = 2;               // roller rows per wheel
+  int per_row = 6;            // rollers in one row
+  double row_offset = 0.011;  // ± offset of the rows along the axle [m]
+  double row_phase_deg = 15;  // second row turned by this [deg]
+  double wheel_phase_deg = 3.75;  // extra phase from wheel to wheel so bumps do not line up
+  double radius = 0.015;      // capsule radius [m]; axis sits at r - radius from the hub
+  double coverage_deg = 15;   // capsule half-length = (r - radius)·tan(coverage/2)
+  double mass = 0.01;         // per roller [kg]
+  double damping = 1e-5;      // hinge damping [N·m·s/rad]
+};
+
+struct FloorParams {
+  double friction = 0.9;        // sliding friction floor–roller (rolling direction for capsule)
+  double lateral_friction = 0.001;  // capsule variant: friction along the axle
+  double slip_gain = 1.0;       // scales `friction` (wheel-slip studies: < 1 slips sooner)
+};
+
+// Motor with its analog velocity-mode servo amplifier, as seen at the wheel shaft.
+struct MotorParams {
+  double kv = 20.0;             // velocity-servo gain of the amplifier+motor [N·m·s/rad]
+  double torque_limit = 5.0;    // |torque| at the wheel [N·m]
+  double speed_limit = 20.0;    // |speed setpoint| the amplifier accepts [rad/s]
+  double armature = 0.02;       // reflected rotor inertia [kg·m²]
+  double damping = 0.0;         // viscous friction in the wheel bearing [N·m·s/rad]
+};
+
+// Analog velocity driver input: speed setpoint = gain·(V - zero_volts), clamped.
+struct DriverParams {
+  double zero_volts = 2.5;      // input voltage that means standstill [V]
+  double gain = 8.0;            // [rad/s per V]
+};
+
+// 12-bit DA (AD7541 behind a TLC2274 buffer): V = D/4096 · vref, eq. 4-8.
+struct DacParams {
+  int bits = 12;
+  double vref = 5.0;            // Out1 - Out2 [V]
+};
+
+// Incremental quadrature encoder on the wheel axle, decoded 4x by an HCTL-2032.
+struct EncoderParams {
+  int lines = 500;              // lines per revolution; counts per rev = 4·lines
+  int index_per_rev = 1;        // index pulses per revolution
+};
+
+// The slave's (8051) velocity loop: PI in counts per sample, output in DA codes.
+struct VelocityLoopParams {
+  double period = 0.010;        // nominal sample period of the slave timer [s]
+  double kp = 20.0;             // [DA codes per (count/sample)]
+  double ki = 4.0;              // [DA codes per (count/sample)·sample]
+  double kff = 1.0;             // feed-forward scale on the ideal code for the command [-]
+};
+
+struct SimParams {
+  double timestep = 0.001;      // MuJoCo step [s]
+  ModelVariant variant = ModelVariant::rollers;
+};
+
+struct PlatformParams {
+  std::string source = "built-in defaults";  // file the values came from (for messages)
+  GeometryParams geometry;
+  RollerParams rollers;
+  FloorParams floor;
+  MotorParams motor;
+  DriverParams driver;
+  DacParams dac;
+  EncoderParams encoder;
+  VelocityLoopParams velocity_loop;
+  SimParams sim;
+
+  int counts_per_rev() const { return 4 * encoder.lines; }
+};
+
+// Alpha_i of wheel i (0-based): 45°, 135°, 225°, 315° (seed 002, fig. 4-11) [rad].
+double wheel_alpha(int wheel);
+
+const char* to_string(ModelVariant v);
+
+}  // namespace omnitwin::physics
