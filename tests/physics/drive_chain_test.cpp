@@ -1,0 +1,232 @@
+// Tests physics/drive_chain: the thesis slave's electronics — 12-bit DA (eq. 4-8), the analog
+// driver's input mapping and clamp, the HCTL-2032 style counter (exact counts, direction,
+// 32-bit wrap, index latching, RST), and the 8051 velocity PI closed around a first-order
+// motor simulated here (tracking within a count, anti-windup after saturation).
+#include "physics/drive_chain.hpp"
+
+#include <gtest/gtest.h>
+
+#include <climits>
+#include <cmath>
+#include <numbers>
+
+namespace omnitwin::physics {
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+TEST(Dac, VoltsAtCodesZeroMidAndFull) {
+  const DacParams dac;  // 12 bits, 5 V
+  EXPECT_EQ(dac_max_code(dac), 4095);
+  EXPECT_DOUBLE_EQ(dac_volts(dac, 0), 0.0);
+  EXPECT_DOUBLE_EQ(dac_volts(dac, 2048), 2.5);
+  EXPECT_DOUBLE_EQ(dac_volts(dac, 4095), 4095.0 / 4096.0 * 5.0);
+}
+
+TEST(Dac, CodesAreClampedToTheConverterRange) {
+  const DacParams dac;
+  EXPECT_DOUBLE_EQ(dac_volts(dac, -7), 0.0);
+  EXPECT_DOUBLE_EQ(dac_volts(dac, 99999), dac_volts(dac, 4095));
+  EXPECT_EQ(dac_clamp_code(dac, -3.2), 0);
+  EXPECT_EQ(dac_clamp_code(dac, 5000.0), 4095);
+  EXPECT_EQ(dac_clamp_code(dac, 1000.6), 1001);
+}
+
+TEST(Driver, SetpointIsGainTimesOffsetVoltsAndClamped) {
+  const DriverParams drv;  // 2.5 V zero, 8 rad/s/V
+  MotorParams motor;
+  motor.speed_limit = 10.0;
+  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 2.5), 0.0);
+  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 3.0), 4.0);
+  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 2.0), -4.0);
+  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 5.0), 10.0);   // 20 rad/s asked, 10 allowed
+  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 0.0), -10.0);
+}
+
+TEST(Counter, ExactCountsForKnownAnglesBothDirections) {
+  const EncoderParams enc;  // 500 lines → 2000 counts/rev
+  QuadratureCounter c(enc);
+  EXPECT_EQ(c.counts_per_rev(), 2000);
+  const double step = kTwoPi / 2000.0;
+  c.update(10.5 * step);
+  EXPECT_EQ(c.count(), 10);
+  c.update(kTwoPi * 1.25);  // a revolution and a quarter
+  EXPECT_EQ(c.count(), 2500);
+  c.update(-0.5 * step);    // just below zero: floor gives −1
+  EXPECT_EQ(c.count(), -1);
+  c.update(-kTwoPi * 3.0 - 0.5 * step);
+  EXPECT_EQ(c.count(), -6001);
+  c.update(0.5 * step);
+  EXPECT_EQ(c.count(), 0);
+}
+
+TEST(Counter, CountsRelativeToTheResetPositionOnFixedEdges) {
+  const EncoderParams enc;
+  const double step = kTwoPi / 2000.0;
+  QuadratureCounter c(enc, 100.7 * step);  // starts mid-way between edges 100 and 101
+  EXPECT_EQ(c.count(), 0);
+  c.update(101.1 * step);  // one edge crossed
+  EXPECT_EQ(c.count(), 1);
+  c.update(99.9 * step);   // back over two edges
+  EXPECT_EQ(c.count(), -1);
+  c.reset();               // RST at edge 99
+  EXPECT_EQ(c.count(), 0);
+  c.update(105.5 * step);
+  EXPECT_EQ(c.count(), 6);
+}
+
+TEST(Counter, WrapsAsATwosComplement32BitCounter) {
+  const EncoderParams enc;
+  const double step = kTwoPi / 2000.0;
+  QuadratureCounter c(enc, 0.5 * step);
+  c.preset(INT32_MAX - 2);
+  int32_t before = c.count();
+  c.update(5.5 * step);  // five counts up over the top
+  EXPECT_EQ(c.count(), INT32_MIN + 2);
+  EXPECT_EQ(counter_delta(c.count(), before), 5);
+  before = c.count();
+  c.update(-2.5 * step);  // eight counts back down across the wrap
+  EXPECT_EQ(c.count(), INT32_MAX - 5);
+  EXPECT_EQ(counter_delta(c.count(), before), -8);
+}
+
+TEST(Counter, WrapsFromRealShaftTravelToo) {
+  // 2^31 counts = 1073741.824 revolutions of shaft angle.
+  const EncoderParams enc;
+  QuadratureCounter c(enc);
+  const double step = kTwoPi / 2000.0;
+  c.update((2147483647.0 + 0.5) * step);
+  EXPECT_EQ(c.count(), INT32_MAX);
+  c.update((2147483647.0 + 3.5) * step);
+  EXPECT_EQ(c.count(), INT32_MIN + 2);
+}
+
+TEST(Counter, IndexEventsLatchTheIndexPositionCountInEitherDirection) {
+  EncoderParams enc;
+  enc.index_per_rev = 2;  // index every half revolution
+  QuadratureCounter c(enc, 0.001);  // edge 0: counts equal shaft edges
+  EXPECT_FALSE(c.index_latched());
+  c.update(2.0);          // no index yet (next at π)
+  EXPECT_EQ(c.index_events(), 0);
+  c.update(3.5);          // over π: count of the index position is 1000
+  EXPECT_EQ(c.index_events(), 1);
+  ASSERT_TRUE(c.index_latched());
+  EXPECT_EQ(c.index_count(), 1000);
+  c.update(7.0);          // over 2π: index position count 2000
+  EXPECT_EQ(c.index_events(), 2);
+  EXPECT_EQ(c.index_count(), 2000);
+  c.update(3.0);          // back over 2π and π: the last one crossed is π
+  EXPECT_EQ(c.index_events(), 4);
+  EXPECT_EQ(c.index_count(), 1000);
+  c.update(-0.5);         // back over 0: count 0 at the index
+  EXPECT_EQ(c.index_events(), 5);
+  EXPECT_EQ(c.index_count(), 0);
+  c.reset();
+  EXPECT_EQ(c.index_events(), 0);
+  EXPECT_FALSE(c.index_latched());
+}
+
+TEST(Counter, IndexCountFollowsTheResetReference) {
+  const EncoderParams enc;  // one index per revolution at shaft angle 0, 2π, …
+  const double step = kTwoPi / 2000.0;
+  QuadratureCounter c(enc, 1500.2 * step);  // count 0 at edge 1500
+  c.update(2100.0 * step);
+  EXPECT_EQ(c.index_events(), 1);
+  EXPECT_EQ(c.index_count(), 500);  // edge 2000 reads 2000 − 1500
+}
+
+// First-order motor: speed follows the driver setpoint with time constant tau and a gain
+// error; the shaft angle integrates it. Stepped at 1 ms under the slave's 10 ms loop.
+struct MotorPlant {
+  double tau = 0.02, gain = 1.0, speed = 0.0, angle = 0.0;
+  void step(double setpoint, double dt) {
+    speed += (gain * setpoint - speed) * (dt / tau);
+    angle += speed * dt;
+  }
+};
+
+// Runs the drive chain for `samples` samples of command c; returns the chain.
+void run(WheelDriveChain& chain, MotorPlant& plant, double c, int samples, double period) {
+  for (int k = 0; k < samples; ++k) {
+    const double sp = chain.sample(plant.angle, c);
+    for (int i = 0; i < 10; ++i) {
+      plant.step(sp, period / 10.0);
+      chain.observe(plant.angle);
+    }
+  }
+}
+
+TEST(VelocityLoop, IdealCodeMapsCommandToTheMatchingDriverSpeed) {
+  const PlatformParams p;
+  const VelocityLoop loop(p.velocity_loop, p.dac, p.driver, p.counts_per_rev());
+  EXPECT_DOUBLE_EQ(loop.ideal_code(0.0), 2048.0);
+  const double c = 12.0;  // counts/sample
+  const double want = c * kTwoPi / p.counts_per_rev() / p.velocity_loop.period;
+  const double volts = loop.ideal_code(c) / 4096.0 * p.dac.vref;
+  EXPECT_NEAR(driver_setpoint(p.driver, p.motor, volts), want, 1e-12);
+}
+
+TEST(VelocityLoop, TracksTheCommandOnAFirstOrderMotorWithGainError) {
+  const PlatformParams p;
+  for (double c : {25.0, -13.0, 4.0}) {
+    WheelDriveChain chain(p);
+    MotorPlant plant;
+    plant.gain = 0.8;  // the integral must make up 20 % missing gain
+    run(chain, plant, c, 300, p.velocity_loop.period);
+    // After 3 s: every sample within one count, the mean on the command.
+    double sum = 0.0;
+    for (int k = 0; k < 100; ++k) {
+      run(chain, plant, c, 1, p.velocity_loop.period);
+      EXPECT_LE(std::abs(chain.last().delta_counts - c), 1.0) << "c=" << c << " k=" << k;
+      sum += chain.last().delta_counts;
+    }
+    EXPECT_NEAR(sum / 100.0, c, 0.05) << "c=" << c;
+    EXPECT_FALSE(chain.loop().saturated());
+  }
+}
+
+TEST(VelocityLoop, AntiWindupKeepsTheIntegralBoundedInSaturation) {
+  PlatformParams p;
+  p.motor.speed_limit = 100.0;  // let the DA be the limit
+  WheelDriveChain chain(p);
+  MotorPlant plant;
+  plant.gain = 0.5;  // the motor cannot reach 60 counts/sample even at full code
+  // Command beyond reach for 5 s: the output pins at the top code, integral stops growing.
+  run(chain, plant, 60.0, 500, p.velocity_loop.period);
+  EXPECT_EQ(chain.last().code, 4095);
+  EXPECT_TRUE(chain.loop().saturated());
+  const double i_sat = chain.loop().integral();
+  EXPECT_LT(i_sat, 4096.0);
+  run(chain, plant, 60.0, 100, p.velocity_loop.period);
+  EXPECT_DOUBLE_EQ(chain.loop().integral(), i_sat);
+  // Then a reachable command: the loop comes off the limit quickly and does not overshoot
+  // far below, settling within a count.
+  const double c = 10.0;
+  double min_delta = 1e9;
+  for (int k = 0; k < 200; ++k) {
+    run(chain, plant, c, 1, p.velocity_loop.period);
+    if (k > 5) min_delta = std::min<double>(min_delta, chain.last().delta_counts);
+    if (k >= 150) {
+      EXPECT_LE(std::abs(chain.last().delta_counts - c), 1.0) << k;
+    }
+  }
+  EXPECT_GT(min_delta, c - 6.0);
+}
+
+TEST(VelocityLoop, ResetClearsTheIntegralAndTheChainRestartsAtZeroSpeed) {
+  const PlatformParams p;
+  WheelDriveChain chain(p);
+  EXPECT_EQ(chain.last().code, 2048);
+  EXPECT_DOUBLE_EQ(chain.setpoint(), 0.0);
+  MotorPlant plant;
+  plant.gain = 0.8;
+  run(chain, plant, 20.0, 50, p.velocity_loop.period);
+  EXPECT_NE(chain.loop().integral(), 0.0);
+  chain.reset();
+  EXPECT_EQ(chain.loop().integral(), 0.0);
+  EXPECT_EQ(chain.counter().count(), 0);
+  EXPECT_DOUBLE_EQ(chain.setpoint(), 0.0);
+}
+
+}  // namespace
+}  // namespace omnitwin::physics
