@@ -31,7 +31,7 @@ struct RollerParams {
   int rows = 2;               // roller rows per wheel
   int per_row = 6;            // rollers in one row
   double row_offset = 0.011;  // ± offset of the rows along the axle [m]
-  double row_phase_deg = 15;  // second row turned by this [deg]
+  double row_phase_deg = 30;  // second row turned by this [deg] (half the roller pitch)
   double wheel_phase_deg = 3.75;  // extra phase from wheel to wheel so bumps do not line up
   double radius = 0.015;      // capsule radius [m]; axis sits at r - radius from the hub
   double coverage_deg = 15;   // capsule half-length = (r - radius)·tan(coverage/2)
