@@ -66,8 +66,8 @@ struct PathSpec {
 // The platform loop of the master (seed 002, fig. 4-13).
 struct ControllerSpec {
   double period = 0.010;                   // master sample period [s]
-  double kp[3] = {2.0, 2.0, 2.0};          // PI on x, y [1/s], phi [1/s]
-  double ki[3] = {0.5, 0.5, 0.5};          // [1/s²]
+  double kp[3] = {6.0, 6.0, 6.0};          // PI on x, y [1/s], phi [1/s]
+  double ki[3] = {6.0, 6.0, 6.0};          // [1/s²]
   bool feedforward = false;                // add the planned velocity to the PI output
   double max_speed = 0.5;                  // |platform speed command| limit [m/s]
   double max_yaw_rate = 2.0;               // [rad/s]

@@ -1,0 +1,77 @@
+// Tests the thesis's tracking indices (twin/metrics.cpp): IAE = Σ|e| (seed 002 eq. 4-14)
+// and σ = sqrt(Σe²/N) (eq. 4-15) over samples, in cm/deg/pulses, against numbers worked
+// out by hand, including the contour error, final/max values and the empty case.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "twin/metrics.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+constexpr double kTol = 1e-9;
+constexpr double kDegPerRad = 180.0 / std::numbers::pi;
+
+TEST(PoseErrorStats, TwoSamplesByHand) {
+  PoseErrorStats s;
+  s.add(-0.06, 0.08, -0.02);  // contour 0.10 m
+  s.add(0.03, 0.04, 0.01);    // contour 0.05 m
+  const auto j = s.to_json();
+  EXPECT_EQ(j["samples"], 2);
+  // IAE: sums of |e| in cm, no dt.
+  EXPECT_NEAR(j["iae_x_cm"].get<double>(), 9.0, kTol);
+  EXPECT_NEAR(j["iae_y_cm"].get<double>(), 12.0, kTol);
+  EXPECT_NEAR(j["iae_contour_cm"].get<double>(), 15.0, kTol);
+  // σ: sqrt((0.0036 + 0.0009)/2) m etc.
+  EXPECT_NEAR(j["std_x_cm"].get<double>(), 100 * std::sqrt(0.00225), kTol);
+  EXPECT_NEAR(j["std_y_cm"].get<double>(), 100 * std::sqrt(0.004), kTol);
+  EXPECT_NEAR(j["std_contour_cm"].get<double>(), 100 * std::sqrt(0.00625), kTol);
+  // Last sample and worst sample.
+  EXPECT_NEAR(j["final_error_cm"].get<double>(), 5.0, kTol);
+  EXPECT_NEAR(j["max_error_cm"].get<double>(), 10.0, kTol);
+  // Heading in degrees.
+  EXPECT_NEAR(j["iae_phi_deg"].get<double>(), 0.03 * kDegPerRad, kTol);
+  EXPECT_NEAR(j["std_phi_deg"].get<double>(), std::sqrt(0.00025) * kDegPerRad, kTol);
+  EXPECT_NEAR(j["final_phi_error_deg"].get<double>(), 0.01 * kDegPerRad, kTol);
+  EXPECT_NEAR(j["max_phi_error_deg"].get<double>(), 0.02 * kDegPerRad, kTol);
+}
+
+TEST(PoseErrorStats, EmptyIsAllZero) {
+  const auto j = PoseErrorStats{}.to_json();
+  EXPECT_EQ(j["samples"], 0);
+  EXPECT_EQ(j.size(), 13u);
+  for (const auto& [key, value] : j.items()) EXPECT_EQ(value.get<double>(), 0.0) << key;
+}
+
+TEST(PoseErrorStats, IaeGrowsWithSampleCountNotTime) {
+  // Same constant error, twice the samples: IAE doubles, σ stays (eq. 4-14 is a sum).
+  PoseErrorStats a, b;
+  for (int i = 0; i < 10; ++i) a.add(0.01, 0, 0);
+  for (int i = 0; i < 20; ++i) b.add(0.01, 0, 0);
+  EXPECT_NEAR(b.to_json()["iae_x_cm"].get<double>(), 2 * a.to_json()["iae_x_cm"].get<double>(), kTol);
+  EXPECT_NEAR(a.to_json()["std_x_cm"].get<double>(), 1.0, kTol);
+  EXPECT_NEAR(b.to_json()["std_x_cm"].get<double>(), 1.0, kTol);
+}
+
+TEST(VelocityErrorStats, ThreeSamplesByHand) {
+  VelocityErrorStats v;
+  v.add(3);
+  v.add(-4);
+  v.add(0);
+  const auto j = v.to_json();
+  EXPECT_EQ(j["samples"], 3);
+  EXPECT_NEAR(j["iae_velocity_pulse"].get<double>(), 7.0, kTol);
+  EXPECT_NEAR(j["std_velocity_pulse"].get<double>(), std::sqrt(25.0 / 3.0), kTol);
+}
+
+TEST(VelocityErrorStats, EmptyIsZero) {
+  const auto j = VelocityErrorStats{}.to_json();
+  EXPECT_EQ(j["iae_velocity_pulse"], 0.0);
+  EXPECT_EQ(j["std_velocity_pulse"], 0.0);
+  EXPECT_EQ(j["samples"], 0);
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

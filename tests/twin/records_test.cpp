@@ -1,0 +1,158 @@
+// Tests the record writers (twin/records.cpp): CSV bytes are exact and deterministic, the
+// CSV and JSON files appear under their final names only when complete (temp + rename),
+// the event log is line-formatted and flushed per line, and unwritable places or a full
+// disk give a std::runtime_error naming the path.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "twin/records.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string read_all(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// A fresh directory under /tmp per test, removed afterwards.
+class RecordsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("omnitwin_records_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  fs::path dir_;
+};
+
+TEST_F(RecordsTest, CsvBytesAreExact) {
+  {
+    CsvWriter csv(dir_.string(), "trajectory.csv", {"t", "x", "y"});
+    csv.row(std::vector<double>{0, 1.5, -2});
+    csv.row(std::vector<double>{0.1, 1.0 / 3.0, 1e-12});
+    csv.row(std::vector<double>{1234567890123.0, -0.000125, 42});
+    EXPECT_EQ(csv.rows(), 3u);
+    csv.close();
+  }
+  EXPECT_EQ(read_all(dir_ / "trajectory.csv"),
+            "t,x,y\n"
+            "0,1.5,-2\n"
+            "0.1,0.3333333333,1e-12\n"
+            "1.23456789e+12,-0.000125,42\n");
+}
+
+TEST_F(RecordsTest, CsvIdenticalInputsGiveIdenticalBytes) {
+  for (const char* name : {"a.csv", "b.csv"}) {
+    CsvWriter csv(dir_.string(), name, {"t", "v"});
+    for (int i = 0; i < 100; ++i) csv.row(std::vector<double>{i * 0.01, std::sin(i * 0.1)});
+  }
+  EXPECT_EQ(read_all(dir_ / "a.csv"), read_all(dir_ / "b.csv"));
+  EXPECT_FALSE(read_all(dir_ / "a.csv").empty());
+}
+
+TEST_F(RecordsTest, CsvLivesUnderTempNameUntilClose) {
+  CsvWriter csv(dir_.string(), "trajectory.csv", {"t"});
+  csv.row(std::vector<double>{1});
+  csv.flush();
+  EXPECT_TRUE(fs::exists(dir_ / ".trajectory.csv.part"));
+  EXPECT_FALSE(fs::exists(dir_ / "trajectory.csv"));
+  csv.close();
+  EXPECT_FALSE(fs::exists(dir_ / ".trajectory.csv.part"));
+  EXPECT_EQ(read_all(dir_ / "trajectory.csv"), "t\n1\n");
+  csv.close();  // idempotent
+}
+
+TEST_F(RecordsTest, CsvTakesAWholePathToo) {
+  {
+    CsvWriter csv((dir_ / "p.csv").string(), {"a"});
+    csv.row(std::vector<double>{-0.5});
+  }
+  EXPECT_EQ(read_all(dir_ / "p.csv"), "a\n-0.5\n");
+}
+
+TEST_F(RecordsTest, CsvDestructorRenames) {
+  { CsvWriter csv(dir_.string(), "x.csv", {"a", "b"}); }
+  EXPECT_EQ(read_all(dir_ / "x.csv"), "a,b\n");
+  EXPECT_FALSE(fs::exists(dir_ / ".x.csv.part"));
+}
+
+TEST_F(RecordsTest, CsvHeaderCellsAreQuotedWhenNeeded) {
+  { CsvWriter csv(dir_.string(), "q.csv", {"x,y", "say \"hi\""}); }
+  EXPECT_EQ(read_all(dir_ / "q.csv"), "\"x,y\",\"say \"\"hi\"\"\"\n");
+}
+
+TEST_F(RecordsTest, CsvRowWidthMustMatchHeader) {
+  CsvWriter csv(dir_.string(), "w.csv", {"a", "b"});
+  EXPECT_THROW(csv.row(std::vector<double>{1}), std::invalid_argument);
+}
+
+TEST_F(RecordsTest, UnwritableDirectoryNamesThePath) {
+  const std::string missing = (dir_ / "no" / "such" / "dir").string();
+  try {
+    CsvWriter csv(missing, "t.csv", {"a"});
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(missing), std::string::npos) << e.what();
+  }
+  // A regular file where the directory should be.
+  std::ofstream(dir_ / "plain").put('x');
+  EXPECT_THROW(CsvWriter((dir_ / "plain").string(), "t.csv", {"a"}), std::runtime_error);
+  EXPECT_THROW(EventLog((dir_ / "plain" / "events.log").string()), std::runtime_error);
+  EXPECT_THROW(write_json_atomic((dir_ / "plain" / "m.json").string(), {{"a", 1}}), std::runtime_error);
+}
+
+TEST_F(RecordsTest, FullDiskIsAnError) {
+  // /dev/full accepts the open and fails every write with ENOSPC once data reaches it.
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  CheckedFile f("/dev/full", "wb");
+  f.write("some bytes");
+  try {
+    f.flush();
+    FAIL() << "flush to /dev/full succeeded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/dev/full"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(f.failed());
+}
+
+TEST_F(RecordsTest, JsonIsPrettyAndAtomic) {
+  const nlohmann::json j = {{"scenario", "thesis_line"}, {"platform", {{"iae_x_cm", 1.5}}}};
+  const fs::path p = dir_ / "metrics.json";
+  std::ofstream(p) << "old";
+  write_json_atomic(p.string(), j);
+  EXPECT_EQ(read_all(p), j.dump(2) + "\n");
+  EXPECT_EQ(nlohmann::json::parse(read_all(p)), j);
+  EXPECT_FALSE(fs::exists(dir_ / ".metrics.json.part"));
+  EXPECT_NE(read_all(p).find("\n  \"platform\": {\n    \"iae_x_cm\": 1.5\n  }"), std::string::npos);
+}
+
+TEST_F(RecordsTest, EventLogLinesAndPerLineFlush) {
+  EventLog log((dir_ / "events.log").string());
+  log.log(1.5, "fault", "wheel 2 slips");
+  // Readable before close: every line is flushed.
+  EXPECT_EQ(read_all(dir_ / "events.log"), "    1.500000  fault       wheel 2 slips\n");
+  log.log(12.25, "expectation", "line one\nline two");
+  log.close();
+  EXPECT_EQ(read_all(dir_ / "events.log"),
+            "    1.500000  fault       wheel 2 slips\n"
+            "   12.250000  expectation  line one line two\n");
+  EXPECT_EQ(log.path(), (dir_ / "events.log").string());
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

@@ -1,0 +1,458 @@
+// Tests scenario loading (twin/scenario.cpp, twin/yaml_schema.cpp): a full scenario fills
+// every field, defaults match models/platform/omni4.yaml, parameter files land in
+// PlatformParams, --set overrides edit the tree before validation, and each kind of bad
+// input throws a ScenarioError with exactly the right file, line and key.
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "tests/support/mujoco_fixture.hpp"
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+using omnitwin::testing::source_path;
+
+std::string scenario(const std::string& name) { return source_path("tests/data/scenarios/" + name); }
+std::string params(const std::string& name) { return source_path("tests/data/params/" + name); }
+
+// The ScenarioError load_scenario throws (fails the test if it throws none).
+ScenarioError load_error(const std::string& path, const std::vector<Override>& overrides = {}) {
+  try {
+    load_scenario(path, overrides);
+  } catch (const ScenarioError& e) {
+    return e;
+  }
+  ADD_FAILURE() << path << " loaded without error";
+  return ScenarioError("", 0, "", "none");
+}
+
+void expect_error(const ScenarioError& e, const std::string& file, int line, const std::string& key) {
+  EXPECT_EQ(e.file(), file) << e.what();
+  EXPECT_EQ(e.line(), line) << e.what();
+  EXPECT_EQ(e.key(), key) << e.what();
+}
+
+// ---------------------------------------------------------------------------------------
+// Good files
+
+TEST(Scenario, GoodScenarioFillsEveryField) {
+  const Scenario s = load_scenario(scenario("good.yaml"));
+  EXPECT_EQ(s.name, "good_case");
+  EXPECT_EQ(s.description, "200 cm along world X in 20 s (seed 002, 4-4-2)");
+  EXPECT_EQ(s.file, scenario("good.yaml"));
+  EXPECT_EQ(s.bus.kind, BusKind::can);
+  EXPECT_EQ(s.clock, ClockMode::realtime);
+
+  // Platform: parameter file, then the scenario's own overrides and variant.
+  EXPECT_EQ(s.platform.source, params("custom.yaml"));
+  EXPECT_DOUBLE_EQ(s.platform.geometry.L, 0.28);              // scenario override
+  EXPECT_DOUBLE_EQ(s.platform.geometry.r, 0.06);              // parameter file
+  EXPECT_DOUBLE_EQ(s.platform.floor.friction, 0.7);           // scenario override
+  EXPECT_DOUBLE_EQ(s.platform.floor.slip_gain, 0.9);          // parameter file
+  EXPECT_EQ(s.platform.sim.variant, physics::ModelVariant::rollers);  // platform.variant wins
+
+  const ControllerSpec& c = s.controller;
+  EXPECT_DOUBLE_EQ(c.period, 0.005);
+  EXPECT_DOUBLE_EQ(c.kp[0], 1);
+  EXPECT_DOUBLE_EQ(c.kp[1], 2);
+  EXPECT_DOUBLE_EQ(c.kp[2], 3);
+  EXPECT_DOUBLE_EQ(c.ki[2], 0.3);
+  EXPECT_TRUE(c.feedforward);
+  EXPECT_DOUBLE_EQ(c.max_speed, 0.4);
+  EXPECT_DOUBLE_EQ(c.max_yaw_rate, 1.5);
+
+  EXPECT_DOUBLE_EQ(s.path.x0, 0.1);
+  EXPECT_DOUBLE_EQ(s.path.y0, -0.2);
+  EXPECT_DOUBLE_EQ(s.path.phi0_deg, 30);
+  EXPECT_DOUBLE_EQ(s.settle, 1.5);
+  // 20 + 5 + 4 + 1 + 4·5 (square: per side) + 20 + 30 + settle 1.5
+  EXPECT_DOUBLE_EQ(s.duration, 101.5);
+}
+
+TEST(Scenario, GoodScenarioSegments) {
+  using K = PathSegment::Kind;
+  const auto segs = load_scenario(scenario("good.yaml")).path.segments;
+  ASSERT_EQ(segs.size(), 7u);
+  EXPECT_EQ(segs[0].kind, K::line);
+  EXPECT_DOUBLE_EQ(segs[0].dx, 2.0);
+  EXPECT_DOUBLE_EQ(segs[0].dy, 0.5);
+  EXPECT_DOUBLE_EQ(segs[0].dphi_deg, 10);
+  EXPECT_DOUBLE_EQ(segs[0].duration, 20);
+  EXPECT_EQ(segs[0].line, 16);
+  EXPECT_EQ(segs[1].kind, K::arc);
+  EXPECT_DOUBLE_EQ(segs[1].cx, 0);
+  EXPECT_DOUBLE_EQ(segs[1].cy, 0.5);
+  EXPECT_DOUBLE_EQ(segs[1].sweep_deg, 90);
+  EXPECT_DOUBLE_EQ(segs[1].dphi_deg, 5);
+  EXPECT_EQ(segs[2].kind, K::rotate);
+  EXPECT_DOUBLE_EQ(segs[2].dphi_deg, 90);
+  EXPECT_EQ(segs[3].kind, K::dwell);
+  EXPECT_DOUBLE_EQ(segs[3].duration, 1);
+  EXPECT_EQ(segs[4].kind, K::square);
+  EXPECT_DOUBLE_EQ(segs[4].side, 1.0);
+  EXPECT_FALSE(segs[4].ccw);
+  EXPECT_EQ(segs[5].kind, K::circle);
+  EXPECT_DOUBLE_EQ(segs[5].radius, 0.5);
+  EXPECT_TRUE(segs[5].ccw);  // default
+  EXPECT_EQ(segs[6].kind, K::figure_eight);
+  EXPECT_DOUBLE_EQ(segs[6].radius, 0.4);
+  EXPECT_FALSE(segs[6].ccw);
+  EXPECT_EQ(segs[6].line, 22);
+}
+
+TEST(Scenario, GoodScenarioFaultsAndExpectations) {
+  const Scenario s = load_scenario(scenario("good.yaml"));
+  ASSERT_EQ(s.faults.size(), 2u);
+  EXPECT_EQ(s.faults[0].kind, FaultSpec::Kind::wheel_slip);
+  EXPECT_EQ(s.faults[0].wheel, 1);  // "wheel: 2" in the file
+  EXPECT_DOUBLE_EQ(s.faults[0].at, 5.0);
+  EXPECT_DOUBLE_EQ(s.faults[0].duration, 1.0);
+  EXPECT_DOUBLE_EQ(s.faults[0].friction_scale, 0.1);
+  EXPECT_EQ(s.faults[0].line, 25);
+  EXPECT_EQ(s.faults[1].wheel, 3);
+  EXPECT_DOUBLE_EQ(s.faults[1].duration, 0.0);  // default: until the end
+
+  ASSERT_EQ(s.expectations.size(), 3u);
+  EXPECT_EQ(s.expectations[0].metric, "platform.final_error_cm");
+  EXPECT_FALSE(s.expectations[0].min.has_value());
+  EXPECT_EQ(s.expectations[0].max, 0.5);
+  EXPECT_EQ(s.expectations[0].line, 28);
+  EXPECT_EQ(s.expectations[1].metric, "axes.0.iae_velocity_pulse");
+  EXPECT_EQ(s.expectations[1].min, 1.0);
+  EXPECT_EQ(s.expectations[1].max, 500.0);
+  EXPECT_EQ(s.expectations[2].metric, "bus.dropout_rate");
+  EXPECT_FALSE(s.expectations[2].max.has_value());
+}
+
+TEST(Scenario, MinimalScenarioTakesDefaults) {
+  const Scenario s = load_scenario(scenario("minimal.yaml"));
+  EXPECT_EQ(s.name, "minimal");  // the file stem
+  EXPECT_EQ(s.description, "");
+  EXPECT_EQ(s.bus.kind, BusKind::direct);
+  EXPECT_EQ(s.clock, ClockMode::lockstep);
+  EXPECT_EQ(s.platform.source, "built-in defaults");
+  EXPECT_DOUBLE_EQ(s.controller.period, 0.010);
+  EXPECT_DOUBLE_EQ(s.settle, 2.0);
+  EXPECT_DOUBLE_EQ(s.duration, 12.0);  // path 10 s + settle 2 s
+  ASSERT_EQ(s.path.segments.size(), 1u);
+  EXPECT_DOUBLE_EQ(s.path.segments[0].dy, 0.0);
+  EXPECT_TRUE(s.faults.empty());
+  EXPECT_TRUE(s.expectations.empty());
+}
+
+TEST(Scenario, ParameterFileValuesLandInPlatformParams) {
+  const Scenario s =
+      load_scenario(scenario("minimal.yaml"), {{"platform.params", "../params/custom.yaml"}});
+  const physics::PlatformParams& p = s.platform;
+  EXPECT_EQ(p.source, params("custom.yaml"));
+  EXPECT_DOUBLE_EQ(p.geometry.L, 0.3);
+  EXPECT_DOUBLE_EQ(p.geometry.r, 0.06);
+  EXPECT_DOUBLE_EQ(p.geometry.chassis_size[0], 0.4);
+  EXPECT_DOUBLE_EQ(p.geometry.chassis_size[1], 0.35);
+  EXPECT_DOUBLE_EQ(p.geometry.chassis_size[2], 0.1);
+  EXPECT_DOUBLE_EQ(p.geometry.chassis_mass, 15.0);
+  EXPECT_DOUBLE_EQ(p.geometry.hub_mass, 0.3);
+  EXPECT_DOUBLE_EQ(p.geometry.wheel_width, 0.05);
+  EXPECT_EQ(p.rollers.rows, 3);
+  EXPECT_EQ(p.rollers.per_row, 8);
+  EXPECT_DOUBLE_EQ(p.rollers.row_offset, 0.012);
+  EXPECT_DOUBLE_EQ(p.rollers.row_phase_deg, 10);
+  EXPECT_DOUBLE_EQ(p.rollers.wheel_phase_deg, 2.5);
+  EXPECT_DOUBLE_EQ(p.rollers.radius, 0.02);
+  EXPECT_DOUBLE_EQ(p.rollers.coverage_deg, 12);
+  EXPECT_DOUBLE_EQ(p.rollers.mass, 0.02);
+  EXPECT_DOUBLE_EQ(p.rollers.damping, 2.0e-5);
+  EXPECT_DOUBLE_EQ(p.floor.friction, 0.8);
+  EXPECT_DOUBLE_EQ(p.floor.lateral_friction, 0.002);
+  EXPECT_DOUBLE_EQ(p.floor.slip_gain, 0.9);
+  EXPECT_DOUBLE_EQ(p.motor.kv, 25.0);
+  EXPECT_DOUBLE_EQ(p.motor.torque_limit, 6.0);
+  EXPECT_DOUBLE_EQ(p.motor.speed_limit, 22.0);
+  EXPECT_DOUBLE_EQ(p.motor.armature, 0.03);
+  EXPECT_DOUBLE_EQ(p.motor.damping, 0.01);
+  EXPECT_DOUBLE_EQ(p.driver.zero_volts, 2.0);
+  EXPECT_DOUBLE_EQ(p.driver.gain, 9.0);
+  EXPECT_EQ(p.dac.bits, 10);
+  EXPECT_DOUBLE_EQ(p.dac.vref, 4.0);
+  EXPECT_EQ(p.encoder.lines, 1000);
+  EXPECT_EQ(p.encoder.index_per_rev, 2);
+  EXPECT_DOUBLE_EQ(p.velocity_loop.period, 0.005);
+  EXPECT_DOUBLE_EQ(p.velocity_loop.kp, 21.0);
+  EXPECT_DOUBLE_EQ(p.velocity_loop.ki, 5.0);
+  EXPECT_DOUBLE_EQ(p.velocity_loop.kff, 0.9);
+  EXPECT_DOUBLE_EQ(p.sim.timestep, 0.002);
+  EXPECT_EQ(p.sim.variant, physics::ModelVariant::capsule);
+}
+
+TEST(Scenario, Omni4FileEqualsBuiltInDefaults) {
+  const std::string omni4 = source_path("models/platform/omni4.yaml");
+  const physics::PlatformParams p =
+      load_scenario(scenario("minimal.yaml"), {{"platform.params", omni4}}).platform;
+  const physics::PlatformParams d;
+  EXPECT_EQ(p.geometry.L, d.geometry.L);
+  EXPECT_EQ(p.geometry.r, d.geometry.r);
+  EXPECT_EQ(p.geometry.chassis_size, d.geometry.chassis_size);
+  EXPECT_EQ(p.geometry.chassis_mass, d.geometry.chassis_mass);
+  EXPECT_EQ(p.geometry.hub_mass, d.geometry.hub_mass);
+  EXPECT_EQ(p.geometry.wheel_width, d.geometry.wheel_width);
+  EXPECT_EQ(p.rollers.rows, d.rollers.rows);
+  EXPECT_EQ(p.rollers.per_row, d.rollers.per_row);
+  EXPECT_EQ(p.rollers.row_offset, d.rollers.row_offset);
+  EXPECT_EQ(p.rollers.row_phase_deg, d.rollers.row_phase_deg);
+  EXPECT_EQ(p.rollers.wheel_phase_deg, d.rollers.wheel_phase_deg);
+  EXPECT_EQ(p.rollers.radius, d.rollers.radius);
+  EXPECT_EQ(p.rollers.coverage_deg, d.rollers.coverage_deg);
+  EXPECT_EQ(p.rollers.mass, d.rollers.mass);
+  EXPECT_EQ(p.rollers.damping, d.rollers.damping);
+  EXPECT_EQ(p.floor.friction, d.floor.friction);
+  EXPECT_EQ(p.floor.lateral_friction, d.floor.lateral_friction);
+  EXPECT_EQ(p.floor.slip_gain, d.floor.slip_gain);
+  EXPECT_EQ(p.motor.kv, d.motor.kv);
+  EXPECT_EQ(p.motor.torque_limit, d.motor.torque_limit);
+  EXPECT_EQ(p.motor.speed_limit, d.motor.speed_limit);
+  EXPECT_EQ(p.motor.armature, d.motor.armature);
+  EXPECT_EQ(p.motor.damping, d.motor.damping);
+  EXPECT_EQ(p.driver.zero_volts, d.driver.zero_volts);
+  EXPECT_EQ(p.driver.gain, d.driver.gain);
+  EXPECT_EQ(p.dac.bits, d.dac.bits);
+  EXPECT_EQ(p.dac.vref, d.dac.vref);
+  EXPECT_EQ(p.encoder.lines, d.encoder.lines);
+  EXPECT_EQ(p.encoder.index_per_rev, d.encoder.index_per_rev);
+  EXPECT_EQ(p.velocity_loop.period, d.velocity_loop.period);
+  EXPECT_EQ(p.velocity_loop.kp, d.velocity_loop.kp);
+  EXPECT_EQ(p.velocity_loop.ki, d.velocity_loop.ki);
+  EXPECT_EQ(p.velocity_loop.kff, d.velocity_loop.kff);
+  EXPECT_EQ(p.sim.timestep, d.sim.timestep);
+  EXPECT_EQ(p.sim.variant, d.sim.variant);
+}
+
+TEST(Scenario, ToStringNamesMatchFileSpelling) {
+  EXPECT_STREQ(to_string(BusKind::direct), "direct");
+  EXPECT_STREQ(to_string(BusKind::canopen), "canopen");
+  EXPECT_STREQ(to_string(BusKind::ethercat), "ethercat");
+  EXPECT_STREQ(to_string(BusKind::m3), "m3");
+  EXPECT_STREQ(to_string(BusKind::tml), "tml");
+  EXPECT_STREQ(to_string(ClockMode::lockstep), "lockstep");
+  EXPECT_STREQ(to_string(ClockMode::realtime), "realtime");
+}
+
+// ---------------------------------------------------------------------------------------
+// Bad files: exact file, line and key
+
+TEST(ScenarioErrors, WhatIsOneLineFileLineKeyMessage) {
+  EXPECT_STREQ(ScenarioError("a.yaml", 3, "x.y", "bad").what(), "a.yaml:3: x.y: bad");
+  EXPECT_STREQ(ScenarioError("a.yaml", 0, "x.y", "bad").what(), "a.yaml: x.y: bad");
+  EXPECT_STREQ(ScenarioError("a.yaml", 0, "", "missing").what(), "a.yaml: missing");
+}
+
+TEST(ScenarioErrors, UnknownTopLevelKey) {
+  const auto e = load_error(scenario("bad_unknown_top.yaml"));
+  expect_error(e, scenario("bad_unknown_top.yaml"), 4, "setle");
+  EXPECT_NE(std::string(e.what()).find("unknown key"), std::string::npos) << e.what();
+}
+
+TEST(ScenarioErrors, UnknownNestedKey) {
+  expect_error(load_error(scenario("bad_unknown_nested.yaml")), scenario("bad_unknown_nested.yaml"), 5,
+               "controller.kd");
+}
+
+TEST(ScenarioErrors, WrongTypeDuration) {
+  const auto e = load_error(scenario("bad_type_duration.yaml"));
+  expect_error(e, scenario("bad_type_duration.yaml"), 5, "path.segments.1.line.duration");
+  EXPECT_NE(std::string(e.what()).find("expected a number, got 'abc'"), std::string::npos) << e.what();
+}
+
+TEST(ScenarioErrors, NegativeDuration) {
+  expect_error(load_error(scenario("bad_negative_duration.yaml")), scenario("bad_negative_duration.yaml"), 3,
+               "duration");
+}
+
+TEST(ScenarioErrors, KpNotAThreeList) {
+  expect_error(load_error(scenario("bad_kp.yaml")), scenario("bad_kp.yaml"), 3, "controller.kp");
+}
+
+TEST(ScenarioErrors, PeriodOutOfRange) {
+  const auto e = load_error(scenario("bad_period.yaml"));
+  expect_error(e, scenario("bad_period.yaml"), 3, "controller.period");
+  EXPECT_NE(std::string(e.what()).find("in (0, 1]"), std::string::npos) << e.what();
+}
+
+TEST(ScenarioErrors, MissingParamsFileNamesTheScenario) {
+  const auto e = load_error(scenario("bad_missing_params.yaml"));
+  expect_error(e, scenario("bad_missing_params.yaml"), 4, "platform.params");
+  EXPECT_NE(std::string(e.what()).find("does_not_exist.yaml"), std::string::npos) << e.what();
+}
+
+TEST(ScenarioErrors, MissingScenarioFile) {
+  const std::string missing = scenario("no_such_scenario.yaml");
+  expect_error(load_error(missing), missing, 0, "");
+}
+
+TEST(ScenarioErrors, UnknownMetric) {
+  expect_error(load_error(scenario("bad_unknown_metric.yaml")), scenario("bad_unknown_metric.yaml"), 5,
+               "expect.platform.final_errr_cm");
+}
+
+TEST(ScenarioErrors, ExpectationBounds) {
+  expect_error(load_error(scenario("bad_expect_bounds.yaml")), scenario("bad_expect_bounds.yaml"), 4,
+               "expect.sim_time_s");
+  expect_error(load_error(scenario("bad_expect_empty.yaml")), scenario("bad_expect_empty.yaml"), 4,
+               "expect.realtime.overruns");
+}
+
+TEST(ScenarioErrors, FaultWheelOutOfRange) {
+  expect_error(load_error(scenario("bad_fault_wheel.yaml")), scenario("bad_fault_wheel.yaml"), 4,
+               "faults.0.wheel_slip.wheel");
+}
+
+TEST(ScenarioErrors, UnknownSegmentKind) {
+  expect_error(load_error(scenario("bad_segment_kind.yaml")), scenario("bad_segment_kind.yaml"), 5,
+               "path.segments.1.spiral");
+}
+
+TEST(ScenarioErrors, UnknownBus) {
+  expect_error(load_error(scenario("bad_bus.yaml")), scenario("bad_bus.yaml"), 3, "bus.type");
+}
+
+TEST(ScenarioErrors, DuplicateKey) {
+  expect_error(load_error(scenario("bad_duplicate_key.yaml")), scenario("bad_duplicate_key.yaml"), 4,
+               "controller.period");
+}
+
+TEST(ScenarioErrors, YamlSyntaxErrorNamesFileAndLine) {
+  const auto e = load_error(scenario("bad_syntax.yaml"));
+  EXPECT_EQ(e.file(), scenario("bad_syntax.yaml"));
+  EXPECT_GT(e.line(), 0);
+}
+
+TEST(ScenarioErrors, BadValueInParamsFileNamesTheParamsFile) {
+  expect_error(load_error(scenario("bad_params_value.yaml")), params("bad_type.yaml"), 5, "encoder.lines");
+  expect_error(load_error(scenario("bad_params_unknown.yaml")), params("bad_unknown_key.yaml"), 4,
+               "geometry.radius");
+}
+
+TEST(ScenarioErrors, BadPlatformOverrideNamesTheScenario) {
+  expect_error(load_error(scenario("bad_platform_override.yaml")), scenario("bad_platform_override.yaml"), 6,
+               "platform.geometry.L");
+  // r shrunk below the parameter file's roller radius: blamed on the override that did it.
+  expect_error(load_error(scenario("bad_roller_override.yaml")), scenario("bad_roller_override.yaml"), 5,
+               "platform.geometry.r");
+}
+
+// ---------------------------------------------------------------------------------------
+// --set overrides
+
+TEST(ScenarioOverrides, ParseOverrideSplitsAtFirstEquals) {
+  const Override o = parse_override("controller.period=0.005");
+  EXPECT_EQ(o.key, "controller.period");
+  EXPECT_EQ(o.value, "0.005");
+  const Override q = parse_override("description=a=b");
+  EXPECT_EQ(q.key, "description");
+  EXPECT_EQ(q.value, "a=b");
+}
+
+TEST(ScenarioOverrides, ParseOverrideRejectsMalformedText) {
+  for (const char* bad : {"controller.period", "=3", "a..b=1"}) {
+    try {
+      parse_override(bad);
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const ScenarioError& e) {
+      EXPECT_EQ(e.file(), "--set") << bad;
+      EXPECT_EQ(e.line(), 0) << bad;
+    }
+  }
+}
+
+TEST(ScenarioOverrides, NumberListIndexAndNestedPlatformKey) {
+  const Scenario s = load_scenario(scenario("good.yaml"), {parse_override("controller.period=0.02"),
+                                                           parse_override("controller.kp.0=5"),
+                                                           parse_override("platform.geometry.L=0.31"),
+                                                           parse_override("platform.rollers.rows=4")});
+  EXPECT_DOUBLE_EQ(s.controller.period, 0.02);
+  EXPECT_DOUBLE_EQ(s.controller.kp[0], 5);
+  EXPECT_DOUBLE_EQ(s.controller.kp[1], 2);  // rest of the list untouched
+  EXPECT_DOUBLE_EQ(s.platform.geometry.L, 0.31);
+  EXPECT_EQ(s.platform.rollers.rows, 4);
+  EXPECT_DOUBLE_EQ(s.platform.geometry.r, 0.06);  // still from the parameter file
+}
+
+TEST(ScenarioOverrides, ValuesAreParsedAsYaml) {
+  const Scenario s = load_scenario(scenario("minimal.yaml"), {parse_override("controller.ki=[1, 2, 3]"),
+                                                              parse_override("controller.feedforward=true"),
+                                                              parse_override("bus=ethercat"),
+                                                              parse_override("clock=realtime"),
+                                                              parse_override("duration=30")});
+  EXPECT_DOUBLE_EQ(s.controller.ki[2], 3);
+  EXPECT_TRUE(s.controller.feedforward);
+  EXPECT_EQ(s.bus.kind, BusKind::ethercat);
+  EXPECT_EQ(s.clock, ClockMode::realtime);
+  EXPECT_DOUBLE_EQ(s.duration, 30);
+}
+
+TEST(ScenarioOverrides, BusMappingForm) {
+  EXPECT_EQ(load_scenario(scenario("minimal.yaml"), {parse_override("bus={type: m3}")}).bus.kind, BusKind::m3);
+  expect_error(load_error(scenario("minimal.yaml"), {parse_override("bus={type: m3, rate: 1}")}), "--set", 0,
+               "bus.rate");
+}
+
+TEST(ScenarioOverrides, NewSegmentAndExpectation) {
+  const Scenario s = load_scenario(scenario("minimal.yaml"),
+                                   {parse_override("path.segments.1={rotate: {dphi_deg: 45, duration: 2}}"),
+                                    parse_override("expect.platform.max_error_cm.max=2")});
+  ASSERT_EQ(s.path.segments.size(), 2u);
+  EXPECT_EQ(s.path.segments[1].kind, PathSegment::Kind::rotate);
+  EXPECT_DOUBLE_EQ(s.duration, 14.0);
+  ASSERT_EQ(s.expectations.size(), 1u);
+  EXPECT_EQ(s.expectations[0].metric, "platform.max_error_cm");
+  EXPECT_EQ(s.expectations[0].max, 2.0);
+  EXPECT_EQ(s.expectations[0].line, 0);
+}
+
+TEST(ScenarioOverrides, WrongTypeNamesSet) {
+  expect_error(load_error(scenario("good.yaml"), {parse_override("controller.period=abc")}), "--set", 0,
+               "controller.period");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("controller.kp.1=x")}), "--set", 0,
+               "controller.kp.1");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("controller.kp=[1, 2]")}), "--set", 0,
+               "controller.kp");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("platform.geometry.L=-1")}), "--set", 0,
+               "platform.geometry.L");
+}
+
+TEST(ScenarioOverrides, UnknownKeysFromSetNameSet) {
+  expect_error(load_error(scenario("good.yaml"), {parse_override("controler.period=1")}), "--set", 0,
+               "controler");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("platform.geometry.LL=1")}), "--set", 0,
+               "platform.geometry.LL");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("expect.platform.nope.max=1")}), "--set", 0,
+               "expect.platform.nope");
+}
+
+TEST(ScenarioOverrides, UnusableTargetsNameSet) {
+  // Index past the end of a list, and a child of a plain value.
+  expect_error(load_error(scenario("good.yaml"), {parse_override("controller.kp.5=1")}), "--set", 0,
+               "controller.kp.5");
+  expect_error(load_error(scenario("good.yaml"), {parse_override("settle.x=1")}), "--set", 0, "settle.x");
+  expect_error(load_error(scenario("good.yaml"), {{"controller.period", "[1, 2"}}), "--set", 0,
+               "controller.period");
+}
+
+TEST(ScenarioOverrides, ParamsFileFromSet) {
+  expect_error(load_error(scenario("minimal.yaml"), {parse_override("platform.params=nope.yaml")}), "--set",
+               0, "platform.params");
+  // A parameter file named by --set still reports its own problems against itself.
+  expect_error(load_error(scenario("minimal.yaml"),
+                          {parse_override("platform.params=../params/bad_roller_radius.yaml")}),
+               params("bad_roller_radius.yaml"), 5, "rollers.radius");
+}
+
+TEST(ScenarioOverrides, ErrorsOutsideOverriddenNodesStillNameTheFile) {
+  expect_error(load_error(scenario("bad_kp.yaml"), {parse_override("controller.period=0.02")}),
+               scenario("bad_kp.yaml"), 3, "controller.kp");
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

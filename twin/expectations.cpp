@@ -1,0 +1,122 @@
+// twin layer — expectation checks; see expectations.hpp.
+#include "twin/expectations.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+
+namespace omnitwin::twin {
+
+namespace {
+
+constexpr std::array<std::string_view, 3> kRunMetrics = {"sim_time_s", "wall_time_s",
+                                                         "real_time_factor"};
+constexpr std::array<std::string_view, 12> kPoseMetrics = {
+    "iae_x_cm",       "iae_y_cm",       "iae_contour_cm",      "std_x_cm",
+    "std_y_cm",       "std_contour_cm", "final_error_cm",      "max_error_cm",
+    "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
+constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
+                                                          "std_velocity_pulse"};
+constexpr std::array<std::string_view, 5> kBusMetrics = {"frames_tx", "frames_rx", "dropouts",
+                                                         "dropout_rate", "errors"};
+constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
+                                                              "jitter_p99_us", "jitter_max_us"};
+constexpr int kAxes = 4;
+
+template <std::size_t N>
+bool in(const std::array<std::string_view, N>& list, std::string_view s) {
+  return std::find(list.begin(), list.end(), s) != list.end();
+}
+
+// Splits "a.b.c" into its components.
+std::vector<std::string_view> split_dots(std::string_view path) {
+  std::vector<std::string_view> parts;
+  std::size_t start = 0;
+  while (true) {
+    const auto dot = path.find('.', start);
+    parts.push_back(path.substr(start, dot == std::string_view::npos ? dot : dot - start));
+    if (dot == std::string_view::npos) return parts;
+    start = dot + 1;
+  }
+}
+
+// A non-negative decimal index, or -1.
+long parse_index(std::string_view s) {
+  long v = -1;
+  if (s.empty()) return -1;
+  const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  return (ec == std::errc() && p == s.data() + s.size() && v >= 0) ? v : -1;
+}
+
+}  // namespace
+
+bool is_known_metric(std::string_view path) {
+  const auto parts = split_dots(path);
+  if (parts.size() == 1) return in(kRunMetrics, parts[0]);
+  if (parts.size() == 2) {
+    if (parts[0] == "platform" || parts[0] == "platform_odometry") return in(kPoseMetrics, parts[1]);
+    if (parts[0] == "bus") return in(kBusMetrics, parts[1]);
+    if (parts[0] == "realtime") return in(kRealtimeMetrics, parts[1]);
+    return false;
+  }
+  if (parts.size() == 3 && parts[0] == "axes") {
+    const long axis = parse_index(parts[1]);
+    return axis >= 0 && axis < kAxes && in(kAxisMetrics, parts[2]);
+  }
+  return false;
+}
+
+const nlohmann::json* find_metric(const nlohmann::json& metrics, std::string_view path) {
+  const nlohmann::json* cur = &metrics;
+  for (const auto part : split_dots(path)) {
+    // Objects by key, arrays by numeric index; anything else ends the walk.
+    if (cur->is_object()) {
+      const auto it = cur->find(std::string(part));
+      if (it == cur->end()) return nullptr;
+      cur = &*it;
+    } else if (cur->is_array()) {
+      const long i = parse_index(part);
+      if (i < 0 || static_cast<std::size_t>(i) >= cur->size()) return nullptr;
+      cur = &(*cur)[static_cast<std::size_t>(i)];
+    } else {
+      return nullptr;
+    }
+  }
+  return cur;
+}
+
+ExpectationResult evaluate_expectations(const std::vector<Expectation>& expectations,
+                                        const nlohmann::json& metrics) {
+  ExpectationResult result;
+  for (const auto& e : expectations) {
+    const nlohmann::json* value = find_metric(metrics, e.metric);
+    // A metric that is absent, not a number or not finite cannot meet any bound.
+    if (value == nullptr) {
+      result.failures.push_back(fmt::format("{}: missing from metrics", e.metric));
+      continue;
+    }
+    if (!value->is_number()) {
+      result.failures.push_back(fmt::format("{}: not a number ({})", e.metric, value->dump()));
+      continue;
+    }
+    const double v = value->get<double>();
+    if (!std::isfinite(v)) {
+      result.failures.push_back(fmt::format("{} = {} is not finite", e.metric, v));
+    } else if (e.max && v > *e.max) {
+      result.failures.push_back(fmt::format("{} = {} > max {}", e.metric, v, *e.max));
+    } else if (e.min && v < *e.min) {
+      result.failures.push_back(fmt::format("{} = {} < min {}", e.metric, v, *e.min));
+    }
+  }
+  result.passed = result.failures.empty();
+  return result;
+}
+
+nlohmann::json ExpectationResult::to_json() const {
+  return nlohmann::json{{"passed", passed}, {"failures", failures}};
+}
+
+}  // namespace omnitwin::twin

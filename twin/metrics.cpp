@@ -1,0 +1,71 @@
+// twin layer — IAE and σ accumulators; see metrics.hpp.
+#include "twin/metrics.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace omnitwin::twin {
+
+namespace {
+
+constexpr double kCm = 100.0;                       // m -> cm
+constexpr double kDeg = 180.0 / std::numbers::pi;  // rad -> deg
+
+// σ of eq. 4-15 from Σe² over n samples (0 with no samples).
+double rms(double sum_sq, std::size_t n) { return n == 0 ? 0.0 : std::sqrt(sum_sq / n); }
+
+}  // namespace
+
+void PoseErrorStats::add(double ex_m, double ey_m, double ephi_rad) {
+  const double ec = std::hypot(ex_m, ey_m);
+  // Running sums for IAE (eq. 4-14) and σ (eq. 4-15).
+  abs_x_ += std::abs(ex_m);
+  abs_y_ += std::abs(ey_m);
+  abs_c_ += ec;
+  abs_phi_ += std::abs(ephi_rad);
+  sq_x_ += ex_m * ex_m;
+  sq_y_ += ey_m * ey_m;
+  sq_c_ += ec * ec;
+  sq_phi_ += ephi_rad * ephi_rad;
+  // Last and worst samples.
+  final_c_ = ec;
+  final_phi_ = std::abs(ephi_rad);
+  max_c_ = std::max(max_c_, ec);
+  max_phi_ = std::max(max_phi_, final_phi_);
+  ++n_;
+}
+
+nlohmann::json PoseErrorStats::to_json() const {
+  return nlohmann::json{
+      {"iae_x_cm", abs_x_ * kCm},
+      {"iae_y_cm", abs_y_ * kCm},
+      {"iae_contour_cm", abs_c_ * kCm},
+      {"std_x_cm", rms(sq_x_, n_) * kCm},
+      {"std_y_cm", rms(sq_y_, n_) * kCm},
+      {"std_contour_cm", rms(sq_c_, n_) * kCm},
+      {"final_error_cm", final_c_ * kCm},
+      {"max_error_cm", max_c_ * kCm},
+      {"iae_phi_deg", abs_phi_ * kDeg},
+      {"std_phi_deg", rms(sq_phi_, n_) * kDeg},
+      {"final_phi_error_deg", final_phi_ * kDeg},
+      {"max_phi_error_deg", max_phi_ * kDeg},
+      {"samples", n_},
+  };
+}
+
+void VelocityErrorStats::add(double err_pulses) {
+  abs_ += std::abs(err_pulses);
+  sq_ += err_pulses * err_pulses;
+  ++n_;
+}
+
+nlohmann::json VelocityErrorStats::to_json() const {
+  return nlohmann::json{
+      {"iae_velocity_pulse", abs_},
+      {"std_velocity_pulse", rms(sq_, n_)},
+      {"samples", n_},
+  };
+}
+
+}  // namespace omnitwin::twin

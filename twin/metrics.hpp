@@ -1,0 +1,52 @@
+// twin layer — the thesis's tracking indices, accumulated over control samples.
+//
+// Seed 002 scores runs with IAE = Σ|e_i| (eq. 4-14) and σ = sqrt(Σe_i²/N) (eq. 4-15) over
+// the samples of the control loop — sums, not integrals (no dt) — so our metrics.json and
+// the thesis tables compare directly. The accumulators keep running sums only, so add() is
+// allocation-free and can sit in the stepping loop; to_json() is called once at the end.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstddef>
+
+namespace omnitwin::twin {
+
+// Position/heading error of the platform against the reference path.
+class PoseErrorStats {
+ public:
+  // One control sample: errors in world x, y [m] and heading [rad] (reference - actual).
+  // Real-time safe.
+  void add(double ex_m, double ey_m, double ephi_rad);
+
+  std::size_t samples() const { return n_; }
+
+  // iae_x_cm, iae_y_cm, iae_contour_cm, std_x_cm, std_y_cm, std_contour_cm, final_error_cm,
+  // max_error_cm, iae_phi_deg, std_phi_deg, final_phi_error_deg, max_phi_error_deg, samples.
+  // The contour error is sqrt(ex² + ey²); all zero with no samples. Not real-time safe.
+  nlohmann::json to_json() const;
+
+ private:
+  std::size_t n_ = 0;
+  double abs_x_ = 0, abs_y_ = 0, abs_c_ = 0, abs_phi_ = 0;  // Σ|e| [m, m, m, rad]
+  double sq_x_ = 0, sq_y_ = 0, sq_c_ = 0, sq_phi_ = 0;      // Σe² [m², m², m², rad²]
+  double final_c_ = 0, max_c_ = 0, final_phi_ = 0, max_phi_ = 0;  // [m, m, rad, rad], abs
+};
+
+// Velocity error of one wheel axis, in encoder pulses (counts) per control sample.
+class VelocityErrorStats {
+ public:
+  // One sample: commanded minus measured [pulses]. Real-time safe.
+  void add(double err_pulses);
+
+  std::size_t samples() const { return n_; }
+
+  // iae_velocity_pulse, std_velocity_pulse, samples. Not real-time safe.
+  nlohmann::json to_json() const;
+
+ private:
+  std::size_t n_ = 0;
+  double abs_ = 0, sq_ = 0;
+};
+
+}  // namespace omnitwin::twin

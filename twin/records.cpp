@@ -1,0 +1,163 @@
+// twin layer — checked, atomic record files; see records.hpp.
+#include "twin/records.hpp"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <stdexcept>
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// "<dir>/.<name>.part" next to `path`, so the final rename stays within one file system.
+std::string temp_path_for(const std::string& path) {
+  const fs::path p(path);
+  return (p.parent_path() / ("." + p.filename().string() + ".part")).string();
+}
+
+// Renames `from` to `to`; throws std::runtime_error naming both on failure.
+void rename_checked(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  fs::rename(from, to, ec);
+  if (ec) throw std::runtime_error(fmt::format("cannot rename '{}' to '{}': {}", from, to, ec.message()));
+}
+
+// A CSV header cell: quoted (with doubled quotes) only when it needs to be.
+std::string csv_cell(const std::string& s) {
+  if (s.find_first_of(",\"\n\r") == std::string::npos) return s;
+  std::string out = "\"";
+  for (char c : s) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return out + "\"";
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// CheckedFile
+
+CheckedFile::CheckedFile(std::string path, const char* mode) : path_(std::move(path)) {
+  f_ = std::fopen(path_.c_str(), mode);
+  if (f_ == nullptr) fail("cannot create", errno);
+}
+
+CheckedFile::~CheckedFile() {
+  if (f_ != nullptr) std::fclose(f_);
+}
+
+void CheckedFile::fail(const char* what, int err) {
+  failed_ = true;
+  throw std::runtime_error(fmt::format("{} '{}': {}", what, path_, std::strerror(err)));
+}
+
+void CheckedFile::write(std::string_view text) {
+  if (f_ == nullptr) throw std::logic_error(fmt::format("write to closed file '{}'", path_));
+  errno = 0;
+  if (std::fwrite(text.data(), 1, text.size(), f_) != text.size() || std::ferror(f_)) {
+    fail("cannot write", errno != 0 ? errno : EIO);
+  }
+}
+
+void CheckedFile::flush() {
+  if (f_ == nullptr) return;
+  errno = 0;
+  if (std::fflush(f_) != 0) fail("cannot write", errno != 0 ? errno : EIO);
+}
+
+void CheckedFile::close() {
+  if (f_ == nullptr) return;
+  // fclose flushes; a failure there (e.g. disk full) still releases the handle.
+  std::FILE* f = f_;
+  f_ = nullptr;
+  errno = 0;
+  const bool bad = std::ferror(f) != 0;
+  if (std::fclose(f) != 0 || bad) fail("cannot write", errno != 0 ? errno : EIO);
+}
+
+// ---------------------------------------------------------------------------------------
+// CsvWriter
+
+CsvWriter::CsvWriter(const std::string& dir, const std::string& name,
+                     const std::vector<std::string>& header)
+    : CsvWriter((fs::path(dir) / name).string(), header) {}
+
+CsvWriter::CsvWriter(const std::string& path, const std::vector<std::string>& header)
+    : path_(path), file_(temp_path_for(path_), "wb"), columns_(header.size()) {
+  std::string line;
+  for (std::size_t i = 0; i < header.size(); ++i) line += (i ? "," : "") + csv_cell(header[i]);
+  file_.write(line + "\n");
+}
+
+CsvWriter::~CsvWriter() {
+  try {
+    close();
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+  }
+}
+
+void CsvWriter::row(std::span<const double> values) {
+  if (values.size() != columns_) {
+    throw std::invalid_argument(fmt::format("{}: row has {} values, header has {} columns", path_,
+                                            values.size(), columns_));
+  }
+  // Format into the reused buffer, then one write.
+  line_.clear();
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (i) line_ += ',';
+    fmt::format_to(std::back_inserter(line_), "{:.10g}", values[i]);
+  }
+  line_ += '\n';
+  file_.write(line_);
+  ++rows_;
+}
+
+void CsvWriter::flush() { file_.flush(); }
+
+void CsvWriter::close() {
+  if (!file_.is_open()) return;
+  // A file that lost rows must never appear under the final name.
+  const bool lost_rows = file_.failed();
+  file_.close();
+  if (lost_rows) throw std::runtime_error(fmt::format("'{}' left incomplete: a write failed", file_.path()));
+  rename_checked(file_.path(), path_);
+}
+
+// ---------------------------------------------------------------------------------------
+// JSON and plain text
+
+void write_text_atomic(const std::string& path, std::string_view text) {
+  const std::string temp = temp_path_for(path);
+  CheckedFile f(temp, "wb");
+  f.write(text);
+  f.close();
+  rename_checked(temp, path);
+}
+
+void write_json_atomic(const std::string& path, const nlohmann::json& j) {
+  write_text_atomic(path, j.dump(2) + "\n");
+}
+
+// ---------------------------------------------------------------------------------------
+// EventLog
+
+EventLog::EventLog(const std::string& path) : file_(path, "wb") {}
+
+void EventLog::log(double sim_time_s, std::string_view kind, std::string_view message) {
+  std::string line = fmt::format("{:12.6f}  {:<10}  {}\n", sim_time_s, kind, message);
+  // Keep one event per line whatever the message holds.
+  for (std::size_t i = 0; i + 1 < line.size(); ++i) {
+    if (line[i] == '\n' || line[i] == '\r') line[i] = ' ';
+  }
+  file_.write(line);
+  file_.flush();
+}
+
+void EventLog::close() { file_.close(); }
+
+}  // namespace omnitwin::twin

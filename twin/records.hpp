@@ -1,0 +1,103 @@
+// twin layer — run records on disk: trajectory CSV, JSON documents, the event log.
+//
+// Records must be complete or absent, never half-written under their final name: the CSV
+// and JSON writers write "DIR/.NAME.part" and rename it to NAME on close (rename within one
+// directory is atomic), and every write is checked so a full disk or an unwritable
+// directory is a clear std::runtime_error naming the path rather than a silently short
+// file. Numbers are formatted with fmt ("{:.10g}"), so identical runs give identical bytes.
+// None of this is real-time safe (file I/O); the run loop calls it at control-sample rate.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace omnitwin::twin {
+
+// A C stdio file whose every operation is checked; errors throw std::runtime_error naming
+// the path. Closed (without throwing) by the destructor.
+class CheckedFile {
+ public:
+  CheckedFile(std::string path, const char* mode);
+  ~CheckedFile();
+  CheckedFile(const CheckedFile&) = delete;
+  CheckedFile& operator=(const CheckedFile&) = delete;
+
+  void write(std::string_view text);
+  void flush();
+  void close();  // flushes; idempotent
+  bool is_open() const { return f_ != nullptr; }
+  bool failed() const { return failed_; }  // some operation threw
+  const std::string& path() const { return path_; }
+
+ private:
+  [[noreturn]] void fail(const char* what, int err);
+
+  std::string path_;
+  std::FILE* f_ = nullptr;
+  bool failed_ = false;
+};
+
+// A CSV file written through DIR/.NAME.part and renamed to DIR/NAME by close().
+class CsvWriter {
+ public:
+  // Creates the temp file for `path` (DIR/NAME) and writes the header line. Throws
+  // std::runtime_error if it cannot be created (missing or unwritable directory).
+  CsvWriter(const std::string& path, const std::vector<std::string>& header);
+  // The same for DIR/NAME given as its two parts.
+  CsvWriter(const std::string& dir, const std::string& name, const std::vector<std::string>& header);
+  // Closes (and renames) if still open; errors are logged, not thrown.
+  ~CsvWriter();
+  CsvWriter(const CsvWriter&) = delete;
+  CsvWriter& operator=(const CsvWriter&) = delete;
+
+  // One line: each value as "{:.10g}", comma-separated. values.size() must equal the
+  // header's column count (std::invalid_argument otherwise). Throws on write failure.
+  void row(std::span<const double> values);
+  // Pushes buffered rows to the temp file (still under its temp name).
+  void flush();
+  // Flushes, closes and renames the temp file to its final name. Idempotent. If a write
+  // failed earlier the temp file is closed but not renamed, and this throws.
+  void close();
+
+  const std::string& path() const { return path_; }  // the final name
+  std::size_t rows() const { return rows_; }
+
+ private:
+  std::string path_;
+  CheckedFile file_;
+  std::size_t columns_;
+  std::size_t rows_ = 0;
+  std::string line_;  // reused per row
+};
+
+// Writes `text` to path via "<dir>/.<name>.part" + rename. Throws std::runtime_error.
+void write_text_atomic(const std::string& path, std::string_view text);
+
+// Writes `j` pretty-printed (2-space indent, trailing newline) atomically as above.
+void write_json_atomic(const std::string& path, const nlohmann::json& j);
+
+// The run's event log (DIR/events.log): one line per event, "%12.6f  %-10s  %s" (sim time
+// [s], kind, message), flushed per line so the log survives a crash. Written in place (not
+// via a temp file): it is meant to be read while a run is going.
+class EventLog {
+ public:
+  // Creates (truncates) the log file at `path`, normally DIR/events.log. Throws
+  // std::runtime_error if it cannot.
+  explicit EventLog(const std::string& path);
+
+  // Appends one event; newlines in `message` become spaces. Throws on write failure.
+  void log(double sim_time_s, std::string_view kind, std::string_view message);
+  void close();
+
+  const std::string& path() const { return file_.path(); }
+
+ private:
+  CheckedFile file_;
+};
+
+}  // namespace omnitwin::twin

@@ -1,0 +1,506 @@
+// twin layer — scenario loading and validation; see scenario.hpp.
+//
+// Order of work: read the scenario YAML, apply --set overrides to the tree, then walk the
+// tree once with YamlField (yaml_schema.hpp), filling the Scenario as each key is checked.
+// The platform parameters come in layers — built-in defaults, the parameter file, the
+// scenario's platform section — and each layer is validated against its own file, so an
+// error names the file the bad value was written in.
+#include "twin/scenario.hpp"
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include <charconv>
+#include <filesystem>
+#include <optional>
+
+#include "twin/expectations.hpp"
+#include "twin/yaml_schema.hpp"
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// ---------------------------------------------------------------------------------------
+// Small helpers
+
+std::string format_error(const std::string& file, int line, const std::string& key,
+                         const std::string& message) {
+  std::string out = file;
+  if (line > 0) out += fmt::format(":{}", line);
+  out += ": ";
+  if (!key.empty()) out += key + ": ";
+  return out + message;
+}
+
+std::vector<std::string> split_key(const std::string& key) {
+  std::vector<std::string> parts;
+  std::size_t start = 0;
+  while (true) {
+    const auto dot = key.find('.', start);
+    parts.push_back(key.substr(start, dot == std::string::npos ? dot : dot - start));
+    if (dot == std::string::npos) return parts;
+    start = dot + 1;
+  }
+}
+
+std::string join(const std::vector<std::string>& parts, std::size_t from, std::size_t to) {
+  std::string out;
+  for (std::size_t i = from; i < to; ++i) out += (i == from ? "" : ".") + parts[i];
+  return out;
+}
+
+long parse_index(const std::string& s) {
+  long v = -1;
+  const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+  return (!s.empty() && ec == std::errc() && p == s.data() + s.size() && v >= 0) ? v : -1;
+}
+
+// Parses a YAML document from a file; syntax errors name the file and line.
+YAML::Node load_yaml_file(const std::string& file) {
+  try {
+    return YAML::LoadFile(file);
+  } catch (const YAML::Exception& e) {
+    throw ScenarioError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// --set overrides
+
+// Splits `parts` for the expect section, whose keys are dotted metric paths themselves:
+// expect.<metric>.min|max or expect.<metric> (a whole {min, max} mapping).
+std::vector<std::string> group_expect_key(const std::vector<std::string>& parts) {
+  if (parts.size() < 2 || parts[0] != "expect") return parts;
+  const bool bound = parts.back() == "min" || parts.back() == "max";
+  const std::size_t metric_end = bound && parts.size() > 2 ? parts.size() - 1 : parts.size();
+  std::vector<std::string> out{parts[0], join(parts, 1, metric_end)};
+  if (metric_end < parts.size()) out.push_back(parts.back());
+  return out;
+}
+
+// Steps from `cur` into child `part` (creating a mapping if there is none yet), or, when
+// `value` is given, sets that child. Returns false, with the reason in `why`, if the child
+// is a plain value that cannot hold children or `part` is not a usable list index.
+bool descend(YAML::Node& cur, const std::string& part, const YAML::Node* value, std::string& why) {
+  if (cur.IsSequence()) {
+    const long i = parse_index(part);
+    if (i < 0 || static_cast<std::size_t>(i) > cur.size()) {
+      why = fmt::format("'{}' is not an index of a list of {}", part, cur.size());
+      return false;
+    }
+    const auto idx = static_cast<std::size_t>(i);
+    if (idx == cur.size()) cur.push_back(YAML::Node(YAML::NodeType::Null));
+    if (value != nullptr) {
+      cur[idx] = *value;
+      return true;
+    }
+    if (cur[idx].IsScalar()) {
+      why = fmt::format("'{}' holds a single value, not a mapping or list", part);
+      return false;
+    }
+    if (!cur[idx].IsMap() && !cur[idx].IsSequence()) cur[idx] = YAML::Node(YAML::NodeType::Map);
+    cur.reset(cur[idx]);
+    return true;
+  }
+  if (value != nullptr) {
+    cur[part] = *value;
+    return true;
+  }
+  if (cur[part].IsScalar()) {
+    why = fmt::format("'{}' holds a single value, not a mapping or list", part);
+    return false;
+  }
+  if (!cur[part].IsMap() && !cur[part].IsSequence()) cur[part] = YAML::Node(YAML::NodeType::Map);
+  cur.reset(cur[part]);
+  return true;
+}
+
+// An override key must be a dotted path with no empty components.
+void check_override_key(const std::string& key) {
+  if (key.empty()) throw ScenarioError(kOverrideFile, 0, "", "empty key (expected key=value)");
+  for (const auto& part : split_key(key)) {
+    if (part.empty()) throw ScenarioError(kOverrideFile, 0, key, "empty component in dotted key");
+  }
+}
+
+// Applies one override to the scenario tree (see Override in scenario.hpp).
+void apply_override(YAML::Node& root, const Override& o) {
+  const auto parts = group_expect_key(split_key(o.key));
+  YAML::Node value;
+  try {
+    value = YAML::Load(o.value);
+  } catch (const YAML::Exception& e) {
+    throw ScenarioError(kOverrideFile, 0, o.key, fmt::format("cannot parse value '{}': {}", o.value, e.msg));
+  }
+  YAML::Node cur;
+  cur.reset(root);  // reset(), not '=': assigning a yaml-cpp node overwrites the tree
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    std::string why;
+    const bool last = i + 1 == parts.size();
+    if (!descend(cur, parts[i], last ? &value : nullptr, why)) {
+      throw ScenarioError(kOverrideFile, 0, o.key, fmt::format("cannot apply: {}", why));
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Platform parameters
+
+// The sections of a parameter file (models/platform/omni4.yaml).
+std::vector<std::string_view> param_sections() {
+  return {"geometry", "rollers", "floor", "motor", "driver", "dac", "encoder", "velocity_loop", "sim"};
+}
+
+// The field that last set geometry.r or rollers.radius in one layer (for the cross-check).
+struct ParamTrace {
+  std::optional<YamlField> radius_or_r;
+};
+
+void read_geometry(const YamlField& s, physics::GeometryParams& g, ParamTrace& t) {
+  s.allow_keys({"L", "r", "chassis_size", "chassis_mass", "hub_mass", "wheel_width"});
+  read_number(s, "L", g.L, Bounds::positive());
+  if (read_number(s, "r", g.r, Bounds::positive())) t.radius_or_r = s["r"];
+  if (s["chassis_size"].exists()) {
+    const auto v = s["chassis_size"].numbers(3, Bounds::positive());
+    g.chassis_size = {v[0], v[1], v[2]};
+  }
+  read_number(s, "chassis_mass", g.chassis_mass, Bounds::positive());
+  read_number(s, "hub_mass", g.hub_mass, Bounds::positive());
+  read_number(s, "wheel_width", g.wheel_width, Bounds::positive());
+}
+
+void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
+  s.allow_keys({"rows", "per_row", "row_offset", "row_phase_deg", "wheel_phase_deg", "radius",
+                "coverage_deg", "mass", "damping"});
+  read_integer(s, "rows", r.rows, Bounds::at_least(1));
+  read_integer(s, "per_row", r.per_row, Bounds::at_least(1));
+  read_number(s, "row_offset", r.row_offset, Bounds::non_negative());
+  read_number(s, "row_phase_deg", r.row_phase_deg);
+  read_number(s, "wheel_phase_deg", r.wheel_phase_deg);
+  if (read_number(s, "radius", r.radius, Bounds::positive())) t.radius_or_r = s["radius"];
+  read_number(s, "coverage_deg", r.coverage_deg, Bounds{0.0, 180.0, true, true});
+  read_number(s, "mass", r.mass, Bounds::positive());
+  read_number(s, "damping", r.damping, Bounds::non_negative());
+}
+
+void read_floor(const YamlField& s, physics::FloorParams& f) {
+  s.allow_keys({"friction", "lateral_friction", "slip_gain"});
+  read_number(s, "friction", f.friction, Bounds::non_negative());
+  read_number(s, "lateral_friction", f.lateral_friction, Bounds::non_negative());
+  read_number(s, "slip_gain", f.slip_gain, Bounds::non_negative());
+}
+
+void read_motor(const YamlField& s, physics::MotorParams& m) {
+  s.allow_keys({"kv", "torque_limit", "speed_limit", "armature", "damping"});
+  read_number(s, "kv", m.kv, Bounds::positive());
+  read_number(s, "torque_limit", m.torque_limit, Bounds::positive());
+  read_number(s, "speed_limit", m.speed_limit, Bounds::positive());
+  read_number(s, "armature", m.armature, Bounds::non_negative());
+  read_number(s, "damping", m.damping, Bounds::non_negative());
+}
+
+void read_electronics(const YamlField& section, const std::string& name, physics::PlatformParams& p) {
+  // The small drive-chain sections: driver, dac, encoder, velocity_loop.
+  if (name == "driver") {
+    section.allow_keys({"zero_volts", "gain"});
+    read_number(section, "zero_volts", p.driver.zero_volts);
+    read_number(section, "gain", p.driver.gain, Bounds::positive());
+  } else if (name == "dac") {
+    section.allow_keys({"bits", "vref"});
+    read_integer(section, "bits", p.dac.bits, Bounds::closed(1, 16));
+    read_number(section, "vref", p.dac.vref, Bounds::positive());
+  } else if (name == "encoder") {
+    section.allow_keys({"lines", "index_per_rev"});
+    read_integer(section, "lines", p.encoder.lines, Bounds::at_least(1));
+    read_integer(section, "index_per_rev", p.encoder.index_per_rev, Bounds::non_negative());
+  } else if (name == "velocity_loop") {
+    section.allow_keys({"period", "kp", "ki", "kff"});
+    read_number(section, "period", p.velocity_loop.period, Bounds::open_closed(0, 1));
+    read_number(section, "kp", p.velocity_loop.kp, Bounds::non_negative());
+    read_number(section, "ki", p.velocity_loop.ki, Bounds::non_negative());
+    read_number(section, "kff", p.velocity_loop.kff, Bounds::non_negative());
+  }
+}
+
+physics::ModelVariant read_variant(const YamlField& f) {
+  return f.choice({"rollers", "capsule"}) == "capsule" ? physics::ModelVariant::capsule
+                                                       : physics::ModelVariant::rollers;
+}
+
+void read_sim(const YamlField& s, physics::SimParams& sim) {
+  s.allow_keys({"timestep", "variant"});
+  read_number(s, "timestep", sim.timestep, Bounds::open_closed(0, 0.01));
+  if (s["variant"].exists()) sim.variant = read_variant(s["variant"]);
+}
+
+// Applies the parameter sections present in `map` (a parameter file's root or a
+// scenario's platform section) over `p`, checking each value, then the cross-field rules.
+void apply_param_sections(const YamlField& map, physics::PlatformParams& p) {
+  ParamTrace t;
+  read_geometry(map["geometry"], p.geometry, t);
+  read_rollers(map["rollers"], p.rollers, t);
+  read_floor(map["floor"], p.floor);
+  read_motor(map["motor"], p.motor);
+  for (const char* name : {"driver", "dac", "encoder", "velocity_loop"}) {
+    read_electronics(map[name], name, p);
+  }
+  read_sim(map["sim"], p.sim);
+  // Rollers must fit inside the wheel envelope; blame whichever this layer set last.
+  if (t.radius_or_r && !(p.rollers.radius < p.geometry.r)) {
+    t.radius_or_r->fail(fmt::format("rollers.radius ({}) must be smaller than geometry.r ({})",
+                                    p.rollers.radius, p.geometry.r));
+  }
+}
+
+// Loads a parameter file over `p`; errors name that file.
+void apply_param_file(const std::string& file, physics::PlatformParams& p) {
+  const YAML::Node node = load_yaml_file(file);
+  const YamlDoc doc(file);
+  const YamlField root = YamlField::root(doc, node);
+  root.allow_keys(param_sections());
+  apply_param_sections(root, p);
+  p.source = file;
+}
+
+// The scenario's platform section: parameter file, then its overrides, then the variant.
+physics::PlatformParams read_platform(const YamlField& s, const std::string& scenario_file) {
+  std::vector<std::string_view> allowed = param_sections();
+  allowed.insert(allowed.begin(), {"params", "variant"});
+  s.allow_keys(allowed);
+  physics::PlatformParams p;
+  if (const YamlField params = s["params"]; params.exists()) {
+    // Relative parameter paths are relative to the scenario file.
+    const fs::path given = params.string();
+    const fs::path resolved =
+        given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();
+    if (!fs::is_regular_file(resolved)) {
+      params.fail(fmt::format("cannot open parameter file '{}'", resolved.string()));
+    }
+    apply_param_file(resolved.string(), p);
+  }
+  apply_param_sections(s, p);
+  if (s["variant"].exists()) p.sim.variant = read_variant(s["variant"]);
+  return p;
+}
+
+// ---------------------------------------------------------------------------------------
+// Bus, clock, controller
+
+BusSpec read_bus(const YamlField& f) {
+  BusSpec bus;
+  if (!f.present()) return bus;
+  // Either `bus: can` or `bus: {type: can}` (the mapping form will carry bus settings).
+  YamlField type = f;
+  if (f.node().IsMap()) {
+    f.allow_keys({"type"});
+    type = f.required("type");
+  }
+  const std::string k = type.choice({"direct", "can", "canopen", "ethercat", "m3", "tml"});
+  const BusKind all[] = {BusKind::direct, BusKind::can, BusKind::canopen,
+                         BusKind::ethercat, BusKind::m3, BusKind::tml};
+  for (BusKind b : all) {
+    if (k == to_string(b)) bus.kind = b;
+  }
+  return bus;
+}
+
+ControllerSpec read_controller(const YamlField& s) {
+  ControllerSpec c;
+  s.allow_keys({"period", "kp", "ki", "feedforward", "max_speed", "max_yaw_rate"});
+  read_number(s, "period", c.period, Bounds::open_closed(0, 1));
+  for (const auto& [name, gains] : {std::pair{"kp", c.kp}, std::pair{"ki", c.ki}}) {
+    if (!s[name].exists()) continue;
+    const auto v = s[name].numbers(3, Bounds::non_negative());
+    std::copy(v.begin(), v.end(), gains);
+  }
+  read_bool(s, "feedforward", c.feedforward);
+  read_number(s, "max_speed", c.max_speed, Bounds::positive());
+  read_number(s, "max_yaw_rate", c.max_yaw_rate, Bounds::positive());
+  return c;
+}
+
+// ---------------------------------------------------------------------------------------
+// Path
+
+PathSegment read_segment(const YamlField& item) {
+  using K = PathSegment::Kind;
+  const YamlField v = item.single_member(
+      {"line", "arc", "rotate", "dwell", "square", "circle", "figure_eight"});
+  const std::string& kind = v.name();
+  PathSegment seg;
+  seg.line = v.line();
+  // Each kind: its keys, then its values; duration (> 0) is required everywhere.
+  if (kind == "line") {
+    v.allow_keys({"dx", "dy", "dphi_deg", "duration"});
+    seg.kind = K::line;
+    read_number(v, "dx", seg.dx);
+    read_number(v, "dy", seg.dy);
+    read_number(v, "dphi_deg", seg.dphi_deg);
+  } else if (kind == "arc") {
+    v.allow_keys({"cx", "cy", "sweep_deg", "dphi_deg", "duration"});
+    seg.kind = K::arc;
+    seg.cx = v.required("cx").number();
+    seg.cy = v.required("cy").number();
+    seg.sweep_deg = v.required("sweep_deg").number();
+    read_number(v, "dphi_deg", seg.dphi_deg);
+    if (seg.cx == 0 && seg.cy == 0) v.fail("arc centre (cx, cy) must differ from the start point");
+  } else if (kind == "rotate") {
+    v.allow_keys({"dphi_deg", "duration"});
+    seg.kind = K::rotate;
+    seg.dphi_deg = v.required("dphi_deg").number();
+  } else if (kind == "dwell") {
+    v.allow_keys({"duration"});
+    seg.kind = K::dwell;
+  } else if (kind == "square") {
+    v.allow_keys({"side", "duration", "ccw"});
+    seg.kind = K::square;
+    seg.side = v.required("side").number(Bounds::positive());
+    read_bool(v, "ccw", seg.ccw);
+  } else {  // circle, figure_eight
+    v.allow_keys({"radius", "duration", "ccw"});
+    seg.kind = kind == "circle" ? K::circle : K::figure_eight;
+    seg.radius = v.required("radius").number(Bounds::positive());
+    read_bool(v, "ccw", seg.ccw);
+  }
+  seg.duration = v.required("duration").number(Bounds::positive());
+  return seg;
+}
+
+PathSpec read_path(const YamlField& s) {
+  PathSpec path;
+  s.allow_keys({"start", "segments"});
+  const YamlField start = s["start"];
+  start.allow_keys({"x", "y", "phi_deg"});
+  read_number(start, "x", path.x0);
+  read_number(start, "y", path.y0);
+  read_number(start, "phi_deg", path.phi0_deg);
+  for (const auto& item : s["segments"].elements()) path.segments.push_back(read_segment(item));
+  return path;
+}
+
+// Time the whole path takes [s] (a square's duration is per side).
+double path_duration(const PathSpec& path) {
+  double t = 0;
+  for (const auto& seg : path.segments) {
+    t += seg.kind == PathSegment::Kind::square ? 4 * seg.duration : seg.duration;
+  }
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------
+// Faults and expectations
+
+FaultSpec read_fault(const YamlField& item) {
+  const YamlField v = item.single_member({"wheel_slip"});
+  FaultSpec f;
+  f.kind = FaultSpec::Kind::wheel_slip;
+  f.line = v.line();
+  v.allow_keys({"wheel", "at", "duration", "friction_scale"});
+  f.wheel = v.required("wheel").integer(Bounds::closed(1, 4)) - 1;  // files count from 1
+  f.at = v.required("at").number(Bounds::non_negative());
+  read_number(v, "duration", f.duration, Bounds::non_negative());
+  f.friction_scale = v.required("friction_scale").number(Bounds::non_negative());
+  return f;
+}
+
+Expectation read_expectation(const YamlField& m) {
+  Expectation e;
+  e.metric = m.name();
+  e.line = m.line();
+  if (!is_known_metric(e.metric)) m.fail(fmt::format("unknown metric '{}'", e.metric));
+  m.allow_keys({"min", "max"});
+  if (m["min"].exists()) e.min = m["min"].number();
+  if (m["max"].exists()) e.max = m["max"].number();
+  if (!e.min && !e.max) m.fail("an expectation needs min, max or both");
+  if (e.min && e.max && *e.min > *e.max) {
+    m.fail(fmt::format("min {} is greater than max {}", *e.min, *e.max));
+  }
+  return e;
+}
+
+// ---------------------------------------------------------------------------------------
+// The whole scenario
+
+Scenario read_scenario(const YamlField& root, const std::string& file) {
+  root.allow_keys({"name", "description", "platform", "bus", "clock", "controller", "path",
+                   "settle", "duration", "faults", "expect"});
+  Scenario s;
+  s.file = file;
+  s.name = root["name"].exists() ? root["name"].string() : fs::path(file).stem().string();
+  if (root["description"].exists()) s.description = root["description"].string();
+  s.platform = read_platform(root["platform"], file);
+  s.bus = read_bus(root["bus"]);
+  if (root["clock"].exists()) {
+    s.clock = root["clock"].choice({"lockstep", "realtime"}) == "realtime" ? ClockMode::realtime
+                                                                           : ClockMode::lockstep;
+  }
+  s.controller = read_controller(root["controller"]);
+  s.path = read_path(root["path"]);
+  read_number(root, "settle", s.settle, Bounds::non_negative());
+  s.duration = path_duration(s.path) + s.settle;
+  read_number(root, "duration", s.duration, Bounds::positive());
+  if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
+  for (const auto& item : root["faults"].elements()) s.faults.push_back(read_fault(item));
+  for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
+  return s;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Public API
+
+ScenarioError::ScenarioError(std::string file, int line, std::string key, const std::string& message)
+    : std::runtime_error(format_error(file, line, key, message)),
+      file_(std::move(file)),
+      line_(line),
+      key_(std::move(key)) {}
+
+Override parse_override(const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos) throw ScenarioError(kOverrideFile, 0, text, "expected key=value");
+  Override o{text.substr(0, eq), text.substr(eq + 1)};
+  check_override_key(o.key);
+  return o;
+}
+
+Scenario load_scenario(const std::string& path, const std::vector<Override>& overrides) {
+  if (!fs::is_regular_file(path)) throw ScenarioError(path, 0, "", "cannot open scenario file");
+  YAML::Node root = load_yaml_file(path);
+  if (!root.IsDefined() || root.IsNull()) throw ScenarioError(path, 0, "", "empty scenario file");
+  if (!root.IsMap()) throw ScenarioError(path, root.Mark().line + 1, "", "expected a mapping at the top level");
+  // Overrides edit the tree first, so they are checked exactly like file values.
+  std::vector<std::string> overridden;
+  for (const auto& o : overrides) {
+    check_override_key(o.key);
+    apply_override(root, o);
+    overridden.push_back(o.key);
+  }
+  const YamlDoc doc(path, overridden);
+  return read_scenario(YamlField::root(doc, root), path);
+}
+
+const char* to_string(BusKind b) {
+  switch (b) {
+    case BusKind::direct: return "direct";
+    case BusKind::can: return "can";
+    case BusKind::canopen: return "canopen";
+    case BusKind::ethercat: return "ethercat";
+    case BusKind::m3: return "m3";
+    case BusKind::tml: return "tml";
+  }
+  return "?";
+}
+
+const char* to_string(ClockMode c) {
+  switch (c) {
+    case ClockMode::lockstep: return "lockstep";
+    case ClockMode::realtime: return "realtime";
+  }
+  return "?";
+}
+
+}  // namespace omnitwin::twin
