@@ -18,9 +18,9 @@ namespace omnitwin::controller {
 
 struct PlatformLoopConfig {
   double period = 0.010;                 // control sample period [s]
-  std::array<double, 3> kp{4.0, 4.0, 4.0};  // x, y [1/s]; phi [1/s]
-  std::array<double, 3> ki{2.0, 2.0, 2.0};  // x, y [1/s²]; phi [1/s²]
-  bool feedforward = true;               // add the planned world velocity to the PI output
+  std::array<double, 3> kp{6.0, 6.0, 6.0};  // x, y [1/s]; phi [1/s]
+  std::array<double, 3> ki{6.0, 6.0, 6.0};  // x, y [1/s²]; phi [1/s²]
+  bool feedforward = false;              // add the planned world velocity (the thesis: no)
   double max_speed = 0.5;                // |(xdot, ydot)| limit of the command [m/s]
   double max_yaw_rate = 2.0;             // |phidot| limit of the command [rad/s]
   double L = 0.25;                       // wheel-to-centre distance [m]

@@ -36,7 +36,7 @@ struct RollerParams {
   double radius = 0.015;      // capsule radius [m]; axis sits at r - radius from the hub
   double coverage_deg = 15;   // capsule half-length = (r - radius)·tan(coverage/2)
   double mass = 0.01;         // per roller [kg]
-  double damping = 1e-5;      // hinge damping [N·m·s/rad]
+  double damping = 0.0;       // hinge damping [N·m·s/rad]
 };
 
 struct FloorParams {

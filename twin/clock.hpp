@@ -1,0 +1,65 @@
+// twin layer — clock modes: how simulated time maps onto the wall clock.
+//
+// lockstep: simulated time runs as fast as the computation allows and never looks at the
+//   wall clock, so a scenario gives byte-identical results every run.
+// realtime: simulated time follows CLOCK_MONOTONIC. Before each new instant the pacer
+//   sleeps to an absolute deadline (clock_nanosleep TIMER_ABSTIME, no drift from relative
+//   sleeps) and records, for the ticks it is told about, how late it woke (jitter) and how
+//   often it was already more than one tick period behind (overruns).
+// Both keep the wall time they took so the run can report its real-time factor.
+#pragma once
+
+#include <cstdint>
+#include <ctime>
+#include <vector>
+
+#include "twin/scheduler.hpp"
+
+namespace omnitwin::twin {
+
+// Reads CLOCK_MONOTONIC [ns]. Real-time safe.
+std::int64_t monotonic_ns();
+
+class LockstepPacer final : public Pacer {
+ public:
+  void start() override { wall_start_ = monotonic_ns(); }
+  void wait_until(SimTime) override {}
+  void tick(SimTime) override {}
+  double wall_seconds() const { return (monotonic_ns() - wall_start_) * 1e-9; }
+
+ private:
+  std::int64_t wall_start_ = 0;
+};
+
+struct RealtimeStats {
+  std::uint64_t ticks = 0;
+  std::uint64_t overruns = 0;      // ticks that started more than one tick period late
+  double jitter_mean_us = 0;       // lateness of tick starts against their deadline [µs]
+  double jitter_p99_us = 0;
+  double jitter_max_us = 0;
+};
+
+class RealtimePacer final : public Pacer {
+ public:
+  // tick_period: the period of the ticks whose lateness is measured [ns];
+  // expected_ticks: capacity reserved up front so the cyclic path does not allocate.
+  RealtimePacer(SimTime tick_period, std::size_t expected_ticks);
+
+  void start() override;
+  // Sleeps until wall_start + t. Real-time safe.
+  void wait_until(SimTime t) override;
+  // Records the lateness of the instant t (call right after wait_until(t)). Real-time safe
+  // while fewer than expected_ticks were recorded.
+  void tick(SimTime t) override;
+
+  double wall_seconds() const { return (monotonic_ns() - wall_start_) * 1e-9; }
+  RealtimeStats stats() const;
+
+ private:
+  SimTime tick_period_;
+  std::int64_t wall_start_ = 0;
+  std::uint64_t overruns_ = 0;
+  std::vector<double> lateness_us_;
+};
+
+}  // namespace omnitwin::twin

@@ -1,0 +1,277 @@
+// twin layer — one run of a scenario; see run.hpp.
+#include "twin/run.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <numbers>
+
+#include "controller/path.hpp"
+#include "controller/platform_loop.hpp"
+#include "physics/drive_chain.hpp"
+#include "physics/platform_sim.hpp"
+#include "twin/clock.hpp"
+#include "twin/expectations.hpp"
+#include "twin/metrics.hpp"
+#include "twin/progress.hpp"
+#include "twin/records.hpp"
+#include "twin/scheduler.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// The master's reference path from the scenario's segments.
+controller::Path build_path(const PathSpec& spec) {
+  controller::Path path(controller::Pose2{spec.x0, spec.y0, spec.phi0_deg * kDeg});
+  for (const PathSegment& s : spec.segments) {
+    switch (s.kind) {
+      case PathSegment::Kind::line: path.add_line(s.dx, s.dy, s.dphi_deg * kDeg, s.duration); break;
+      case PathSegment::Kind::arc: path.add_arc(s.cx, s.cy, s.sweep_deg * kDeg, s.dphi_deg * kDeg, s.duration); break;
+      case PathSegment::Kind::rotate: path.add_rotate(s.dphi_deg * kDeg, s.duration); break;
+      case PathSegment::Kind::dwell: path.add_dwell(s.duration); break;
+      case PathSegment::Kind::square: path.add_square(s.side, s.duration, s.ccw); break;
+      case PathSegment::Kind::circle: path.add_circle(s.radius, s.duration, s.ccw); break;
+      case PathSegment::Kind::figure_eight: path.add_figure_eight(s.radius, s.duration, s.ccw); break;
+    }
+  }
+  return path;
+}
+
+controller::PlatformLoopConfig loop_config(const Scenario& s) {
+  controller::PlatformLoopConfig c;
+  c.period = s.controller.period;
+  for (int i = 0; i < 3; ++i) c.kp[i] = s.controller.kp[i], c.ki[i] = s.controller.ki[i];
+  c.feedforward = s.controller.feedforward;
+  c.max_speed = s.controller.max_speed;
+  c.max_yaw_rate = s.controller.max_yaw_rate;
+  c.L = s.platform.geometry.L;
+  c.r = s.platform.geometry.r;
+  c.counts_per_rev = s.platform.counts_per_rev();
+  return c;
+}
+
+std::vector<std::string> trajectory_header() {
+  std::vector<std::string> h{"t",      "ref_x",   "ref_y",   "ref_phi", "x",       "y",       "phi",
+                             "odom_x", "odom_y",  "odom_phi", "vx",     "vy",      "wz",      "cmd_vx",
+                             "cmd_vy", "cmd_wz"};
+  for (int i = 1; i <= 4; ++i) {
+    for (const char* f : {"cmd_rad_s", "speed_rad_s", "angle_rad", "count", "cmd_counts", "meas_counts",
+                          "dac_code", "setpoint_rad_s", "torque_nm"})
+      h.push_back(fmt::format("w{}_{}", i, f));
+  }
+  return h;
+}
+
+// Everything one run owns, wired onto one scheduler.
+class PlatformRun {
+ public:
+  PlatformRun(const Scenario& s, const RunOptions& o)
+      : s_(s), o_(o), sim_(s.platform), path_(build_path(s.path)), loop_(loop_config(s), path_) {
+    sim_.reset(s.path.x0, s.path.y0, s.path.phi0_deg * kDeg);
+    for (int i = 0; i < 4; ++i) chains_[i] = std::make_unique<physics::WheelDriveChain>(s.platform, sim_.wheel_angle(i));
+    loop_.reset(controller::Pose2{s.path.x0, s.path.y0, s.path.phi0_deg * kDeg}, counts());
+    end_ = seconds_to_ns(s.duration);
+  }
+
+  RunResult execute();
+
+ private:
+  controller::WheelCounts counts() const {
+    controller::WheelCounts c{};
+    for (int i = 0; i < 4; ++i) c[i] = chains_[i]->counter().count();
+    return c;
+  }
+  void schedule();
+  void on_physics();
+  void on_master(SimTime t);
+  void on_device(int wheel);
+  void on_record(SimTime t);
+  void on_fault(const FaultSpec& f, bool begin, SimTime t);
+  nlohmann::json metrics_json(double wall_s, bool interrupted) const;
+
+  const Scenario& s_;
+  const RunOptions& o_;
+  physics::PlatformSim sim_;
+  controller::Path path_;
+  controller::PlatformLoop loop_;
+  std::array<std::unique_ptr<physics::WheelDriveChain>, 4> chains_;
+  Scheduler sched_;
+  Pacer* pacer_ = nullptr;
+  SimTime end_;
+
+  // What the master last decided, and what the slaves do with it (the `direct` link).
+  controller::PlatformLoopOutput out_{};
+  std::array<double, 4> wheel_cmd_rad_s_{};
+  int segment_ = -1;
+  std::uint64_t physics_steps_ = 0;
+
+  // Records and indices.
+  std::unique_ptr<CsvWriter> csv_;
+  std::unique_ptr<EventLog> events_;
+  std::unique_ptr<ProgressBar> progress_;
+  PoseErrorStats truth_stats_, odom_stats_;
+  std::array<VelocityErrorStats, 4> axis_stats_;
+  std::vector<double> row_;
+};
+
+void PlatformRun::schedule() {
+  const SimTime dt = seconds_to_ns(s_.platform.sim.timestep);
+  const SimTime tm = seconds_to_ns(s_.controller.period);
+  const SimTime ts = seconds_to_ns(s_.platform.velocity_loop.period);
+  sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master(t); });
+  for (int i = 0; i < 4; ++i)
+    sched_.add_periodic(fmt::format("slave{}", i + 1), Phase::device, 0, ts, [this, i](SimTime) { on_device(i); });
+  sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
+  sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime) { on_physics(); });
+  for (const FaultSpec& f : s_.faults) {
+    sched_.add_once("fault", Phase::fault, seconds_to_ns(f.at), [this, &f](SimTime t) { on_fault(f, true, t); });
+    if (f.duration > 0)
+      sched_.add_once("fault-end", Phase::fault, seconds_to_ns(f.at + f.duration),
+                      [this, &f](SimTime t) { on_fault(f, false, t); });
+  }
+}
+
+void PlatformRun::on_physics() {
+  sim_.step();
+  ++physics_steps_;
+  // The HCTL-2032 samples its lines far faster than anything else: follow every step.
+  for (int i = 0; i < 4; ++i) chains_[i]->observe(sim_.wheel_angle(i));
+}
+
+void PlatformRun::on_master(SimTime t) {
+  pacer_->tick(t);
+  out_ = loop_.step(ns_to_seconds(t), counts());
+  for (int i = 0; i < 4; ++i) wheel_cmd_rad_s_[i] = out_.wheel_rad_s(i);
+  if (out_.reference.segment != segment_) {
+    segment_ = out_.reference.segment;
+    if (segment_ >= 0 && segment_ < static_cast<int>(s_.path.segments.size()))
+      events_->log(ns_to_seconds(t), "path", fmt::format("segment {} starts", segment_ + 1));
+  }
+}
+
+void PlatformRun::on_device(int wheel) {
+  // The slave converts the speed it was sent into counts per its own nominal sample.
+  const double per_sample = s_.platform.velocity_loop.period * s_.platform.counts_per_rev() / (2 * std::numbers::pi);
+  const double setpoint = chains_[wheel]->sample(sim_.wheel_angle(wheel), wheel_cmd_rad_s_[wheel] * per_sample);
+  sim_.set_wheel_speed_setpoint(wheel, setpoint);
+  const physics::WheelDriveSample& last = chains_[wheel]->last();
+  axis_stats_[wheel].add(last.command - last.delta_counts);
+}
+
+void PlatformRun::on_record(SimTime t) {
+  const physics::Pose p = sim_.pose();
+  const Eigen::Vector3d v = sim_.twist_world();
+  const controller::Pose2& ref = out_.reference.pose;
+  const controller::Pose2& odo = out_.odom_pose;
+  truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
+  odom_stats_.add(ref.x - odo.x, ref.y - odo.y, ref.phi - odo.phi);
+  row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo.x, odo.y, odo.phi, v(0), v(1), v(2),
+               out_.twist_command(0), out_.twist_command(1), out_.twist_command(2)});
+  for (int i = 0; i < 4; ++i) {
+    const physics::WheelDriveSample& w = chains_[i]->last();
+    row_.insert(row_.end(), {wheel_cmd_rad_s_[i], sim_.wheel_speed(i), sim_.wheel_angle(i),
+                             static_cast<double>(chains_[i]->counter().count()), w.command,
+                             static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
+                             sim_.wheel_torque(i)});
+  }
+  csv_->row(row_);
+  if (progress_) progress_->update(ns_to_seconds(t));
+}
+
+void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
+  const double scale = begin ? f.friction_scale : 1.0;
+  sim_.set_wheel_friction_scale(f.wheel, scale);
+  events_->log(ns_to_seconds(t), "fault",
+               fmt::format("wheel_slip wheel {} friction x{} ({})", f.wheel + 1, scale, begin ? "begins" : "ends"));
+}
+
+nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const {
+  const double sim_s = ns_to_seconds(sched_.now());
+  nlohmann::json m;
+  m["scenario"] = s_.name;
+  m["scenario_file"] = s_.file;
+  m["bus"] = {{"name", to_string(s_.bus.kind)}, {"frames_tx", 0}, {"frames_rx", 0}, {"dropouts", 0},
+              {"dropout_rate", 0.0}, {"errors", 0}};
+  m["clock"] = to_string(s_.clock);
+  m["sim_time_s"] = sim_s;
+  m["wall_time_s"] = wall_s;
+  m["real_time_factor"] = wall_s > 0 ? sim_s / wall_s : 0.0;
+  m["interrupted"] = interrupted;
+  m["platform"] = truth_stats_.to_json();
+  m["platform_odometry"] = odom_stats_.to_json();
+  m["axes"] = nlohmann::json::array();
+  for (const auto& a : axis_stats_) m["axes"].push_back(a.to_json());
+  m["physics"] = {{"variant", physics::to_string(s_.platform.sim.variant)}, {"timestep_s", s_.platform.sim.timestep},
+                  {"steps", physics_steps_}, {"warnings", sim_.warning_count()}};
+  return m;
+}
+
+RunResult PlatformRun::execute() {
+  // Everything is built; only now does the run directory appear.
+  fs::create_directories(o_.out_dir);
+  csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "trajectory.csv").string(), trajectory_header());
+  events_ = std::make_unique<EventLog>((fs::path(o_.out_dir) / "events.log").string());
+  if (o_.progress) progress_ = std::make_unique<ProgressBar>(s_.duration, s_.name, true);
+  events_->log(0.0, "start",
+               fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
+                           to_string(s_.clock), physics::to_string(s_.platform.sim.variant), s_.platform.source));
+
+  LockstepPacer lockstep;
+  std::unique_ptr<RealtimePacer> realtime;
+  if (s_.clock == ClockMode::realtime) {
+    const SimTime tm = seconds_to_ns(s_.controller.period);
+    realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(end_ / tm) + 2);
+    pacer_ = realtime.get();
+  } else {
+    pacer_ = &lockstep;
+  }
+  schedule();
+  const std::int64_t wall0 = monotonic_ns();
+  pacer_->start();
+  // Events up to and including the final control sample at `duration`.
+  sched_.run_until(end_ + 1, *pacer_, [this] { return o_.interrupt && o_.interrupt->load(); });
+  const double wall_s = (monotonic_ns() - wall0) * 1e-9;
+  if (progress_) progress_->finish();
+
+  const bool interrupted = o_.interrupt && o_.interrupt->load();
+  RunResult r;
+  r.out_dir = o_.out_dir;
+  r.interrupted = interrupted;
+  r.metrics = metrics_json(wall_s, interrupted);
+  if (realtime) {
+    const RealtimeStats st = realtime->stats();
+    r.metrics["realtime"] = {{"ticks", st.ticks}, {"overruns", st.overruns}, {"jitter_mean_us", st.jitter_mean_us},
+                             {"jitter_p99_us", st.jitter_p99_us}, {"jitter_max_us", st.jitter_max_us}};
+  }
+  ExpectationResult ex = evaluate_expectations(s_.expectations, r.metrics);
+  if (sim_.warning_count() > 0) {
+    ex.passed = false;
+    ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));
+  }
+  r.metrics["expectations"] = ex.to_json();
+  r.passed = ex.passed;
+  events_->log(ns_to_seconds(sched_.now()), interrupted ? "interrupt" : "end",
+               fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed", ex.failures.size()));
+  csv_->close();
+  write_json_atomic((fs::path(o_.out_dir) / "metrics.json").string(), r.metrics);
+  r.exit_code = interrupted ? 3 : (r.passed ? 0 : 1);
+  return r;
+}
+
+}  // namespace
+
+RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
+  if (scenario.bus.kind != BusKind::direct)
+    throw RunSetupError(fmt::format("bus '{}' is not available in this build yet; only 'direct' is",
+                                    to_string(scenario.bus.kind)));
+  PlatformRun run(scenario, options);
+  return run.execute();
+}
+
+}  // namespace omnitwin::twin

@@ -1,0 +1,50 @@
+// twin layer — one run of a scenario: the platform twin wired onto the scheduler.
+//
+// A run owns the MuJoCo platform, the four wheels' drive chains (HCTL-2032 counter, the
+// slave's velocity PI, DA, analog driver) and the master's platform loop, and puts each on
+// the discrete-event timeline: physics every dt, the master every control period, each
+// wheel's slave on its own oscillator. With bus `direct` the master and the slaves share
+// memory with zero delay: the baseline that bus effects are measured against. The buses of
+// later issues replace that link with frames over a real transport.
+//
+// Records are written into the run directory: trajectory.csv (every control sample),
+// metrics.json, events.log. A run validates and builds everything before it creates the
+// directory, so a bad input never leaves half-written files behind.
+#pragma once
+
+#include <atomic>
+#include <optional>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin {
+
+struct RunOptions {
+  std::string out_dir;                        // run directory (created if missing)
+  bool progress = false;                      // terminal progress bar on stderr
+  const std::atomic<bool>* interrupt = nullptr;  // set by SIGINT/SIGTERM: end cleanly
+};
+
+struct RunResult {
+  int exit_code = 0;          // DESIGN §9: 0 ok, 1 expectations failed, 3 runtime failure
+  bool passed = false;        // expectations held
+  bool interrupted = false;
+  std::string out_dir;
+  nlohmann::json metrics;     // what metrics.json holds
+};
+
+// A scenario that cannot run as given (e.g. a bus that is not built yet): exit code 2.
+class RunSetupError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Runs a loaded scenario to its end. Throws RunSetupError for inputs it cannot run and
+// std::runtime_error when records cannot be written. Not real-time safe as a whole; the
+// per-tick path inside is.
+RunResult run_scenario(const Scenario& scenario, const RunOptions& options);
+
+}  // namespace omnitwin::twin
