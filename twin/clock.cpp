@@ -2,7 +2,12 @@
 #include "twin/clock.hpp"
 
 #include <algorithm>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
 #include <cerrno>
+#include <cstring>
 #include <numeric>
 
 namespace omnitwin::twin {
@@ -18,7 +23,34 @@ RealtimePacer::RealtimePacer(SimTime tick_period, std::size_t expected_ticks)
   lateness_us_.reserve(expected_ticks + 16);
 }
 
-void RealtimePacer::start() { wall_start_ = monotonic_ns(); }
+namespace {
+constexpr int kFifoPriority = 40;  // above ordinary work, below the kernel's own threads
+}
+
+RealtimePacer::~RealtimePacer() {
+  if (restore_policy_) {
+    sched_param sp{};
+    sp.sched_priority = old_priority_;
+    pthread_setschedparam(pthread_self(), old_policy_, &sp);
+  }
+  if (unlock_memory_) munlockall();
+}
+
+void RealtimePacer::start() {
+  // Real-time scheduling and locked memory where permitted; otherwise say why not.
+  sched_param old{};
+  if (!restore_policy_ && pthread_getschedparam(pthread_self(), &old_policy_, &old) == 0) {
+    old_priority_ = old.sched_priority;
+    sched_param sp{};
+    sp.sched_priority = kFifoPriority;
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    restore_policy_ = rc == 0;
+    scheduling_ = rc == 0 ? "SCHED_FIFO " + std::to_string(kFifoPriority)
+                          : std::string("SCHED_OTHER (SCHED_FIFO refused: ") + std::strerror(rc) + ")";
+  }
+  if (!unlock_memory_) unlock_memory_ = mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
+  wall_start_ = monotonic_ns();
+}
 
 void RealtimePacer::wait_until(SimTime t) {
   const std::int64_t deadline = wall_start_ + t;
@@ -39,6 +71,7 @@ void RealtimePacer::tick(SimTime t) {
 
 RealtimeStats RealtimePacer::stats() const {
   RealtimeStats s;
+  s.scheduling = scheduling_;
   s.ticks = lateness_us_.size();
   s.overruns = overruns_;
   if (lateness_us_.empty()) return s;

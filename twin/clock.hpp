@@ -6,11 +6,15 @@
 //   sleeps to an absolute deadline (clock_nanosleep TIMER_ABSTIME, no drift from relative
 //   sleeps) and records, for the ticks it is told about, how late it woke (jitter) and how
 //   often it was already more than one tick period behind (overruns).
+//   Where permitted (root or CAP_SYS_NICE) the realtime pacer runs the thread under
+//   SCHED_FIFO and locks memory for the run, and puts both back when it is destroyed;
+//   elsewhere it runs as it is and says so in its statistics.
 // Both keep the wall time they took so the run can report its real-time factor.
 #pragma once
 
 #include <cstdint>
 #include <ctime>
+#include <string>
 #include <vector>
 
 #include "twin/scheduler.hpp"
@@ -32,6 +36,7 @@ class LockstepPacer final : public Pacer {
 };
 
 struct RealtimeStats {
+  std::string scheduling;          // e.g. "SCHED_FIFO 40" or "SCHED_OTHER (…)"
   std::uint64_t ticks = 0;
   std::uint64_t overruns = 0;      // ticks that started more than one tick period late
   double jitter_mean_us = 0;       // lateness of tick starts against their deadline [µs]
@@ -44,6 +49,9 @@ class RealtimePacer final : public Pacer {
   // tick_period: the period of the ticks whose lateness is measured [ns];
   // expected_ticks: capacity reserved up front so the cyclic path does not allocate.
   RealtimePacer(SimTime tick_period, std::size_t expected_ticks);
+  ~RealtimePacer() override;
+  RealtimePacer(const RealtimePacer&) = delete;
+  RealtimePacer& operator=(const RealtimePacer&) = delete;
 
   void start() override;
   // Sleeps until wall_start + t. Real-time safe.
@@ -60,6 +68,11 @@ class RealtimePacer final : public Pacer {
   std::int64_t wall_start_ = 0;
   std::uint64_t overruns_ = 0;
   std::vector<double> lateness_us_;
+  std::string scheduling_ = "not started";
+  bool restore_policy_ = false;
+  int old_policy_ = 0;
+  int old_priority_ = 0;
+  bool unlock_memory_ = false;
 };
 
 }  // namespace omnitwin::twin

@@ -68,8 +68,8 @@ void print_summary(const RunResult& r) {
                            p.value("iae_contour_cm", 0.0), p.value("std_contour_cm", 0.0));
   if (m.contains("realtime")) {
     const auto& rt = m["realtime"];
-    std::cout << fmt::format("  realtime: {} ticks, {} overruns, jitter mean {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",
-                             rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
+    std::cout << fmt::format("  realtime ({}): {} ticks, {} overruns, jitter mean {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",
+                             rt.value("scheduling", "?"), rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";

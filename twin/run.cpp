@@ -246,7 +246,7 @@ RunResult PlatformRun::execute() {
   r.metrics = metrics_json(wall_s, interrupted);
   if (realtime) {
     const RealtimeStats st = realtime->stats();
-    r.metrics["realtime"] = {{"ticks", st.ticks}, {"overruns", st.overruns}, {"jitter_mean_us", st.jitter_mean_us},
+    r.metrics["realtime"] = {{"scheduling", st.scheduling}, {"ticks", st.ticks}, {"overruns", st.overruns}, {"jitter_mean_us", st.jitter_mean_us},
                              {"jitter_p99_us", st.jitter_p99_us}, {"jitter_max_us", st.jitter_max_us}};
   }
   ExpectationResult ex = evaluate_expectations(s_.expectations, r.metrics);
