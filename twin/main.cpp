@@ -4,11 +4,13 @@
 // bad input (the message names file, line and key); 3 runtime failure (including a run
 // ended by SIGINT/SIGTERM, whose records are still closed and valid).
 #include <CLI/CLI.hpp>
+#include <mujoco/mujoco.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <atomic>
 #include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -30,6 +32,15 @@ namespace {
 std::atomic<bool> g_interrupt{false};  // the one process-wide flag a signal handler may set
 
 void on_signal(int) { g_interrupt.store(true); }
+
+// MuJoCo's own handlers print to stdout, append to MUJOCO_LOG.TXT in the working directory
+// and exit(1) on errors, which would read as "expectations failed". Route both through our
+// log; a MuJoCo error is a runtime failure (exit 3).
+void mujoco_warning(const char* msg) { spdlog::warn("MuJoCo: {}", msg); }
+[[noreturn]] void mujoco_error(const char* msg) {
+  spdlog::critical("MuJoCo error: {}", msg);
+  std::exit(3);
+}
 
 void install_signal_handlers() {
   struct sigaction sa {};
@@ -204,6 +215,8 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
 
 int main(int argc, char** argv) {
   spdlog::set_level(spdlog::level::warn);
+  mju_user_warning = mujoco_warning;
+  mju_user_error = mujoco_error;
   CLI::App app{"omnitwin — co-simulation digital twin of the seed-002 four-omniwheel platform"};
   app.require_subcommand(1);
   bool verbose = false;
