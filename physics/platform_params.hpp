@@ -83,6 +83,10 @@ struct VelocityLoopParams {
 struct SimParams {
   double timestep = 0.001;      // MuJoCo step [s]
   ModelVariant variant = ModelVariant::rollers;
+  // A hand-written MJCF to use instead of the generated one (it must follow the naming
+  // contract of platform_mjcf.hpp); empty = generate from these parameters. The drive
+  // chain, encoder and controller geometry still come from the parameters.
+  std::string mjcf;
 };
 
 struct PlatformParams {

@@ -95,17 +95,26 @@ bool collides(const mjModel* m, int g) {
 
 }  // namespace
 
-PlatformSim::PlatformSim(const PlatformParams& p)
-    : PlatformSim(ModelPtr(load_from_text(platform_mjcf(p))), p) {}
+namespace {
 
-PlatformSim PlatformSim::from_file(const std::string& mjcf_path, const PlatformParams& p) {
+mjModel* load_from_file(const std::string& mjcf_path) {
   std::array<char, kErrLen> err{};
-  ModelPtr m(mj_loadXML(mjcf_path.c_str(), nullptr, err.data(), kErrLen));
+  mjModel* m = mj_loadXML(mjcf_path.c_str(), nullptr, err.data(), kErrLen);
   if (!m) {
     throw std::runtime_error("PlatformSim: cannot load MJCF '" + mjcf_path +
                              "': " + std::string(err.data()));
   }
-  return PlatformSim(std::move(m), p);
+  return m;
+}
+
+}  // namespace
+
+PlatformSim::PlatformSim(const PlatformParams& p)
+    : PlatformSim(ModelPtr(p.sim.mjcf.empty() ? load_from_text(platform_mjcf(p)) : load_from_file(p.sim.mjcf)),
+                  p) {}
+
+PlatformSim PlatformSim::from_file(const std::string& mjcf_path, const PlatformParams& p) {
+  return PlatformSim(ModelPtr(load_from_file(mjcf_path)), p);
 }
 
 PlatformSim::PlatformSim(ModelPtr model, const PlatformParams& p)

@@ -270,8 +270,15 @@ RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
   if (scenario.bus.kind != BusKind::direct)
     throw RunSetupError(fmt::format("bus '{}' is not available in this build yet; only 'direct' is",
                                     to_string(scenario.bus.kind)));
-  PlatformRun run(scenario, options);
-  return run.execute();
+  // Building the platform (compiling the MJCF, checking its names) is part of validating
+  // the input: a model that does not load is bad input, and nothing has been written yet.
+  std::unique_ptr<PlatformRun> run;
+  try {
+    run = std::make_unique<PlatformRun>(scenario, options);
+  } catch (const std::exception& e) {
+    throw RunSetupError(e.what());
+  }
+  return run->execute();
 }
 
 }  // namespace omnitwin::twin

@@ -268,7 +268,7 @@ void apply_param_file(const std::string& file, physics::PlatformParams& p) {
 // The scenario's platform section: parameter file, then its overrides, then the variant.
 physics::PlatformParams read_platform(const YamlField& s, const std::string& scenario_file) {
   std::vector<std::string_view> allowed = param_sections();
-  allowed.insert(allowed.begin(), {"params", "variant"});
+  allowed.insert(allowed.begin(), {"params", "variant", "mjcf"});
   s.allow_keys(allowed);
   physics::PlatformParams p;
   if (const YamlField params = s["params"]; params.exists()) {
@@ -283,6 +283,14 @@ physics::PlatformParams read_platform(const YamlField& s, const std::string& sce
   }
   apply_param_sections(s, p);
   if (s["variant"].exists()) p.sim.variant = read_variant(s["variant"]);
+  if (const YamlField mjcf = s["mjcf"]; mjcf.exists()) {
+    // A hand-written model instead of the generated one, relative to the scenario file.
+    const fs::path given = mjcf.string();
+    const fs::path resolved =
+        given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();
+    if (!fs::is_regular_file(resolved)) mjcf.fail(fmt::format("cannot open model file '{}'", resolved.string()));
+    p.sim.mjcf = resolved.string();
+  }
   return p;
 }
 

@@ -263,7 +263,13 @@ TEST_F(PlatformSimTest, CommittedModelFileBehavesLikeTheGeneratedOne) {
   const PlatformParams p = params(ModelVariant::rollers);
   PlatformSim gen(p);
   PlatformSim file = PlatformSim::from_file(source_path("models/platform/omni4_rollers.xml"), p);
+  // The same file named through the parameters (a scenario's platform.mjcf).
+  PlatformParams named = p;
+  named.sim.mjcf = source_path("models/platform/omni4_rollers.xml");
+  PlatformSim by_param(named);
   for (int k = 0; k < 300; ++k) {
+    for (int i = 0; i < 4; ++i) by_param.set_wheel_speed_setpoint(i, 2.0 - i);
+    by_param.step();
     for (int i = 0; i < 4; ++i) {
       gen.set_wheel_speed_setpoint(i, 2.0 - i);
       file.set_wheel_speed_setpoint(i, 2.0 - i);
@@ -272,6 +278,8 @@ TEST_F(PlatformSimTest, CommittedModelFileBehavesLikeTheGeneratedOne) {
     file.step();
   }
   EXPECT_EQ(std::memcmp(gen.data()->qpos, file.data()->qpos, sizeof(mjtNum) * gen.model()->nq),
+            0);
+  EXPECT_EQ(std::memcmp(gen.data()->qpos, by_param.data()->qpos, sizeof(mjtNum) * gen.model()->nq),
             0);
 }
 

@@ -456,3 +456,23 @@ TEST(ScenarioOverrides, ErrorsOutsideOverriddenNodesStillNameTheFile) {
 
 }  // namespace
 }  // namespace omnitwin::twin
+
+namespace omnitwin::twin {
+namespace {
+
+// platform.mjcf: a hand-written model path, resolved relative to the scenario file.
+TEST(Scenario, OwnMjcfResolvesRelativeToTheScenario) {
+  const Scenario s = load_scenario(scenario("mjcf_own_model.yaml"));
+  EXPECT_EQ(s.platform.sim.mjcf, source_path("models/platform/omni4_rollers.xml"));
+  EXPECT_TRUE(load_scenario(scenario("minimal.yaml")).platform.sim.mjcf.empty());
+}
+
+// A missing model file is bad input naming the scenario file, the line and platform.mjcf.
+TEST(ScenarioErrors, MissingModelFile) {
+  const auto e = load_error(scenario("bad_mjcf_missing.yaml"));
+  expect_error(e, scenario("bad_mjcf_missing.yaml"), 3, "platform.mjcf");
+  EXPECT_NE(std::string(e.what()).find("no_such_model.xml"), std::string::npos) << e.what();
+}
+
+}  // namespace
+}  // namespace omnitwin::twin
