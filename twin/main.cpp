@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <optional>
 
 #include "physics/platform_mjcf.hpp"
@@ -131,7 +132,8 @@ std::vector<std::string> scenario_files(const std::vector<std::string>& paths) {
   return files;
 }
 
-JunitCase check_one(const std::string& file, const std::string& out_root, bool& bad_input) {
+JunitCase check_one(const std::string& file, const std::string& out_root, std::map<std::string, std::string>& used,
+                    bool& bad_input) {
   JunitCase c;
   c.name = fs::path(file).stem().string();
   c.classname = "omnitwin.check";
@@ -139,6 +141,9 @@ JunitCase check_one(const std::string& file, const std::string& out_root, bool& 
   try {
     const Scenario s = load_scenario(file);
     c.name = s.name;
+    // Each scenario gets its own run directory: two files with one name would overwrite.
+    if (const auto [it, fresh] = used.emplace(s.name, file); !fresh)
+      throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
     RunOptions o;
     o.out_dir = (fs::path(out_root) / s.name).string();
     o.interrupt = &g_interrupt;
@@ -168,18 +173,26 @@ int cmd_check(const std::vector<std::string>& paths, const std::string& junit, c
     return 2;
   }
   std::vector<JunitCase> cases;
+  std::map<std::string, std::string> used;
   bool bad_input = false;
   int passed = 0, failed = 0;
   for (const auto& f : files) {
     if (g_interrupt.load()) break;
-    JunitCase c = check_one(f, out_root, bad_input);
+    JunitCase c = check_one(f, out_root, used, bad_input);
     (c.passed ? passed : failed)++;
     std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
     for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
     cases.push_back(std::move(c));
   }
-  if (!junit.empty()) write_junit(junit, "omnitwin check", cases);
   std::cout << passed << " passed, " << failed << " failed\n";
+  if (!junit.empty()) {
+    try {
+      write_junit(junit, "omnitwin check", cases);
+    } catch (const std::exception& e) {
+      std::cerr << "omnitwin check: cannot write the JUnit report: " << e.what() << "\n";
+      return 3;
+    }
+  }
   if (bad_input) return 2;
   if (g_interrupt.load()) return 3;
   return failed ? 1 : 0;
@@ -259,8 +272,14 @@ int main(int argc, char** argv) {
   if (verbose) spdlog::set_level(spdlog::level::info);
   install_signal_handlers();
 
-  if (*run) return cmd_run(ra);
-  if (*check) return cmd_check(check_paths, junit, check_out);
-  if (*model) return cmd_model(model_scenario, model_variant, model_out);
+  try {
+    if (*run) return cmd_run(ra);
+    if (*check) return cmd_check(check_paths, junit, check_out);
+    if (*model) return cmd_model(model_scenario, model_variant, model_out);
+  } catch (const std::exception& e) {
+    // Anything not handled closer to its cause is a runtime failure, never an abort.
+    std::cerr << "omnitwin: " << e.what() << "\n";
+    return 3;
+  }
   return 2;
 }

@@ -250,6 +250,11 @@ RunResult PlatformRun::execute() {
                              {"jitter_p99_us", st.jitter_p99_us}, {"jitter_max_us", st.jitter_max_us}};
   }
   ExpectationResult ex = evaluate_expectations(s_.expectations, r.metrics);
+  if (interrupted) {
+    // Bounds meant for the whole run say nothing about a part of it.
+    ex.passed = false;
+    ex.failures.assign({fmt::format("interrupted at t = {:.3f} s: expectations not evaluated", ns_to_seconds(sched_.now()))});
+  }
   if (sim_.warning_count() > 0) {
     ex.passed = false;
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));

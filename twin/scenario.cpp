@@ -438,6 +438,14 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   Scenario s;
   s.file = file;
   s.name = root["name"].exists() ? root["name"].string() : fs::path(file).stem().string();
+  // The name becomes a directory under out/: keep it a plain, safe file name.
+  const bool safe = !s.name.empty() && s.name[0] != '.' &&
+                    s.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
+                        std::string::npos;
+  if (!safe) {
+    if (root["name"].exists()) root["name"].fail("must be letters, digits, '_', '-' or '.' (it names the run directory)");
+    throw ScenarioError(file, 0, "name", "the file name does not make a safe scenario name; set name:");
+  }
   if (root["description"].exists()) s.description = root["description"].string();
   s.platform = read_platform(root["platform"], file);
   s.bus = read_bus(root["bus"]);

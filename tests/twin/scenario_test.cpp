@@ -476,3 +476,14 @@ TEST(ScenarioErrors, MissingModelFile) {
 
 }  // namespace
 }  // namespace omnitwin::twin
+
+namespace omnitwin::twin {
+namespace {
+
+// A name that would put the run directory elsewhere (../, /) is refused with its line.
+TEST(ScenarioErrors, UnsafeNameIsRefused) {
+  expect_error(load_error(scenario("bad_name.yaml")), scenario("bad_name.yaml"), 2, "name");
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

@@ -1,0 +1,534 @@
+// Integration tests of the `omnitwin` command line (twin/main.cpp), run as a real child
+// process (posix_spawn, argv passed as is, stdout/stderr captured to files, exit status
+// from waitpid): exit codes 0/1/2/3 of DESIGN §9; bad scenario files and bad --set values
+// give one stderr line naming file, line and key and write nothing; `check` counts passed
+// and failed scenarios and writes JUnit; SIGINT/SIGTERM end a run with closed, complete
+// records; `model` prints the checked-in MJCF byte for byte.
+//
+// Needs the omnitwin executable built first (tests/CMakeLists.txt: twin_tests depends on
+// omnitwin); every test here is skipped, saying so, when the binary is missing.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/support/mujoco_fixture.hpp"
+
+extern char** environ;
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using omnitwin::testing::binary_path;
+using omnitwin::testing::source_path;
+
+constexpr std::size_t kColumns = 16 + 4 * 9;  // trajectory.csv columns
+
+// ---------------------------------------------------------------------------------------
+// Helpers: files
+
+// A fresh directory under TMPDIR (or /tmp), removed with everything in it on destruction.
+class TempDir {
+ public:
+  TempDir() {
+    const char* base = std::getenv("TMPDIR");
+    std::string templ = std::string(base && *base ? base : "/tmp") + "/omnitwin-cli-XXXXXX";
+    if (::mkdtemp(templ.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + templ);
+    path_ = templ;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  fs::path operator/(const std::string& name) const { return path_ / name; }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+std::string test_scenario(const std::string& name) { return source_path("tests/data/scenarios/" + name); }
+
+std::string read_bytes(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) out.push_back(l);
+  return out;
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+std::size_t count_char(const std::string& text, char c) { return std::count(text.begin(), text.end(), c); }
+
+// ---------------------------------------------------------------------------------------
+// Helpers: the child process
+
+std::string omnitwin_binary() { return binary_path("twin/omnitwin"); }
+
+// One `omnitwin` child: started with posix_spawn in `cwd`, stdin from /dev/null, stdout
+// and stderr into files under `io`. The destructor kills and reaps it if still running.
+class Child {
+ public:
+  Child(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& io)
+      : out_(io / "stdout"), err_(io / "stderr") {
+    std::vector<std::string> argv_s{omnitwin_binary()};
+    argv_s.insert(argv_s.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& a : argv_s) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    // Redirections and working directory.
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_addopen(&fa, 1, out_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&fa, 2, err_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addchdir_np(&fa, cwd.c_str());
+    // Default dispositions and an empty mask, whatever the test runner inherited.
+    posix_spawnattr_t at;
+    posix_spawnattr_init(&at);
+    sigset_t none, defaults;
+    sigemptyset(&none);
+    sigemptyset(&defaults);
+    sigaddset(&defaults, SIGINT);
+    sigaddset(&defaults, SIGTERM);
+    posix_spawnattr_setsigmask(&at, &none);
+    posix_spawnattr_setsigdefault(&at, &defaults);
+    posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+    const int rc = posix_spawn(&pid_, argv[0], &fa, &at, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    posix_spawnattr_destroy(&at);
+    if (rc != 0) throw std::runtime_error("posix_spawn " + argv_s[0] + ": " + std::strerror(rc));
+  }
+  ~Child() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+  }
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+
+  bool running() { return pid_ > 0 && !reap(WNOHANG); }
+  void signal(int sig) const {
+    if (pid_ > 0) ::kill(pid_, sig);
+  }
+
+  // Waits up to `limit` for the exit. Returns the exit code, 128 + N if killed by signal
+  // N, or -1 on timeout (the child is then killed by the destructor).
+  int wait(std::chrono::milliseconds limit) {
+    const auto deadline = std::chrono::steady_clock::now() + limit;
+    while (pid_ > 0 && !reap(WNOHANG)) {
+      if (std::chrono::steady_clock::now() > deadline) return -1;
+      std::this_thread::sleep_for(10ms);
+    }
+    return code_;
+  }
+
+  std::string out() const { return read_bytes(out_); }
+  std::string err() const { return read_bytes(err_); }
+
+ private:
+  // Collects the child if it has ended; keeps its exit code (128 + N for signal N).
+  bool reap(int flags) {
+    int status = 0;
+    if (::waitpid(pid_, &status, flags) != pid_) return false;
+    code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    pid_ = 0;
+    return true;
+  }
+
+  pid_t pid_ = 0;
+  int code_ = -1;
+  fs::path out_, err_;
+};
+
+struct Finished {
+  int code;
+  std::string out, err;
+};
+
+// Base for every CLI test: a temp dir (work/ is the child's cwd, io/ its captured output)
+// and a skip when the binary has not been built.
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!fs::is_regular_file(omnitwin_binary()))
+      GTEST_SKIP() << "omnitwin binary not built at " << omnitwin_binary()
+                   << " (build the omnitwin target before twin_tests)";
+    fs::create_directories(work());
+    fs::create_directories(io());
+  }
+  fs::path work() const { return dir_ / "work"; }
+  fs::path io() const { return dir_ / "io"; }
+
+  // Runs omnitwin to completion (limit 120 s) and returns its exit code and output.
+  Finished run(const std::vector<std::string>& args) {
+    Child c(args, work(), io());
+    const int code = c.wait(120s);
+    EXPECT_NE(code, -1) << "omnitwin did not finish within 120 s";
+    return {code, c.out(), c.err()};
+  }
+
+  TempDir dir_;
+};
+
+// Copies files into a fresh directory `name` under the temp dir; returns it.
+fs::path scenario_dir(const TempDir& dir, const std::string& name, const std::vector<std::string>& files) {
+  const fs::path d = dir / name;
+  fs::create_directories(d);
+  for (const auto& f : files) fs::copy_file(test_scenario(f), d / f);
+  return d;
+}
+
+// ---------------------------------------------------------------------------------------
+// Bad input: exit 2, one line naming file, line and key, nothing written
+
+class CliBadScenario : public CliTest {
+ protected:
+  // Runs `file` (under tests/data/scenarios) with an --out that must never appear and
+  // checks exit 2, one stderr line "omnitwin: FILE:LINE: KEY: …", an empty stdout, and
+  // nothing created: not the run directory, its parent, nor anything in the cwd.
+  void expect_rejected(const std::string& name, int line, const std::string& key) {
+    const std::string file = test_scenario(name);
+    const fs::path out = dir_ / "never/run";
+    const Finished f = run({"run", file, "--out", out.string(), "--no-progress"});
+    EXPECT_EQ(f.code, 2) << f.err;
+    EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+    EXPECT_TRUE(f.err.ends_with("\n")) << f.err;
+    EXPECT_TRUE(contains(f.err, file + ":" + std::to_string(line) + ": " + key + ": ")) << f.err;
+    EXPECT_EQ(f.out, "");
+    EXPECT_FALSE(fs::exists(dir_ / "never"));
+    EXPECT_TRUE(fs::is_empty(work())) << "something was written in the working directory";
+  }
+};
+
+// An unknown top-level key (line 4, `setle`): exit 2, one line with file:4: setle.
+TEST_F(CliBadScenario, UnknownKey) { expect_rejected("bad_unknown_top.yaml", 4, "setle"); }
+
+// A segment duration that is not a number (line 5): exit 2, one line naming the full key.
+TEST_F(CliBadScenario, WrongType) { expect_rejected("bad_type_duration.yaml", 5, "path.segments.1.line.duration"); }
+
+// A negative run duration (line 3): exit 2, one line naming `duration`.
+TEST_F(CliBadScenario, NegativeDuration) { expect_rejected("bad_negative_duration.yaml", 3, "duration"); }
+
+// A parameter file that does not exist (line 4): exit 2, one line naming platform.params.
+TEST_F(CliBadScenario, MissingParameterFile) { expect_rejected("bad_missing_params.yaml", 4, "platform.params"); }
+
+class CliBadInput : public CliTest {};
+
+// A scenario file that does not exist: exit 2, one stderr line naming it, nothing written.
+TEST_F(CliBadInput, MissingScenarioFile) {
+  const std::string file = (dir_ / "no_such_scenario.yaml").string();
+  const Finished f = run({"run", file, "--out", (dir_ / "never").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+  EXPECT_TRUE(contains(f.err, file)) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "never"));
+}
+
+// A bad --set (a value of the wrong type, or no '=') exits 2 with one line naming --set
+// and the key, and writes nothing.
+TEST_F(CliBadInput, BadSetNamesSet) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  for (const std::vector<std::string>& set : {std::vector<std::string>{"--set", "controller.period=abc"},
+                                              std::vector<std::string>{"--set", "controller.period"},
+                                              std::vector<std::string>{"--set", "controller.period=-1"}}) {
+    std::vector<std::string> args{"run", file, "--out", (dir_ / "never").string()};
+    args.insert(args.end(), set.begin(), set.end());
+    const Finished f = run(args);
+    EXPECT_EQ(f.code, 2) << set[1];
+    EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+    EXPECT_TRUE(contains(f.err, "--set: controller.period")) << f.err;
+    EXPECT_FALSE(fs::exists(dir_ / "never")) << set[1];
+  }
+}
+
+// `--bus can` (not built yet) exits 2 saying the bus is not available, naming the
+// scenario, before anything is written.
+TEST_F(CliBadInput, UnbuiltBusIsRefused) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  const Finished f = run({"run", file, "--bus", "can", "--out", (dir_ / "never").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+  EXPECT_TRUE(contains(f.err, file)) << f.err;
+  EXPECT_TRUE(contains(f.err, "bus 'can' is not available")) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "never"));
+}
+
+// Usage errors exit 2 (unknown subcommand, unknown option, no subcommand, a value outside
+// a choice list); --help exits 0 and lists the subcommands.
+TEST_F(CliBadInput, UsageErrorsExitTwoHelpExitsZero) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  EXPECT_EQ(run({"frobnicate"}).code, 2);
+  EXPECT_EQ(run({}).code, 2);
+  EXPECT_EQ(run({"run", file, "--frobnicate"}).code, 2);
+  EXPECT_EQ(run({"run", file, "--clock", "sundial"}).code, 2);
+  EXPECT_EQ(run({"run"}).code, 2);
+  const Finished help = run({"--help"});
+  EXPECT_EQ(help.code, 0);
+  for (const char* sub : {"run", "check", "model"}) EXPECT_TRUE(contains(help.out, sub)) << help.out;
+  EXPECT_EQ(run({"run", "--help"}).code, 0);
+  EXPECT_TRUE(fs::is_empty(work()));
+}
+
+// ---------------------------------------------------------------------------------------
+// run: expectations and overrides
+
+class CliRun : public CliTest {};
+
+// A scenario whose expectation cannot hold: exit 1, stdout prints the FAILED line with
+// the metric, metrics.json has expectations.passed false and the same failure text.
+TEST_F(CliRun, FailedExpectationExitsOne) {
+  const fs::path out = dir_ / "out";
+  const Finished f = run({"run", test_scenario("run_impossible.yaml"), "--out", out.string(), "--no-progress"});
+  EXPECT_EQ(f.code, 1) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "FAILED: platform.final_error_cm")) << f.out;
+  EXPECT_TRUE(contains(f.out, "expectations: FAILED")) << f.out;
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("expectations").at("passed"), false);
+  ASSERT_EQ(m.at("expectations").at("failures").size(), 1u);
+  const std::string failure = m.at("expectations").at("failures").at(0);
+  EXPECT_TRUE(contains(failure, "platform.final_error_cm")) << failure;
+  EXPECT_TRUE(contains(failure, "max 0.0001")) << failure;
+  EXPECT_TRUE(contains(f.out, "FAILED: " + failure)) << f.out;
+}
+
+// A passing scenario exits 0 and prints its summary and the paths of its three records.
+TEST_F(CliRun, PassingRunExitsZeroAndPrintsRecords) {
+  const fs::path out = dir_ / "out";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress"});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "run_short_line (direct bus, lockstep clock): 3.50 s simulated")) << f.out;
+  EXPECT_TRUE(contains(f.out, "expectations: passed")) << f.out;
+  for (const char* rec : {"metrics.json", "trajectory.csv", "events.log"}) {
+    EXPECT_TRUE(contains(f.out, (out / rec).string())) << f.out;
+    EXPECT_TRUE(fs::is_regular_file(out / rec)) << rec;
+  }
+}
+
+// Without --out, `run` writes into out/<scenario name>/ under the working directory.
+TEST_F(CliRun, DefaultRunDirectoryIsOutScenarioName) {
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--no-progress"});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  for (const char* rec : {"metrics.json", "trajectory.csv", "events.log"})
+    EXPECT_TRUE(fs::is_regular_file(work() / "out/run_short_line" / rec)) << rec;
+}
+
+// --set overrides reach the run: controller.period=0.005 turns the 351 rows of the 3.5 s
+// run into 701 rows (one per 5 ms sample).
+TEST_F(CliRun, SetPeriodDoublesTheRows) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  EXPECT_EQ(run({"run", file, "--out", (dir_ / "base").string(), "--no-progress"}).code, 0);
+  EXPECT_EQ(run({"run", file, "--out", (dir_ / "fast").string(), "--no-progress", "--set", "controller.period=0.005"})
+                .code,
+            0);
+  const auto base = lines_of(read_bytes(dir_ / "base/trajectory.csv"));
+  const auto fast = lines_of(read_bytes(dir_ / "fast/trajectory.csv"));
+  EXPECT_EQ(base.size(), 1u + 351u);
+  EXPECT_EQ(fast.size(), 1u + 701u);
+  ASSERT_GT(fast.size(), 2u);
+  EXPECT_TRUE(fast[2].starts_with("0.005,")) << fast[2];
+}
+
+// ---------------------------------------------------------------------------------------
+// check
+
+class CliCheck : public CliTest {};
+
+// `check DIR --junit FILE` over one passing and one failing scenario: prints PASS/FAIL per
+// case and "1 passed, 1 failed" last, exits 1; the JUnit XML counts tests="2"
+// failures="1" errors="0" and carries the failure text.
+TEST_F(CliCheck, OnePassedOneFailed) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml", "run_impossible.yaml"});
+  const fs::path junit = dir_ / "report.xml";
+  const Finished f = run({"check", scenarios.string(), "--junit", junit.string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 1) << f.out << f.err;
+  const auto lines = lines_of(f.out);
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back(), "1 passed, 1 failed");
+  EXPECT_TRUE(contains(f.out, "PASS run_short_line")) << f.out;
+  EXPECT_TRUE(contains(f.out, "FAIL run_impossible")) << f.out;
+  // The JUnit report.
+  const std::string xml = read_bytes(junit);
+  EXPECT_TRUE(contains(xml, "<testsuite name=\"omnitwin check\" tests=\"2\" failures=\"1\" errors=\"0\"")) << xml;
+  EXPECT_TRUE(contains(xml, "<testcase name=\"run_impossible\"")) << xml;
+  EXPECT_TRUE(contains(xml, "<failure message=\"platform.final_error_cm")) << xml;
+  EXPECT_EQ(count_char(xml, '<'), count_char(xml, '>'));
+  // One run directory per scenario.
+  EXPECT_TRUE(fs::is_regular_file(dir_ / "runs/run_short_line/metrics.json"));
+  EXPECT_TRUE(fs::is_regular_file(dir_ / "runs/run_impossible/metrics.json"));
+}
+
+// A directory holding a bad scenario: check exits 2 and the bad file is an <error> case
+// (errors="1") naming its line and key, while the good one still runs and passes.
+TEST_F(CliCheck, BadScenarioIsAnError) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"bad_unknown_top.yaml", "run_short_line.yaml"});
+  const fs::path junit = dir_ / "report.xml";
+  const Finished f = run({"check", scenarios.string(), "--junit", junit.string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  const auto lines = lines_of(f.out);
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.back(), "1 passed, 1 failed");
+  EXPECT_TRUE(contains(f.out, "ERROR bad_unknown_top")) << f.out;
+  const std::string xml = read_bytes(junit);
+  EXPECT_TRUE(contains(xml, "tests=\"2\" failures=\"0\" errors=\"1\"")) << xml;
+  EXPECT_TRUE(contains(xml, "<error message=\"" + (scenarios / "bad_unknown_top.yaml").string() + ":4: setle:"))
+      << xml;
+  EXPECT_FALSE(fs::exists(dir_ / "runs/bad_unknown_top"));
+}
+
+// Two scenario files with the same name would share (and overwrite) one run directory: the
+// second is an error naming the first, and the first still runs.
+TEST_F(CliCheck, DuplicateScenarioNamesAreAnError) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  fs::copy_file(scenarios / "run_short_line.yaml", scenarios / "zz_copy.yaml");
+  const Finished f = run({"check", scenarios.string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "ERROR")) << f.out;
+  EXPECT_TRUE(contains(f.out, "is already the name of " + (scenarios / "run_short_line.yaml").string())) << f.out;
+  EXPECT_EQ(lines_of(f.out).back(), "1 passed, 1 failed");
+}
+
+// A --junit FILE that cannot be written (its directory does not exist) ends `check` with a
+// clear one-line error and exit code 3 (runtime failure), never an abort.
+TEST_F(CliCheck, UnwritableJunitFailsCleanly) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  const fs::path junit = dir_ / "missing/report.xml";
+  const Finished f = run({"check", scenarios.string(), "--junit", junit.string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 3) << "stderr: " << f.err;
+  EXPECT_FALSE(contains(f.err, "terminate called")) << f.err;
+  EXPECT_TRUE(contains(f.err, (dir_ / "missing").string())) << f.err;
+  EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+}
+
+// A path with no scenario files is bad usage: exit 2.
+TEST_F(CliCheck, NoScenariosIsBadUsage) {
+  fs::create_directories(dir_ / "empty");
+  const Finished f = run({"check", (dir_ / "empty").string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_TRUE(contains(f.err, "no scenario files")) << f.err;
+}
+
+// ---------------------------------------------------------------------------------------
+// Interrupts: SIGINT and SIGTERM half-way leave closed, complete records
+
+class CliInterrupt : public CliTest {
+ protected:
+  void expect_clean_stop(int sig);
+};
+
+// Waits until the run's temp CSV holds more than `bytes` (rows are being produced).
+bool wait_for_rows(const fs::path& part, std::uintmax_t bytes, Child& c) {
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < deadline && c.running()) {
+    std::error_code ec;
+    if (fs::file_size(part, ec) > bytes && !ec) return true;
+    std::this_thread::sleep_for(20ms);
+  }
+  return false;
+}
+
+// Starts the 120 s rollers run, waits until trajectory rows are being written (under the
+// temp name only), sends the signal, and expects: exit 3 within 10 s; the temp CSV renamed
+// to trajectory.csv with every line complete (52 cells, trailing newline) and rows
+// contiguous at 10 ms up to the stop; metrics.json "interrupted": true with sim_time_s
+// short of 120 s; events.log ending in an interrupt line; stdout saying INTERRUPTED.
+void CliInterrupt::expect_clean_stop(int sig) {
+  const fs::path out = dir_ / "out";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--out", out.string(), "--no-progress"}, work(), io());
+  // Rows are being produced, under the temporary name only.
+  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, c)) << c.err();
+  EXPECT_FALSE(fs::exists(out / "trajectory.csv"));
+  EXPECT_FALSE(fs::exists(out / "metrics.json"));
+  c.signal(sig);
+  EXPECT_EQ(c.wait(10s), 3) << c.out() << c.err();
+  EXPECT_TRUE(contains(c.out(), "INTERRUPTED")) << c.out();
+  // The CSV: renamed, complete lines, contiguous rows.
+  EXPECT_FALSE(fs::exists(out / ".trajectory.csv.part"));
+  const std::string csv = read_bytes(out / "trajectory.csv");
+  ASSERT_FALSE(csv.empty());
+  EXPECT_EQ(csv.back(), '\n');
+  const auto lines = lines_of(csv);
+  ASSERT_GT(lines.size(), 100u);
+  for (std::size_t i = 0; i < lines.size(); ++i)
+    ASSERT_EQ(count_char(lines[i], ',') + 1, kColumns) << "line " << i + 1 << ": " << lines[i];
+  const double last_t = std::stod(lines.back().substr(0, lines.back().find(',')));
+  EXPECT_NEAR(last_t, (lines.size() - 2) * 0.010, 1e-9);
+  // metrics.json.
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("interrupted"), true);
+  // Bounds meant for the whole run are not judged on a part of it.
+  EXPECT_EQ(m.at("expectations").at("passed"), false);
+  EXPECT_TRUE(contains(m.at("expectations").at("failures").at(0).get<std::string>(), "not evaluated"));
+  const double sim = m.at("sim_time_s").get<double>();
+  EXPECT_GE(sim, last_t);
+  EXPECT_LT(sim, last_t + 0.010);
+  EXPECT_LT(sim, 100.0);
+  // events.log.
+  const auto events = lines_of(read_bytes(out / "events.log"));
+  ASSERT_GE(events.size(), 2u);
+  EXPECT_TRUE(contains(events.front(), "start")) << events.front();
+  EXPECT_TRUE(contains(events.back(), "interrupt")) << events.back();
+}
+
+// Ctrl-C half-way through a run (see expect_clean_stop).
+TEST_F(CliInterrupt, SigintClosesCompleteRecords) { expect_clean_stop(SIGINT); }
+
+// SIGTERM half-way through a run (see expect_clean_stop).
+TEST_F(CliInterrupt, SigtermClosesCompleteRecords) { expect_clean_stop(SIGTERM); }
+
+// ---------------------------------------------------------------------------------------
+// model
+
+class CliModel : public CliTest {
+ protected:
+  void expect_checked_in_mjcf(const std::string& variant);
+};
+
+// `model --variant V` prints models/platform/omni4_V.xml byte for byte on stdout, and
+// `--out FILE` writes the same bytes to FILE.
+void CliModel::expect_checked_in_mjcf(const std::string& variant) {
+  const std::string expected = read_bytes(source_path("models/platform/omni4_" + variant + ".xml"));
+  ASSERT_GT(expected.size(), 1000u);
+  const Finished f = run({"model", "--variant", variant});
+  EXPECT_EQ(f.code, 0) << f.err;
+  EXPECT_TRUE(f.out == expected) << "omnitwin model --variant " << variant << " differs from omni4_" << variant
+                                 << ".xml (" << f.out.size() << " vs " << expected.size() << " bytes)";
+  const fs::path file = dir_ / ("model_" + variant + ".xml");
+  EXPECT_EQ(run({"model", "--variant", variant, "--out", file.string()}).code, 0);
+  EXPECT_TRUE(read_bytes(file) == expected);
+}
+
+// The rollers model (see expect_checked_in_mjcf).
+TEST_F(CliModel, RollersMatchesCheckedInMjcf) { expect_checked_in_mjcf("rollers"); }
+
+// The capsule model (see expect_checked_in_mjcf).
+TEST_F(CliModel, CapsuleMatchesCheckedInMjcf) { expect_checked_in_mjcf("capsule"); }
+
+}  // namespace
+}  // namespace omnitwin::twin
