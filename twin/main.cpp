@@ -85,6 +85,7 @@ void print_summary(const RunResult& r) {
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";
+  if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
   for (const char* f : {"metrics.json", "trajectory.csv", "events.log"})
@@ -203,6 +204,10 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
     std::vector<Override> o;
     physics::PlatformParams p;
     if (!scenario.empty()) p = load_scenario(scenario, o).platform;
+    if (!p.sim.mjcf.empty()) {
+      std::cerr << "omnitwin model: " << scenario << " runs its own MJCF (" << p.sim.mjcf << "); nothing is generated\n";
+      return 2;
+    }
     if (variant == "rollers") p.sim.variant = physics::ModelVariant::rollers;
     if (variant == "capsule") p.sim.variant = physics::ModelVariant::capsule;
     const std::string xml = physics::platform_mjcf(p);

@@ -101,7 +101,7 @@ CsvWriter::~CsvWriter() {
   }
 }
 
-void CsvWriter::row(std::span<const double> values) {
+bool CsvWriter::row(std::span<const double> values) {
   if (values.size() != columns_) {
     throw std::invalid_argument(fmt::format("{}: row has {} values, header has {} columns", path_,
                                             values.size(), columns_));
@@ -113,8 +113,14 @@ void CsvWriter::row(std::span<const double> values) {
     fmt::format_to(std::back_inserter(line_), "{:.10g}", values[i]);
   }
   line_ += '\n';
-  file_.write(line_);
+  try {
+    file_.write(line_);
+  } catch (const std::runtime_error& e) {
+    error_ = e.what();  // cold path: the file is marked failed and will not be renamed
+    return false;
+  }
   ++rows_;
+  return true;
 }
 
 void CsvWriter::flush() { file_.flush(); }
@@ -148,14 +154,20 @@ void write_json_atomic(const std::string& path, const nlohmann::json& j) {
 
 EventLog::EventLog(const std::string& path) : file_(path, "wb") {}
 
-void EventLog::log(double sim_time_s, std::string_view kind, std::string_view message) {
+bool EventLog::log(double sim_time_s, std::string_view kind, std::string_view message) {
   std::string line = fmt::format("{:12.6f}  {:<10}  {}\n", sim_time_s, kind, message);
   // Keep one event per line whatever the message holds.
   for (std::size_t i = 0; i + 1 < line.size(); ++i) {
     if (line[i] == '\n' || line[i] == '\r') line[i] = ' ';
   }
-  file_.write(line);
-  file_.flush();
+  try {
+    file_.write(line);
+    file_.flush();
+  } catch (const std::runtime_error& e) {
+    error_ = e.what();
+    return false;
+  }
+  return true;
 }
 
 void EventLog::close() { file_.close(); }

@@ -56,8 +56,12 @@ class CsvWriter {
   CsvWriter& operator=(const CsvWriter&) = delete;
 
   // One line: each value as "{:.10g}", comma-separated. values.size() must equal the
-  // header's column count (std::invalid_argument otherwise). Throws on write failure.
-  void row(std::span<const double> values);
+  // header's column count (std::invalid_argument otherwise: a programmer error). Returns
+  // false when the write failed (e.g. disk full; error() says why): this is on the run's
+  // cyclic path, so a failure is a status, not an exception. Allocation-free once warm.
+  bool row(std::span<const double> values);
+  // Why the last failed write failed ("" if none did).
+  const std::string& error() const { return error_; }
   // Pushes buffered rows to the temp file (still under its temp name).
   void flush();
   // Flushes, closes and renames the temp file to its final name. Idempotent. If a write
@@ -73,6 +77,7 @@ class CsvWriter {
   std::size_t columns_;
   std::size_t rows_ = 0;
   std::string line_;  // reused per row
+  std::string error_;
 };
 
 // Writes `text` to path via "<dir>/.<name>.part" + rename. Throws std::runtime_error.
@@ -90,14 +95,17 @@ class EventLog {
   // std::runtime_error if it cannot.
   explicit EventLog(const std::string& path);
 
-  // Appends one event; newlines in `message` become spaces. Throws on write failure.
-  void log(double sim_time_s, std::string_view kind, std::string_view message);
+  // Appends one event; newlines in `message` become spaces. Returns false when the write
+  // failed (error() says why): events are logged from the cyclic path.
+  bool log(double sim_time_s, std::string_view kind, std::string_view message);
+  const std::string& error() const { return error_; }
   void close();
 
   const std::string& path() const { return file_.path(); }
 
  private:
   CheckedFile file_;
+  std::string error_;
 };
 
 }  // namespace omnitwin::twin

@@ -43,6 +43,18 @@ controller::Path build_path(const PathSpec& spec) {
   return path;
 }
 
+// What MuJoCo runs: a generated variant, or the hand-written file the scenario named.
+std::string model_name(const physics::PlatformParams& p) {
+  return p.sim.mjcf.empty() ? std::string(physics::to_string(p.sim.variant)) : p.sim.mjcf;
+}
+
+// A message as one line (MuJoCo's own errors span several).
+std::string one_line(std::string text) {
+  for (char& c : text)
+    if (c == '\n' || c == '\r') c = ' ';
+  return text;
+}
+
 controller::PlatformLoopConfig loop_config(const Scenario& s) {
   controller::PlatformLoopConfig c;
   c.period = s.controller.period;
@@ -93,7 +105,16 @@ class PlatformRun {
   void on_device(int wheel);
   void on_record(SimTime t);
   void on_fault(const FaultSpec& f, bool begin, SimTime t);
+  // A record write that failed (disk full…) ends the run as a runtime failure: remember
+  // the first reason and stop the scheduler. Real-time safe on the success path.
+  template <class Writer>
+  void note(bool ok, const Writer& w) {
+    if (ok || !error_.empty()) return;
+    error_ = w.error();
+    sched_.stop();
+  }
   nlohmann::json metrics_json(double wall_s, bool interrupted) const;
+  RunResult finish(double wall_s, const RealtimePacer* realtime);
 
   const Scenario& s_;
   const RunOptions& o_;
@@ -110,6 +131,7 @@ class PlatformRun {
   std::array<double, 4> wheel_cmd_rad_s_{};
   int segment_ = -1;
   std::uint64_t physics_steps_ = 0;
+  std::string error_;  // why the run ended early ("" = it did not)
 
   // Records and indices.
   std::unique_ptr<CsvWriter> csv_;
@@ -151,7 +173,7 @@ void PlatformRun::on_master(SimTime t) {
   if (out_.reference.segment != segment_) {
     segment_ = out_.reference.segment;
     if (segment_ >= 0 && segment_ < static_cast<int>(s_.path.segments.size()))
-      events_->log(ns_to_seconds(t), "path", fmt::format("segment {} starts", segment_ + 1));
+      note(events_->log(ns_to_seconds(t), "path", fmt::format("segment {} starts", segment_ + 1)), *events_);
   }
 }
 
@@ -180,15 +202,16 @@ void PlatformRun::on_record(SimTime t) {
                              static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
                              sim_.wheel_torque(i)});
   }
-  csv_->row(row_);
+  note(csv_->row(row_), *csv_);
   if (progress_) progress_->update(ns_to_seconds(t));
 }
 
 void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
   const double scale = begin ? f.friction_scale : 1.0;
   sim_.set_wheel_friction_scale(f.wheel, scale);
-  events_->log(ns_to_seconds(t), "fault",
-               fmt::format("wheel_slip wheel {} friction x{} ({})", f.wheel + 1, scale, begin ? "begins" : "ends"));
+  note(events_->log(ns_to_seconds(t), "fault",
+               fmt::format("wheel_slip wheel {} friction x{} ({})", f.wheel + 1, scale, begin ? "begins" : "ends")),
+       *events_);
 }
 
 nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const {
@@ -207,7 +230,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   m["platform_odometry"] = odom_stats_.to_json();
   m["axes"] = nlohmann::json::array();
   for (const auto& a : axis_stats_) m["axes"].push_back(a.to_json());
-  m["physics"] = {{"variant", physics::to_string(s_.platform.sim.variant)}, {"timestep_s", s_.platform.sim.timestep},
+  m["physics"] = {{"model", model_name(s_.platform)}, {"timestep_s", s_.platform.sim.timestep},
                   {"steps", physics_steps_}, {"warnings", sim_.warning_count()}};
   return m;
 }
@@ -220,7 +243,7 @@ RunResult PlatformRun::execute() {
   if (o_.progress) progress_ = std::make_unique<ProgressBar>(s_.duration, s_.name, true);
   events_->log(0.0, "start",
                fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
-                           to_string(s_.clock), physics::to_string(s_.platform.sim.variant), s_.platform.source));
+                           to_string(s_.clock), model_name(s_.platform), s_.platform.source));
 
   LockstepPacer lockstep;
   std::unique_ptr<RealtimePacer> realtime;
@@ -234,11 +257,19 @@ RunResult PlatformRun::execute() {
   schedule();
   const std::int64_t wall0 = monotonic_ns();
   pacer_->start();
-  // Events up to and including the final control sample at `duration`.
-  sched_.run_until(end_ + 1, *pacer_, [this] { return o_.interrupt && o_.interrupt->load(); });
+  // Events up to and including the final control sample at `duration`. Anything thrown
+  // from inside a step ends the run like a record failure: records closed, metrics written.
+  try {
+    sched_.run_until(end_ + 1, *pacer_, [this] { return o_.interrupt && o_.interrupt->load(); });
+  } catch (const std::exception& e) {
+    if (error_.empty()) error_ = e.what();
+  }
   const double wall_s = (monotonic_ns() - wall0) * 1e-9;
   if (progress_) progress_->finish();
+  return finish(wall_s, realtime.get());
+}
 
+RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   const bool interrupted = o_.interrupt && o_.interrupt->load();
   RunResult r;
   r.out_dir = o_.out_dir;
@@ -246,26 +277,39 @@ RunResult PlatformRun::execute() {
   r.metrics = metrics_json(wall_s, interrupted);
   if (realtime) {
     const RealtimeStats st = realtime->stats();
-    r.metrics["realtime"] = {{"scheduling", st.scheduling}, {"ticks", st.ticks}, {"overruns", st.overruns}, {"jitter_mean_us", st.jitter_mean_us},
-                             {"jitter_p99_us", st.jitter_p99_us}, {"jitter_max_us", st.jitter_max_us}};
+    r.metrics["realtime"] = {{"scheduling", st.scheduling}, {"ticks", st.ticks}, {"overruns", st.overruns},
+                             {"jitter_mean_us", st.jitter_mean_us}, {"jitter_p99_us", st.jitter_p99_us},
+                             {"jitter_max_us", st.jitter_max_us}};
   }
   ExpectationResult ex = evaluate_expectations(s_.expectations, r.metrics);
-  if (interrupted) {
+  const bool cut_short = interrupted || !error_.empty();
+  if (cut_short) {
     // Bounds meant for the whole run say nothing about a part of it.
     ex.passed = false;
-    ex.failures.assign({fmt::format("interrupted at t = {:.3f} s: expectations not evaluated", ns_to_seconds(sched_.now()))});
+    ex.failures.assign({fmt::format("{} at t = {:.3f} s: expectations not evaluated",
+                                    interrupted ? "interrupted" : "failed", ns_to_seconds(sched_.now()))});
   }
   if (sim_.warning_count() > 0) {
     ex.passed = false;
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));
   }
+  const std::string end_kind = !error_.empty() ? "error" : (interrupted ? "interrupt" : "end");
+  events_->log(ns_to_seconds(sched_.now()), end_kind,
+               error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
+                                            ex.failures.size())
+                              : error_);
+  // The CSV is renamed only if every row reached it; otherwise the reason joins the metrics.
+  try {
+    csv_->close();
+  } catch (const std::exception& e) {
+    if (error_.empty()) error_ = e.what();
+  }
+  if (!error_.empty()) r.metrics["error"] = error_;
   r.metrics["expectations"] = ex.to_json();
   r.passed = ex.passed;
-  events_->log(ns_to_seconds(sched_.now()), interrupted ? "interrupt" : "end",
-               fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed", ex.failures.size()));
-  csv_->close();
+  r.error = error_;
   write_json_atomic((fs::path(o_.out_dir) / "metrics.json").string(), r.metrics);
-  r.exit_code = interrupted ? 3 : (r.passed ? 0 : 1);
+  r.exit_code = cut_short || !error_.empty() ? 3 : (r.passed ? 0 : 1);
   return r;
 }
 
@@ -273,7 +317,7 @@ RunResult PlatformRun::execute() {
 
 RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
   if (scenario.bus.kind != BusKind::direct)
-    throw RunSetupError(fmt::format("bus '{}' is not available in this build yet; only 'direct' is",
+    throw RunSetupError(fmt::format("bus: the bus '{}' is not available in this build yet; only 'direct' is",
                                     to_string(scenario.bus.kind)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
@@ -281,7 +325,8 @@ RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
   try {
     run = std::make_unique<PlatformRun>(scenario, options);
   } catch (const std::exception& e) {
-    throw RunSetupError(e.what());
+    const char* key = scenario.platform.sim.mjcf.empty() ? "platform" : "platform.mjcf";
+    throw RunSetupError(fmt::format("{}: {}", key, one_line(e.what())));
   }
   return run->execute();
 }

@@ -32,6 +32,7 @@ struct RunResult {
   int exit_code = 0;          // DESIGN §9: 0 ok, 1 expectations failed, 3 runtime failure
   bool passed = false;        // expectations held
   bool interrupted = false;
+  std::string error;          // why the run ended early (a record write failed…); "" if not
   std::string out_dir;
   nlohmann::json metrics;     // what metrics.json holds
 };
@@ -42,9 +43,11 @@ class RunSetupError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Runs a loaded scenario to its end. Throws RunSetupError for inputs it cannot run and
-// std::runtime_error when records cannot be written. Not real-time safe as a whole; the
-// per-tick path inside is.
+// Runs a loaded scenario to its end. Throws RunSetupError for inputs it cannot run (before
+// anything is written) and std::runtime_error when the run directory or metrics.json cannot
+// be written. A record write that fails mid-run ends the run early with exit_code 3 and
+// `error` set; trajectory.csv then stays under its temporary name. Not real-time safe as a
+// whole; the per-tick path inside is.
 RunResult run_scenario(const Scenario& scenario, const RunOptions& options);
 
 }  // namespace omnitwin::twin

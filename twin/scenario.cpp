@@ -214,7 +214,8 @@ void read_electronics(const YamlField& section, const std::string& name, physics
     read_number(section, "vref", p.dac.vref, Bounds::positive());
   } else if (name == "encoder") {
     section.allow_keys({"lines", "index_per_rev"});
-    read_integer(section, "lines", p.encoder.lines, Bounds::at_least(1));
+    // 4·lines counts per revolution must fit the int the counter works with.
+    read_integer(section, "lines", p.encoder.lines, Bounds::closed(1, 100'000'000));
     read_integer(section, "index_per_rev", p.encoder.index_per_rev, Bounds::non_negative());
   } else if (name == "velocity_loop") {
     section.allow_keys({"period", "kp", "ki", "kff"});
@@ -414,6 +415,22 @@ FaultSpec read_fault(const YamlField& item) {
   return f;
 }
 
+// The newest fault (faults.back()) must start inside the run and must not overlap an earlier
+// fault on the same wheel: the first one's end would otherwise cancel the second early.
+void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& faults, double run_duration) {
+  const FaultSpec& f = faults.back();
+  const YamlField v = item.single_member({"wheel_slip"});
+  if (f.at >= run_duration)
+    v["at"].fail(fmt::format("{} s is not inside the run (it lasts {} s): the fault would never happen", f.at,
+                             run_duration));
+  const auto end_of = [](const FaultSpec& x) { return x.duration > 0 ? x.at + x.duration : 1e300; };
+  for (std::size_t i = 0; i + 1 < faults.size(); ++i) {
+    const FaultSpec& g = faults[i];
+    if (g.wheel == f.wheel && f.at < end_of(g) && g.at < end_of(f))
+      v["at"].fail(fmt::format("overlaps the wheel_slip fault on wheel {} at line {}", f.wheel + 1, g.line));
+  }
+}
+
 Expectation read_expectation(const YamlField& m) {
   Expectation e;
   e.metric = m.name();
@@ -459,7 +476,10 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   s.duration = path_duration(s.path) + s.settle;
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
-  for (const auto& item : root["faults"].elements()) s.faults.push_back(read_fault(item));
+  for (const auto& item : root["faults"].elements()) {
+    s.faults.push_back(read_fault(item));
+    check_fault_timing(item, s.faults, s.duration);
+  }
   for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
   return s;
 }

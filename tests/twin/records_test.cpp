@@ -156,3 +156,33 @@ TEST_F(RecordsTest, EventLogLinesAndPerLineFlush) {
 
 }  // namespace
 }  // namespace omnitwin::twin
+
+namespace omnitwin::twin {
+namespace {
+
+// On the run's cyclic path a full disk is a status, not an exception: row() and log()
+// return false with the reason, the CSV is never renamed to its final name, and close()
+// says it was left incomplete. The temp file is made a link to /dev/full (ENOSPC on write).
+TEST(RecordsFullDisk, RowAndLogReturnFalseAndTheCsvIsNeverPublished) {
+  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full on this machine";
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("omnitwin-full-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  std::filesystem::create_symlink("/dev/full", dir / ".t.csv.part");
+  {
+    CsvWriter csv((dir / "t.csv").string(), {"a", "b"});
+    bool ok = true;
+    for (int i = 0; i < 100000 && ok; ++i) ok = csv.row(std::vector<double>{i * 0.5, -1.0 / 3.0});
+    EXPECT_FALSE(ok) << "writes to /dev/full never failed";
+    EXPECT_NE(csv.error().find("t.csv"), std::string::npos) << csv.error();
+    EXPECT_THROW(csv.close(), std::runtime_error);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "t.csv"));
+  EventLog log("/dev/full");
+  EXPECT_FALSE(log.log(1.0, "start", "x"));
+  EXPECT_FALSE(log.error().empty());
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

@@ -180,7 +180,7 @@ TEST_F(RunThesisLine, EndsWithin5mmOfGoal) {
   EXPECT_EQ(t.result.exit_code, 0) << m.dump(2);
   EXPECT_TRUE(t.result.passed);
   EXPECT_FALSE(t.result.interrupted);
-  EXPECT_EQ(m["physics"]["variant"], "rollers");
+  EXPECT_EQ(m["physics"]["model"], "rollers");
   EXPECT_EQ(m["physics"]["warnings"], 0);
   EXPECT_LT(m["platform"]["final_error_cm"].get<double>(), 0.5);
   // The last true pose, from the record itself.

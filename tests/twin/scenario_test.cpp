@@ -487,3 +487,31 @@ TEST(ScenarioErrors, UnsafeNameIsRefused) {
 
 }  // namespace
 }  // namespace omnitwin::twin
+
+namespace omnitwin::twin {
+namespace {
+
+// Overlapping slip faults on one wheel would cancel each other early: refused at the later one.
+TEST(ScenarioErrors, OverlappingFaultsOnOneWheel) {
+  const auto e = load_error(scenario("bad_fault_overlap.yaml"));
+  expect_error(e, scenario("bad_fault_overlap.yaml"), 8, "faults.1.wheel_slip.at");
+  EXPECT_NE(std::string(e.what()).find("line 7"), std::string::npos) << e.what();
+  // The same two faults on different wheels are fine.
+  EXPECT_NO_THROW(load_scenario(scenario("bad_fault_overlap.yaml"), {{"faults.1.wheel_slip.wheel", "3"}}));
+}
+
+// A fault after the end of the run would silently never happen: refused.
+TEST(ScenarioErrors, FaultAfterTheEndOfTheRun) {
+  expect_error(load_error(scenario("bad_fault_late.yaml")), scenario("bad_fault_late.yaml"), 7,
+               "faults.0.wheel_slip.at");
+}
+
+// 4·lines must fit the counter's int.
+TEST(ScenarioErrors, EncoderLinesAreBounded) {
+  const auto e = load_error(scenario("minimal.yaml"), {{"platform.encoder.lines", "1000000000"}});
+  EXPECT_EQ(e.file(), "--set");
+  EXPECT_EQ(e.key(), "platform.encoder.lines");
+}
+
+}  // namespace
+}  // namespace omnitwin::twin
