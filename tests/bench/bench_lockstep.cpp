@@ -7,12 +7,14 @@
 //                    contact work and the difference is the twin alone.
 //   BM_TwinLockstep  the whole thesis scenario through run_scenario (scheduler, drive
 //                    chains, master loop, metrics, trajectory.csv) in lockstep.
-// Both simulate the same 22 s; the reported counters are simulated seconds per wall
-// second (real-time factor). overhead = TwinLockstep time / RawMjStep time - 1.
+//   BM_Overhead      both of the above alternated inside every iteration, so machine drift
+//                    hits them alike; reports twin_over_raw = Σ twin time / Σ raw time.
+// All simulate the same 22 s; rtf counters are simulated seconds per wall second.
 #include <benchmark/benchmark.h>
 #include <mujoco/mujoco.h>
 
 #include <algorithm>
+#include <chrono>
 #include <array>
 #include <filesystem>
 #include <fstream>
@@ -57,24 +59,29 @@ std::vector<std::array<double, 4>> recorded_setpoints(const twin::Scenario& s) {
   return rows;
 }
 
+// One replay of the recorded setpoints through bare mj_step (model built beforehand).
+void replay(physics::PlatformSim& sim, const twin::Scenario& s, const std::vector<std::array<double, 4>>& setpoints) {
+  const int per_row = static_cast<int>(std::lround(s.controller.period / s.platform.sim.timestep));
+  const mjModel* m = sim.model();
+  mjData* d = sim.data();
+  const int steps = static_cast<int>(s.duration / s.platform.sim.timestep) + 1;
+  for (int k = 0; k < steps; ++k) {
+    if (k % per_row == 0 && k / per_row < static_cast<int>(setpoints.size()))
+      for (int i = 0; i < 4; ++i) d->ctrl[i] = setpoints[k / per_row][i];
+    mj_step(m, d);
+  }
+  benchmark::DoNotOptimize(d->qpos[0]);
+}
+
 void raw_mj_step(benchmark::State& state, physics::ModelVariant v) {
   const twin::Scenario s = load(v);
   const auto setpoints = recorded_setpoints(s);
-  const int per_row = static_cast<int>(std::lround(s.controller.period / s.platform.sim.timestep));
   for (auto _ : state) {
     state.PauseTiming();
     physics::PlatformSim sim(s.platform);
     sim.reset(0, 0, 0);
     state.ResumeTiming();
-    const mjModel* m = sim.model();
-    mjData* d = sim.data();
-    const int steps = static_cast<int>(s.duration / s.platform.sim.timestep) + 1;
-    for (int k = 0; k < steps; ++k) {
-      if (k % per_row == 0 && k / per_row < static_cast<int>(setpoints.size()))
-        for (int i = 0; i < 4; ++i) d->ctrl[i] = setpoints[k / per_row][i];
-      mj_step(m, d);
-    }
-    benchmark::DoNotOptimize(d->qpos[0]);
+    replay(sim, s, setpoints);
   }
   state.counters["rtf"] = benchmark::Counter(s.duration * state.iterations(), benchmark::Counter::kIsRate);
 }
@@ -94,6 +101,34 @@ void twin_lockstep(benchmark::State& state, physics::ModelVariant v) {
   state.counters["final_error_cm"] = final_error;
 }
 
+void overhead(benchmark::State& state, physics::ModelVariant v) {
+  const twin::Scenario s = load(v);
+  const auto setpoints = recorded_setpoints(s);
+  const std::string out = (std::filesystem::temp_directory_path() / "omnitwin-bench-overhead").string();
+  twin::RunOptions o;
+  o.out_dir = out;
+  double raw_s = 0, twin_s = 0;
+  for (auto _ : state) {
+    // Raw first; both sides build their model inside the timing (generate + compile MJCF).
+    auto t0 = std::chrono::steady_clock::now();
+    {
+      physics::PlatformSim sim(s.platform);
+      sim.reset(0, 0, 0);
+      replay(sim, s, setpoints);
+    }
+    auto t1 = std::chrono::steady_clock::now();
+    twin::run_scenario(s, o);
+    auto t2 = std::chrono::steady_clock::now();
+    raw_s += std::chrono::duration<double>(t1 - t0).count();
+    twin_s += std::chrono::duration<double>(t2 - t1).count();
+  }
+  std::filesystem::remove_all(out);
+  state.counters["twin_over_raw"] = twin_s / raw_s;
+  state.counters["twin_rtf"] = s.duration * state.iterations() / twin_s;
+}
+
+BENCHMARK_CAPTURE(overhead, rollers, physics::ModelVariant::rollers)->Unit(benchmark::kMillisecond)->Iterations(10);
+BENCHMARK_CAPTURE(overhead, capsule, physics::ModelVariant::capsule)->Unit(benchmark::kMillisecond)->Iterations(10);
 BENCHMARK_CAPTURE(raw_mj_step, rollers, physics::ModelVariant::rollers)->Unit(benchmark::kMillisecond)->MinTime(5);
 BENCHMARK_CAPTURE(twin_lockstep, rollers, physics::ModelVariant::rollers)->Unit(benchmark::kMillisecond)->MinTime(5);
 BENCHMARK_CAPTURE(raw_mj_step, capsule, physics::ModelVariant::capsule)->Unit(benchmark::kMillisecond)->MinTime(5);

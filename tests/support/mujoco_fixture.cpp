@@ -20,6 +20,10 @@ void MujocoTest::SetUp() {
 
 void MujocoTest::TearDown() {
   mju_user_warning = nullptr;
+  ReportWarnings();
+}
+
+void MujocoTest::ReportWarnings() {
   for (const auto& m : recorded()) ADD_FAILURE() << "MuJoCo warning: " << m;
   recorded().clear();
 }

@@ -2,9 +2,10 @@
 //
 // MuJoCo reports warnings through the process-wide mju_user_warning hook (and counts them
 // in mjData::warning). The fixture installs a hook that records every message, and after
-// each test fails it if anything was recorded, so a model that goes unstable, runs out of
-// contacts or hits a bad value never passes silently. Tests that step their own mjData can
-// also call ExpectNoWarnings(d) to check the per-data counters.
+// each test fails it if anything was recorded (ReportWarnings), so a model that goes
+// unstable, runs out of contacts or hits a bad value never passes silently. Tests that step
+// their own mjData can also call ExpectNoWarnings(d) to check the per-data counters.
+// tests/physics/mujoco_fixture_test.cpp shows both fail on a real MuJoCo warning.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -22,6 +23,10 @@ class MujocoTest : public ::testing::Test {
 
   // Fails the current test if d counted any warning since it was made or reset.
   static void ExpectNoWarnings(const mjData* d);
+
+  // Adds one non-fatal failure "MuJoCo warning: <message>" per message the hook recorded,
+  // then forgets them. TearDown calls it; a test may call it earlier.
+  static void ReportWarnings();
 
   // Messages recorded by the hook during this test.
   static const std::vector<std::string>& warnings();

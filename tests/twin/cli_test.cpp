@@ -3,10 +3,12 @@
 // from waitpid): exit codes 0/1/2/3 of DESIGN §9; bad scenario files and bad --set values
 // give one stderr line naming file, line and key and write nothing; `check` counts passed
 // and failed scenarios and writes JUnit; SIGINT/SIGTERM end a run with closed, complete
-// records; `model` prints the checked-in MJCF byte for byte.
+// records; two runs of one scenario write byte-identical trajectories; `model` prints the
+// checked-in MJCF byte for byte.
 //
-// Needs the omnitwin executable built first (tests/CMakeLists.txt: twin_tests depends on
-// omnitwin); every test here is skipped, saying so, when the binary is missing.
+// Needs the omnitwin executable built first. The build guarantees it (tests/CMakeLists.txt:
+// twin_tests depends on omnitwin), so a missing binary fails every test here, naming the
+// path, rather than skipping it.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -172,14 +174,15 @@ struct Finished {
   std::string out, err;
 };
 
-// Base for every CLI test: a temp dir (work/ is the child's cwd, io/ its captured output)
-// and a skip when the binary has not been built.
+// Base for every CLI test: a temp dir (work/ is the child's cwd, io/ its captured output).
+// Checks first that the omnitwin binary exists: the build makes it before twin_tests, so its
+// absence is a broken build and a hard failure (the test body then does not run), not a skip.
 class CliTest : public ::testing::Test {
  protected:
   void SetUp() override {
     if (!fs::is_regular_file(omnitwin_binary()))
-      GTEST_SKIP() << "omnitwin binary not built at " << omnitwin_binary()
-                   << " (build the omnitwin target before twin_tests)";
+      FAIL() << "omnitwin binary missing at " << omnitwin_binary()
+             << " (twin_tests depends on the omnitwin target; build it)";
     fs::create_directories(work());
     fs::create_directories(io());
   }
@@ -353,6 +356,35 @@ TEST_F(CliRun, SetPeriodDoublesTheRows) {
   EXPECT_EQ(fast.size(), 1u + 701u);
   ASSERT_GT(fast.size(), 2u);
   EXPECT_TRUE(fast[2].starts_with("0.005,")) << fast[2];
+}
+
+// Determinism across processes: two separate `omnitwin run` processes of the same scenario
+// (run_short_line.yaml) into different --out directories write byte-identical
+// trajectory.csv files, and metrics.json files that are equal once the two wall-clock
+// fields (wall_time_s, real_time_factor) are removed.
+TEST_F(CliRun, TwoProcessesWriteIdenticalRecords) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  const Finished fa = run({"run", file, "--out", a.string(), "--no-progress"});
+  const Finished fb = run({"run", file, "--out", b.string(), "--no-progress"});
+  ASSERT_EQ(fa.code, 0) << fa.out << fa.err;
+  ASSERT_EQ(fb.code, 0) << fb.out << fb.err;
+  // Trajectories: the whole run, byte for byte.
+  const std::string csv_a = read_bytes(a / "trajectory.csv"), csv_b = read_bytes(b / "trajectory.csv");
+  ASSERT_EQ(lines_of(csv_a).size(), 1u + 351u) << "expected the full 3.5 s run";
+  EXPECT_EQ(csv_a.size(), csv_b.size());
+  EXPECT_TRUE(csv_a == csv_b) << "trajectory.csv differs between two runs of the same scenario";
+  // Metrics: equal apart from the wall clock.
+  nlohmann::json ma = nlohmann::json::parse(read_bytes(a / "metrics.json"));
+  nlohmann::json mb = nlohmann::json::parse(read_bytes(b / "metrics.json"));
+  for (nlohmann::json* m : {&ma, &mb}) {
+    for (const char* wall : {"wall_time_s", "real_time_factor"}) {
+      EXPECT_TRUE(m->contains(wall)) << wall;
+      m->erase(wall);
+    }
+  }
+  EXPECT_GT(ma.at("platform").at("samples").get<int>(), 0);
+  EXPECT_EQ(ma, mb) << "a: " << ma.dump(1) << "\nb: " << mb.dump(1);
 }
 
 // ---------------------------------------------------------------------------------------
