@@ -7,6 +7,7 @@
 // full" (mjWARN_CONTACTFULL) — and nothing else, so each check sees exactly one failure.
 #include <gtest/gtest-spi.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <mujoco/mujoco.h>
 
 #include <array>
@@ -43,7 +44,7 @@ std::string box_on_plane(const std::string& size_tag) {
 
 // Loads `xml` through a temp file; fails the test (and returns null) if it does not compile.
 ModelPtr load(const std::string& xml, const std::string& name) {
-  const std::string path = ::testing::TempDir() + name;
+  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_" + name;  // ctest -j: per process
   std::ofstream(path) << xml;
   std::array<char, 1000> err{};
   ModelPtr m(mj_loadXML(path.c_str(), nullptr, err.data(), static_cast<int>(err.size())));

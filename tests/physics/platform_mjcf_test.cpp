@@ -12,6 +12,10 @@
 #include <sstream>
 #include <string>
 
+#include <unistd.h>
+
+#include <cstdio>
+
 #include "tests/support/mujoco_fixture.hpp"
 
 namespace omnitwin::physics {
@@ -21,12 +25,14 @@ using omnitwin::testing::source_path;
 
 class PlatformMjcf : public omnitwin::testing::MujocoTest {
  protected:
-  // Compiles the generated text through a temporary file; fails the test on errors.
+  // Compiles the generated text through a temporary file; fails the test on errors. The
+  // name is unique per process: ctest -j runs these tests in parallel processes.
   static mjModel* compile(const std::string& xml) {
-    const std::string path = ::testing::TempDir() + "omni4_mjcf_test.xml";
+    const std::string path = ::testing::TempDir() + "omni4_mjcf_test_" + std::to_string(::getpid()) + ".xml";
     std::ofstream(path) << xml;
     char err[1024] = "";
     mjModel* m = mj_loadXML(path.c_str(), nullptr, err, sizeof err);
+    std::remove(path.c_str());
     EXPECT_NE(m, nullptr) << err;
     return m;
   }

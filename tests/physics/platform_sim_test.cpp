@@ -5,6 +5,7 @@
 #include "physics/platform_sim.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <iostream>
 
@@ -327,7 +328,7 @@ TEST_F(PlatformSimTest, CommittedModelFileBehavesLikeTheGeneratedOne) {
 }
 
 TEST_F(PlatformSimTest, FromFileRejectsUnloadableFiles) {
-  const std::string path = ::testing::TempDir() + "omni4_broken.xml";
+  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_omni4_broken.xml";
   std::ofstream(path) << "<mujoco><worldbody><body name=\"chassis\"></worldbody></mujoco>\n";
   try {
     PlatformSim::from_file(path, PlatformParams{});
@@ -345,7 +346,7 @@ TEST_F(PlatformSimTest, FromFileNamesWhatBreaksTheNamingContract) {
   const std::string motor3 = "name=\"motor3\"", hinge2 = "name=\"wheel2\" type=\"hinge\"";
   xml.replace(xml.find(motor3), motor3.size(), "name=\"drive3\"");
   xml.replace(xml.find(hinge2), hinge2.size(), "name=\"wheel2\" type=\"slide\"");
-  const std::string path = ::testing::TempDir() + "omni4_misnamed.xml";
+  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_omni4_misnamed.xml";
   std::ofstream(path) << xml;
   try {
     PlatformSim::from_file(path, PlatformParams{});
