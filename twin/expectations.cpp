@@ -31,18 +31,6 @@ bool in(const std::array<std::string_view, N>& list, std::string_view s) {
   return std::find(list.begin(), list.end(), s) != list.end();
 }
 
-// Splits "a.b.c" into its components.
-std::vector<std::string_view> split_dots(std::string_view path) {
-  std::vector<std::string_view> parts;
-  std::size_t start = 0;
-  while (true) {
-    const auto dot = path.find('.', start);
-    parts.push_back(path.substr(start, dot == std::string_view::npos ? dot : dot - start));
-    if (dot == std::string_view::npos) return parts;
-    start = dot + 1;
-  }
-}
-
 // A non-negative decimal index, or -1.
 long parse_index(std::string_view s) {
   long v = -1;
@@ -117,6 +105,17 @@ ExpectationResult evaluate_expectations(const std::vector<Expectation>& expectat
 
 nlohmann::json ExpectationResult::to_json() const {
   return nlohmann::json{{"passed", passed}, {"failures", failures}};
+}
+
+std::vector<std::string_view> split_dots(std::string_view path) {
+  std::vector<std::string_view> parts;
+  std::size_t start = 0;
+  while (true) {
+    const auto dot = path.find('.', start);
+    parts.push_back(path.substr(start, dot == std::string_view::npos ? dot : dot - start));
+    if (dot == std::string_view::npos) return parts;
+    start = dot + 1;
+  }
 }
 
 }  // namespace omnitwin::twin

@@ -36,4 +36,8 @@ ExpectationResult evaluate_expectations(const std::vector<Expectation>& expectat
 // The value at a dotted path, or nullptr if there is none.
 const nlohmann::json* find_metric(const nlohmann::json& metrics, std::string_view path);
 
+// Splits a dotted path ("a.b.0.c") into its components (views into `path`). Used for
+// metric paths and for --set keys alike.
+std::vector<std::string_view> split_dots(std::string_view path);
+
 }  // namespace omnitwin::twin

@@ -36,14 +36,8 @@ std::string format_error(const std::string& file, int line, const std::string& k
 }
 
 std::vector<std::string> split_key(const std::string& key) {
-  std::vector<std::string> parts;
-  std::size_t start = 0;
-  while (true) {
-    const auto dot = key.find('.', start);
-    parts.push_back(key.substr(start, dot == std::string::npos ? dot : dot - start));
-    if (dot == std::string::npos) return parts;
-    start = dot + 1;
-  }
+  const auto views = split_dots(key);
+  return {views.begin(), views.end()};
 }
 
 std::string join(const std::vector<std::string>& parts, std::size_t from, std::size_t to) {

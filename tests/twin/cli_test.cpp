@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 
 extern char** environ;
 
@@ -40,49 +41,16 @@ namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using omnitwin::testing::binary_path;
 using omnitwin::testing::source_path;
+using omnitwin::testing::TempDir;
+using omnitwin::testing::lines_of;
+using omnitwin::testing::read_bytes;
 
 constexpr std::size_t kColumns = 16 + 4 * 9;  // trajectory.csv columns
 
 // ---------------------------------------------------------------------------------------
 // Helpers: files
 
-// A fresh directory under TMPDIR (or /tmp), removed with everything in it on destruction.
-class TempDir {
- public:
-  TempDir() {
-    const char* base = std::getenv("TMPDIR");
-    std::string templ = std::string(base && *base ? base : "/tmp") + "/omnitwin-cli-XXXXXX";
-    if (::mkdtemp(templ.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + templ);
-    path_ = templ;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
 std::string test_scenario(const std::string& name) { return source_path("tests/data/scenarios/" + name); }
-
-std::string read_bytes(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-std::vector<std::string> lines_of(const std::string& text) {
-  std::vector<std::string> out;
-  std::istringstream in(text);
-  for (std::string l; std::getline(in, l);) out.push_back(l);
-  return out;
-}
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
@@ -197,7 +165,7 @@ class CliTest : public ::testing::Test {
     return {code, c.out(), c.err()};
   }
 
-  TempDir dir_;
+  TempDir dir_{"omnitwin-cli"};
 };
 
 // Copies files into a fresh directory `name` under the temp dir; returns it.

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 #include "twin/run.hpp"
 #include "twin/scenario.hpp"
 
@@ -29,6 +30,9 @@ namespace {
 
 namespace fs = std::filesystem;
 using omnitwin::testing::source_path;
+using omnitwin::testing::TempDir;
+using omnitwin::testing::lines_of;
+using omnitwin::testing::read_bytes;
 
 // 16 platform columns + 9 per wheel (twin/run.cpp trajectory_header()).
 constexpr std::size_t kColumns = 16 + 4 * 9;
@@ -36,45 +40,8 @@ constexpr std::size_t kColumns = 16 + 4 * 9;
 // ---------------------------------------------------------------------------------------
 // Helpers
 
-// A fresh directory under TMPDIR (or /tmp), removed with everything in it on destruction.
-class TempDir {
- public:
-  TempDir() {
-    const char* base = std::getenv("TMPDIR");
-    std::string templ = std::string(base && *base ? base : "/tmp") + "/omnitwin-run-XXXXXX";
-    if (::mkdtemp(templ.data()) == nullptr) throw std::runtime_error("mkdtemp failed for " + templ);
-    path_ = templ;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
-
 std::string models_scenario(const std::string& name) { return source_path("models/scenarios/" + name); }
 std::string test_scenario(const std::string& name) { return source_path("tests/data/scenarios/" + name); }
-
-// The whole file as bytes ("" if it cannot be read; callers check sizes).
-std::string read_bytes(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-std::vector<std::string> lines_of(const std::string& text) {
-  std::vector<std::string> out;
-  std::istringstream in(text);
-  for (std::string l; std::getline(in, l);) out.push_back(l);
-  return out;
-}
 
 std::vector<std::string> split_commas(const std::string& line) {
   std::vector<std::string> out;
@@ -145,7 +112,7 @@ std::size_t samples(double duration_s, double period_s) {
 // cores, the short capsule line ~0.2 s.
 
 struct SharedRun {
-  TempDir dir;
+  TempDir dir{"omnitwin-run"};
   RunResult result;
   SharedRun(const std::string& scenario, const std::vector<Override>& overrides = {})
       : result(run_into(scenario, dir / "run", overrides)) {}
@@ -331,7 +298,7 @@ TEST_F(RunRecords, EventsLogHasStartAndEnd) {
 
 class RunShort : public omnitwin::testing::MujocoTest {
  protected:
-  TempDir dir_;
+  TempDir dir_{"omnitwin-run"};
 };
 
 // An expectation that cannot hold (final error ≤ 1 µm) fails the run: exit code 1,
