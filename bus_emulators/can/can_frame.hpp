@@ -2,7 +2,7 @@
 //
 // A plain value type: identifier, format (standard 11-bit / extended 29-bit), kind (data,
 // remote, error), DLC and up to 8 data bytes. The bit-level layer (can_bits), the bus core
-// (can_bus), the controller models (can_controller) and every transport pass frames as this
+// (can_bus), the controller models (sja1000, ecan) and every transport pass frames as this
 // type; nothing here knows about sockets or time.
 #pragma once
 
