@@ -422,21 +422,13 @@ void CanBus::apply_node(BusNode id, NodeTransition tr, std::int64_t t) {
       ++n.rec;
       break;
     case NodeTransition::recovery_complete:
-      n.tec = 0;
-      n.rec = 0;
-      n.recovering = false;
-      n.recovery_started = false;
-      n.recovery_count = 0;
+      n.clear_errors();
       n.ready_ns = std::max(n.ready_ns, t);
       ++n.stats.recoveries;
       leaves_bus_off = true;
       break;
     case NodeTransition::power_on:
-      n.tec = 0;
-      n.rec = 0;
-      n.recovering = false;
-      n.recovery_started = false;
-      n.recovery_count = 0;
+      n.clear_errors();
       leaves_bus_off = true;
       break;
   }

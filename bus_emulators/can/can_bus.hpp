@@ -221,6 +221,15 @@ class CanBus {
     std::int64_t recovery_begin_ns = 0;
     int recovery_count = 0;          // occurrences of 11 recessive bits seen
     NodeStats stats{};
+
+    // Back to a fresh controller's error state (recovery done, or power returning).
+    void clear_errors() {
+      tec = 0;
+      rec = 0;
+      recovering = false;
+      recovery_started = false;
+      recovery_count = 0;
+    }
   };
   enum class Transition : std::uint8_t {
     start_of_frame,

@@ -150,4 +150,14 @@ bool wait_readable(const Transport& t, std::chrono::milliseconds timeout) {
   }
 }
 
+std::optional<TimedFrame> receive_within(Transport& t, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    if (auto f = t.receive()) return f;
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left <= std::chrono::milliseconds(0)) return std::nullopt;
+    wait_readable(t, left);
+  }
+}
+
 }  // namespace omnitwin::can

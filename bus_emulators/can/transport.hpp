@@ -85,6 +85,10 @@ std::unique_ptr<Transport> open_transport(std::string_view spec);
 // Waits until t.poll_fd() is readable or the timeout passes; true when readable.
 bool wait_readable(const Transport& t, std::chrono::milliseconds timeout);
 
+// The next frame received within `timeout` (waiting on poll_fd between attempts), or
+// nullopt. Blocks: for set-up code, tools and tests, not the cyclic path.
+std::optional<TimedFrame> receive_within(Transport& t, std::chrono::milliseconds timeout);
+
 // Parsed form of a spec, exposed for tests and for `omnitwin` argument checking.
 struct TransportSpec {
   enum class Kind { socketcan, udp, mem };

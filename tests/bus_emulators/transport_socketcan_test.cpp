@@ -63,16 +63,6 @@ class VcanInterface {
   bool created_ = false;
 };
 
-std::optional<TimedFrame> receive_within(Transport& t, std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  for (;;) {
-    if (auto f = t.receive()) return f;
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left <= 0ms) return std::nullopt;
-    wait_readable(t, left);
-  }
-}
-
 TEST(SocketCanTransport, ExchangesFramesOnVcan) {
   std::string why;
   if (!SocketCanTransport::available(&why)) GTEST_SKIP() << "skipped: " << why;

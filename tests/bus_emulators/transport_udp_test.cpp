@@ -81,16 +81,6 @@ std::string spec_v6(const std::string& g, int port, const std::string& opts = ""
   return "udp:[" + g + "]:" + std::to_string(port) + opts;
 }
 
-std::optional<TimedFrame> receive_within(Transport& t, std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  for (;;) {
-    if (auto f = t.receive()) return f;
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left <= 0ms) return std::nullopt;
-    wait_readable(t, left);
-  }
-}
-
 std::vector<Frame> sample_frames() {
   Frame err;
   err.kind = FrameKind::error;
