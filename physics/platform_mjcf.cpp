@@ -104,7 +104,9 @@ void append_defaults(std::string& out, const PlatformParams& p) {
          "    </default>\n";
   // Rollers touch the floor only, through explicit pairs (append_contact_pairs): collision
   // detection then tests 48 known pairs instead of filtering every geom pair (half the cost).
-  out += "    <default class=\"roller\">\n"
+  // The capsule variant has no rollers and so no roller class.
+  if (p.sim.variant == ModelVariant::rollers)
+    out += "    <default class=\"roller\">\n"
          "      <joint type=\"hinge\" damping=\"" + num(rp.damping) + "\"/>\n"
          "      <geom type=\"capsule\" contype=\"0\" conaffinity=\"0\" condim=\"3\" "
          "friction=\"" + nums({mu, 0.005, 0.0001}) + "\" size=\"" +

@@ -201,9 +201,8 @@ int cmd_check(const std::vector<std::string>& paths, const std::string& junit, c
 
 int cmd_model(const std::string& scenario, const std::string& variant, const std::string& out) {
   try {
-    std::vector<Override> o;
     physics::PlatformParams p;
-    if (!scenario.empty()) p = load_scenario(scenario, o).platform;
+    if (!scenario.empty()) p = load_scenario(scenario).platform;
     if (!p.sim.mjcf.empty()) {
       std::cerr << "omnitwin model: " << scenario << " runs its own MJCF (" << p.sim.mjcf << "); nothing is generated\n";
       return 2;
