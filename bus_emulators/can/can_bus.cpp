@@ -205,7 +205,7 @@ void CanBus::plan_frame() {
     if (can_acknowledge(static_cast<BusNode>(i), tx_node_)) ackers |= bit_of(static_cast<BusNode>(i));
   ack_set_ = ackers;
   phase_start_ = frame_start_;
-  if (corrupt_remaining_ > 0) {
+  if (corrupt_remaining_ > 0 || node(tx_node_).corrupt_tx > 0) {
     // The last CRC bit is flipped: the transmitter flags from the next bit on.
     outcome_ = Outcome::bit_error;
     phase_end_ = frame_start_ + bit_ns(current_.region_bits);
@@ -331,7 +331,12 @@ void CanBus::apply(Transition tr, std::int64_t t) {
           break;
         case Outcome::bit_error:
           cause = ErrorCause::bit;
-          if (corrupt_remaining_ > 0) --corrupt_remaining_;
+          // A corruption aimed at this transmitter is used up before a bus-wide one.
+          if (tx.corrupt_tx > 0) {
+            --tx.corrupt_tx;
+          } else if (corrupt_remaining_ > 0) {
+            --corrupt_remaining_;
+          }
           ++tx.stats.tx_errors;
           apply_node(tx_node_, NodeTransition::tx_error, t);
           receivers_flag = true;
@@ -456,6 +461,7 @@ bool CanBus::detach(BusNode id, std::int64_t now_ns) {
   n.powered = false;
   n.head = 0;
   n.count = 0;
+  n.corrupt_tx = 0;
   n.recovering = false;
   n.recovery_started = false;
   contenders_ &= ~bit_of(id);
@@ -479,6 +485,12 @@ bool CanBus::reattach(BusNode id, std::int64_t now_ns) {
   n.joined_ns = t;
   n.ready_ns = t + bit_ns(kIntegrationBits);
   apply_node(id, NodeTransition::power_on, t);
+  return true;
+}
+
+bool CanBus::corrupt_frames_of(BusNode id, int count) {
+  if (id < 0 || id >= static_cast<int>(nodes_.size())) return false;
+  nodes_[static_cast<std::size_t>(id)].corrupt_tx += count;
   return true;
 }
 

@@ -170,6 +170,10 @@ class CanBus {
   // error frame, retransmission). Real-time safe.
   void corrupt_next_frames(int count) { corrupt_remaining_ += count; }
   int corruptions_pending() const { return corrupt_remaining_; }
+  // The next `count` transmissions of `node` are corrupted (a faulty transceiver or wiring at
+  // that node): 32 in a row take an error-active node to bus-off. Returns false for an
+  // unknown node. Real-time safe.
+  bool corrupt_frames_of(BusNode node, int count);
   // Power loss: runs events up to now_ns, then the node stops: its queue is emptied, it no
   // longer receives or acknowledges; a frame it was sending is cut off (receivers see an
   // error frame). Returns false if it was already off or is unknown. Real-time safe.
@@ -220,6 +224,7 @@ class CanBus {
     bool recovery_started = false;   // counting began (at an idle instant)
     std::int64_t recovery_begin_ns = 0;
     int recovery_count = 0;          // occurrences of 11 recessive bits seen
+    int corrupt_tx = 0;              // own transmissions still to corrupt (fault injection)
     NodeStats stats{};
 
     // Back to a fresh controller's error state (recovery done, or power returning).

@@ -257,6 +257,28 @@ TEST(CanBus, CorruptedFramesDriveTheTransmitterBusOff) {
   EXPECT_TRUE(rec.rx.empty());
 }
 
+TEST(CanBus, CorruptionAimedAtOneNodeSparesTheOthers) {
+  CanBus bus;
+  Recorder rec(bus);
+  const BusNode a = bus.attach(), b = bus.attach(), c = bus.attach();
+  EXPECT_FALSE(bus.corrupt_frames_of(7, 1));
+  ASSERT_TRUE(bus.corrupt_frames_of(a, 32));
+  // b's frame has the lower identifier and goes first, untouched; a fails 32 times.
+  bus.submit(a, make_data(0x202, {0x04, 0, 0, 0, 0, 0}), 0);
+  bus.submit(b, make_data(0x102, {0x02, 0, 0, 0, 0}), 0);
+  bus.advance(100'000'000);
+  EXPECT_EQ(bus.error_state(a), ErrorState::bus_off);
+  EXPECT_EQ(bus.error_state(b), ErrorState::error_active);
+  EXPECT_EQ(bus.node_stats(b).tx_frames, 1u);
+  EXPECT_EQ(bus.stats().error_frames, 32u);
+  EXPECT_EQ(rec.received_by(c).size(), 1u);
+  // b sends again without error: the corruption was a's alone and is used up.
+  bus.submit(b, make_data(0x102, {0x02, 1, 1, 1, 1}), 100'000'000);
+  bus.advance(200'000'000);
+  EXPECT_EQ(bus.node_stats(b).tx_frames, 2u);
+  EXPECT_EQ(bus.stats().error_frames, 32u);
+}
+
 TEST(CanBus, RecoveryOnlyOnRequestAfter128Times11RecessiveBits) {
   CanBus bus;
   Recorder rec(bus);
