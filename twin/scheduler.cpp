@@ -12,15 +12,15 @@ Scheduler::TimerId Scheduler::add_periodic(std::string name, Phase phase, SimTim
   if (period <= 0) throw std::invalid_argument("scheduler: period must be > 0 for " + name);
   if (drift <= -1.0) throw std::invalid_argument("scheduler: drift must be > -1 for " + name);
   const int id = static_cast<int>(timers_.size());
-  timers_.push_back(Timer{std::move(name), phase, first, static_cast<double>(period) * (1.0 + drift),
-                          0, true, true, 0, std::move(cb)});
+  timers_.push_back(Timer{std::move(name), phase, first, static_cast<double>(period),
+                          static_cast<double>(period) * (1.0 + drift), 0, true, true, 0, std::move(cb)});
   push(id);
   return id;
 }
 
 void Scheduler::add_once(std::string name, Phase phase, SimTime t, Callback cb) {
   const int id = static_cast<int>(timers_.size());
-  timers_.push_back(Timer{std::move(name), phase, t, 0.0, 0, false, true, 0, std::move(cb)});
+  timers_.push_back(Timer{std::move(name), phase, t, 0.0, 0.0, 0, false, true, 0, std::move(cb)});
   push(id);
 }
 
@@ -37,6 +37,19 @@ void Scheduler::restart(TimerId id, SimTime t) {
   tm.active = true;
   ++tm.generation;
   push(id);
+}
+
+void Scheduler::set_drift(TimerId id, double drift) {
+  Timer& tm = timers_.at(static_cast<std::size_t>(id));
+  if (!tm.periodic || drift <= -1.0) throw std::invalid_argument("scheduler: set_drift needs a periodic timer and drift > -1");
+  // The firing already due keeps its time; the periods after it run on the new oscillator.
+  if (tm.active) {
+    tm.origin = next_time(tm);
+    tm.k = 0;
+    ++tm.generation;
+  }
+  tm.period_ns = tm.nominal_ns * (1.0 + drift);
+  if (tm.active) push(id);
 }
 
 SimTime Scheduler::next_time(const Timer& tm) const {

@@ -65,6 +65,10 @@ class Scheduler {
   // Re-arms a periodic timer so its next firing is at `t`, counting periods from there
   // (used by device resynchronisation). Real-time safe.
   void restart(TimerId id, SimTime t);
+  // Changes a periodic timer's oscillator drift from its next firing on (which keeps its
+  // time): later firings are every period·(1 + drift). Throws std::invalid_argument for a
+  // one-shot timer or drift <= -1 (programmer errors). Real-time safe.
+  void set_drift(TimerId id, double drift);
 
   // Runs every event with time < end, in order, pacing through `pacer`. Returns the number
   // of events run. Stops early (returning) when stop() was called from a callback or when
@@ -80,6 +84,7 @@ class Scheduler {
     std::string name;
     Phase phase;
     SimTime origin;    // time of firing number 0 after the last (re)start
+    double nominal_ns; // period without drift
     double period_ns;  // period·(1 + drift)
     std::int64_t k;    // number of the next firing
     bool periodic;

@@ -57,6 +57,25 @@ TEST(Scheduler, CancelAndRestartFromCallbacks) {
   EXPECT_EQ(a, (std::vector<SimTime>{0, 10, 20, 55, 65, 75}));
 }
 
+TEST(Scheduler, SetDriftKeepsTheDueFiringAndStretchesTheRest) {
+  Scheduler s;
+  std::vector<SimTime> a;
+  const Scheduler::TimerId id = s.add_periodic("a", Phase::device, 0, 1000, [&](SimTime t) { a.push_back(t); });
+  // At 2500 the firing due at 3000 stays; later periods are 1100 (drift +10 %).
+  s.add_once("retune", Phase::fault, 2500, [&](SimTime) { s.set_drift(id, 0.1); });
+  CountingPacer p;
+  s.run_until(6000, p);
+  EXPECT_EQ(a, (std::vector<SimTime>{0, 1000, 2000, 3000, 4100, 5200}));
+  EXPECT_THROW(s.set_drift(id, -1.0), std::invalid_argument);
+  // A cancelled timer takes the new drift when restarted.
+  s.cancel(id);
+  s.set_drift(id, 0.0);
+  s.restart(id, 7000);
+  a.clear();
+  s.run_until(9500, p);
+  EXPECT_EQ(a, (std::vector<SimTime>{7000, 8000, 9000}));
+}
+
 TEST(Scheduler, StopRequestsEndTheRun) {
   Scheduler s;
   int n = 0;
