@@ -1,0 +1,166 @@
+// controller layer — the sim-clock channel: how the twin lends its simulated time to a master
+// process in lockstep (DESIGN section 4; protocol in docs/protocols/sim-clock.md).
+//
+// The twin owns time (the ROS 2 /clock idea). Each control tick k it GRANTs the master the
+// instant t_k together with, per bus, the number of frames it has put on that bus's transport
+// since the run began; the master first drains its transport until it has received that many
+// frames (so it never runs a tick without frames the twin already delivered), runs tick k, sends
+// its frames, and answers DONE with the number of frames it has sent per bus since the run began
+// (so the twin waits for exactly those frames before it simulates [t_k, t_k+1)). END ends the
+// run. Frames still travel over the real transport; only time and counts use this channel.
+//
+// Wire: a Unix-domain SOCK_SEQPACKET connection (message boundaries, ordered, and the peer's
+// death is seen as end of stream), address "unix:PATH". The twin listens, the master connects.
+// Every message is a fixed 96-byte little-endian record (encode()/decode() below); the codec is
+// pure and fuzzed. Frame counts are cumulative and 64-bit, so a lost message cannot go unnoticed.
+//
+// Both ends live here (the master links the client, the twin links the server); neither end
+// depends on anything else in the project.
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <variant>
+
+namespace omnitwin::simclock {
+
+inline constexpr std::uint32_t kMagic = 0x4353544fu;  // "OTSC" little-endian
+inline constexpr std::uint16_t kVersion = 1;
+inline constexpr std::size_t kMaxBuses = 4;           // per-bus counts carried per message
+inline constexpr std::size_t kMessageSize = 96;       // bytes on the wire, every message
+
+// Why a master is where it is; carried in DONE so the twin can record the master's reaction
+// (scenario expectations use it). Values are part of the wire protocol.
+enum class MasterState : std::uint8_t {
+  waiting = 0,    // waiting for a start (from the PC node) before detecting
+  detecting = 1,  // start-up: looking for its slaves
+  running = 2,    // slaves started, commands every tick
+  stopped = 3,    // it stopped the slaves (see StopReason) and holds
+  finished = 4,   // path done, slaves stopped normally
+};
+enum class StopReason : std::uint8_t {
+  none = 0,
+  node_missing = 1,    // a slave did not answer node detection (node in `node`)
+  feedback_missing = 2,// a slave's feedback stayed away (node in `node`)
+  nmt_stop = 3,        // an NMT stop from the bus (PC node or another participant)
+  startup_timeout = 4, // not every slave answered detection at start-up
+  bus_error = 5,       // its transport refused frames
+};
+const char* to_string(MasterState s);
+const char* to_string(StopReason r);
+
+// The master's report with each DONE: state, and what it sees (for records and metrics; the
+// twin never feeds these back into the simulation). The poses travel as f32 (about 1 µm at
+// 10 m) so that DONE fits kMessageSize; a decoded report holds them widened back to double.
+struct MasterReport {
+  MasterState state = MasterState::waiting;
+  StopReason reason = StopReason::none;
+  std::uint8_t node = 0;            // the node a reason names (0 = none)
+  std::int64_t path_origin_ns = -1; // tick time at which its path time was 0; -1 = not started
+  std::array<double, 3> reference{};  // planned pose x [m], y [m], phi [rad]
+  std::array<double, 3> odometry{};   // its odometry pose x [m], y [m], phi [rad]
+  bool operator==(const MasterReport&) const = default;
+};
+
+struct Hello {  // master → twin, once after connecting
+  std::uint32_t pid = 0;
+  bool operator==(const Hello&) const = default;
+};
+struct Grant {  // twin → master: run tick `tick` at `t_ns`
+  std::uint64_t tick = 0;
+  std::int64_t t_ns = 0;                       // simulated time of the tick [ns]
+  std::array<std::uint64_t, kMaxBuses> frames{};  // frames the twin has sent per bus, cumulative
+  bool operator==(const Grant&) const = default;
+};
+struct Done {  // master → twin: tick `tick` ran
+  std::uint64_t tick = 0;
+  std::array<std::uint64_t, kMaxBuses> frames{};  // frames the master has sent per bus, cumulative
+  MasterReport report;
+  bool operator==(const Done&) const = default;
+};
+struct End {  // twin → master: the run is over; exit
+  std::int64_t t_ns = 0;
+  bool operator==(const End&) const = default;
+};
+using Message = std::variant<Hello, Grant, Done, End>;
+
+enum class DecodeError : std::uint8_t { wrong_size, bad_magic, bad_version, unknown_type, bad_value };
+const char* to_string(DecodeError e);
+
+// Pure codec. encode() always yields kMessageSize bytes; decode() accepts exactly that size
+// and rejects unknown types and out-of-range enum values. Real-time safe, never throws.
+std::array<std::uint8_t, kMessageSize> encode(const Message& m) noexcept;
+std::variant<Message, DecodeError> decode(const std::uint8_t* data, std::size_t size) noexcept;
+
+// Set-up failures (bad address, socket cannot be created/bound/connected).
+class ChannelError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Outcome of a blocking wait on the channel.
+enum class WaitStatus : std::uint8_t {
+  ok,
+  timeout,    // nothing within the time limit
+  closed,     // the peer closed the connection (or died)
+  protocol,   // a message that does not decode, or of a type not expected here
+};
+const char* to_string(WaitStatus s);
+
+// "unix:PATH" → PATH; throws ChannelError for anything else.
+std::string parse_address(std::string_view address);
+
+// Twin end. Creates the listening socket at construction (removing a stale socket file at
+// PATH first) and removes it again in the destructor.
+class Server {
+ public:
+  explicit Server(std::string_view address);  // throws ChannelError
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Waits for the master to connect and say Hello (a message other than Hello is protocol and
+  // drops the connection). Not real-time safe; throws ChannelError only when accept() itself
+  // fails (no descriptors left).
+  WaitStatus accept(std::chrono::milliseconds timeout, Hello* hello = nullptr);
+  // One tick: sends the grant and waits for the matching Done (a Done for another tick is a
+  // protocol error). Real-time safe apart from the system calls.
+  WaitStatus grant(const Grant& g, Done& done, std::chrono::milliseconds timeout);
+  // Tells the master the run is over (best effort; a closed peer is fine).
+  void end(std::int64_t t_ns);
+  const std::string& address() const { return address_; }
+  int fd() const { return conn_fd_; }
+
+ private:
+  std::string address_;
+  std::string path_;
+  int listen_fd_ = -1;
+  int conn_fd_ = -1;
+};
+
+// Master end.
+class Client {
+ public:
+  // Connects (retrying until `timeout` while the twin has not yet created the socket) and
+  // sends Hello. Throws ChannelError when it cannot.
+  Client(std::string_view address, std::chrono::milliseconds timeout);
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  // Waits for the next Grant (ok) or End (closed, with *end set when given).
+  WaitStatus next(Grant& grant, std::chrono::milliseconds timeout, End* end = nullptr);
+  bool done(const Done& d);  // false when the twin is gone
+  int fd() const { return fd_; }
+
+ private:
+  int fd_ = -1;
+};
+
+}  // namespace omnitwin::simclock
