@@ -12,7 +12,9 @@
 //                                    frames this transport sent; default 0).
 //   mem:NAME                         in-process bus shared by every transport opened with NAME
 //
-// Semantics shared by all transports: send() never blocks and never throws; receive() is
+// Semantics shared by all transports: send() never throws and does not block, except that UDP
+// waits (at most 100 ms) for room when the socket buffer is full — back-pressure from local
+// receivers that have not yet been handed earlier datagrams, which must not become loss; receive() is
 // non-blocking and returns the next good frame, counting and skipping bad input; poll_fd()
 // becomes readable when receive() may have a frame, so a caller's event loop can wait on it.
 // A transport does not deliver a frame back to the transport that sent it (as SocketCAN's
@@ -54,7 +56,8 @@ struct TransportStats {
   std::uint64_t bad_id_rx = 0;       // identifier outside its format's range
   std::uint64_t unsupported_rx = 0;  // well-formed but not classic CAN (CAN FD) or bad flag combination
   std::uint64_t invalid_tx = 0;      // frames send() refused (identifier or DLC invalid)
-  std::uint64_t send_errors = 0;     // the OS refused a send (buffer full, network down, …)
+  std::uint64_t send_errors = 0;     // the OS refused a send (network down, buffer full for 100 ms, …)
+  std::uint64_t send_waits = 0;      // UDP: sends that waited for socket-buffer room (back-pressure)
   std::uint64_t rx_errors = 0;       // the OS reported a receive error
   std::uint64_t rx_dropped = 0;      // in-process queue overflow
 };

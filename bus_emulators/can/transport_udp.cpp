@@ -7,6 +7,7 @@
 #include <ifaddrs.h>
 #include <net/if.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -145,11 +146,21 @@ std::string UdpTransport::spec() const {
 }
 
 bool UdpTransport::send_raw(const std::uint8_t* data, std::size_t size) {
+  // A full socket buffer (EAGAIN/ENOBUFS: the kernel has not yet handed earlier datagrams to
+  // the local receivers) is back-pressure, not loss: wait for room, a bounded time.
+  int waits = 0;
   for (;;) {
     const ssize_t n = ::sendto(tx_fd_, data, size, MSG_DONTWAIT | MSG_NOSIGNAL,
                                reinterpret_cast<const sockaddr*>(&group_), group_len_);
     if (n == static_cast<ssize_t>(size)) return true;
     if (n < 0 && errno == EINTR) continue;
+    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS) && waits < kSendRetries) {
+      ++waits;
+      ++stats_.send_waits;
+      pollfd p{tx_fd_, POLLOUT, 0};
+      ::poll(&p, 1, kSendWaitMs);
+      continue;
+    }
     ++stats_.send_errors;
     return false;
   }

@@ -33,6 +33,9 @@ class UdpTransport final : public Transport {
   bool send_raw(const std::uint8_t* data, std::size_t size);
 
  private:
+  // Back-pressure on send: up to kSendRetries waits of kSendWaitMs for socket-buffer room.
+  static constexpr int kSendRetries = 20;
+  static constexpr int kSendWaitMs = 5;
   bool is_own(const sockaddr_storage& from) const;
 
   TransportSpec spec_;
