@@ -1,0 +1,389 @@
+// controller programs — `omni-master`: the thesis's Omni master (fig. 4-15) as its own
+// process, talking to the twin (or real slaves) over a real CAN transport.
+//
+// A thin shell around the protocol core controller/omni_master: options, the configuration
+// file, the transport, and the clock that drives the core's two interrupts. `--clock sim`
+// follows the twin's sim-clock grants (lockstep, DESIGN §4); `--clock wall` runs on
+// CLOCK_MONOTONIC absolute deadlines and keeps receiving frames between ticks. SIGINT and
+// SIGTERM are read through a signalfd (no global flag): the loop ends, the master sends NMT
+// stop all as a real master does on shutdown, and the process exits 0.
+// Exit codes: 0 normal end; 2 bad usage, configuration or transport spec/interface (one-line
+// message); 3 runtime failure (the twin vanished, frames the twin sent never arrived, the
+// transport refused frames).
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <poll.h>
+#include <sched.h>
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+#include <sys/mman.h>
+#include <sys/signalfd.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "bus_emulators/can/transport.hpp"
+#include "controller/master_config.hpp"
+#include "controller/omni_master.hpp"
+#include "controller/program_support.hpp"
+#include "controller/sim_clock.hpp"
+
+using namespace omnitwin;
+using controller::normalize_iface;
+using controller::open_signal_fd;
+using controller::MasterState;
+using controller::OmniMaster;
+
+namespace {
+
+constexpr int kExitOk = 0;
+constexpr int kExitUsage = 2;
+constexpr int kExitRuntime = 3;
+constexpr const char* kDefaultIface = "udp:239.74.163.2:43113";
+constexpr auto kConnectTimeout = std::chrono::seconds(10);
+constexpr auto kGrantTimeout = std::chrono::seconds(60);
+constexpr std::int64_t kDrainLimitNs = 5'000'000'000;  // frames the twin sent must arrive within 5 s
+constexpr int kRtPriority = 40;
+constexpr int kDrainBatch = 256;  // frames handled before the wall loop looks at the clock again
+
+struct Options {
+  std::string bus = "can";
+  std::string iface = kDefaultIface;
+  std::string config;
+  std::string clock = "wall";
+  std::string sim_clock;
+  double duration = -1;  // [s]; < 0: until a signal
+  std::string log_level = "info";
+  bool print_config = false;
+};
+
+// What the loops count besides the core's own statistics.
+struct LoopStats {
+  std::uint64_t frames_tx = 0;  // accepted by the transport
+  std::uint64_t frames_rx = 0;  // received from the transport
+  std::uint64_t overruns = 0;   // wall: ticks one period or more late
+  std::int64_t max_late_ns = 0; // wall: the latest tick [ns]
+  bool interrupted = false;     // SIGINT/SIGTERM ended the loop
+};
+
+// A runtime failure: the loop ends, the process exits 3 with this message.
+struct RuntimeFailure {
+  std::string message;
+};
+
+std::int64_t monotonic_ns() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+timespec to_timespec(std::int64_t ns) {
+  return timespec{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
+}
+
+
+// True (and the signal consumed) if SIGINT/SIGTERM is pending on the signalfd.
+bool signalled(int sigfd) {
+  signalfd_siginfo info{};
+  return sigfd >= 0 && ::read(sigfd, &info, sizeof info) == static_cast<ssize_t>(sizeof info);
+}
+
+// SCHED_FIFO and locked memory where permitted; a debug line where not.
+void try_realtime() {
+  sched_param sp{};
+  sp.sched_priority = kRtPriority;
+  if (::sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
+    spdlog::debug("SCHED_FIFO {} not permitted ({}); running with normal priority", kRtPriority, std::strerror(errno));
+  }
+  if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+    spdlog::debug("mlockall not permitted ({})", std::strerror(errno));
+  }
+}
+
+// Logs the master's state changes at info level (the only info output while running).
+class StateLog {
+ public:
+  void check(const OmniMaster& m) {
+    const simclock::MasterReport r = m.report();
+    if (r.state == last_) return;
+    if (r.reason == controller::StopReason::none) {
+      spdlog::info("state {} -> {}", simclock::to_string(last_), simclock::to_string(r.state));
+    } else {
+      spdlog::info("state {} -> {} ({}{})", simclock::to_string(last_), simclock::to_string(r.state),
+                   simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
+    }
+    last_ = r.state;
+  }
+  void reset(MasterState s) { last_ = s; }
+
+ private:
+  MasterState last_ = MasterState::waiting;
+};
+
+// ---------------------------------------------------------------------------------------
+// Lockstep with the twin (--clock sim)
+
+// Waits for the next grant while watching for signals. ok / closed (End or twin gone) / …
+simclock::WaitStatus next_grant(simclock::Client& client, int sigfd, simclock::Grant& g,
+                                simclock::End& end, LoopStats& ls) {
+  pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+  const int r = ::poll(fds, 2, static_cast<int>(std::chrono::milliseconds(kGrantTimeout).count()));
+  if (r == 0) return simclock::WaitStatus::timeout;
+  if (signalled(sigfd)) {
+    ls.interrupted = true;
+    return simclock::WaitStatus::closed;
+  }
+  return client.next(g, std::chrono::seconds(1), &end);
+}
+
+// Hands the core every frame until `target` frames have been received in all; false when
+// they do not arrive within kDrainLimitNs.
+bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::int64_t t_ns, LoopStats& ls) {
+  const std::int64_t give_up = monotonic_ns() + kDrainLimitNs;
+  while (ls.frames_rx < target) {
+    if (auto tf = tr.receive()) {
+      ++ls.frames_rx;
+      m.on_frame(tf->frame, t_ns);
+      continue;
+    }
+    if (monotonic_ns() >= give_up) return false;
+    can::wait_readable(tr, std::chrono::milliseconds(10));
+  }
+  // Frames beyond the count (another node, e.g. the PC) are handled as well.
+  while (auto tf = tr.receive()) ++ls.frames_rx, m.on_frame(tf->frame, t_ns);
+  return true;
+}
+
+int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
+            LoopStats& ls) {
+  simclock::Client client(o.sim_clock, kConnectTimeout);
+  spdlog::debug("connected to the twin's sim clock at {}", o.sim_clock);
+  StateLog log;
+  log.reset(m.state());
+  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  for (;;) {
+    simclock::Grant g;
+    simclock::End end{kNoEnd};
+    const simclock::WaitStatus w = next_grant(client, sigfd, g, end, ls);
+    if (ls.interrupted || (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd)) return kExitOk;
+    if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
+    if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    stamp_ns = g.t_ns;
+    if (!drain_until(tr, m, g.frames[0], g.t_ns, ls)) {
+      throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, ls.frames_rx, g.frames[0])};
+    }
+    m.on_tick(g.t_ns);
+    log.check(m);
+    const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()};
+    if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Real time (--clock wall)
+
+// Handles up to kDrainBatch waiting frames at the current monotonic time.
+void drain_wall(can::Transport& tr, OmniMaster& m, std::int64_t start_ns, LoopStats& ls, StateLog& log) {
+  for (int i = 0; i < kDrainBatch; ++i) {
+    auto tf = tr.receive();
+    if (!tf) return;
+    ++ls.frames_rx;
+    m.on_frame(tf->frame, monotonic_ns() - start_ns);
+    log.check(m);
+  }
+}
+
+// One timer interrupt for the deadline that has passed; skips (and counts) missed periods.
+void wall_tick(OmniMaster& m, std::int64_t start_ns, std::int64_t period_ns, std::int64_t& deadline,
+               LoopStats& ls, StateLog& log) {
+  const std::int64_t late = monotonic_ns() - deadline;
+  ls.max_late_ns = std::max(ls.max_late_ns, late);
+  if (late >= period_ns) {
+    ++ls.overruns;
+    deadline += (late / period_ns) * period_ns;
+  }
+  m.on_tick(deadline - start_ns);
+  log.check(m);
+  deadline += period_ns;
+}
+
+// Waits for frames, a signal or the wake-up time; sleeps to the wake-up time exactly.
+void wall_wait(can::Transport& tr, OmniMaster& m, int sigfd, std::int64_t start_ns, std::int64_t wake_ns,
+               LoopStats& ls, StateLog& log) {
+  pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+  const timespec timeout = to_timespec(std::max<std::int64_t>(0, wake_ns - monotonic_ns()));
+  const int r = ::ppoll(fds, 2, &timeout, nullptr);
+  if (r < 0 && errno != EINTR) throw RuntimeFailure{fmt::format("poll failed: {}", std::strerror(errno))};
+  if (r > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) ls.interrupted = true;
+  if (r > 0 && (fds[0].revents & POLLIN)) drain_wall(tr, m, start_ns, ls, log);
+  if (r == 0) {
+    const timespec at = to_timespec(wake_ns);
+    while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, nullptr) == EINTR) {
+    }
+  }
+}
+
+int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd, LoopStats& ls) {
+  try_realtime();
+  const std::int64_t period_ns = std::llround(m.config().loop.period * 1e9);
+  const std::int64_t start_ns = monotonic_ns();
+  const std::int64_t end_ns = o.duration >= 0 ? start_ns + std::llround(o.duration * 1e9)
+                                              : std::numeric_limits<std::int64_t>::max();
+  std::int64_t deadline = start_ns;  // the first tick is at once
+  StateLog log;
+  log.reset(m.state());
+  while (!ls.interrupted) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= end_ns) break;
+    stamp_ns = realtime_ns();  // as python-can stamps frames
+    if (now >= deadline) {
+      wall_tick(m, start_ns, period_ns, deadline, ls, log);
+      continue;
+    }
+    wall_wait(tr, m, sigfd, start_ns, std::min(deadline, end_ns), ls, log);
+  }
+  return kExitOk;
+}
+
+// ---------------------------------------------------------------------------------------
+// main
+
+void add_options(CLI::App& app, Options& o) {
+  app.add_option("--bus", o.bus, "bus kind (only can is supported)")->capture_default_str();
+  app.add_option("--iface", o.iface, "transport: udp:GROUP[:PORT], socketcan:IFACE (or IFACE), mem:NAME")
+      ->capture_default_str();
+  app.add_option("--config", o.config, "the master's configuration file (YAML)")->required();
+  app.add_option("--clock", o.clock, "sim: lockstep with the twin; wall: real time")
+      ->check(CLI::IsMember({"sim", "wall"}))
+      ->capture_default_str();
+  app.add_option("--sim-clock", o.sim_clock, "the twin's sim-clock address unix:PATH (with --clock sim)");
+  app.add_option("--duration", o.duration, "wall clock: stop after S seconds (default: until SIGINT/SIGTERM)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--log-level", o.log_level, "trace, debug, info, warn, error, off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
+      ->capture_default_str();
+  app.add_flag("--print-config", o.print_config, "print the configuration as loaded (YAML) and exit");
+}
+
+// Option combinations CLI11 cannot check; the message of the first problem, or "".
+std::string usage_problem(const Options& o) {
+  if (o.bus != "can") return fmt::format("--bus {}: not supported yet (only can)", o.bus);
+  if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
+  if (o.clock == "wall" && !o.sim_clock.empty()) return "--sim-clock is only used with --clock sim";
+  if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
+  try {
+    if (o.clock == "sim") simclock::parse_address(o.sim_clock);
+    can::parse_transport_spec(normalize_iface(o.iface));
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+void setup_logging(const std::string& level) {
+  auto logger = spdlog::stderr_color_mt("omni-master");
+  spdlog::set_default_logger(logger);
+  spdlog::set_pattern("omni-master: %^%l%$: %v");
+  spdlog::set_level(spdlog::level::from_str(level));
+}
+
+void print_summary(const OmniMaster& m, const LoopStats& ls, const std::string& clock) {
+  const simclock::MasterReport r = m.report();
+  const auto& s = m.stats();
+  spdlog::info("end: state {}, reason {}{}, frames tx {} rx {} (decode errors {}, ignored {}), ticks {}{}",
+               simclock::to_string(r.state), simclock::to_string(r.reason),
+               r.node ? fmt::format(" (node 0x{:02X})", r.node) : "", ls.frames_tx, ls.frames_rx, s.decode_errors,
+               s.frames_ignored, s.ticks,
+               clock == "wall" ? fmt::format(", overruns {}, max late {:.3f} ms", ls.overruns, ls.max_late_ns / 1e6) : "");
+}
+
+// Runs the loop for the chosen clock with the transport open; returns the exit code.
+int run(const Options& o, const controller::MasterConfig& cfg, can::Transport& tr) {
+  LoopStats ls;
+  std::int64_t stamp_ns = 0;
+  OmniMaster master(cfg, [&](const can::Frame& f) {
+    const bool ok = tr.send(f, stamp_ns);
+    ls.frames_tx += ok ? 1 : 0;
+    return ok;
+  });
+  const int sigfd = open_signal_fd();
+  spdlog::info("state {} (transport {}, clock {})", simclock::to_string(master.state()), tr.spec(), o.clock);
+  int code = kExitOk;
+  try {
+    code = o.clock == "sim" ? run_sim(o, master, tr, stamp_ns, sigfd, ls) : run_wall(o, master, tr, stamp_ns, sigfd, ls);
+  } catch (const RuntimeFailure& f) {
+    spdlog::error("{}", f.message);
+    code = kExitRuntime;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = kExitRuntime;
+  }
+  // Shutdown as a real master: stop the slaves unless they already are.
+  if (code == kExitOk && (o.clock == "wall" || ls.interrupted)) master.shutdown();
+  if (master.report().reason == controller::StopReason::bus_error) code = kExitRuntime;
+  print_summary(master, ls, o.clock);
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
+}
+
+// Loads the configuration; nullopt (message printed) when it is bad.
+std::optional<controller::MasterConfig> load(const std::string& path) {
+  try {
+    return controller::load_master_config(path);
+  } catch (const controller::MasterConfigError& e) {
+    spdlog::error("{}", e.what());
+    return std::nullopt;
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"omni-master: the thesis's Omni CAN master (seed 002, fig. 4-15)"};
+  Options o;
+  add_options(app, o);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "omni-master: " << e.what() << "\n";
+    return kExitUsage;
+  }
+  setup_logging(o.log_level);
+  if (const std::string p = usage_problem(o); !p.empty()) {
+    spdlog::error("{}", p);
+    return kExitUsage;
+  }
+  const auto cfg = load(o.config);
+  if (!cfg) return kExitUsage;
+  if (o.print_config) {
+    std::cout << controller::dump_master_config(*cfg);
+    return kExitOk;
+  }
+  std::unique_ptr<can::Transport> tr;
+  try {
+    tr = can::open_transport(normalize_iface(o.iface));
+  } catch (const can::TransportError& e) {
+    spdlog::error("--iface {}: {}", o.iface, e.what());
+    return kExitUsage;
+  }
+  return run(o, *cfg, *tr);
+}
