@@ -20,8 +20,15 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
     "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
-constexpr std::array<std::string_view, 5> kBusMetrics = {"frames_tx", "frames_rx", "dropouts",
-                                                         "dropout_rate", "errors"};
+constexpr std::array<std::string_view, 11> kBusMetrics = {
+    "frames_tx", "frames_rx",  "dropouts",       "dropout_rate", "errors", "frames",
+    "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed"};
+// The master's reaction (bus can): when it stopped, why (simclock::StopReason code), which node.
+constexpr std::array<std::string_view, 5> kMasterMetrics = {"stopped_at_s", "stop_reason_code", "missing_node",
+                                                            "path_origin_s", "ticks"};
+constexpr std::array<std::string_view, 8> kSlaveMetrics = {"samples",  "dropouts",     "dropout_percent",
+                                                           "resyncs",  "commands",     "bad_frames",
+                                                           "tec",      "bus_off_events"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;
@@ -48,11 +55,13 @@ bool is_known_metric(std::string_view path) {
     if (parts[0] == "platform" || parts[0] == "platform_odometry") return in(kPoseMetrics, parts[1]);
     if (parts[0] == "bus") return in(kBusMetrics, parts[1]);
     if (parts[0] == "realtime") return in(kRealtimeMetrics, parts[1]);
+    if (parts[0] == "master") return in(kMasterMetrics, parts[1]);
     return false;
   }
-  if (parts.size() == 3 && parts[0] == "axes") {
+  if (parts.size() == 3 && (parts[0] == "axes" || parts[0] == "slaves")) {
     const long axis = parse_index(parts[1]);
-    return axis >= 0 && axis < kAxes && in(kAxisMetrics, parts[2]);
+    if (axis < 0 || axis >= kAxes) return false;
+    return parts[0] == "axes" ? in(kAxisMetrics, parts[2]) : in(kSlaveMetrics, parts[2]);
   }
   return false;
 }

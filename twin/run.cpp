@@ -4,17 +4,25 @@
 #include <spdlog/spdlog.h>
 
 #include <array>
+#include <atomic>
+#include <fstream>
+#include <limits>
+#include <unistd.h>
 #include <cmath>
 #include <filesystem>
 #include <memory>
 #include <numbers>
 
+#include "bus_emulators/can/transport.hpp"
 #include "controller/path.hpp"
 #include "controller/platform_loop.hpp"
+#include "controller/sim_clock.hpp"
 #include "physics/drive_chain.hpp"
 #include "physics/platform_sim.hpp"
+#include "twin/can_network.hpp"
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
+#include "twin/master_process.hpp"
 #include "twin/metrics.hpp"
 #include "twin/progress.hpp"
 #include "twin/records.hpp"
@@ -91,6 +99,10 @@ class PlatformRun {
     end_ = seconds_to_ns(s.duration);
   }
 
+  // The CAN network (bus `can`): built after the platform, whose wheels it drives. Throws
+  // can::TransportError for a transport that cannot be opened.
+  void build_can_network();
+
   RunResult execute();
 
  private:
@@ -104,7 +116,17 @@ class PlatformRun {
   void on_master(SimTime t);
   void on_device(int wheel);
   void on_record(SimTime t);
+  void record_can(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v);
   void on_fault(const FaultSpec& f, bool begin, SimTime t);
+  // bus `can`: the master process, the sim-clock tick, the master's report.
+  bool can_bus() const { return net_ != nullptr; }
+  void start_master();
+  void stop_master();
+  void on_master_can(SimTime t);
+  void on_physics_can(SimTime t);
+  void note_report(const simclock::MasterReport& r, SimTime t);
+  void fail(std::string why);
+  controller::Pose2 can_reference(SimTime t) const;
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
   // the first reason and stop the scheduler. Real-time safe on the success path.
   template <class Writer>
@@ -140,17 +162,149 @@ class PlatformRun {
   PoseErrorStats truth_stats_, odom_stats_;
   std::array<VelocityErrorStats, 4> axis_stats_;
   std::vector<double> row_;
+
+  // bus `can`
+  std::unique_ptr<OmniCanNetwork> net_;
+  std::unique_ptr<simclock::Server> clock_server_;
+  std::unique_ptr<MasterProcess> master_;
+  std::string master_program_;
+  simclock::MasterReport report_{};
+  std::uint64_t tick_ = 0;
+  SimTime master_stop_ns_ = -1;
+  std::array<double, 4> can_setpoint_{};
 };
+
+void PlatformRun::build_can_network() {
+  master_program_ = find_master_program(s_.bus.can.master);
+  OmniCanNetwork::Hooks h;
+  h.wheel_angle = [this](int i) { return sim_.wheel_angle(i); };
+  h.set_setpoint = [this](int i, double w) {
+    can_setpoint_[static_cast<std::size_t>(i)] = w;
+    sim_.set_wheel_speed_setpoint(i, w);
+  };
+  h.axis_sample = [this](int i, double e) { axis_stats_[static_cast<std::size_t>(i)].add(e); };
+  h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
+    if (events_) note(events_->log(ns_to_seconds(t), kind, text), *events_);
+  };
+  net_ = std::make_unique<OmniCanNetwork>(s_, sched_, std::move(h));
+}
+
+void PlatformRun::fail(std::string why) {
+  if (error_.empty()) error_ = std::move(why);
+  sched_.stop();
+}
+
+// The master process: its configuration and log in the run directory; lockstep meets it on
+// the sim-clock channel, realtime lets it run on its own wall clock.
+void PlatformRun::start_master() {
+  const fs::path dir(o_.out_dir);
+  const std::string cfg = (dir / "master.yaml").string();
+  {
+    std::ofstream f(cfg);
+    f << master_config_yaml(s_);
+    if (!f) throw std::runtime_error(fmt::format("cannot write {}", cfg));
+  }
+  std::vector<std::string> args{"--bus", "can", "--iface", s_.bus.can.transport, "--config", cfg};
+  const bool lockstep = s_.clock == ClockMode::lockstep;
+  if (lockstep) {
+    // A short socket path (sun_path holds 108 bytes; run directories can be longer).
+    static std::atomic<int> serial{0};
+    const std::string addr = fmt::format("unix:/tmp/omnitwin-{}-{}.clock", ::getpid(), serial++);
+    clock_server_ = std::make_unique<simclock::Server>(addr);
+    args.insert(args.end(), {"--clock", "sim", "--sim-clock", addr});
+  } else {
+    args.insert(args.end(), {"--clock", "wall"});
+  }
+  master_ = std::make_unique<MasterProcess>(master_program_, args, (dir / "master.log").string());
+  if (lockstep) {
+    // Wait for its Hello, noticing at once a master that died instead of connecting.
+    const auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::milliseconds(std::llround(s_.bus.can.handshake_timeout * 1e3));
+    simclock::WaitStatus st = simclock::WaitStatus::timeout;
+    while (st == simclock::WaitStatus::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
+      st = clock_server_->accept(std::chrono::milliseconds(100));
+    if (st != simclock::WaitStatus::ok)
+      throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; {}; see master.log)",
+                                           simclock::to_string(st), master_->describe_exit()));
+  }
+  events_->log(0.0, "master", fmt::format("{} started (pid {}, clock {})", master_program_, master_->pid(),
+                                          lockstep ? "sim" : "wall"));
+}
+
+void PlatformRun::stop_master() {
+  if (!master_) return;
+  if (clock_server_) clock_server_->end(sched_.now());
+  // The master exits on End (lockstep); in realtime it is told by SIGTERM.
+  if (!clock_server_ || !master_->wait(std::chrono::milliseconds(3000))) master_->stop(std::chrono::milliseconds(3000));
+  events_->log(ns_to_seconds(sched_.now()), "master", fmt::format("ended: {}", master_->describe_exit()));
+}
+
+// One master tick in lockstep: the bus is run to t, the master is granted t with the count
+// of frames put on the transport so far, and its frames (exactly as many as it says it sent)
+// are queued on the wire at t + T_pre.
+void PlatformRun::on_master_can(SimTime t) {
+  pacer_->tick(t);
+  net_->advance(t);
+  if (!clock_server_) return;  // realtime: the master keeps its own time
+  const auto timeout = std::chrono::milliseconds(std::llround(s_.bus.can.handshake_timeout * 1e3));
+  simclock::Grant g;
+  g.tick = tick_++;
+  g.t_ns = t;
+  g.frames[0] = net_->frames_to_transport();
+  simclock::Done d;
+  const simclock::WaitStatus st = clock_server_->grant(g, d, timeout);
+  if (st != simclock::WaitStatus::ok)
+    return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),
+                            master_->running() ? "still running" : master_->describe_exit()));
+  if (!net_->drain_transport(d.frames[0], t, timeout))
+    return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
+                            net_->frames_from_transport(), s_.bus.can.transport));
+  note_report(d.report, t);
+}
+
+void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
+  if (r.state != report_.state || r.reason != report_.reason) {
+    std::string text = fmt::format("state {}", simclock::to_string(r.state));
+    if (r.reason != simclock::StopReason::none)
+      text += fmt::format(" ({}{})", simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
+    note(events_->log(ns_to_seconds(t), "master", text), *events_);
+    if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0) master_stop_ns_ = t;
+  }
+  report_ = r;
+}
+
+void PlatformRun::on_physics_can(SimTime t) {
+  net_->advance(t);
+  if (!clock_server_) net_->poll_transport(t);  // realtime: frames as they come
+  sim_.step();
+  ++physics_steps_;
+  net_->observe_wheels();
+}
+
+// The plan at t: the master's own (lockstep), else the path from when its start-all completed.
+controller::Pose2 PlatformRun::can_reference(SimTime t) const {
+  SimTime origin = report_.path_origin_ns;
+  if (!clock_server_) origin = net_->master_start_ns();
+  if (origin < 0) return path_.start_pose();
+  return path_.sample(std::max(0.0, ns_to_seconds(t - origin))).pose;
+}
 
 void PlatformRun::schedule() {
   const SimTime dt = seconds_to_ns(s_.platform.sim.timestep);
   const SimTime tm = seconds_to_ns(s_.controller.period);
   const SimTime ts = seconds_to_ns(s_.platform.velocity_loop.period);
-  sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master(t); });
-  for (int i = 0; i < 4; ++i)
-    sched_.add_periodic(fmt::format("slave{}", i + 1), Phase::device, 0, ts, [this, i](SimTime) { on_device(i); });
-  sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
-  sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime) { on_physics(); });
+  if (can_bus()) {
+    // The slaves' timers belong to the network (they start with NMT start).
+    sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master_can(t); });
+    sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
+    sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime t) { on_physics_can(t); });
+  } else {
+    sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master(t); });
+    for (int i = 0; i < 4; ++i)
+      sched_.add_periodic(fmt::format("slave{}", i + 1), Phase::device, 0, ts, [this, i](SimTime) { on_device(i); });
+    sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
+    sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime) { on_physics(); });
+  }
   for (const FaultSpec& f : s_.faults) {
     sched_.add_once("fault", Phase::fault, seconds_to_ns(f.at), [this, &f](SimTime t) { on_fault(f, true, t); });
     if (f.duration > 0)
@@ -189,24 +343,51 @@ void PlatformRun::on_device(int wheel) {
 void PlatformRun::on_record(SimTime t) {
   const physics::Pose p = sim_.pose();
   const Eigen::Vector3d v = sim_.twist_world();
-  const controller::Pose2& ref = out_.reference.pose;
-  const controller::Pose2& odo = out_.odom_pose;
-  truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
-  odom_stats_.add(ref.x - odo.x, ref.y - odo.y, ref.phi - odo.phi);
-  row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo.x, odo.y, odo.phi, v(0), v(1), v(2),
-               out_.twist_command(0), out_.twist_command(1), out_.twist_command(2)});
-  for (int i = 0; i < 4; ++i) {
-    const physics::WheelDriveSample& w = chains_[i]->last();
-    row_.insert(row_.end(), {wheel_cmd_rad_s_[i], sim_.wheel_speed(i), sim_.wheel_angle(i),
-                             static_cast<double>(chains_[i]->counter().count()), w.command,
-                             static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
-                             sim_.wheel_torque(i)});
+  if (can_bus()) {
+    record_can(t, p, v);
+  } else {
+    const controller::Pose2& ref = out_.reference.pose;
+    const controller::Pose2& odo = out_.odom_pose;
+    truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
+    odom_stats_.add(ref.x - odo.x, ref.y - odo.y, ref.phi - odo.phi);
+    row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo.x, odo.y, odo.phi, v(0), v(1), v(2),
+                 out_.twist_command(0), out_.twist_command(1), out_.twist_command(2)});
+    for (int i = 0; i < 4; ++i) {
+      const physics::WheelDriveSample& w = chains_[i]->last();
+      row_.insert(row_.end(), {wheel_cmd_rad_s_[i], sim_.wheel_speed(i), sim_.wheel_angle(i),
+                               static_cast<double>(chains_[i]->counter().count()), w.command,
+                               static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
+                               sim_.wheel_torque(i)});
+    }
   }
   note(csv_->row(row_), *csv_);
   if (progress_) progress_->update(ns_to_seconds(t));
 }
 
+// A CAN run's row: the master's plan and odometry (lockstep; NaN where it cannot be known),
+// the slaves' held commands and chains.
+void PlatformRun::record_can(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v) {
+  const controller::Pose2 ref = can_reference(t);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const bool lockstep = clock_server_ != nullptr;
+  const std::array<double, 3> odo = lockstep ? report_.odometry : std::array<double, 3>{nan, nan, nan};
+  truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
+  if (lockstep) odom_stats_.add(ref.x - odo[0], ref.y - odo[1], ref.phi - odo[2]);
+  row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo[0], odo[1], odo[2], v(0), v(1), v(2),
+               nan, nan, nan});
+  const double per_sample = s_.platform.velocity_loop.period * s_.platform.counts_per_rev() / (2 * std::numbers::pi);
+  for (int i = 0; i < 4; ++i) {
+    const omni::OmniSlave& sl = net_->slave(i);
+    const physics::WheelDriveSample& w = sl.drive_chain().last();
+    row_.insert(row_.end(), {sl.command() / per_sample, sim_.wheel_speed(i), sim_.wheel_angle(i),
+                             static_cast<double>(sl.drive_chain().counter().count()), w.command,
+                             static_cast<double>(w.delta_counts), static_cast<double>(w.code),
+                             can_setpoint_[static_cast<std::size_t>(i)], sim_.wheel_torque(i)});
+  }
+}
+
 void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
+  if (f.kind != FaultSpec::Kind::wheel_slip) return net_->apply_fault(f, begin, t);
   const double scale = begin ? f.friction_scale : 1.0;
   sim_.set_wheel_friction_scale(f.wheel, scale);
   note(events_->log(ns_to_seconds(t), "fault",
@@ -219,8 +400,24 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   nlohmann::json m;
   m["scenario"] = s_.name;
   m["scenario_file"] = s_.file;
-  m["bus"] = {{"name", to_string(s_.bus.kind)}, {"frames_tx", 0}, {"frames_rx", 0}, {"dropouts", 0},
-              {"dropout_rate", 0.0}, {"errors", 0}};
+  if (can_bus()) {
+    m["bus"] = net_->bus_metrics(sched_.now());
+    m["slaves"] = net_->slave_metrics();
+    // Only a lockstep master reports (on the sim clock); one on its own wall clock does not.
+    const bool reports = clock_server_ != nullptr;
+    m["master"] = {{"state", reports ? simclock::to_string(report_.state) : "unreported"},
+                   {"stop_reason", reports ? simclock::to_string(report_.reason) : "unreported"},
+                   {"stop_reason_code", static_cast<int>(report_.reason)},
+                   {"missing_node", report_.node},
+                   {"stopped_at_s", master_stop_ns_ < 0 ? -1.0 : ns_to_seconds(master_stop_ns_)},
+                   {"path_origin_s", report_.path_origin_ns < 0 ? -1.0 : ns_to_seconds(report_.path_origin_ns)},
+                   {"ticks", tick_},
+                   {"clock", clock_server_ ? "sim" : "wall"},
+                   {"exit", master_ ? master_->describe_exit() : "not started"}};
+  } else {
+    m["bus"] = {{"name", to_string(s_.bus.kind)}, {"frames_tx", 0}, {"frames_rx", 0}, {"dropouts", 0},
+                {"dropout_rate", 0.0}, {"errors", 0}};
+  }
   m["clock"] = to_string(s_.clock);
   m["sim_time_s"] = sim_s;
   m["wall_time_s"] = wall_s;
@@ -245,6 +442,15 @@ RunResult PlatformRun::execute() {
                fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
                            to_string(s_.clock), model_name(s_.platform), s_.platform.source));
 
+  if (can_bus()) {
+    net_->open_pcap((fs::path(o_.out_dir) / "bus-can.pcap").string());
+    try {
+      if (!o_.external_master) start_master();
+    } catch (const std::exception& e) {
+      error_ = e.what();
+      return finish(0.0, nullptr);
+    }
+  }
   LockstepPacer lockstep;
   std::unique_ptr<RealtimePacer> realtime;
   if (s_.clock == ClockMode::realtime) {
@@ -266,6 +472,7 @@ RunResult PlatformRun::execute() {
   }
   const double wall_s = (monotonic_ns() - wall0) * 1e-9;
   if (progress_) progress_->finish();
+  stop_master();
   return finish(wall_s, realtime.get());
 }
 
@@ -316,8 +523,8 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
 }  // namespace
 
 RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
-  if (scenario.bus.kind != BusKind::direct)
-    throw RunSetupError(fmt::format("bus: the bus '{}' is not available in this build yet; only 'direct' is",
+  if (scenario.bus.kind != BusKind::direct && scenario.bus.kind != BusKind::can)
+    throw RunSetupError(fmt::format("bus: the bus '{}' is not available in this build yet; only 'direct' and 'can' are",
                                     to_string(scenario.bus.kind)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
@@ -327,6 +534,17 @@ RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
   } catch (const std::exception& e) {
     const char* key = scenario.platform.sim.mjcf.empty() ? "platform" : "platform.mjcf";
     throw RunSetupError(fmt::format("{}: {}", key, one_line(e.what())));
+  }
+  if (options.external_master && (scenario.bus.kind != BusKind::can || scenario.clock != ClockMode::realtime))
+    throw RunSetupError("the twin alone needs bus: can and clock: realtime (an external master keeps its own time)");
+  if (scenario.bus.kind == BusKind::can) {
+    try {
+      run->build_can_network();
+    } catch (const can::TransportError& e) {
+      throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+    } catch (const std::exception& e) {
+      throw RunSetupError(one_line(e.what()));
+    }
   }
   return run->execute();
 }

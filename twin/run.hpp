@@ -26,6 +26,9 @@ struct RunOptions {
   std::string out_dir;                        // run directory (created if missing)
   bool progress = false;                      // terminal progress bar on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set by SIGINT/SIGTERM: end cleanly
+  // bus `can`: the master is someone else's program on the transport (`omnitwin twin`); the
+  // twin starts none and runs in realtime.
+  bool external_master = false;
 };
 
 struct RunResult {

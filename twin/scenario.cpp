@@ -129,6 +129,17 @@ void apply_override(YAML::Node& root, const Override& o) {
   } catch (const YAML::Exception& e) {
     throw ScenarioError(kOverrideFile, 0, o.key, fmt::format("cannot parse value '{}': {}", o.value, e.msg));
   }
+  // `bus` is a name or a mapping of settings: --bus can keeps the settings, and a setting
+  // given for a bus written by name turns the name into {type: name}.
+  if (!parts.empty() && parts[0] == "bus" && root["bus"].IsMap() && parts.size() == 1 && value.IsScalar()) {
+    root["bus"]["type"] = value;
+    return;
+  }
+  if (parts.size() > 1 && parts[0] == "bus" && !root["bus"].IsMap()) {
+    YAML::Node bus(YAML::NodeType::Map);
+    bus["type"] = root["bus"].IsScalar() ? root["bus"].as<std::string>() : std::string("direct");
+    root["bus"] = bus;
+  }
   YAML::Node cur;
   cur.reset(root);  // reset(), not '=': assigning a yaml-cpp node overwrites the tree
   for (std::size_t i = 0; i < parts.size(); ++i) {
@@ -292,20 +303,51 @@ physics::PlatformParams read_platform(const YamlField& s, const std::string& sce
 // ---------------------------------------------------------------------------------------
 // Bus, clock, controller
 
+// The `can` bus's settings (bus: {type: can, …}).
+void read_can(const YamlField& f, CanSpec& c) {
+  double rate = static_cast<double>(c.bit_rate);
+  if (read_number(f, "bit_rate", rate, Bounds::closed(10'000, 1'000'000))) c.bit_rate = std::llround(rate);
+  if (f["transport"].exists()) c.transport = f["transport"].string();
+  read_number(f, "t_pre_us", c.t_pre_us, Bounds::non_negative());
+  read_number(f, "t_post_us", c.t_post_us, Bounds::non_negative());
+  if (const YamlField d = f["drift"]; d.exists()) {
+    // One drift for every slave, or one per axis.
+    const Bounds b{-0.5, 0.5};
+    if (d.node().IsSequence()) {
+      const auto v = d.numbers(4, b);
+      std::copy(v.begin(), v.end(), c.drift.begin());
+    } else {
+      c.drift.fill(d.number(b));
+    }
+  }
+  read_bool(f, "sync", c.sync);
+  read_integer(f, "sync_interval", c.sync_interval, Bounds::at_least(1));
+  read_integer(f, "detect_every", c.detect_every, Bounds::non_negative());
+  if (f["master"].exists()) c.master = f["master"].string();
+  int seed = static_cast<int>(c.seed);
+  if (read_integer(f, "seed", seed, Bounds::non_negative())) c.seed = static_cast<std::uint64_t>(seed);
+  read_number(f, "handshake_timeout", c.handshake_timeout, Bounds::positive());
+}
+
 BusSpec read_bus(const YamlField& f) {
   BusSpec bus;
   if (!f.present()) return bus;
-  // Either `bus: can` or `bus: {type: can}` (the mapping form will carry bus settings).
-  YamlField type = f;
-  if (f.node().IsMap()) {
-    f.allow_keys({"type"});
-    type = f.required("type");
-  }
-  const std::string k = type.choice({"direct", "can", "canopen", "ethercat", "m3", "tml"});
+  // Either `bus: can` or `bus: {type: can, …settings}`. (No YamlField reassignment: assigning
+  // a yaml-cpp node overwrites the node it refers to.)
+  const bool settings = f.node().IsMap();
+  const std::string k = (settings ? f.required("type") : f).choice({"direct", "can", "canopen", "ethercat", "m3", "tml"});
   const BusKind all[] = {BusKind::direct, BusKind::can, BusKind::canopen,
                          BusKind::ethercat, BusKind::m3, BusKind::tml};
   for (BusKind b : all) {
     if (k == to_string(b)) bus.kind = b;
+  }
+  if (!settings) return bus;
+  if (bus.kind == BusKind::can) {
+    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
+                  "detect_every", "master", "seed", "handshake_timeout"});
+    read_can(f, bus.can);
+  } else {
+    f.allow_keys({"type"});
   }
   return bus;
 }
@@ -396,32 +438,73 @@ double path_duration(const PathSpec& path) {
 // ---------------------------------------------------------------------------------------
 // Faults and expectations
 
-FaultSpec read_fault(const YamlField& item) {
-  const YamlField v = item.single_member({"wheel_slip"});
+// The fault kinds a scenario may name (single_member() takes them as a list).
+#define OMNITWIN_FAULT_KINDS {"wheel_slip", "frame_loss", "delay", "drift", "power_loss", "bus_off"}
+
+// `node:` of a CAN fault: 1..4 (a slave), or `master` / `all` where the kind allows them.
+int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
+  const YamlField n = v.required("node");
+  if (n.node().IsScalar() && (n.node().as<std::string>() == "master" || n.node().as<std::string>() == "all")) {
+    const bool master = n.node().as<std::string>() == "master";
+    if (master ? !master_ok : !all_ok) n.fail(fmt::format("'{}' is not a node this fault can act on", n.string()));
+    return master ? FaultSpec::kMaster : FaultSpec::kAllNodes;
+  }
+  return n.integer(Bounds::closed(1, 4)) - 1;  // files count axes from 1
+}
+
+FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
+  using K = FaultSpec::Kind;
+  const YamlField v = item.single_member(OMNITWIN_FAULT_KINDS);
   FaultSpec f;
-  f.kind = FaultSpec::Kind::wheel_slip;
   f.line = v.line();
-  v.allow_keys({"wheel", "at", "duration", "friction_scale"});
-  f.wheel = v.required("wheel").integer(Bounds::closed(1, 4)) - 1;  // files count from 1
+  const std::string& kind = v.name();
+  if (kind != "wheel_slip" && bus.kind != BusKind::can) v.fail("a bus fault needs bus: can");
+  if (kind == "wheel_slip") {
+    v.allow_keys({"wheel", "at", "duration", "friction_scale"});
+    f.kind = K::wheel_slip;
+    f.wheel = v.required("wheel").integer(Bounds::closed(1, 4)) - 1;
+    f.friction_scale = v.required("friction_scale").number(Bounds::non_negative());
+  } else if (kind == "frame_loss") {
+    v.allow_keys({"node", "at", "duration", "rate", "burst"});
+    f.kind = K::frame_loss;
+    f.wheel = read_fault_node(v, true, true);
+    f.rate = v.required("rate").number(Bounds::closed(0, 1));
+    read_integer(v, "burst", f.burst, Bounds::at_least(1));
+  } else if (kind == "delay") {
+    v.allow_keys({"node", "at", "duration", "extra_ms", "jitter_ms"});
+    f.kind = K::delay;
+    f.wheel = read_fault_node(v, true, false);
+    read_number(v, "extra_ms", f.extra_ms, Bounds::non_negative());
+    read_number(v, "jitter_ms", f.jitter_ms, Bounds::non_negative());
+  } else if (kind == "drift") {
+    v.allow_keys({"node", "at", "duration", "drift"});
+    f.kind = K::drift;
+    f.wheel = read_fault_node(v, false, false);
+    f.drift = v.required("drift").number(Bounds{-0.5, 0.5});
+  } else {  // power_loss, bus_off
+    v.allow_keys({"node", "at", "duration"});
+    f.kind = kind == "power_loss" ? K::power_loss : K::bus_off;
+    f.wheel = read_fault_node(v, false, false);
+  }
   f.at = v.required("at").number(Bounds::non_negative());
   read_number(v, "duration", f.duration, Bounds::non_negative());
-  f.friction_scale = v.required("friction_scale").number(Bounds::non_negative());
   return f;
 }
 
 // The newest fault (faults.back()) must start inside the run and must not overlap an earlier
-// fault on the same wheel: the first one's end would otherwise cancel the second early.
+// fault of the same kind on the same wheel/node: the first one's end would otherwise cancel
+// the second early.
 void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& faults, double run_duration) {
   const FaultSpec& f = faults.back();
-  const YamlField v = item.single_member({"wheel_slip"});
+  const YamlField v = item.single_member(OMNITWIN_FAULT_KINDS);
   if (f.at >= run_duration)
     v["at"].fail(fmt::format("{} s is not inside the run (it lasts {} s): the fault would never happen", f.at,
                              run_duration));
   const auto end_of = [](const FaultSpec& x) { return x.duration > 0 ? x.at + x.duration : 1e300; };
   for (std::size_t i = 0; i + 1 < faults.size(); ++i) {
     const FaultSpec& g = faults[i];
-    if (g.wheel == f.wheel && f.at < end_of(g) && g.at < end_of(f))
-      v["at"].fail(fmt::format("overlaps the wheel_slip fault on wheel {} at line {}", f.wheel + 1, g.line));
+    if (g.kind == f.kind && g.wheel == f.wheel && f.at < end_of(g) && g.at < end_of(f))
+      v["at"].fail(fmt::format("overlaps the {} fault at line {}", to_string(g.kind), g.line));
   }
 }
 
@@ -471,7 +554,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   for (const auto& item : root["faults"].elements()) {
-    s.faults.push_back(read_fault(item));
+    s.faults.push_back(read_fault(item, s.bus));
     check_fault_timing(item, s.faults, s.duration);
   }
   for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
@@ -521,6 +604,18 @@ const char* to_string(BusKind b) {
     case BusKind::ethercat: return "ethercat";
     case BusKind::m3: return "m3";
     case BusKind::tml: return "tml";
+  }
+  return "?";
+}
+
+const char* to_string(FaultSpec::Kind k) {
+  switch (k) {
+    case FaultSpec::Kind::wheel_slip: return "wheel_slip";
+    case FaultSpec::Kind::frame_loss: return "frame_loss";
+    case FaultSpec::Kind::delay: return "delay";
+    case FaultSpec::Kind::drift: return "drift";
+    case FaultSpec::Kind::power_loss: return "power_loss";
+    case FaultSpec::Kind::bus_off: return "bus_off";
   }
   return "?";
 }

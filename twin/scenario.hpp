@@ -8,6 +8,7 @@
 // configuration; nothing in it changes while a run steps.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <stdexcept>
@@ -76,20 +77,56 @@ struct ControllerSpec {
 enum class BusKind { direct, can, canopen, ethercat, m3, tml };
 enum class ClockMode { lockstep, realtime };
 
-struct BusSpec {
-  BusKind kind = BusKind::direct;
+// Settings of the `can` bus: the thesis's Omni nodes on one classic-CAN bus.
+struct CanSpec {
+  std::int64_t bit_rate = 1'000'000;          // [bit/s], 10 kbit/s … 1 Mbit/s
+  // Where the master process and the twin meet (transport.hpp spec). The default is
+  // python-can's udp_multicast default, so a python-can script joins without arguments.
+  std::string transport = "udp:239.74.163.2:43113";
+  double t_pre_us = 0.604;                    // master processing before a frame [µs] (table 2-1)
+  double t_post_us = 88.8;                    // slave processing before a frame [µs] (table 2-1)
+  std::array<double, 4> drift{3.62e-3, 3.62e-3, 3.62e-3, 3.62e-3};  // slave oscillators [-]
+  bool sync = false;                          // synchronisation of 3-2-2
+  int sync_interval = 20;                     // timer interrupts between resyncs
+  int detect_every = 1;                       // master: node detection every N samples (0 off)
+  std::string master;                         // master program; "" = omni-master beside omnitwin
+  std::uint64_t seed = 1;                     // random faults (frame loss, jitter)
+  double handshake_timeout = 10.0;            // [s] the master must answer a tick within
 };
 
-// A scripted fault. Issue 2 knows physics faults; bus faults arrive with the buses.
+struct BusSpec {
+  BusKind kind = BusKind::direct;
+  CanSpec can;
+};
+
+// A scripted fault. wheel_slip acts on the physics; the others on the CAN bus (bus: can).
 struct FaultSpec {
-  enum class Kind { wheel_slip };
+  enum class Kind {
+    wheel_slip,  // the wheel's floor friction scaled by friction_scale
+    frame_loss,  // frames to `node` lost with probability `rate`, in bursts of `burst`
+    delay,       // frames sent by `node` leave extra_ms (+ uniform jitter_ms) later
+    drift,       // the slave's oscillator drift becomes `drift` (back to its setting at the end)
+    power_loss,  // the slave loses power (off the bus, drive off) and returns at the end
+    bus_off,     // the slave's transmissions are corrupted until it is bus-off; it asks for
+                 // recovery at the end (duration 0: never)
+  };
   Kind kind = Kind::wheel_slip;
   double at = 0;              // start [s]
   double duration = 0;        // [s]; 0 = until the end
-  int wheel = 0;              // 0-based wheel index (scenario files say 1..4)
+  // wheel_slip: 0-based wheel; CAN faults: the node, 0..3 = axis 1..4 slave, kMaster = the
+  // master (frames to / from the transport), kAllNodes = every receiver (frame_loss only).
+  int wheel = 0;
   double friction_scale = 0;  // wheel_slip: multiplies the wheel's floor friction
+  double rate = 0;            // frame_loss: probability a frame is lost [0, 1]
+  int burst = 1;              // frame_loss: frames lost in a row once a loss starts
+  double extra_ms = 0;        // delay [ms]
+  double jitter_ms = 0;       // delay: uniform extra in [0, jitter_ms) [ms]
+  double drift = 0;           // drift [-]
   int line = 0;
+  static constexpr int kMaster = 4;
+  static constexpr int kAllNodes = 5;
 };
+const char* to_string(FaultSpec::Kind k);
 
 // A bound on one metric of metrics.json, addressed by its dotted path
 // (e.g. "platform.final_error_cm", "axes.0.iae_velocity_pulse").

@@ -243,11 +243,22 @@ TEST_F(CliBadInput, BadSetNamesSet) {
 // scenario, before anything is written.
 TEST_F(CliBadInput, UnbuiltBusIsRefused) {
   const std::string file = test_scenario("run_short_line.yaml");
-  const Finished f = run({"run", file, "--bus", "can", "--out", (dir_ / "never").string()});
+  const Finished f = run({"run", file, "--bus", "ethercat", "--out", (dir_ / "never").string()});
   EXPECT_EQ(f.code, 2);
   EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
   EXPECT_TRUE(contains(f.err, file)) << f.err;
-  EXPECT_TRUE(contains(f.err, "bus 'can' is not available")) << f.err;
+  EXPECT_TRUE(contains(f.err, "bus 'ethercat' is not available")) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "never"));
+}
+
+// A CAN transport that cannot be opened is bad input, named by its key; nothing is written.
+TEST_F(CliBadInput, UnopenableCanTransportIsRefused) {
+  const std::string file = test_scenario("run_short_line.yaml");
+  const Finished f = run({"run", file, "--bus", "can", "--set", "bus.transport=socketcan:nosuchcan0", "--out",
+                          (dir_ / "never").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+  EXPECT_TRUE(contains(f.err, "bus.transport")) << f.err;
   EXPECT_FALSE(fs::exists(dir_ / "never"));
 }
 
@@ -529,6 +540,102 @@ TEST_F(CliModel, RollersMatchesCheckedInMjcf) { expect_checked_in_mjcf("rollers"
 
 // The capsule model (see expect_checked_in_mjcf).
 TEST_F(CliModel, CapsuleMatchesCheckedInMjcf) { expect_checked_in_mjcf("capsule"); }
+
+}  // namespace
+}  // namespace omnitwin::twin
+
+namespace omnitwin::twin {
+namespace {
+
+// ---------------------------------------------------------------------------------------
+// bus can: master and twin as two processes over UDP multicast (distinct ports per test, so
+// tests running in parallel never hear each other)
+
+class CliCan : public CliTest {
+ protected:
+  static std::string transport(int port) { return "bus.transport=udp:239.74.163.2:" + std::to_string(port); }
+};
+
+// Two lockstep runs of the same scenario over UDP write byte-identical trajectories; the
+// master ran the whole time, the slaves' feedback reached it (frames both ways), and the
+// capture holds every frame that completed on the simulated wire.
+TEST_F(CliCan, LockstepRunsOverUdpAreByteIdentical) {
+  std::string csv[2];
+  for (int i = 0; i < 2; ++i) {
+    const fs::path out = dir_ / ("run" + std::to_string(i));
+    const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47601),
+                            "--out", out.string(), "--no-progress"});
+    ASSERT_EQ(f.code, 0) << f.out << f.err;
+    csv[i] = read_bytes(out / "trajectory.csv");
+    const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+    EXPECT_EQ(m.at("master").at("state"), "running");
+    EXPECT_EQ(m.at("master").at("exit"), "exit 0");
+    EXPECT_GT(m.at("bus").at("frames_tx").get<int>(), 1000);  // slave frames to the master
+    EXPECT_GT(m.at("bus").at("frames_rx").get<int>(), 300);   // master frames to the slaves
+    EXPECT_EQ(m.at("bus").at("frames"), m.at("bus").at("pcap_frames"));
+    EXPECT_EQ(m.at("bus").at("transport_send_failures"), 0);
+    EXPECT_TRUE(fs::exists(out / "master.yaml"));
+    EXPECT_TRUE(contains(read_bytes(out / "master.log"), "state detecting -> running")) << read_bytes(out / "master.log");
+  }
+  EXPECT_FALSE(csv[0].empty());
+  EXPECT_EQ(csv[0], csv[1]);
+}
+
+// tshark decodes the capture: as many CAN frames as the bus completed, none malformed, and
+// the thesis's identifiers are there (0x102 commands, 0x202… feedback, detection 0x004…).
+TEST_F(CliCan, CaptureDecodesInTshark) {
+  if (std::system("command -v tshark >/dev/null 2>&1") != 0) GTEST_SKIP() << "tshark is not installed";
+  const fs::path out = dir_ / "pcap";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47602),
+                          "--out", out.string(), "--no-progress"});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  const fs::path ids = dir_ / "ids.txt", bad = dir_ / "bad.txt";
+  const std::string pcap = (out / "bus-can.pcap").string();
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -T fields -e can.id > " + ids.string() + " 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -Y _ws.malformed > " + bad.string() + " 2>/dev/null").c_str()), 0);
+  const auto lines = lines_of(read_bytes(ids));
+  EXPECT_EQ(lines.size(), m.at("bus").at("frames").get<std::size_t>());
+  EXPECT_TRUE(read_bytes(bad).empty()) << read_bytes(bad);
+  for (const char* id : {"258", "514", "770", "1282", "1538", "4", "8", "16", "32"})
+    EXPECT_NE(std::find(lines.begin(), lines.end(), id), lines.end()) << "no frame with id " << id;
+}
+
+// A master program that cannot be found is bad input (exit 2, nothing written); one that
+// starts but never joins the sim clock is a runtime failure (exit 3) with the reason recorded.
+TEST_F(CliCan, MasterProgramProblems) {
+  const Finished missing = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47603),
+                                "--set", "bus.master=/nonexistent/omni-master", "--out", (dir_ / "never").string()});
+  EXPECT_EQ(missing.code, 2) << missing.err;
+  EXPECT_TRUE(contains(missing.err, "bus.master")) << missing.err;
+  EXPECT_FALSE(fs::exists(dir_ / "never"));
+  const fs::path out = dir_ / "false";
+  const Finished silent = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47604),
+                               "--set", "bus.master=/bin/false", "--set", "bus.handshake_timeout=2", "--out",
+                               out.string(), "--no-progress"});
+  EXPECT_EQ(silent.code, 3) << silent.out << silent.err;
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_TRUE(contains(m.at("error").get<std::string>(), "did not connect")) << m.at("error");
+}
+
+// Ctrl-C in the middle of a CAN run: records closed and complete, the master told to end
+// (it exits 0 on End), the capture readable.
+TEST_F(CliCan, InterruptEndsBothProcessesCleanly) {
+  const fs::path out = dir_ / "int";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", transport(47605), "--out",
+           out.string(), "--no-progress"},
+          work(), io());
+  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 32 * 1024, c)) << c.err();
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(20s), 3) << c.out() << c.err();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("interrupted"), true);
+  EXPECT_EQ(m.at("master").at("exit"), "exit 0");
+  const std::string csv = read_bytes(out / "trajectory.csv");
+  ASSERT_FALSE(csv.empty());
+  EXPECT_EQ(csv.back(), '\n');
+  EXPECT_GT(fs::file_size(out / "bus-can.pcap"), 1000u);
+}
 
 }  // namespace
 }  // namespace omnitwin::twin

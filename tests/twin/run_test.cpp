@@ -403,11 +403,23 @@ TEST_F(RunShort, RealtimePacesWithoutChangingResults) {
 
 // A bus that is not built yet is refused before anything runs or is written.
 TEST_F(RunShort, UnbuiltBusRefusedBeforeWriting) {
-  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "can"}});
+  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "ethercat"}});
   RunOptions o;
-  o.out_dir = (dir_ / "can").string();
+  o.out_dir = (dir_ / "ethercat").string();
   EXPECT_THROW(run_scenario(s, o), RunSetupError);
-  EXPECT_FALSE(fs::exists(dir_ / "can"));
+  EXPECT_FALSE(fs::exists(dir_ / "ethercat"));
+}
+
+// The twin alone (for an external master) needs bus can and the realtime clock.
+TEST_F(RunShort, TwinAloneNeedsCanAndRealtime) {
+  RunOptions o;
+  o.out_dir = (dir_ / "alone").string();
+  o.external_master = true;
+  const Scenario direct = load_scenario(test_scenario("run_short_line.yaml"));
+  EXPECT_THROW(run_scenario(direct, o), RunSetupError);
+  const Scenario lockstep = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "can"}});
+  EXPECT_THROW(run_scenario(lockstep, o), RunSetupError);
+  EXPECT_FALSE(fs::exists(dir_ / "alone"));
 }
 
 }  // namespace

@@ -1,0 +1,330 @@
+// twin layer — the twin's side of the thesis CAN network; see can_network.hpp.
+#include "twin/can_network.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+namespace omnitwin::twin {
+
+namespace {
+
+constexpr int kBusNodes = 5;  // the transport side + four slaves
+
+can::BusConfig bus_config(const Scenario& s) {
+  can::BusConfig c;
+  c.bit_rate_bps = s.bus.can.bit_rate;
+  c.queue_capacity = 64;  // the transport side may hand over a burst (a PC script)
+  c.max_nodes = kBusNodes;
+  return c;
+}
+
+std::string node_name(int fault_node) {
+  if (fault_node == FaultSpec::kMaster) return "master";
+  if (fault_node == FaultSpec::kAllNodes) return "all nodes";
+  return fmt::format("axis {} (node 0x{:02X})", fault_node + 1, omni::slave_of_axis(fault_node + 1));
+}
+
+const char* state_name(can::ErrorState e) {
+  switch (e) {
+    case can::ErrorState::error_active: return "error_active";
+    case can::ErrorState::error_passive: return "error_passive";
+    case can::ErrorState::bus_off: return "bus_off";
+  }
+  return "?";
+}
+
+// The master's NMT "start all" (0x000 [00 01]): the moment the platform's run begins.
+bool is_start_all(const can::Frame& f) {
+  return f.id == 0 && !f.extended && f.kind == can::FrameKind::data && f.dlc == 2 && f.data[0] == 0 &&
+         f.data[1] == 1;
+}
+
+}  // namespace
+
+OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
+    : s_(s), sched_(sched), hooks_(std::move(hooks)), bus_(bus_config(s)), rng_(s.bus.can.seed) {
+  for (int i = 0; i < kBusNodes; ++i) bus_.attach();
+  bus_.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
+  bus_.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
+  bus_.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
+  for (int i = 0; i < 4; ++i) {
+    make_slave(i);
+    const omni::OmniSlaveConfig& c = slaves_[static_cast<std::size_t>(i)]->config();
+    // Each node's timer runs on its own oscillator; it starts when NMT start arrives.
+    timers_[static_cast<std::size_t>(i)] = sched_.add_periodic(
+        fmt::format("slave{}", i + 1), Phase::device, 0, c.timer_period_ns,
+        [this, i](SimTime t) { on_slave_timer(i, t); }, c.drift);
+    sched_.cancel(timers_[static_cast<std::size_t>(i)]);
+  }
+  transport_ = can::open_transport(s.bus.can.transport);
+}
+
+OmniCanNetwork::~OmniCanNetwork() = default;
+
+void OmniCanNetwork::make_slave(int i) {
+  const std::uint8_t id = omni::slave_of_axis(i + 1);
+  omni::OmniSlaveConfig c = omni::make_slave_config(id, s_.platform);
+  c.drift = s_.bus.can.drift[static_cast<std::size_t>(i)];
+  c.sync_enabled = s_.bus.can.sync;
+  c.sync_interval = s_.bus.can.sync_interval;
+  c.t_post_ns = std::llround(s_.bus.can.t_post_us * 1e3);
+  auto send = [this, i](const can::Frame& f, std::int64_t at) { bus_.submit(bus_node(i), f, at + extra_delay(i)); };
+  slaves_[static_cast<std::size_t>(i)] = std::make_unique<omni::OmniSlave>(c, send, hooks_.wheel_angle(i));
+}
+
+void OmniCanNetwork::open_pcap(const std::string& path) { pcap_ = std::make_unique<can::PcapWriter>(path); }
+
+void OmniCanNetwork::advance(SimTime t) { bus_.advance(t); }
+
+void OmniCanNetwork::observe_wheels() {
+  for (int i = 0; i < 4; ++i)
+    if (powered_[static_cast<std::size_t>(i)]) slaves_[static_cast<std::size_t>(i)]->observe(hooks_.wheel_angle(i));
+}
+
+// ---------------------------------------------------------------------------------------
+// The transport side
+
+void OmniCanNetwork::submit_from_far(const can::Frame& f, SimTime t) {
+  const SimTime stamp = t + std::llround(s_.bus.can.t_pre_us * 1e3) + extra_delay(FaultSpec::kMaster);
+  // A burst beyond the transport side's queue is refused by the wire model: counted.
+  if (bus_.submit(kFar, f, stamp) != can::SubmitStatus::queued) ++refused_from_far_;
+}
+
+bool OmniCanNetwork::drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (from_transport_ < count) {
+    if (auto r = transport_->receive()) {
+      ++from_transport_;
+      submit_from_far(r->frame, t);
+      continue;
+    }
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0 || !can::wait_readable(*transport_, left)) return from_transport_ >= count;
+  }
+  return true;
+}
+
+int OmniCanNetwork::poll_transport(SimTime t) {
+  int n = 0;
+  while (auto r = transport_->receive()) {
+    ++from_transport_;
+    ++n;
+    submit_from_far(r->frame, t);
+  }
+  return n;
+}
+
+// ---------------------------------------------------------------------------------------
+// Bus callbacks
+
+void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing) {
+  if (receiver == kFar) return;  // the far side heard it on the transport (on_tx_done)
+  const int i = receiver - 1;
+  if (lose(i)) {
+    ++lost_frames_;
+    return;
+  }
+  omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
+  const std::uint64_t before = sl.stats().samples;
+  const omni::TimerAction a = sl.on_frame(f, timing.end_ns);
+  after_slave_input(i, before, a);
+}
+
+void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
+  if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
+  if (sender == kFar) {
+    if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
+    return;
+  }
+  // A slave's frame reaches the master (and anyone else on the transport) when it completes.
+  if (lose(FaultSpec::kMaster)) {
+    ++lost_frames_;
+    return;
+  }
+  if (transport_->send(f, timing.end_ns)) {
+    ++to_transport_;
+  } else {
+    ++send_failures_;
+  }
+}
+
+void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {
+  if (e.kind == can::BusEventKind::error_frame || e.node == kFar) return;  // counted by the bus
+  const std::string who = node_name(e.node - 1);
+  if (e.kind == can::BusEventKind::state_changed) {
+    if (e.state == can::ErrorState::bus_off) ++bus_off_events_;
+    hooks_.log(e.t_ns, "can", fmt::format("{} is {}", who, state_name(e.state)));
+  } else {
+    hooks_.log(e.t_ns, "can", fmt::format("{} recovered from bus-off", who));
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Slaves
+
+void OmniCanNetwork::on_slave_timer(int i, SimTime t) {
+  bus_.advance(t);  // frames that complete at or before the interrupt are in its FIFO
+  omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
+  const std::uint64_t before = sl.stats().samples;
+  const omni::TimerAction a = sl.on_timer(t, hooks_.wheel_angle(i));
+  after_slave_input(i, before, a);
+}
+
+void OmniCanNetwork::after_slave_input(int i, std::uint64_t samples_before, const omni::TimerAction& a) {
+  const Scheduler::TimerId id = timers_[static_cast<std::size_t>(i)];
+  if (a.request == omni::TimerRequest::stop) sched_.cancel(id);
+  if (a.request == omni::TimerRequest::restart) sched_.restart(id, a.first_ns);
+  const omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
+  // The driver follows the chain's output (the zero code after a stop).
+  hooks_.set_setpoint(i, sl.setpoint());
+  if (sl.stats().samples > samples_before) {
+    const physics::WheelDriveSample& w = sl.drive_chain().last();
+    hooks_.axis_sample(i, w.command - w.delta_counts);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Faults
+
+bool OmniCanNetwork::lose(int target) {
+  for (LossState* l : {&loss_[static_cast<std::size_t>(target)], &loss_[FaultSpec::kAllNodes]}) {
+    if (!l->active) continue;
+    if (l->left > 0) {
+      --l->left;
+      return true;
+    }
+    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < l->rate) {
+      l->left = l->burst - 1;
+      return true;
+    }
+  }
+  return false;
+}
+
+std::int64_t OmniCanNetwork::extra_delay(int node) {
+  const DelayState& d = delay_[static_cast<std::size_t>(node)];
+  if (!d.active) return 0;
+  const double jitter = d.jitter_ns > 0 ? std::uniform_real_distribution<double>(0.0, d.jitter_ns)(rng_) : 0.0;
+  return std::llround(d.extra_ns + jitter);
+}
+
+void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
+  bus_.advance(t);
+  const std::size_t n = static_cast<std::size_t>(f.wheel);
+  const std::string who = node_name(f.wheel);
+  const char* edge = begin ? "begins" : "ends";
+  switch (f.kind) {
+    case FaultSpec::Kind::frame_loss:
+      loss_[n] = LossState{f.rate, f.burst, 0, begin};
+      hooks_.log(t, "fault", fmt::format("frame_loss to {} rate {} burst {} ({})", who, f.rate, f.burst, edge));
+      return;
+    case FaultSpec::Kind::delay:
+      delay_[n] = DelayState{f.extra_ms * 1e6, f.jitter_ms * 1e6, begin};
+      hooks_.log(t, "fault", fmt::format("delay of {} +{} ms jitter {} ms ({})", who, f.extra_ms, f.jitter_ms, edge));
+      return;
+    case FaultSpec::Kind::drift: {
+      const double d = begin ? f.drift : s_.bus.can.drift[n];
+      sched_.set_drift(timers_[n], d);
+      hooks_.log(t, "fault", fmt::format("drift of {} now {} ({})", who, d, edge));
+      return;
+    }
+    case FaultSpec::Kind::power_loss:
+      if (begin) {
+        // Off the bus, timer dead, drive output gone; the node's counts so far are kept.
+        bus_.detach(bus_node(f.wheel), t);
+        sched_.cancel(timers_[n]);
+        powered_[n] = false;
+        dropouts_before_[n] += slaves_[n]->stats().dropouts;
+        samples_before_[n] += slaves_[n]->stats().samples;
+        slaves_[n]->reset_statistics();  // carried over: count them once while it is off
+        hooks_.set_setpoint(f.wheel, 0.0);
+      } else {
+        // Power-on reset: a fresh node, stopped, counter from zero at the shaft's angle.
+        make_slave(f.wheel);
+        bus_.reattach(bus_node(f.wheel), t);
+        powered_[n] = true;
+        hooks_.set_setpoint(f.wheel, slaves_[n]->setpoint());
+      }
+      hooks_.log(t, "fault", fmt::format("power_loss of {} ({})", who, edge));
+      return;
+    case FaultSpec::Kind::bus_off:
+      if (begin) {
+        bus_.corrupt_frames_of(bus_node(f.wheel), 32);  // 32 × 8 > 255: bus-off
+      } else if (!bus_.request_recovery(bus_node(f.wheel), t)) {
+        hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
+        return;
+      }
+      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}{})", who, edge, begin ? "" : ": recovery requested"));
+      return;
+    case FaultSpec::Kind::wheel_slip:
+      return;  // physics, not the bus
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Metrics
+
+nlohmann::json OmniCanNetwork::slave_json(int i) const {
+  const std::size_t n = static_cast<std::size_t>(i);
+  const omni::OmniSlave& sl = *slaves_[n];
+  const omni::OmniSlaveStats& st = sl.stats();
+  const std::uint64_t samples = samples_before_[n] + st.samples;
+  const std::uint64_t dropouts = dropouts_before_[n] + st.dropouts;
+  const can::NodeStats& ns = bus_.node_stats(bus_node(i));
+  return {{"node", sl.config().node_id},
+          {"state", powered_[n] ? omni::to_string(sl.state()) : "off"},
+          {"samples", samples},
+          {"dropouts", dropouts},
+          {"dropout_percent", samples ? 100.0 * static_cast<double>(dropouts) / static_cast<double>(samples) : 0.0},
+          {"first_dropout_sample", st.first_dropout_sample},
+          {"resyncs", st.resyncs},
+          {"commands", st.commands},
+          {"stale_samples", st.stale_samples},
+          {"frames_received", st.frames_received},
+          {"frames_sent", st.frames_sent},
+          {"bad_frames", st.bad_frames},
+          {"fifo_overruns", st.frames_overrun},
+          {"can_state", state_name(bus_.error_state(bus_node(i)))},
+          {"tec", bus_.tec(bus_node(i))},
+          {"tx_errors", ns.tx_errors},
+          {"bus_off_events", ns.bus_off_events}};
+}
+
+nlohmann::json OmniCanNetwork::slave_metrics() const {
+  nlohmann::json a = nlohmann::json::array();
+  for (int i = 0; i < 4; ++i) a.push_back(slave_json(i));
+  return a;
+}
+
+nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
+  std::uint64_t samples = 0, dropouts = 0, bad = 0;
+  for (std::size_t i = 0; i < 4; ++i) {
+    samples += samples_before_[i] + slaves_[i]->stats().samples;
+    dropouts += dropouts_before_[i] + slaves_[i]->stats().dropouts;
+    bad += slaves_[i]->stats().bad_frames;
+  }
+  const can::TransportStats ts = transport_->stats();
+  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
+  return {{"name", "can"},
+          {"bit_rate", s_.bus.can.bit_rate},
+          {"transport", transport_->spec()},
+          {"frames_tx", to_transport_},
+          {"frames_rx", from_transport_},
+          {"frames", bus_.stats().frames},
+          {"error_frames", bus_.stats().error_frames},
+          {"lost_frames", lost_frames_},
+          {"bus_off_events", bus_off_events_},
+          {"load", bus_.bus_load(now)},
+          {"dropouts", dropouts},
+          {"dropout_rate", samples ? static_cast<double>(dropouts) / static_cast<double>(samples) : 0.0},
+          {"errors", bus_.stats().error_frames + malformed + bad + send_failures_ + refused_from_far_},
+          {"refused_from_transport", refused_from_far_},
+          {"transport_rx_malformed", malformed},
+          {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)
+          {"transport_send_waits", ts.send_waits},
+          {"pcap_frames", pcap_ ? pcap_->written() : 0},
+          {"sync", s_.bus.can.sync}};
+}
+
+}  // namespace omnitwin::twin

@@ -1,0 +1,135 @@
+// twin layer — the twin's side of the thesis CAN network (bus `can`): the simulated wire
+// between a real transport and the four emulated 8051 wheel nodes.
+//
+// One CanBus core is the wire. Node 0 stands for everything on the far side of the transport
+// (the master process, a PC node, a python-can script): frames received from the transport are
+// queued on it, stamped at the receiving tick + T_pre. Nodes 1..4 are the OmniSlaves of axes
+// 1..4, each on its own drifting timer on the scheduler (Phase::device). A frame a slave sends
+// is forwarded to the transport when it completes on the simulated wire (with its end-of-frame
+// time as timestamp), so the master hears it exactly when a real controller would. Every frame
+// that completes on the wire goes into the pcap. The scenario's CAN faults (frame loss, delay,
+// drift, power loss, bus-off) are applied here.
+//
+// Time: every entry point first runs the bus to the caller's instant (advance()), so bus
+// deliveries and timer interrupts interleave in exact time order. Nothing here reads the wall
+// clock except drain_transport()'s timeout. Set-up allocates; the per-event paths do not
+// (apart from the event log, which only writes on state changes).
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <string_view>
+
+#include <nlohmann/json.hpp>
+
+#include "bus_emulators/can/can_bus.hpp"
+#include "bus_emulators/can/can_pcap.hpp"
+#include "bus_emulators/can/transport.hpp"
+#include "bus_emulators/omni/omni_slave.hpp"
+#include "twin/scenario.hpp"
+#include "twin/scheduler.hpp"
+
+namespace omnitwin::twin {
+
+class OmniCanNetwork {
+ public:
+  struct Hooks {
+    std::function<double(int wheel)> wheel_angle;             // shaft angle of wheel 0..3 [rad]
+    std::function<void(int wheel, double rad_s)> set_setpoint; // driver speed setpoint [rad/s]
+    std::function<void(int wheel, double err_pulses)> axis_sample;  // command − measured [pulses]
+    std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
+  };
+
+  // Builds the bus and the slaves and opens the transport (throws can::TransportError for a
+  // bad spec or a socket that cannot be opened). Timers are added to `sched` (all off: the
+  // slaves start stopped). Not real-time safe.
+  OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks);
+  ~OmniCanNetwork();
+
+  // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
+  void open_pcap(const std::string& path);
+
+  // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
+  void advance(SimTime t);
+
+  // Lockstep: receives frames from the transport until `count` frames have arrived in all
+  // since the start, queueing each on node 0 at t + T_pre (+ any delay fault). Returns false
+  // when they did not all arrive within `timeout`.
+  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout);
+  // Realtime: queues whatever the transport holds now at t + T_pre. Returns the number taken.
+  int poll_transport(SimTime t);
+
+  // Every physics step: the counters follow the shafts. Real-time safe.
+  void observe_wheels();
+
+  // A scenario CAN fault begins or ends at t. Not real-time safe (logs).
+  void apply_fault(const FaultSpec& f, bool begin, SimTime t);
+
+  std::uint64_t frames_to_transport() const { return to_transport_; }
+  std::uint64_t frames_from_transport() const { return from_transport_; }
+  const can::CanBus& bus() const { return bus_; }
+  const omni::OmniSlave& slave(int axis0) const { return *slaves_[static_cast<std::size_t>(axis0)]; }
+  const can::Transport& transport() const { return *transport_; }
+  // Time the master's NMT start-all completed on the wire [ns], or -1.
+  SimTime master_start_ns() const { return master_start_ns_; }
+
+  // bus.* of metrics.json (frames_tx, frames_rx, dropouts, dropout_rate, errors, …) and the
+  // per-slave figures. Not real-time safe.
+  nlohmann::json bus_metrics(SimTime now) const;
+  nlohmann::json slave_metrics() const;
+
+ private:
+  struct LossState {
+    double rate = 0;
+    int burst = 1;
+    int left = 0;  // frames of the current burst still to lose
+    bool active = false;
+  };
+  struct DelayState {
+    double extra_ns = 0;
+    double jitter_ns = 0;
+    bool active = false;
+  };
+  static constexpr int kFar = 0;  // bus node of the transport side
+  static int bus_node(int axis0) { return axis0 + 1; }
+
+  void on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing);
+  void on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing);
+  void on_bus_event(const can::BusEvent& e);
+  void on_slave_timer(int axis0, SimTime t);
+  void after_slave_input(int axis0, std::uint64_t samples_before, const omni::TimerAction& a);
+  void submit_from_far(const can::Frame& f, SimTime t);
+  void make_slave(int axis0);
+  bool lose(int target);  // frame_loss roll for a receiver (0..3 slaves, kMaster)
+  std::int64_t extra_delay(int node);
+  nlohmann::json slave_json(int axis0) const;
+
+  const Scenario& s_;
+  Scheduler& sched_;
+  Hooks hooks_;
+  can::CanBus bus_;
+  std::unique_ptr<can::Transport> transport_;
+  std::unique_ptr<can::PcapWriter> pcap_;
+  std::array<std::unique_ptr<omni::OmniSlave>, 4> slaves_;
+  std::array<Scheduler::TimerId, 4> timers_{};
+  std::array<bool, 4> powered_{true, true, true, true};
+  std::array<LossState, 6> loss_{};   // by FaultSpec node: 0..3 slaves, 4 master, 5 all
+  std::array<DelayState, 5> delay_{}; // by FaultSpec node: 0..3 slaves, 4 master
+  std::mt19937_64 rng_;
+  std::uint64_t to_transport_ = 0;
+  std::uint64_t from_transport_ = 0;
+  std::uint64_t lost_frames_ = 0;
+  std::uint64_t send_failures_ = 0;
+  std::uint64_t refused_from_far_ = 0;  // frames from the transport the wire's queue refused
+  std::uint64_t bus_off_events_ = 0;
+  SimTime master_start_ns_ = -1;
+  // Slave statistics carried over power cycles (a returning node starts from zero).
+  std::array<std::uint64_t, 4> dropouts_before_{}, samples_before_{};
+};
+
+}  // namespace omnitwin::twin

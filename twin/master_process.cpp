@@ -1,0 +1,145 @@
+// twin layer — the master program as a child process; see master_process.hpp.
+#include "twin/master_process.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <stdexcept>
+#include <thread>
+
+#include <fmt/format.h>
+
+extern char** environ;
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+
+MasterProcess::MasterProcess(const std::string& program, const std::vector<std::string>& args,
+                             const std::string& log_path) {
+  std::vector<std::string> argv_s{program};
+  argv_s.insert(argv_s.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  // stdout and stderr into the run directory's master.log; stdin from /dev/null.
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_addopen(&fa, 1, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  const int rc = posix_spawn(&pid_, program.c_str(), &fa, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) {
+    pid_ = -1;
+    throw std::runtime_error(fmt::format("cannot start the master '{}': {}", program, std::strerror(rc)));
+  }
+}
+
+MasterProcess::~MasterProcess() {
+  if (pid_ > 0 && exit_code_ < 0) stop(std::chrono::milliseconds(2000));
+}
+
+void MasterProcess::reap(int status) {
+  exit_code_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+bool MasterProcess::running() {
+  if (pid_ <= 0 || exit_code_ >= 0) return false;
+  int status = 0;
+  const pid_t r = waitpid(pid_, &status, WNOHANG);
+  if (r == pid_) reap(status);
+  return exit_code_ < 0;
+}
+
+bool MasterProcess::wait(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (running()) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+void MasterProcess::stop(std::chrono::milliseconds grace) {
+  if (!running()) return;
+  kill(pid_, SIGTERM);
+  if (wait(grace)) return;
+  kill(pid_, SIGKILL);
+  int status = 0;
+  while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
+  }
+  reap(status);
+}
+
+std::string MasterProcess::describe_exit() const {
+  if (exit_code_ < 0) return "running";
+  if (exit_code_ >= 128) return fmt::format("killed by signal {}", exit_code_ - 128);
+  return fmt::format("exit {}", exit_code_);
+}
+
+std::string find_master_program(const std::string& configured) {
+  if (!configured.empty()) {
+    if (access(configured.c_str(), X_OK) != 0)
+      throw std::runtime_error(fmt::format("bus.master: '{}' is not an executable program", configured));
+    return configured;
+  }
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  const fs::path dir = ec ? fs::current_path() : self.parent_path();
+  // Build tree (build/twin/omnitwin → build/controller/omni-master), then an install beside it.
+  for (const fs::path& p : {dir / ".." / "controller" / "omni-master", dir / "omni-master"}) {
+    if (access(p.c_str(), X_OK) == 0) return p.lexically_normal().string();
+  }
+  throw std::runtime_error(fmt::format(
+      "bus: the master program omni-master was not found beside {} (build it, or set bus.master)", dir.string()));
+}
+
+namespace {
+
+// One path segment in the master's file format (the scenario's own vocabulary).
+std::string segment_yaml(const PathSegment& g) {
+  switch (g.kind) {
+    case PathSegment::Kind::line:
+      return fmt::format("line: {{dx: {}, dy: {}, dphi_deg: {}, duration: {}}}", g.dx, g.dy, g.dphi_deg, g.duration);
+    case PathSegment::Kind::arc:
+      return fmt::format("arc: {{cx: {}, cy: {}, sweep_deg: {}, dphi_deg: {}, duration: {}}}", g.cx, g.cy,
+                         g.sweep_deg, g.dphi_deg, g.duration);
+    case PathSegment::Kind::rotate: return fmt::format("rotate: {{dphi_deg: {}, duration: {}}}", g.dphi_deg, g.duration);
+    case PathSegment::Kind::dwell: return fmt::format("dwell: {{duration: {}}}", g.duration);
+    case PathSegment::Kind::square:
+      return fmt::format("square: {{side: {}, duration: {}, ccw: {}}}", g.side, g.duration, g.ccw);
+    case PathSegment::Kind::circle:
+      return fmt::format("circle: {{radius: {}, duration: {}, ccw: {}}}", g.radius, g.duration, g.ccw);
+    case PathSegment::Kind::figure_eight:
+      return fmt::format("figure_eight: {{radius: {}, duration: {}, ccw: {}}}", g.radius, g.duration, g.ccw);
+  }
+  return "";
+}
+
+}  // namespace
+
+std::string master_config_yaml(const Scenario& s) {
+  const ControllerSpec& c = s.controller;
+  std::string y = fmt::format("# omni-master configuration written by omnitwin for scenario {}\n", s.name);
+  y += fmt::format("period: {}\nkp: [{}, {}, {}]\nki: [{}, {}, {}]\nfeedforward: {}\n", c.period, c.kp[0], c.kp[1],
+                   c.kp[2], c.ki[0], c.ki[1], c.ki[2], c.feedforward);
+  y += fmt::format("max_speed: {}\nmax_yaw_rate: {}\n", c.max_speed, c.max_yaw_rate);
+  y += fmt::format("geometry: {{L: {}, r: {}, counts_per_rev: {}}}\n", s.platform.geometry.L, s.platform.geometry.r,
+                   s.platform.counts_per_rev());
+  y += fmt::format("path:\n  start: {{x: {}, y: {}, phi_deg: {}}}\n  segments:\n", s.path.x0, s.path.y0,
+                   s.path.phi0_deg);
+  for (const PathSegment& g : s.path.segments) y += "    - " + segment_yaml(g) + "\n";
+  y += fmt::format("settle: {}\ndetect_every: {}\n", s.settle, s.bus.can.detect_every);
+  // Real time: the twin may still be starting when the master first looks for its slaves.
+  y += fmt::format("startup_timeout: {}\n", s.clock == ClockMode::realtime ? 3.0 : 1.0);
+  return y;
+}
+
+}  // namespace omnitwin::twin

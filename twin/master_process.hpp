@@ -1,0 +1,56 @@
+// twin layer — the master program as a child process of `omnitwin run`.
+//
+// `omnitwin run --bus can` starts the real master (controller/, `omni-master`) beside the twin
+// and supervises it: its configuration file is written from the scenario into the run
+// directory (master.yaml), its output goes to master.log there, and whatever ends the run
+// (its end, an error, Ctrl-C) ends the master too: End on the sim-clock channel, then
+// SIGTERM, then SIGKILL after a grace period. The two programs share no memory and no code
+// at run time; they meet only on the CAN transport and the sim-clock channel.
+#pragma once
+
+#include <sys/types.h>
+
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin {
+
+class MasterProcess {
+ public:
+  // Starts `program` with `args` (argv[1…]); stdout and stderr go to `log_path`. Throws
+  // std::runtime_error when it cannot be started. Not real-time safe.
+  MasterProcess(const std::string& program, const std::vector<std::string>& args, const std::string& log_path);
+  ~MasterProcess();  // stops it if still running
+  MasterProcess(const MasterProcess&) = delete;
+  MasterProcess& operator=(const MasterProcess&) = delete;
+
+  // True while the child has not exited (reaps it when it has). Not real-time safe.
+  bool running();
+  // Waits up to `timeout` for it to exit on its own; true when it did.
+  bool wait(std::chrono::milliseconds timeout);
+  // SIGTERM, up to `grace` to exit, then SIGKILL. Returns once it is reaped.
+  void stop(std::chrono::milliseconds grace);
+  // Exit code (0…255), 128 + signal when killed, -1 while it runs.
+  int exit_code() const { return exit_code_; }
+  std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"
+  pid_t pid() const { return pid_; }
+
+ private:
+  void reap(int status);
+  pid_t pid_ = -1;
+  int exit_code_ = -1;
+};
+
+// The master program to run: `configured` when given; else omni-master beside the omnitwin
+// executable (build tree: ../controller/omni-master; installed: same folder). Throws
+// RunSetupError-compatible std::runtime_error naming where it looked.
+std::string find_master_program(const std::string& configured);
+
+// The master's configuration file (docs/protocols/omni-master.md) for this scenario: the
+// control loop, geometry, path and the CAN settings the master owns. Not real-time safe.
+std::string master_config_yaml(const Scenario& s);
+
+}  // namespace omnitwin::twin
