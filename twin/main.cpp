@@ -19,6 +19,7 @@
 
 #include "physics/platform_mjcf.hpp"
 #include "twin/clock.hpp"
+#include "twin/experiment.hpp"
 #include "twin/junit.hpp"
 #include "twin/progress.hpp"
 #include "twin/run.hpp"
@@ -58,6 +59,7 @@ struct RunArgs {
   std::string clock;
   std::vector<std::string> sets;
   bool no_progress = false;
+  bool external_master = false;  // `omnitwin twin`
 };
 
 std::vector<Override> collect_overrides(const RunArgs& a) {
@@ -84,12 +86,20 @@ void print_summary(const RunResult& r) {
                              rt.value("scheduling", "?"), rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
+  if (m.contains("master")) {
+    const auto& ms = m["master"];
+    const auto& b = m["bus"];
+    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} %, dropouts {} ({:.2f} %)\n",
+                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
+                             b.value("dropouts", 0), 100.0 * b.value("dropout_rate", 0.0));
+  }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
-  for (const char* f : {"metrics.json", "trajectory.csv", "events.log"})
-    std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
+  for (const char* f : {"metrics.json", "trajectory.csv", "events.log", "bus-can.pcap", "master.log"})
+    if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
 }
 
 int cmd_run(const RunArgs& a) {
@@ -99,6 +109,11 @@ int cmd_run(const RunArgs& a) {
     o.out_dir = a.out.empty() ? (fs::path("out") / s.name).string() : a.out;
     o.progress = !a.no_progress && stderr_is_terminal();
     o.interrupt = &g_interrupt;
+    o.external_master = a.external_master;
+    if (a.external_master)
+      std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
+                               s.bus.can.transport, s.bus.can.bit_rate)
+                << std::flush;
     const RunResult r = run_scenario(s, o);
     print_summary(r);
     return r.exit_code;
@@ -250,12 +265,28 @@ int main(int argc, char** argv) {
       ->type_name("KEY=VALUE");
   run->add_flag("--no-progress", ra.no_progress, "never draw the progress bar");
 
+  RunArgs ta;
+  ta.external_master = true;
+  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, realtime) for an external master");
+  twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
+  twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
+  twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
+  twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
+  twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
+
   std::vector<std::string> check_paths;
   std::string junit, check_out = "out/check";
   CLI::App* check = app.add_subcommand("check", "run regression scenarios and check their expectations");
   check->add_option("paths", check_paths, "scenario files or directories (searched for *.yaml)")->required();
   check->add_option("--junit", junit, "write a JUnit XML report to FILE");
   check->add_option("--out", check_out, "root of the run directories")->capture_default_str();
+
+  std::string exp_name, exp_out;
+  bool exp_quick = false;
+  CLI::App* experiment = app.add_subcommand("experiment", "run one of seed 002's experiments (docs/experiments.md)");
+  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform")->required();
+  experiment->add_option("--out", exp_out, "output folder (default out/<name>/)");
+  experiment->add_flag("--quick", exp_quick, "fewer configurations (a smoke run; the same checks)");
 
   std::string model_scenario, model_variant, model_out;
   CLI::App* model = app.add_subcommand("model", "write the platform MJCF generated from the parameters");
@@ -278,8 +309,15 @@ int main(int argc, char** argv) {
 
   try {
     if (*run) return cmd_run(ra);
+    if (*twin) {
+      // The twin alone: the CAN bus and the realtime clock are implied.
+      ta.bus = "can";
+      ta.clock = "realtime";
+      return cmd_run(ta);
+    }
     if (*check) return cmd_check(check_paths, junit, check_out);
     if (*model) return cmd_model(model_scenario, model_variant, model_out);
+    if (*experiment) return run_experiment(exp_name, ExperimentOptions{exp_out, exp_quick});
   } catch (const std::exception& e) {
     // Anything not handled closer to its cause is a runtime failure, never an abort.
     std::cerr << "omnitwin: " << e.what() << "\n";

@@ -1,0 +1,182 @@
+#!/usr/bin/python3
+"""media layer — plots of the `omnitwin experiment` outputs (can-timing, can-dropout, thesis-platform).
+
+Called by twin/experiment.cpp as `plot_experiment.py KIND CSV OUT_DIR`; reads the CSV the
+experiment wrote and draws PNGs beside it. Kept in Python so the C++ side needs no plotting
+library; Agg backend, so no display is needed. Exit 3 when matplotlib is missing (the caller
+names the Debian package), 2 on bad usage.
+"""
+import csv
+import os
+import sys
+
+try:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+except ImportError:
+    sys.stderr.write("plot_experiment.py: matplotlib is missing (Debian: python3-matplotlib)\n")
+    sys.exit(3)
+
+
+def read_rows(path):
+    """The CSV as a list of dicts with numbers converted where they parse."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        for k, v in r.items():
+            try:
+                r[k] = float(v) if "." in v else int(v)
+            except ValueError:
+                pass
+    return rows
+
+
+def select(rows, **want):
+    """Rows whose fields equal every keyword, sorted by data bytes."""
+    out = [r for r in rows if all(r[k] == v for k, v in want.items())]
+    return sorted(out, key=lambda r: r["bytes"])
+
+
+def save(fig, out_dir, name):
+    """Writes one PNG and closes the figure."""
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, name), dpi=110)
+    plt.close(fig)
+
+
+def plot_timing(rows, out_dir):
+    """Table 2-2: our T_tx (lines) beside the thesis's (markers), one colour per bit rate."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for rate in sorted({r["rate_kbps"] for r in rows}, reverse=True):
+        sel = select(rows, rate_kbps=rate)
+        x = [r["bytes"] for r in sel]
+        line, = ax.plot(x, [r["ours_ms"] for r in sel], "-", label=f"{rate} kbit/s ours")
+        ax.plot(x, [r["thesis_ms"] for r in sel], "o", color=line.get_color(), label=f"{rate} kbit/s thesis")
+    ax.set_yscale("log")
+    ax.set_xlabel("data bytes")
+    ax.set_ylabel("T_tx [ms]")
+    ax.set_title("Table 2-2: CAN transmission time, twin bus vs thesis")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    save(fig, out_dir, "can_timing.png")
+
+
+def lines(ax, rows, key, label_of, style_of=lambda r: "-o", **want):
+    """One line of `key` over data bytes per distinct label among the selected rows."""
+    sel = select(rows, **want)
+    first = {}
+    for r in sel:
+        first.setdefault(label_of(r), r)
+    order = lambda lab: (first[lab]["sync"], first[lab]["messages"], first[lab]["period_ms"],
+                         -first[lab]["rate_kbps"], first[lab]["clock"])
+    for label in sorted(first, key=order):
+        pts = [r for r in sel if label_of(r) == label]
+        ax.plot([r["bytes"] for r in pts], [r[key] for r in pts], style_of(pts[0]), label=label)
+    ax.set_xlabel("data bytes")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def sync_label(r):
+    return ("sync" if r["sync"] else "no sync") + f", N={r['messages']}"
+
+
+def plot_size(rows, out_dir):
+    """Figs. 2-18 / 3-24: p without and with sync, and N_drift, over data size (1000 kbit/s, 5 ms)."""
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(13, 4))
+    for ax, sync in ((a, 0), (b, 1)):
+        lines(ax, rows, "p_percent", sync_label, rate_kbps=1000, period_ms=5, clock="rate", sync=sync)
+        ax.set_ylabel("dropout p [%]")
+    a.set_title("Fig. 2-18: 1000 kbit/s, 5 ms, no sync")
+    b.set_title("Fig. 3-24: with sync")
+    lines(c, rows, "n_drift", sync_label, rate_kbps=1000, period_ms=5, clock="rate", sync=0)
+    c.set_ylabel("N_drift [samples]")
+    c.set_title("N_drift (eq. 2-3), no sync")
+    save(fig, out_dir, "can_dropout_size.png")
+
+
+def rate_messages(rows, period):
+    """The message count the bit-rate sweep used at `period` (the one 100 kbit/s has)."""
+    return max(r["messages"] for r in rows if r["period_ms"] == period and r["rate_kbps"] == 100)
+
+
+def plot_rates(rows, out_dir, period, figs, name):
+    """Figs. 2-19 / 3-25 … 3-28: p over data size per bit rate, without and with sync."""
+    n = rate_messages(rows, period)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, sync in zip(axes, (0, 1)):
+        lines(ax, rows, "p_percent", lambda r: f"{r['rate_kbps']} kbit/s", period_ms=period, messages=n,
+              sync=sync, clock="rate")
+        ax.set_title(f"{figs[sync]}: {period} ms, N={n}, " + ("sync" if sync else "no sync"))
+        ax.set_ylabel("dropout p [%]")
+    save(fig, out_dir, name)
+
+
+def plot_period(rows, out_dir):
+    """Figs. 2-20 / 2-21: p and N_drift per sampling period (rate clock solid, isr-lag dashed)."""
+    n = max(r["messages"] for r in rows if r["period_ms"] == 10)
+    label = lambda r: f"{r['period_ms']} ms, {r['clock']}"
+    style = lambda r: "-o" if r["clock"] == "rate" else "--s"
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    lines(a, rows, "p_percent", label, style, rate_kbps=1000, messages=n, sync=0)
+    a.set_ylabel("dropout p [%]")
+    a.set_title(f"Fig. 2-20: 1000 kbit/s, N={n}")
+    lines(b, rows, "n_drift", label, style, rate_kbps=1000, messages=n, sync=0)
+    b.set_ylabel("N_drift [samples]")
+    b.set_title("Fig. 2-21: N_drift by period")
+    save(fig, out_dir, "can_dropout_period.png")
+
+
+def plot_count(rows, out_dir):
+    """Figs. 2-22 / 2-23: p and N_drift per message count at 1 ms, 1000 kbit/s."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    lines(a, rows, "p_percent", sync_label, rate_kbps=1000, period_ms=1, clock="rate")
+    a.set_ylabel("dropout p [%]")
+    a.set_title("Fig. 2-22: 1000 kbit/s, 1 ms")
+    lines(b, rows, "n_drift", sync_label, rate_kbps=1000, period_ms=1, clock="rate", sync=0)
+    b.set_ylabel("N_drift [samples]")
+    b.set_title("Fig. 2-23: N_drift by message count")
+    save(fig, out_dir, "can_dropout_count.png")
+
+
+def plot_dropout(rows, out_dir):
+    plot_size(rows, out_dir)
+    plot_rates(rows, out_dir, 5, {0: "Figs. 2-19/3-25", 1: "Fig. 3-26"}, "can_dropout_rate_5ms.png")
+    plot_rates(rows, out_dir, 1, {0: "Fig. 3-27", 1: "Fig. 3-28"}, "can_dropout_rate_1ms.png")
+    plot_period(rows, out_dir)
+    plot_count(rows, out_dir)
+
+
+def plot_platform(rows, out_dir):
+    """Tables 4-3 … 4-12: contour and axis IAE by bit rate, without/with sync, ours vs thesis."""
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    rates = sorted({r["rate_kbps"] for r in rows})
+    x = range(len(rates))
+    for col, (ours, thesis, unit) in enumerate((("iae_contour_cm", "thesis_iae_contour_cm", "cm"),
+                                                ("axis_iae_pulse", "thesis_axis_iae_pulse", "pulses"))):
+        for row, (key, who) in enumerate(((ours, "twin"), (thesis, "thesis"))):
+            ax = axes[row][col]
+            for off, sync in ((-0.2, 0), (0.2, 1)):
+                vals = [next(r[key] for r in rows if r["rate_kbps"] == k and r["sync"] == sync) for k in rates]
+                ax.bar([i + off for i in x], vals, width=0.4, label="sync" if sync else "no sync")
+            ax.set_xticks(list(x))
+            ax.set_xticklabels([f"{k} kbit/s" for k in rates])
+            ax.set_ylabel(f"{'contour' if col == 0 else 'axis'} IAE [{unit}]")
+            ax.set_title(f"{who}: {'platform contour' if col == 0 else 'mean axis velocity'} IAE")
+            ax.legend()
+            ax.grid(True, axis="y", alpha=0.3)
+    save(fig, out_dir, "thesis_platform_iae.png")
+
+
+def main(argv):
+    kinds = {"can-timing": plot_timing, "can-dropout": plot_dropout, "thesis-platform": plot_platform}
+    if len(argv) != 4 or argv[1] not in kinds:
+        sys.stderr.write("usage: plot_experiment.py can-timing|can-dropout|thesis-platform CSV OUT_DIR\n")
+        return 2
+    kinds[argv[1]](read_rows(argv[2]), argv[3])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))

@@ -1,0 +1,135 @@
+// twin layer — the experiment registry and the output helpers every experiment shares
+// (folder, text files, the matplotlib subprocess); see experiment.hpp.
+//
+// Plots are drawn by a Python script (media/plots/plot_experiment.py) run as a subprocess, so
+// the C++ side needs no plotting library and a missing matplotlib only costs the PNGs: the
+// CSV and markdown are always written first.
+#include "twin/experiment.hpp"
+
+#include <sys/wait.h>
+#include <array>
+#include <cstdlib>
+#include <exception>
+#include <fstream>
+#include <iostream>
+#include <stdexcept>
+
+namespace omnitwin::twin {
+
+namespace {
+
+struct Registered {
+  const char* name;
+  int (*run)(const ExperimentOptions&);
+};
+
+// The registry: one row per `omnitwin experiment NAME`.
+std::array<Registered, 3> registry() {
+  return {{{"can-timing", run_can_timing}, {"can-dropout", run_can_dropout}, {"thesis-platform", run_thesis_platform}}};
+}
+
+// `text` as one single-quoted shell word.
+std::string shell_quote(const std::string& text) {
+  std::string out = "'";
+  for (const char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// Exit status of a std::system() call (-1 when the shell could not run or was signalled).
+int exit_status(int raw) {
+  if (raw == -1 || !WIFEXITED(raw)) return -1;
+  return WEXITSTATUS(raw);
+}
+
+// True when `interpreter` runs and can import matplotlib.
+bool has_matplotlib(const std::string& interpreter) {
+  const std::string cmd = interpreter + " -c 'import matplotlib' >/dev/null 2>&1";
+  return exit_status(std::system(cmd.c_str())) == 0;
+}
+
+// True when `interpreter` runs at all.
+bool runs(const std::string& interpreter) {
+  const std::string cmd = interpreter + " -c 'pass' >/dev/null 2>&1";
+  return exit_status(std::system(cmd.c_str())) == 0;
+}
+
+// The Debian interpreter first (the PATH one may be a private install without matplotlib),
+// then python3 from PATH. Empty when neither can import matplotlib; `any_python` says
+// whether some python3 ran at all.
+std::string find_plot_interpreter(bool& any_python) {
+  any_python = false;
+  for (const std::string candidate : {"/usr/bin/python3", "python3"}) {
+    if (!runs(candidate)) continue;
+    any_python = true;
+    if (has_matplotlib(candidate)) return candidate;
+  }
+  return {};
+}
+
+}  // namespace
+
+std::vector<std::string> experiment_names() {
+  std::vector<std::string> names;
+  for (const Registered& r : registry()) names.emplace_back(r.name);
+  return names;
+}
+
+int run_experiment(const std::string& name, const ExperimentOptions& options) {
+  for (const Registered& r : registry()) {
+    if (name != r.name) continue;
+    // Any exception is a runtime failure (exit 3), never a crash of the CLI.
+    try {
+      return r.run(options);
+    } catch (const std::exception& e) {
+      std::cerr << "omnitwin experiment " << name << ": " << e.what() << "\n";
+      return kExperimentRuntimeError;
+    }
+  }
+  std::cerr << "omnitwin experiment: unknown experiment '" << name << "'; known:";
+  for (const std::string& n : experiment_names()) std::cerr << " " << n;
+  std::cerr << "\n";
+  return kExperimentUnknown;
+}
+
+namespace experiment {
+
+std::filesystem::path output_dir(const std::string& name, const ExperimentOptions& options) {
+  const std::filesystem::path dir =
+      options.out_dir.empty() ? std::filesystem::path("out") / name : std::filesystem::path(options.out_dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+void write_text(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f << text;
+  f.close();
+  if (!f) throw std::runtime_error("cannot write " + path.string());
+}
+
+bool plot(const std::string& kind, const std::filesystem::path& csv, const std::filesystem::path& out_dir) {
+  // Find a python3 that has matplotlib; name the missing Debian package otherwise.
+  bool any_python = false;
+  const std::string python = find_plot_interpreter(any_python);
+  if (python.empty()) {
+    std::cerr << "warning: no plots for " << kind << ": "
+              << (any_python ? "python3-matplotlib is not installed (apt-get install python3-matplotlib)"
+                             : "python3 is not installed (apt-get install python3 python3-matplotlib)")
+              << "; the CSV and markdown are complete\n";
+    return false;
+  }
+  // Run the script from the source tree with the CSV and the output folder.
+  const std::string script = std::string(OMNITWIN_SOURCE_DIR) + "/media/plots/plot_experiment.py";
+  const std::string cmd = python + " " + shell_quote(script) + " " + shell_quote(kind) + " " +
+                          shell_quote(csv.string()) + " " + shell_quote(out_dir.string());
+  const int status = exit_status(std::system(cmd.c_str()));
+  if (status != 0) {
+    std::cerr << "warning: the plot script failed for " << kind << " (exit " << status << "): " << script << "\n";
+    return false;
+  }
+  return true;
+}
+
+}  // namespace experiment
+
+}  // namespace omnitwin::twin

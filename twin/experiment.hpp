@@ -1,0 +1,111 @@
+// twin layer — `omnitwin experiment NAME`: seed 002's own measurements re-run on the twin
+// (DESIGN §10), each writing CSV + markdown (ours beside the thesis's) + PNG plots.
+//
+// Shaped as a small name → function registry so the CLI (twin/main.cpp) stays a thin
+// dispatcher and each experiment lives in its own file (experiment_can_timing.cpp,
+// experiment_can_dropout.cpp, experiment_thesis_platform.cpp). The dropout model is declared
+// here too, because the tests drive single trials of it directly; everything else an
+// experiment needs (output folder, text files, the matplotlib script) is in
+// namespace experiment below and shared by all of them.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace omnitwin::twin {
+
+struct ExperimentOptions {
+  std::string out_dir;  // output folder; empty: out/<name> under the working directory
+  bool quick = false;   // fewer configurations and messages (tests); the same checks run
+};
+
+// Exit codes of run_experiment() and of each experiment function.
+inline constexpr int kExperimentOk = 0;
+inline constexpr int kExperimentCheckFailed = 1;   // a direction (or claimed accuracy) check failed
+inline constexpr int kExperimentUnknown = 2;       // unknown name; the known names go to stderr
+inline constexpr int kExperimentRuntimeError = 3;  // outputs could not be written, or not built yet
+
+// Runs experiment `name` (one of experiment_names()) into options.out_dir. Prints a short
+// summary and the output paths on stdout. Returns one of the exit codes above.
+int run_experiment(const std::string& name, const ExperimentOptions& options);
+
+// The registered names, in the order `omnitwin experiment` lists them.
+std::vector<std::string> experiment_names();
+
+// The experiments themselves (registered under "can-timing", "can-dropout", "thesis-platform").
+int run_can_timing(const ExperimentOptions& options);
+int run_can_dropout(const ExperimentOptions& options);
+int run_thesis_platform(const ExperimentOptions& options);
+
+// ---- the can-dropout model: one trial of the thesis's chapter-2 test (see the .cpp) ----
+
+// How the slave's timer period departs from the master's nominal period P.
+enum class SlaveClock : std::uint8_t {
+  rate,     // oscillator error: slave period = P·(1 + drift)
+  isr_lag,  // fixed time lost per interrupt: slave period = P + drift·5 ms (the thesis's own
+            // estimate reading: 0.72 ms per 40 interrupts whatever the period)
+};
+const char* to_string(SlaveClock c);
+
+struct DropoutTrial {
+  std::int64_t bit_rate_bps = 1'000'000;  // [bit/s]
+  int data_bytes = 8;                     // payload of each command frame, 0..8
+  std::int64_t period_ns = 5'000'000;     // master sampling period P (nominal timer) [ns]
+  int messages = 2000;                    // commands the master sends: N of eq. 2-2
+  bool sync = false;                      // the synchronisation of 3-2-2
+  int sync_interval = 4;                  // K: timer interrupts between forced resyncs, >= 1
+  SlaveClock clock = SlaveClock::rate;
+  // Slave clock error against the master [-]: 0.362 % measured (fig. 2-13 … 2-16). The sign
+  // says which way the slave's samples slide: negative = they come earlier each period.
+  double drift = -3.62e-3;
+  // Initial phase θ0: the slave's first sample falls θ0·P after the master's first command
+  // tick [-], 0 < θ0 < 1. 0.652 = fig. 2-15: 1.74 ms before the next master tick at 5 ms.
+  double initial_phase = 0.652;
+  std::int64_t t_pre_ns = 604;      // master processing before its frame (table 2-1) [ns]
+  std::int64_t t_post_ns = 88'800;  // slave receive interrupt length (table 2-1) [ns]
+};
+
+struct DropoutResult {
+  int messages = 0;            // N: commands the master tried to send
+  int commands_refused = 0;    // of which its transmit queue refused (bus saturated)
+  int commands_received = 0;   // command frames the slave received
+  int judged = 0;              // slave samples judged (those numbered 1 … N)
+  int dropouts = 0;            // N_dropout, counted by the slave (eq. 2-2)
+  int reported_dropouts = -1;  // the count the slave sent back after stop (-1: none arrived)
+  int first_dropout = -1;      // judged samples before the first dropout; -1: none
+  int resyncs = 0;             // event-driven samples (3-2-2)
+  double p_percent = 0.0;      // eq. 2-2: N_dropout / N · 100 [%]
+  int n_drift = 0;             // eq. 2-3: N − N_dropout [samples]
+  // Gap between a slave sample and the nearest master tick [ms] (what figs. 2-15/2-16 and
+  // 3-21/3-22 show), at the first sample and at the 40th (199 ms later at 5 ms; the last
+  // sample when a run has fewer).
+  double gap_first_ms = 0.0;
+  double gap_40_ms = 0.0;
+  double tx_ms = 0.0;  // bus time of one command frame (table 2-2's T_tx) [ms]
+};
+
+// Runs one trial on a two-node CanBus with the twin's scheduler. Throws
+// std::invalid_argument for an unusable trial (bytes outside 0..8, P <= 0, N < 1, θ0 outside
+// (0, 1), K < 1 with sync, a bit rate CanBus refuses). Deterministic: same trial, same result.
+DropoutResult run_dropout_trial(const DropoutTrial& trial);
+
+// ---- helpers shared by the experiment files ----
+namespace experiment {
+
+// The output folder for `name` (options.out_dir, else out/<name>), created with its parents.
+// Throws std::filesystem::filesystem_error when it cannot be created.
+std::filesystem::path output_dir(const std::string& name, const ExperimentOptions& options);
+
+// Writes `text` to `path`, replacing it. Throws std::runtime_error when that fails.
+void write_text(const std::filesystem::path& path, const std::string& text);
+
+// Runs media/plots/plot_experiment.py KIND CSV OUT_DIR with the Debian python3. Returns true
+// when the plots were written; otherwise prints a warning that names what is missing
+// (python3, python3-matplotlib) or the script's failure, and returns false. Never throws.
+bool plot(const std::string& kind, const std::filesystem::path& csv, const std::filesystem::path& out_dir);
+
+}  // namespace experiment
+
+}  // namespace omnitwin::twin
