@@ -73,7 +73,11 @@ void OmniCanNetwork::make_slave(int i) {
   slaves_[static_cast<std::size_t>(i)] = std::make_unique<omni::OmniSlave>(c, send, hooks_.wheel_angle(i));
 }
 
-void OmniCanNetwork::open_pcap(const std::string& path) { pcap_ = std::make_unique<can::PcapWriter>(path); }
+void OmniCanNetwork::open_pcap(const std::string& path) {
+  can::PcapWriter::Options o;
+  o.flush_each_packet = false;  // flushed once per master tick (flush_pcap)
+  pcap_ = std::make_unique<can::PcapWriter>(path, o);
+}
 
 void OmniCanNetwork::advance(SimTime t) { bus_.advance(t); }
 

@@ -52,7 +52,12 @@ class OmniCanNetwork {
   ~OmniCanNetwork();
 
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
+  // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
+  // tick), and the file is closed with the network, so SIGINT/SIGTERM leave it complete.
   void open_pcap(const std::string& path);
+  void flush_pcap() {
+    if (pcap_) pcap_->flush();
+  }
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
   void advance(SimTime t);

@@ -93,8 +93,10 @@ std::string find_master_program(const std::string& configured) {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);
   const fs::path dir = ec ? fs::current_path() : self.parent_path();
-  // Build tree (build/twin/omnitwin → build/controller/omni-master), then an install beside it.
-  for (const fs::path& p : {dir / ".." / "controller" / "omni-master", dir / "omni-master"}) {
+  // Build tree (build/twin/omnitwin → build/controller/omni-master), an install beside it,
+  // then this build's own (for test and benchmark programs elsewhere in the build tree).
+  for (const fs::path& p : {dir / ".." / "controller" / "omni-master", dir / "omni-master",
+                            fs::path(OMNITWIN_BINARY_DIR) / "controller" / "omni-master"}) {
     if (access(p.c_str(), X_OK) == 0) return p.lexically_normal().string();
   }
   throw std::runtime_error(fmt::format(

@@ -763,6 +763,7 @@ TEST(OmniCanNetwork, PcapHoldsEveryFrameThatCompletedOnTheWire) {
   r.tick(0, {detection_request(), nmt_start_all()});
   for (SimTime t = 10 * kMs; t < 60 * kMs; t += kPeriod) r.tick(t, {speed_command({5, 5, 5, 5})});
   r.finish(61 * kMs);
+  r.net->flush_pcap();  // the run flushes once per master tick
 
   const std::uint64_t frames = r.net->bus().stats().frames;
   EXPECT_GT(r.net->bus().stats().error_frames, 0u);
