@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <stdexcept>
 
 namespace omnitwin::twin {
 
@@ -214,6 +215,13 @@ std::int64_t OmniCanNetwork::extra_delay(int node) {
 }
 
 void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
+  // The loader only lets each kind name the nodes it can act on; a hand-built fault that
+  // names another is a programmer error.
+  const bool slave = f.wheel >= 0 && f.wheel < 4;
+  const bool ok = f.kind == FaultSpec::Kind::frame_loss ? (slave || f.wheel == FaultSpec::kMaster || f.wheel == FaultSpec::kAllNodes)
+                  : f.kind == FaultSpec::Kind::delay    ? (slave || f.wheel == FaultSpec::kMaster)
+                                                        : slave;
+  if (!ok) throw std::invalid_argument(fmt::format("CAN fault {} cannot act on node {}", to_string(f.kind), f.wheel));
   bus_.advance(t);
   const std::size_t n = static_cast<std::size_t>(f.wheel);
   const std::string who = node_name(f.wheel);

@@ -349,6 +349,15 @@ FaultSpec can_fault(FaultSpec::Kind kind, int node, double at, double duration) 
   return f;
 }
 
+TEST(OmniCanNetwork, AFaultNamingANodeItCannotActOnIsAProgrammerError) {
+  Rig r(can_scenario(unique_bus()));
+  EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::power_loss, FaultSpec::kMaster, 0.0, 0.0), true, 0),
+               std::invalid_argument);
+  EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::delay, FaultSpec::kAllNodes, 0.0, 0.0), true, 0),
+               std::invalid_argument);
+  EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::drift, 7, 0.0, 0.0), true, 0), std::invalid_argument);
+}
+
 TEST(OmniCanNetwork, PowerLossTakesTheNodeOffAndItReturnsStopped) {
   Rig r(can_scenario(unique_bus()));
   r.schedule_fault(can_fault(FaultSpec::Kind::power_loss, 1, 0.042, 0.030));  // axis 2, 42 … 72 ms
