@@ -438,8 +438,9 @@ double path_duration(const PathSpec& path) {
 // ---------------------------------------------------------------------------------------
 // Faults and expectations
 
-// The fault kinds a scenario may name (single_member() takes them as a list).
-#define OMNITWIN_FAULT_KINDS {"wheel_slip", "frame_loss", "delay", "drift", "power_loss", "bus_off"}
+// The fault kinds a scenario may name.
+const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",
+                                                   "drift",      "power_loss", "bus_off"};
 
 // `node:` of a CAN fault: 1..4 (a slave), or `master` / `all` where the kind allows them.
 int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
@@ -454,7 +455,7 @@ int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
 
 FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   using K = FaultSpec::Kind;
-  const YamlField v = item.single_member(OMNITWIN_FAULT_KINDS);
+  const YamlField v = item.single_member(kFaultKinds);
   FaultSpec f;
   f.line = v.line();
   const std::string& kind = v.name();
@@ -496,7 +497,7 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
 // the second early.
 void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& faults, double run_duration) {
   const FaultSpec& f = faults.back();
-  const YamlField v = item.single_member(OMNITWIN_FAULT_KINDS);
+  const YamlField v = item.single_member(kFaultKinds);
   if (f.at >= run_duration)
     v["at"].fail(fmt::format("{} s is not inside the run (it lasts {} s): the fault would never happen", f.at,
                              run_duration));

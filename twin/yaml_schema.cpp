@@ -173,6 +173,10 @@ std::vector<YamlField> YamlField::members() const {
 }
 
 YamlField YamlField::single_member(std::initializer_list<std::string_view> kinds) const {
+  return single_member(std::vector<std::string_view>(kinds));
+}
+
+YamlField YamlField::single_member(const std::vector<std::string_view>& kinds) const {
   if (!present() || !node_.IsMap() || node_.size() != 1) {
     fail(fmt::format("expected a one-key mapping naming one of: {}", join_names(kinds)));
   }

@@ -103,6 +103,7 @@ class YamlField {
   // The only key of a one-key mapping (e.g. "line" in `- line: {...}`), which must be one
   // of `kinds`; returns the value field positioned at the key.
   YamlField single_member(std::initializer_list<std::string_view> kinds) const;
+  YamlField single_member(const std::vector<std::string_view>& kinds) const;
   // Last component of the dotted key (the mapping key or sequence index).
   const std::string& name() const { return name_; }
 

@@ -303,6 +303,39 @@ TEST(ScenarioErrors, ExpectationBounds) {
                "expect.realtime.overruns");
 }
 
+TEST(ScenarioErrors, CanFaultsNeedTheCanBusAndANodeTheyCanActOn) {
+  expect_error(load_error(scenario("bad_can_fault_needs_can.yaml")), scenario("bad_can_fault_needs_can.yaml"), 4,
+               "faults.0.power_loss");
+  expect_error(load_error(scenario("bad_can_fault_node.yaml")), scenario("bad_can_fault_node.yaml"), 5,
+               "faults.0.power_loss.node");
+  expect_error(load_error(scenario("bad_can_bit_rate.yaml")), scenario("bad_can_bit_rate.yaml"), 2, "bus.bit_rate");
+}
+
+// Every CAN setting and fault kind is read as written; --bus keeps the settings and --set
+// reaches into a bus given by name.
+TEST(ScenarioCan, SettingsAndFaultsAreRead) {
+  const Scenario s = load_scenario(scenario("good_can.yaml"), {{"bus", "can"}});
+  EXPECT_EQ(s.bus.kind, BusKind::can);
+  EXPECT_EQ(s.bus.can.bit_rate, 250000);
+  EXPECT_EQ(s.bus.can.transport, "udp:239.74.163.2:47999");
+  EXPECT_DOUBLE_EQ(s.bus.can.drift[3], 0.004);
+  EXPECT_TRUE(s.bus.can.sync);
+  EXPECT_EQ(s.bus.can.sync_interval, 10);
+  EXPECT_EQ(s.bus.can.detect_every, 2);
+  ASSERT_EQ(s.faults.size(), 5u);
+  EXPECT_EQ(s.faults[0].kind, FaultSpec::Kind::frame_loss);
+  EXPECT_EQ(s.faults[0].wheel, FaultSpec::kAllNodes);
+  EXPECT_EQ(s.faults[0].burst, 3);
+  EXPECT_EQ(s.faults[1].wheel, FaultSpec::kMaster);
+  EXPECT_DOUBLE_EQ(s.faults[1].jitter_ms, 0.5);
+  EXPECT_DOUBLE_EQ(s.faults[2].drift, -0.01);
+  EXPECT_EQ(s.faults[3].wheel, 1);
+  EXPECT_EQ(s.faults[4].kind, FaultSpec::Kind::bus_off);
+  const Scenario by_name = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"bus.bit_rate", "125000"}});
+  EXPECT_EQ(by_name.bus.kind, BusKind::can);
+  EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
+}
+
 TEST(ScenarioErrors, FaultWheelOutOfRange) {
   expect_error(load_error(scenario("bad_fault_wheel.yaml")), scenario("bad_fault_wheel.yaml"), 4,
                "faults.0.wheel_slip.wheel");
