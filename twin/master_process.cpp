@@ -105,43 +105,48 @@ std::string find_master_program(const std::string& configured) {
 
 namespace {
 
-// One path segment in the master's file format (the scenario's own vocabulary).
-std::string segment_yaml(const PathSegment& g) {
+controller::SegmentSpec segment_spec(const PathSegment& g) {
+  using K = controller::SegmentSpec::Kind;
+  controller::SegmentSpec c;
   switch (g.kind) {
-    case PathSegment::Kind::line:
-      return fmt::format("line: {{dx: {}, dy: {}, dphi_deg: {}, duration: {}}}", g.dx, g.dy, g.dphi_deg, g.duration);
-    case PathSegment::Kind::arc:
-      return fmt::format("arc: {{cx: {}, cy: {}, sweep_deg: {}, dphi_deg: {}, duration: {}}}", g.cx, g.cy,
-                         g.sweep_deg, g.dphi_deg, g.duration);
-    case PathSegment::Kind::rotate: return fmt::format("rotate: {{dphi_deg: {}, duration: {}}}", g.dphi_deg, g.duration);
-    case PathSegment::Kind::dwell: return fmt::format("dwell: {{duration: {}}}", g.duration);
-    case PathSegment::Kind::square:
-      return fmt::format("square: {{side: {}, duration: {}, ccw: {}}}", g.side, g.duration, g.ccw);
-    case PathSegment::Kind::circle:
-      return fmt::format("circle: {{radius: {}, duration: {}, ccw: {}}}", g.radius, g.duration, g.ccw);
-    case PathSegment::Kind::figure_eight:
-      return fmt::format("figure_eight: {{radius: {}, duration: {}, ccw: {}}}", g.radius, g.duration, g.ccw);
+    case PathSegment::Kind::line: c.kind = K::line; break;
+    case PathSegment::Kind::arc: c.kind = K::arc; break;
+    case PathSegment::Kind::rotate: c.kind = K::rotate; break;
+    case PathSegment::Kind::dwell: c.kind = K::dwell; break;
+    case PathSegment::Kind::square: c.kind = K::square; break;
+    case PathSegment::Kind::circle: c.kind = K::circle; break;
+    case PathSegment::Kind::figure_eight: c.kind = K::figure_eight; break;
   }
-  return "";
+  c.duration = g.duration, c.dx = g.dx, c.dy = g.dy, c.dphi_deg = g.dphi_deg, c.cx = g.cx, c.cy = g.cy;
+  c.sweep_deg = g.sweep_deg, c.side = g.side, c.radius = g.radius, c.ccw = g.ccw;
+  return c;
 }
 
 }  // namespace
 
-std::string master_config_yaml(const Scenario& s) {
+controller::MasterConfig master_config(const Scenario& s) {
+  controller::MasterConfig m;
   const ControllerSpec& c = s.controller;
-  std::string y = fmt::format("# omni-master configuration written by omnitwin for scenario {}\n", s.name);
-  y += fmt::format("period: {}\nkp: [{}, {}, {}]\nki: [{}, {}, {}]\nfeedforward: {}\n", c.period, c.kp[0], c.kp[1],
-                   c.kp[2], c.ki[0], c.ki[1], c.ki[2], c.feedforward);
-  y += fmt::format("max_speed: {}\nmax_yaw_rate: {}\n", c.max_speed, c.max_yaw_rate);
-  y += fmt::format("geometry: {{L: {}, r: {}, counts_per_rev: {}}}\n", s.platform.geometry.L, s.platform.geometry.r,
-                   s.platform.counts_per_rev());
-  y += fmt::format("path:\n  start: {{x: {}, y: {}, phi_deg: {}}}\n  segments:\n", s.path.x0, s.path.y0,
-                   s.path.phi0_deg);
-  for (const PathSegment& g : s.path.segments) y += "    - " + segment_yaml(g) + "\n";
-  y += fmt::format("settle: {}\ndetect_every: {}\n", s.settle, s.bus.can.detect_every);
+  m.loop.period = c.period;
+  for (int i = 0; i < 3; ++i) m.loop.kp[i] = c.kp[i], m.loop.ki[i] = c.ki[i];
+  m.loop.feedforward = c.feedforward;
+  m.loop.max_speed = c.max_speed;
+  m.loop.max_yaw_rate = c.max_yaw_rate;
+  m.loop.L = s.platform.geometry.L;
+  m.loop.r = s.platform.geometry.r;
+  m.loop.counts_per_rev = s.platform.counts_per_rev();
+  m.path.x = s.path.x0, m.path.y = s.path.y0, m.path.phi_deg = s.path.phi0_deg;
+  for (const PathSegment& g : s.path.segments) m.path.segments.push_back(segment_spec(g));
+  m.settle = s.settle;
+  m.detect_every = s.bus.can.detect_every;
   // Real time: the twin may still be starting when the master first looks for its slaves.
-  y += fmt::format("startup_timeout: {}\n", s.clock == ClockMode::realtime ? 3.0 : 1.0);
-  return y;
+  m.startup_timeout = s.clock == ClockMode::realtime ? 3.0 : 1.0;
+  return m;
+}
+
+std::string master_config_yaml(const Scenario& s) {
+  return fmt::format("# omni-master configuration written by omnitwin for scenario {}\n", s.name) +
+         controller::dump_master_config(master_config(s));
 }
 
 }  // namespace omnitwin::twin

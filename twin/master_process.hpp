@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "controller/master_config.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
@@ -49,8 +50,11 @@ class MasterProcess {
 // RunSetupError-compatible std::runtime_error naming where it looked.
 std::string find_master_program(const std::string& configured);
 
-// The master's configuration file (docs/protocols/omni-master.md) for this scenario: the
-// control loop, geometry, path and the CAN settings the master owns. Not real-time safe.
+// The master's configuration for this scenario: the control loop, geometry, path and the CAN
+// settings the master owns. The twin's direct link runs the same loop and path from it.
+// Not real-time safe.
+controller::MasterConfig master_config(const Scenario& s);
+// The same as the master's configuration file (docs/protocols/omni-master.md).
 std::string master_config_yaml(const Scenario& s);
 
 }  // namespace omnitwin::twin

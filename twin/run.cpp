@@ -35,23 +35,6 @@ namespace {
 namespace fs = std::filesystem;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-// The master's reference path from the scenario's segments.
-controller::Path build_path(const PathSpec& spec) {
-  controller::Path path(controller::Pose2{spec.x0, spec.y0, spec.phi0_deg * kDeg});
-  for (const PathSegment& s : spec.segments) {
-    switch (s.kind) {
-      case PathSegment::Kind::line: path.add_line(s.dx, s.dy, s.dphi_deg * kDeg, s.duration); break;
-      case PathSegment::Kind::arc: path.add_arc(s.cx, s.cy, s.sweep_deg * kDeg, s.dphi_deg * kDeg, s.duration); break;
-      case PathSegment::Kind::rotate: path.add_rotate(s.dphi_deg * kDeg, s.duration); break;
-      case PathSegment::Kind::dwell: path.add_dwell(s.duration); break;
-      case PathSegment::Kind::square: path.add_square(s.side, s.duration, s.ccw); break;
-      case PathSegment::Kind::circle: path.add_circle(s.radius, s.duration, s.ccw); break;
-      case PathSegment::Kind::figure_eight: path.add_figure_eight(s.radius, s.duration, s.ccw); break;
-    }
-  }
-  return path;
-}
-
 // What MuJoCo runs: a generated variant, or the hand-written file the scenario named.
 std::string model_name(const physics::PlatformParams& p) {
   return p.sim.mjcf.empty() ? std::string(physics::to_string(p.sim.variant)) : p.sim.mjcf;
@@ -75,19 +58,6 @@ void share_cpu_with(pid_t pid) {
     spdlog::debug("could not pin the master and the twin to CPU {}", cpu);
 }
 
-controller::PlatformLoopConfig loop_config(const Scenario& s) {
-  controller::PlatformLoopConfig c;
-  c.period = s.controller.period;
-  for (int i = 0; i < 3; ++i) c.kp[i] = s.controller.kp[i], c.ki[i] = s.controller.ki[i];
-  c.feedforward = s.controller.feedforward;
-  c.max_speed = s.controller.max_speed;
-  c.max_yaw_rate = s.controller.max_yaw_rate;
-  c.L = s.platform.geometry.L;
-  c.r = s.platform.geometry.r;
-  c.counts_per_rev = s.platform.counts_per_rev();
-  return c;
-}
-
 std::vector<std::string> trajectory_header() {
   std::vector<std::string> h{"t",      "ref_x",   "ref_y",   "ref_phi", "x",       "y",       "phi",
                              "odom_x", "odom_y",  "odom_phi", "vx",     "vy",      "wz",      "cmd_vx",
@@ -104,7 +74,11 @@ std::vector<std::string> trajectory_header() {
 class PlatformRun {
  public:
   PlatformRun(const Scenario& s, const RunOptions& o)
-      : s_(s), o_(o), sim_(s.platform), path_(build_path(s.path)), loop_(loop_config(s), path_) {
+      : s_(s),
+        o_(o),
+        sim_(s.platform),
+        path_(controller::build_path(master_config(s).path)),
+        loop_(master_config(s).loop, path_) {
     sim_.reset(s.path.x0, s.path.y0, s.path.phi0_deg * kDeg);
     for (int i = 0; i < 4; ++i) chains_[i] = std::make_unique<physics::WheelDriveChain>(s.platform, sim_.wheel_angle(i));
     loop_.reset(controller::Pose2{s.path.x0, s.path.y0, s.path.phi0_deg * kDeg}, counts());
