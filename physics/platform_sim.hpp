@@ -28,6 +28,16 @@ struct Pose {
   double x, y, phi;
 };
 
+// Owning handles of MuJoCo's model and data (mj_deleteModel / mj_deleteData on release).
+struct ModelDeleter {
+  void operator()(mjModel* m) const { mj_deleteModel(m); }
+};
+struct DataDeleter {
+  void operator()(mjData* d) const { mj_deleteData(d); }
+};
+using ModelPtr = std::unique_ptr<mjModel, ModelDeleter>;
+using DataPtr = std::unique_ptr<mjData, DataDeleter>;
+
 class PlatformSim {
  public:
   // Generates the MJCF for p (p.sim.variant) and loads it from memory. Throws
@@ -89,14 +99,6 @@ class PlatformSim {
   mjData* data() { return data_.get(); }
 
  private:
-  struct ModelDeleter {
-    void operator()(mjModel* m) const { mj_deleteModel(m); }
-  };
-  struct DataDeleter {
-    void operator()(mjData* d) const { mj_deleteData(d); }
-  };
-  using ModelPtr = std::unique_ptr<mjModel, ModelDeleter>;
-  using DataPtr = std::unique_ptr<mjData, DataDeleter>;
 
   // One friction coefficient the slip fault scales: its address in the model and its
   // nominal value.

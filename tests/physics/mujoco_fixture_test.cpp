@@ -15,19 +15,14 @@
 #include <memory>
 #include <string>
 
+#include "physics/platform_sim.hpp"
 #include "tests/support/mujoco_fixture.hpp"
 
 namespace omnitwin::testing {
 namespace {
 
-struct ModelDeleter {
-  void operator()(mjModel* m) const { mj_deleteModel(m); }
-};
-struct DataDeleter {
-  void operator()(mjData* d) const { mj_deleteData(d); }
-};
-using ModelPtr = std::unique_ptr<mjModel, ModelDeleter>;
-using DataPtr = std::unique_ptr<mjData, DataDeleter>;
+using physics::DataPtr;
+using physics::ModelPtr;
 
 // A 10 cm box dropped from 20 cm onto a plane; `size_tag` goes inside <mujoco>.
 std::string box_on_plane(const std::string& size_tag) {
