@@ -309,13 +309,39 @@ nlohmann::json OmniCanNetwork::slave_metrics() const {
   return a;
 }
 
-nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
-  std::uint64_t samples = 0, dropouts = 0, bad = 0;
+BusSample OmniCanNetwork::bus_sample() const {
+  BusSample b;
+  b.has_frames = true;
+  b.frames_tx = to_transport_;
+  b.frames_rx = from_transport_;
+  std::uint64_t bad = 0;
   for (std::size_t i = 0; i < 4; ++i) {
-    samples += samples_before_[i] + slaves_[i]->stats().samples;
-    dropouts += dropouts_before_[i] + slaves_[i]->stats().dropouts;
+    b.dropouts += dropouts_before_[i] + slaves_[i]->stats().dropouts;
     bad += slaves_[i]->stats().bad_frames;
   }
+  const can::TransportStats ts = transport_->stats();
+  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
+  b.errors = bus_.stats().error_frames + malformed + bad + send_failures_ + refused_from_far_;
+  return b;
+}
+
+DriveStateCode OmniCanNetwork::drive_state(int axis0) const {
+  const auto i = static_cast<std::size_t>(axis0);
+  if (!powered_[i]) return DriveStateCode::off;
+  if (bus_.error_state(bus_node(axis0)) == can::ErrorState::bus_off) return DriveStateCode::fault;
+  switch (slaves_[i]->state()) {
+    case omni::SlaveState::stopped: return DriveStateCode::waiting;
+    case omni::SlaveState::running: return DriveStateCode::running;
+    case omni::SlaveState::awaiting_sync: return DriveStateCode::syncing;
+  }
+  return DriveStateCode::waiting;
+}
+
+nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
+  const BusSample b = bus_sample();
+  std::uint64_t samples = 0;
+  for (std::size_t i = 0; i < 4; ++i) samples += samples_before_[i] + slaves_[i]->stats().samples;
+  const std::uint64_t dropouts = b.dropouts;
   const can::TransportStats ts = transport_->stats();
   const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
   return {{"name", "can"},
@@ -330,7 +356,7 @@ nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
           {"load", bus_.bus_load(now)},
           {"dropouts", dropouts},
           {"dropout_rate", samples ? static_cast<double>(dropouts) / static_cast<double>(samples) : 0.0},
-          {"errors", bus_.stats().error_frames + malformed + bad + send_failures_ + refused_from_far_},
+          {"errors", b.errors},
           {"refused_from_transport", refused_from_far_},
           {"transport_rx_malformed", malformed},
           {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)

@@ -31,6 +31,7 @@
 #include "bus_emulators/can/can_pcap.hpp"
 #include "bus_emulators/can/transport.hpp"
 #include "bus_emulators/omni/omni_slave.hpp"
+#include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
 
@@ -87,6 +88,10 @@ class OmniCanNetwork {
   // per-slave figures. Not real-time safe.
   nlohmann::json bus_metrics(SimTime now) const;
   nlohmann::json slave_metrics() const;
+  // The cumulative counters of bus_metrics (load left 0: the caller knows its interval) and
+  // a slave's state for observers. Real-time safe (no allocation).
+  BusSample bus_sample() const;
+  DriveStateCode drive_state(int axis0) const;
 
  private:
   struct LossState {

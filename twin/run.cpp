@@ -19,6 +19,7 @@
 #include "controller/platform_loop.hpp"
 #include "controller/sim_clock.hpp"
 #include "physics/drive_chain.hpp"
+#include "physics/platform_mjcf.hpp"
 #include "physics/platform_sim.hpp"
 #include "twin/can_network.hpp"
 #include "twin/clock.hpp"
@@ -56,6 +57,27 @@ void share_cpu_with(pid_t pid) {
   CPU_SET(cpu, &set);
   if (::sched_setaffinity(0, sizeof set, &set) != 0 || ::sched_setaffinity(pid, sizeof set, &set) != 0)
     spdlog::debug("could not pin the master and the twin to CPU {}", cpu);
+}
+
+std::vector<std::string> bus_header() {
+  std::vector<std::string> h{"t", "frames_tx", "frames_rx", "dropouts", "errors", "load", "active_faults"};
+  for (int i = 1; i <= 4; ++i) h.push_back(fmt::format("s{}_state", i));
+  return h;
+}
+
+// The event log's kinds as the observers' event kinds.
+RunEventKind event_kind(std::string_view kind) {
+  if (kind == "start") return RunEventKind::start;
+  if (kind == "fault") return RunEventKind::fault;
+  if (kind == "end" || kind == "interrupt" || kind == "error") return RunEventKind::end;
+  return RunEventKind::info;
+}
+
+std::string fault_target(const FaultSpec& f) {
+  if (f.kind == FaultSpec::Kind::wheel_slip) return fmt::format("wheel {}", f.wheel + 1);
+  if (f.wheel == FaultSpec::kMaster) return "master";
+  if (f.wheel == FaultSpec::kAllNodes) return "all";
+  return fmt::format("node {}", f.wheel + 1);
 }
 
 std::vector<std::string> trajectory_header() {
@@ -103,6 +125,13 @@ class PlatformRun {
   void on_device(int wheel);
   void on_record(SimTime t);
   void record_can(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v);
+  // bus.csv and the observers' sample, from the row just recorded. Real-time safe.
+  void record_bus_and_state(SimTime t);
+  std::uint32_t active_faults(SimTime t) const;
+  // One event: events.log and the observer. Returns false when the log write failed.
+  bool log_event(SimTime t, std::string_view kind, std::string_view text);
+  // run.json and platform.xml: what ran, for render and report (before the first step).
+  void write_run_description() const;
   void on_fault(const FaultSpec& f, bool begin, SimTime t);
   // bus `can`: the master process, the sim-clock tick, the master's report.
   bool can_bus() const { return net_ != nullptr; }
@@ -143,7 +172,13 @@ class PlatformRun {
 
   // Records and indices.
   std::unique_ptr<CsvWriter> csv_;
+  std::unique_ptr<CsvWriter> bus_csv_;
   std::unique_ptr<EventLog> events_;
+  std::vector<double> bus_row_;
+  StateSample state_{};
+  std::int64_t last_busy_ns_ = 0;
+  SimTime last_record_ns_ = 0;
+  std::uint64_t records_ = 0;  // control samples recorded
   std::unique_ptr<ProgressBar> progress_;
   PoseErrorStats truth_stats_, odom_stats_;
   std::array<VelocityErrorStats, 4> axis_stats_;
@@ -170,7 +205,7 @@ void PlatformRun::build_can_network() {
   };
   h.axis_sample = [this](int i, double e) { axis_stats_[static_cast<std::size_t>(i)].add(e); };
   h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
-    if (events_) note(events_->log(ns_to_seconds(t), kind, text), *events_);
+    if (events_) note(log_event(t, kind, text), *events_);
   };
   net_ = std::make_unique<OmniCanNetwork>(s_, sched_, std::move(h));
 }
@@ -216,8 +251,8 @@ void PlatformRun::start_master() {
       throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; {}; see master.log)",
                                            simclock::to_string(st), master_->describe_exit()));
   }
-  events_->log(0.0, "master", fmt::format("{} started (pid {}, clock {})", master_program_, master_->pid(),
-                                          lockstep ? "sim" : "wall"));
+  log_event(0, "master", fmt::format("{} started (pid {}, clock {})", master_program_, master_->pid(),
+                                     lockstep ? "sim" : "wall"));
 }
 
 void PlatformRun::stop_master() {
@@ -225,7 +260,7 @@ void PlatformRun::stop_master() {
   if (clock_server_) clock_server_->end(sched_.now());
   // The master exits on End (lockstep); in realtime it is told by SIGTERM.
   if (!clock_server_ || !master_->wait(std::chrono::milliseconds(3000))) master_->stop(std::chrono::milliseconds(3000));
-  events_->log(ns_to_seconds(sched_.now()), "master", fmt::format("ended: {}", master_->describe_exit()));
+  log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
 }
 
 // One master tick in lockstep: the bus is run to t, the master is granted t with the count
@@ -257,7 +292,7 @@ void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
     std::string text = fmt::format("state {}", simclock::to_string(r.state));
     if (r.reason != simclock::StopReason::none)
       text += fmt::format(" ({}{})", simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
-    note(events_->log(ns_to_seconds(t), "master", text), *events_);
+    note(log_event(t, "master", text), *events_);
     if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0) master_stop_ns_ = t;
   }
   report_ = r;
@@ -317,7 +352,7 @@ void PlatformRun::on_master(SimTime t) {
   if (out_.reference.segment != segment_) {
     segment_ = out_.reference.segment;
     if (segment_ >= 0 && segment_ < static_cast<int>(s_.path.segments.size()))
-      note(events_->log(ns_to_seconds(t), "path", fmt::format("segment {} starts", segment_ + 1)), *events_);
+      note(log_event(t, "path", fmt::format("segment {} starts", segment_ + 1)), *events_);
   }
 }
 
@@ -351,7 +386,86 @@ void PlatformRun::on_record(SimTime t) {
     }
   }
   note(csv_->row(row_), *csv_);
+  record_bus_and_state(t);
   if (progress_) progress_->update(ns_to_seconds(t));
+}
+
+std::uint32_t PlatformRun::active_faults(SimTime t) const {
+  std::uint32_t n = 0;
+  for (const FaultSpec& f : s_.faults) {
+    const SimTime from = seconds_to_ns(f.at);
+    if (t >= from && (f.duration <= 0 || t < from + seconds_to_ns(f.duration))) ++n;
+  }
+  return n;
+}
+
+// row_ holds the trajectory row just written (docs/run-directory.md column order).
+void PlatformRun::record_bus_and_state(SimTime t) {
+  StateSample& st = state_;
+  st.t_ns = t;
+  st.seq = records_++;
+  st.ref_x = row_[1], st.ref_y = row_[2], st.ref_phi = row_[3];
+  st.x = row_[4], st.y = row_[5], st.phi = row_[6];
+  st.vx = row_[10], st.vy = row_[11], st.wz = row_[12];
+  st.cmd_vx = row_[13], st.cmd_vy = row_[14], st.cmd_wz = row_[15];
+  for (std::size_t i = 0; i < 4; ++i) {
+    const double* w = &row_[16 + 9 * i];
+    st.wheel_cmd[i] = w[0], st.wheel_speed[i] = w[1], st.wheel_angle[i] = w[2], st.wheel_torque[i] = w[8];
+    DriveSample& d = st.drives[i];
+    d.node = can_bus() ? static_cast<std::uint8_t>(net_->slave(static_cast<int>(i)).config().node_id) : 0;
+    d.state = can_bus() ? net_->drive_state(static_cast<int>(i)) : DriveStateCode::running;
+    d.command_rad_s = w[0], d.setpoint_rad_s = w[7];
+    d.dac_code = static_cast<std::int32_t>(w[6]);
+    d.encoder_count = static_cast<std::int64_t>(w[3]);
+  }
+  st.bus = can_bus() ? net_->bus_sample() : BusSample{};
+  if (can_bus()) {
+    // Load over the last control period, from the wire's busy time.
+    const std::int64_t busy = net_->bus().stats().busy_ns;
+    st.bus.load = t > last_record_ns_ ? static_cast<double>(busy - last_busy_ns_) / static_cast<double>(t - last_record_ns_) : 0.0;
+    last_busy_ns_ = busy;
+  }
+  last_record_ns_ = t;
+  st.active_faults = active_faults(t);
+  bus_row_.assign({ns_to_seconds(t), static_cast<double>(st.bus.frames_tx), static_cast<double>(st.bus.frames_rx),
+                   static_cast<double>(st.bus.dropouts), static_cast<double>(st.bus.errors), st.bus.load,
+                   static_cast<double>(st.active_faults)});
+  for (const DriveSample& d : st.drives) bus_row_.push_back(static_cast<double>(d.state));
+  note(bus_csv_->row(bus_row_), *bus_csv_);
+  if (o_.observer) o_.observer->on_state(st);
+}
+
+bool PlatformRun::log_event(SimTime t, std::string_view kind, std::string_view text) {
+  const bool ok = events_->log(ns_to_seconds(t), kind, text);
+  if (o_.observer) o_.observer->on_event(RunEvent{t, event_kind(kind), std::string(kind), std::string(text)});
+  return ok;
+}
+
+void PlatformRun::write_run_description() const {
+  const fs::path dir(o_.out_dir);
+  const std::string mjcf = s_.platform.sim.mjcf.empty() ? physics::platform_mjcf(s_.platform) : [this] {
+    std::ifstream f(s_.platform.sim.mjcf);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  }();
+  write_text_atomic((dir / "platform.xml").string(), mjcf);
+  nlohmann::json faults = nlohmann::json::array();
+  for (const FaultSpec& f : s_.faults) {
+    const std::string target = fault_target(f);
+    faults.push_back({{"kind", to_string(f.kind)}, {"target", target}, {"at_s", f.at}, {"duration_s", f.duration},
+                      {"text", fmt::format("{} {}", to_string(f.kind), target)}});
+  }
+  nlohmann::json expect = nlohmann::json::array();
+  for (const Expectation& e : s_.expectations)
+    expect.push_back({{"metric", e.metric}, {"min", e.min ? nlohmann::json(*e.min) : nlohmann::json()},
+                      {"max", e.max ? nlohmann::json(*e.max) : nlohmann::json()}});
+  const nlohmann::json j = {{"format", 1}, {"scenario", s_.name}, {"scenario_file", s_.file},
+                            {"description", s_.description}, {"bus", to_string(s_.bus.kind)},
+                            {"clock", to_string(s_.clock)}, {"model", "platform.xml"},
+                            {"model_variant", model_name(s_.platform)}, {"control_period_s", s_.controller.period},
+                            {"physics_timestep_s", s_.platform.sim.timestep}, {"duration_s", s_.duration},
+                            {"start_pose", {s_.path.x0, s_.path.y0, s_.path.phi0_deg * kDeg}},
+                            {"faults", faults}, {"expectations", expect}};
+  write_json_atomic((dir / "run.json").string(), j);
 }
 
 // A CAN run's row: the master's plan and odometry (lockstep; NaN where it cannot be known),
@@ -380,8 +494,8 @@ void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
   if (f.kind != FaultSpec::Kind::wheel_slip) return net_->apply_fault(f, begin, t);
   const double scale = begin ? f.friction_scale : 1.0;
   sim_.set_wheel_friction_scale(f.wheel, scale);
-  note(events_->log(ns_to_seconds(t), "fault",
-               fmt::format("wheel_slip wheel {} friction x{} ({})", f.wheel + 1, scale, begin ? "begins" : "ends")),
+  note(log_event(t, "fault",
+                 fmt::format("wheel_slip wheel {} friction x{} ({})", f.wheel + 1, scale, begin ? "begins" : "ends")),
        *events_);
 }
 
@@ -425,12 +539,17 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
 RunResult PlatformRun::execute() {
   // Everything is built; only now does the run directory appear.
   fs::create_directories(o_.out_dir);
+  write_run_description();
   csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "trajectory.csv").string(), trajectory_header());
+  bus_csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "bus.csv").string(), bus_header());
   events_ = std::make_unique<EventLog>((fs::path(o_.out_dir) / "events.log").string());
   if (o_.progress) progress_ = std::make_unique<ProgressBar>(s_.duration, s_.name, true);
-  events_->log(0.0, "start",
-               fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
-                           to_string(s_.clock), model_name(s_.platform), s_.platform.source));
+  if (o_.observer)
+    o_.observer->on_start(RunInfo{s_.name, to_string(s_.bus.kind), to_string(s_.clock), o_.out_dir,
+                                  s_.controller.period, s_.duration});
+  log_event(0, "start",
+            fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
+                        to_string(s_.clock), model_name(s_.platform), s_.platform.source));
 
   if (can_bus()) {
     net_->open_pcap((fs::path(o_.out_dir) / "bus-can.pcap").string());
@@ -491,21 +610,30 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));
   }
   const std::string end_kind = !error_.empty() ? "error" : (interrupted ? "interrupt" : "end");
-  events_->log(ns_to_seconds(sched_.now()), end_kind,
-               error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
-                                            ex.failures.size())
-                              : error_);
+  if (o_.observer) {
+    for (const std::string& f : ex.failures)
+      o_.observer->on_event(RunEvent{sched_.now(), RunEventKind::expectation, "expectations", "failed: " + f});
+    o_.observer->on_event(RunEvent{sched_.now(), RunEventKind::expectation, "expectations",
+                                   ex.passed ? "passed" : "failed"});
+  }
+  log_event(sched_.now(), end_kind,
+            error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
+                                         ex.failures.size())
+                           : error_);
   // The CSV is renamed only if every row reached it; otherwise the reason joins the metrics.
-  try {
-    csv_->close();
-  } catch (const std::exception& e) {
-    if (error_.empty()) error_ = e.what();
+  for (CsvWriter* w : {csv_.get(), bus_csv_.get()}) {
+    try {
+      w->close();
+    } catch (const std::exception& e) {
+      if (error_.empty()) error_ = e.what();
+    }
   }
   if (!error_.empty()) r.metrics["error"] = error_;
   r.metrics["expectations"] = ex.to_json();
   r.passed = ex.passed;
   r.error = error_;
   write_json_atomic((fs::path(o_.out_dir) / "metrics.json").string(), r.metrics);
+  if (o_.observer) o_.observer->on_end(r.metrics);
   r.exit_code = cut_short || !error_.empty() ? 3 : (r.passed ? 0 : 1);
   return r;
 }

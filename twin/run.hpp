@@ -7,9 +7,11 @@
 // memory with zero delay: the baseline that bus effects are measured against. The buses of
 // later issues replace that link with frames over a real transport.
 //
-// Records are written into the run directory: trajectory.csv (every control sample),
-// metrics.json, events.log. A run validates and builds everything before it creates the
-// directory, so a bad input never leaves half-written files behind.
+// Records are written into the run directory (docs/run-directory.md): run.json and
+// platform.xml before the first step, trajectory.csv and bus.csv (every control sample),
+// events.log, metrics.json. Video and report are made from them afterwards (run_outputs).
+// A run validates and builds everything before it creates the directory, so a bad input
+// never leaves half-written files behind.
 #pragma once
 
 #include <atomic>
@@ -18,9 +20,23 @@
 
 #include <nlohmann/json.hpp>
 
+#include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
+
+// A live consumer of the run (DDS). Called on the run's own thread: on_state at every
+// control sample from the cyclic path, so it must be real-time safe (copy and return; never
+// block, never allocate); the others are called rarely and may allocate.
+class RunObserver {
+ public:
+  virtual ~RunObserver() = default;
+  virtual void on_start(const RunInfo& info) = 0;
+  virtual void on_state(const StateSample& s) = 0;
+  virtual void on_event(const RunEvent& e) = 0;
+  // The run's end, with what metrics.json holds.
+  virtual void on_end(const nlohmann::json& metrics) = 0;
+};
 
 struct RunOptions {
   std::string out_dir;                        // run directory (created if missing)
@@ -29,6 +45,7 @@ struct RunOptions {
   // bus `can`: the master is someone else's program on the transport (`omnitwin twin`); the
   // twin starts none and runs in realtime.
   bool external_master = false;
+  RunObserver* observer = nullptr;            // live state and events (may be null)
 };
 
 struct RunResult {

@@ -525,11 +525,60 @@ Expectation read_expectation(const YamlField& m) {
 }
 
 // ---------------------------------------------------------------------------------------
+// Outputs
+
+VideoSpec read_video(const YamlField& f) {
+  VideoSpec v;
+  if (!f.present()) return v;
+  if (!f.node().IsMap()) {
+    v.enabled = f.boolean();
+    return v;
+  }
+  f.allow_keys({"enabled", "width", "height", "fps", "overview_inset"});
+  read_bool(f, "enabled", v.enabled);
+  read_integer(f, "width", v.width, Bounds::closed(64, 3840));
+  read_integer(f, "height", v.height, Bounds::closed(48, 2160));
+  if (v.width % 2) f["width"].fail("must be even (H.264 yuv420p)");
+  if (v.height % 2) f["height"].fail("must be even (H.264 yuv420p)");
+  read_number(f, "fps", v.fps, Bounds::closed(1, 120));
+  read_bool(f, "overview_inset", v.overview_inset);
+  return v;
+}
+
+DdsSpec read_dds(const YamlField& f, double control_period) {
+  DdsSpec d;
+  if (!f.present()) return d;
+  if (!f.node().IsMap()) {
+    d.enabled = f.boolean();
+    return d;
+  }
+  f.allow_keys({"enabled", "domain", "interface", "config", "rate_hz"});
+  read_bool(f, "enabled", d.enabled);
+  read_integer(f, "domain", d.domain, Bounds::closed(0, 232));
+  if (f["interface"].exists()) d.interface = f["interface"].string();
+  if (f["config"].exists()) d.config = f["config"].string();
+  read_number(f, "rate_hz", d.rate_hz, Bounds::positive());
+  if (d.rate_hz > 1.0 / control_period + 1e-9)
+    f["rate_hz"].fail(fmt::format("at most the control rate ({:g} Hz)", 1.0 / control_period));
+  return d;
+}
+
+OutputsSpec read_outputs(const YamlField& f, double control_period) {
+  OutputsSpec o;
+  if (!f.present()) return o;
+  f.allow_keys({"video", "dds", "report"});
+  o.video = read_video(f["video"]);
+  o.dds = read_dds(f["dds"], control_period);
+  read_bool(f, "report", o.report);
+  return o;
+}
+
+// ---------------------------------------------------------------------------------------
 // The whole scenario
 
 Scenario read_scenario(const YamlField& root, const std::string& file) {
   root.allow_keys({"name", "description", "platform", "bus", "clock", "controller", "path",
-                   "settle", "duration", "faults", "expect"});
+                   "settle", "duration", "faults", "expect", "outputs"});
   Scenario s;
   s.file = file;
   s.name = root["name"].exists() ? root["name"].string() : fs::path(file).stem().string();
@@ -559,6 +608,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
     check_fault_timing(item, s.faults, s.duration);
   }
   for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
+  s.outputs = read_outputs(root["outputs"], s.controller.period);
   return s;
 }
 

@@ -136,6 +136,31 @@ struct Expectation {
   int line = 0;
 };
 
+// What a run produces besides its records (DESIGN §8): the video rendered after the run,
+// the HTML report, live DDS publishing. The command line (--video/--no-video, --no-report,
+// --dds) overrides these.
+struct VideoSpec {
+  bool enabled = true;
+  int width = 640;            // [px], even
+  int height = 480;           // [px], even
+  double fps = 30;            // frames per simulated second
+  bool overview_inset = true; // the fixed overview camera as a picture-in-picture
+};
+
+struct DdsSpec {
+  bool enabled = false;
+  int domain = -1;            // -1: $OMNITWIN_DDS_DOMAIN, else 0
+  std::string interface;      // e.g. "lo"; "": $OMNITWIN_DDS_INTERFACE, else Cyclone's choice
+  std::string config;         // a Cyclone DDS XML file (overrides interface)
+  double rate_hz = 100;       // state topics [Hz], at most the control rate
+};
+
+struct OutputsSpec {
+  VideoSpec video;
+  DdsSpec dds;
+  bool report = true;
+};
+
 struct Scenario {
   std::string name;            // default: the file's stem
   std::string description;
@@ -149,6 +174,7 @@ struct Scenario {
   double duration = 0;         // total simulated time [s] (path length + settle if absent)
   std::vector<FaultSpec> faults;
   std::vector<Expectation> expectations;
+  OutputsSpec outputs;
 };
 
 // "key=value" overrides from the command line, applied to the YAML tree before

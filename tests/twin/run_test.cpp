@@ -7,6 +7,7 @@
 // reach the run; the realtime clock paces without changing results; a bus that is not
 // built refuses to run before anything is written.
 #include <gtest/gtest.h>
+#include <mujoco/mujoco.h>
 #include <nlohmann/json.hpp>
 
 #include <stdlib.h>
@@ -291,6 +292,59 @@ TEST_F(RunRecords, EventsLogHasStartAndEnd) {
       << lines.front();
   EXPECT_TRUE(lines.back().starts_with("    3.500000  end")) << lines.back();
   EXPECT_NE(lines.back().find("expectations passed"), std::string::npos) << lines.back();
+}
+
+// run.json describes what ran (docs/run-directory.md) and platform.xml is the MJCF that was
+// compiled: it loads in MuJoCo and has the platform's named parts.
+TEST_F(RunRecords, RunJsonAndPlatformXmlDescribeTheRun) {
+  const nlohmann::json j = read_json(short_line() / "run.json");
+  EXPECT_EQ(j["format"], 1);
+  EXPECT_EQ(j["scenario"], "run_short_line");
+  EXPECT_EQ(j["bus"], "direct");
+  EXPECT_EQ(j["clock"], "lockstep");
+  EXPECT_EQ(j["model"], "platform.xml");
+  EXPECT_DOUBLE_EQ(j["control_period_s"].get<double>(), 0.010);
+  EXPECT_DOUBLE_EQ(j["duration_s"].get<double>(), 3.5);
+  ASSERT_EQ(j["expectations"].size(), 1u);
+  EXPECT_EQ(j["expectations"][0]["metric"], "platform.final_error_cm");
+  EXPECT_DOUBLE_EQ(j["expectations"][0]["max"].get<double>(), 5.0);
+  EXPECT_TRUE(j["expectations"][0]["min"].is_null());
+  char err[300] = "";
+  mjModel* m = mj_loadXML((short_line() / "platform.xml").c_str(), nullptr, err, sizeof err);
+  ASSERT_NE(m, nullptr) << err;
+  EXPECT_GE(mj_name2id(m, mjOBJ_JOINT, "root"), 0);
+  EXPECT_GE(mj_name2id(m, mjOBJ_JOINT, "wheel4"), 0);
+  mj_deleteModel(m);
+}
+
+// bus.csv has one row per control sample beside trajectory.csv; on the direct bus its
+// counters stay 0 and every drive reads running (2).
+TEST_F(RunRecords, BusCsvHasOneRowPerSample) {
+  const Csv bus = read_csv(short_line() / "bus.csv");
+  ASSERT_EQ(bus.rows.size(), samples(3.5, 0.010));
+  ASSERT_EQ(bus.header.size(), 11u);
+  EXPECT_EQ(bus.header[1], "frames_tx");
+  for (const auto& row : bus.rows) {
+    EXPECT_EQ(row[1] + row[2] + row[3] + row[4], 0.0);
+    EXPECT_EQ(row[7], 2.0);
+  }
+  EXPECT_DOUBLE_EQ(bus.rows.back()[0], 3.5);
+}
+
+// A wheel_slip fault is listed in run.json and counted in bus.csv's active_faults exactly
+// while it is in force (1 s … 2 s).
+TEST_F(RunRecords, FaultsAppearInRunJsonAndBusCsv) {
+  TempDir dir{"omnitwin-run"};
+  run_into(test_scenario("run_wheel_slip.yaml"), dir / "slip");
+  const nlohmann::json j = read_json(dir / "slip/run.json");
+  ASSERT_EQ(j["faults"].size(), 1u);
+  EXPECT_EQ(j["faults"][0]["kind"], "wheel_slip");
+  EXPECT_EQ(j["faults"][0]["target"], "wheel 2");
+  const Csv bus = read_csv(dir / "slip/bus.csv");
+  for (const auto& row : bus.rows) {
+    const bool in_force = row[0] >= 1.0 - 1e-9 && row[0] < 2.0 - 1e-9;
+    EXPECT_EQ(row[6], in_force ? 1.0 : 0.0) << "t = " << row[0];
+  }
 }
 
 // ---------------------------------------------------------------------------------------

@@ -336,6 +336,36 @@ TEST(ScenarioCan, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
 }
 
+// The outputs section: video size, rate and inset, DDS domain/interface/rate, report; a
+// plain `video: false` form; the defaults when absent (video and report on, DDS off).
+TEST(ScenarioOutputs, EveryKeyIsReadAndDefaultsHold) {
+  const Scenario s = load_scenario(scenario("good_outputs.yaml"));
+  EXPECT_TRUE(s.outputs.video.enabled);
+  EXPECT_EQ(s.outputs.video.width, 320);
+  EXPECT_EQ(s.outputs.video.height, 240);
+  EXPECT_DOUBLE_EQ(s.outputs.video.fps, 25);
+  EXPECT_FALSE(s.outputs.video.overview_inset);
+  EXPECT_TRUE(s.outputs.dds.enabled);
+  EXPECT_EQ(s.outputs.dds.domain, 7);
+  EXPECT_EQ(s.outputs.dds.interface, "lo");
+  EXPECT_DOUBLE_EQ(s.outputs.dds.rate_hz, 50);
+  EXPECT_FALSE(s.outputs.report);
+  const Scenario off = load_scenario(scenario("good_outputs.yaml"), {{"outputs.video", "false"}});
+  EXPECT_FALSE(off.outputs.video.enabled);
+  const Scenario d = load_scenario(scenario("minimal.yaml"));
+  EXPECT_TRUE(d.outputs.video.enabled);
+  EXPECT_EQ(d.outputs.video.width, 640);
+  EXPECT_TRUE(d.outputs.report);
+  EXPECT_FALSE(d.outputs.dds.enabled);
+}
+
+TEST(ScenarioErrors, OutputsOddWidthAndTooFastDds) {
+  expect_error(load_error(scenario("bad_outputs_odd_width.yaml")), scenario("bad_outputs_odd_width.yaml"), 4,
+               "outputs.video.width");
+  expect_error(load_error(scenario("bad_outputs_dds_rate.yaml")), scenario("bad_outputs_dds_rate.yaml"), 4,
+               "outputs.dds.rate_hz");
+}
+
 TEST(ScenarioErrors, FaultWheelOutOfRange) {
   expect_error(load_error(scenario("bad_fault_wheel.yaml")), scenario("bad_fault_wheel.yaml"), 4,
                "faults.0.wheel_slip.wheel");
