@@ -1,0 +1,52 @@
+// media layer — the video of a recorded run: run directory in, MP4 out.
+//
+// render_run reads only the files of the run directory (docs/run-directory.md): run.json
+// (faults), platform.xml (the exact model), trajectory.csv (pose, speed, wheel angles,
+// reference) and bus.csv if present (bus health). It never touches a live simulation, so
+// `omnitwin render RUN_DIR` works later or on another machine, and `omnitwin run --video`
+// calls it after the run, keeping rendering out of lockstep stepping (DESIGN §8).
+//
+// Timing: frame k shows the state at sim time t = k / fps, interpolated linearly between
+// the two control samples around it (clamped to the first/last sample); frames run from
+// t = 0 to the last sample, so a run of T seconds gives floor(T * fps) + 1 frames and the
+// final state is the last frame. The chassis height and tilt come from the model's qpos0.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <string>
+
+namespace omnitwin::media {
+
+struct VideoOptions {
+  int width = 640;              // frame size [pixels]; both even (H.264 yuv420p)
+  int height = 480;
+  double fps = 30;              // frames per second of sim time [1/s], in (0, 1000]
+  bool overview_inset = true;   // fixed "overview" camera as a top-right inset
+  bool overlay = true;          // text overlay top-left (time, pose, speed, bus, faults)
+  bool high_quality = false;    // shadows + 4x multisampling: 3-5x slower in software
+  std::string camera = "track"; // model camera filling the frame ("track", "top", "overview")
+  // Called after each encoded frame with (frames done, frames in all), on the rendering
+  // thread; e.g. a progress bar. May be empty.
+  std::function<void(int, int)> progress;
+};
+
+struct VideoResult {
+  std::string path;          // the MP4 written
+  int frames = 0;            // frames encoded
+  double duration_s = 0;     // frames / fps [s]
+  bool stopped_early = false;  // `stop` was set before the last frame
+  double render_s = 0;       // wall time spent [s]
+};
+
+// Renders the recorded run in run_dir into out_file (created or replaced; its directory
+// must exist). `stop` (may be null) is polled before every frame: once it is true the frames
+// so far are finalised into a playable file and the result says stopped_early. Throws
+// std::runtime_error with a message naming the file (missing or malformed run files, unknown
+// camera, unwritable output, disk full); std::invalid_argument for bad options.
+// Not real-time safe: allocates, renders in software, writes files. Uses an off-screen GL
+// context current on the calling thread for the duration of the call.
+VideoResult render_run(const std::string& run_dir, const std::string& out_file,
+                       const VideoOptions& options, const std::atomic<bool>* stop = nullptr);
+
+}  // namespace omnitwin::media
