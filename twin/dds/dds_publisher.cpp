@@ -1,0 +1,177 @@
+// twin/dds — the DDS publisher: real-time hand-over in offer(), DDS writes on its own thread
+// (see dds_publisher.hpp).
+#include "twin/dds/dds_publisher.hpp"
+
+#include <cmath>
+#include <sstream>
+
+#include "twin/dds/dds_messages.hpp"
+
+namespace omnitwin::twin {
+
+// The topics and writers, created once in the constructor (Cyclone deletes them with the
+// participant). The scratch messages belong to the publishing thread.
+struct DdsPublisher::Writers {
+  dds_entity_t state = 0, odom = 0, joints = 0, cmd_vel = 0, drives = 0, bus = 0, events = 0;
+  ddsmsg::StateMessages scratch;
+};
+
+namespace {
+
+dds_entity_t make_writer(dds_entity_t participant, std::string_view short_name, const dds_qos_t* qos) {
+  const TopicInfo topic = *find_topic(short_name);
+  const dds_entity_t t = create_topic(participant, topic);
+  const dds_entity_t w = dds_create_writer(participant, t, qos, nullptr);
+  if (w < 0) throw_dds("create_writer " + std::string(topic.name), w);
+  return w;
+}
+
+void check_settings(const DdsSettings& s) {
+  if (!(s.rate_hz > 0) || !std::isfinite(s.rate_hz))
+    throw DdsError("DDS publish rate must be a positive number of Hz, not " + std::to_string(s.rate_hz));
+  if (s.queue_capacity == 0) throw DdsError("DDS queue capacity must be at least 1");
+}
+
+const DdsSettings& checked(const DdsSettings& s) {
+  check_settings(s);
+  return s;
+}
+
+std::string start_text(const RunInfo& i) {
+  std::ostringstream os;
+  os << "scenario=" << i.scenario << " bus=" << i.bus << " clock=" << i.clock
+     << " control_period_s=" << i.control_period_s << " duration_s=" << i.duration_s
+     << " run_dir=" << i.run_dir;
+  return os.str();
+}
+
+}  // namespace
+
+DdsPublisher::DdsPublisher(const DdsSettings& settings)
+    : settings_(checked(settings)),
+      participant_(DdsEndpoint{settings.domain, settings.interface, settings.config_file}),
+      writers_(std::make_unique<Writers>()),
+      decimator_(settings.rate_hz),
+      ring_(settings.queue_capacity) {
+  const dds_entity_t p = participant_.get();
+  const DdsQos state = state_qos(1), events = event_qos(kEventHistory);
+  Writers& w = *writers_;
+  w.state = make_writer(p, "state", state.get());
+  w.odom = make_writer(p, "odom", state.get());
+  w.joints = make_writer(p, "joint_states", state.get());
+  w.cmd_vel = make_writer(p, "cmd_vel", state.get());
+  w.drives = make_writer(p, "drives", state.get());
+  w.bus = make_writer(p, "bus", state.get());
+  w.events = make_writer(p, "events", events.get());
+}
+
+DdsPublisher::~DdsPublisher() { finish(); }
+
+void DdsPublisher::start(const RunInfo& info) {
+  if (started_ || finished_) return;
+  info_ = info;
+  event(RunEvent{0, RunEventKind::start, "twin", start_text(info)});
+  started_ = true;
+  thread_ = std::thread([this] { run_thread(); });
+}
+
+bool DdsPublisher::offer(const StateSample& s) {
+  offered_.fetch_add(1, std::memory_order_relaxed);
+  last_t_ns_.store(s.t_ns, std::memory_order_relaxed);
+  if (!decimator_.take(s.t_ns)) {
+    skipped_.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+  if (!ring_.push(s)) {
+    dropped_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  wake();
+  return true;
+}
+
+void DdsPublisher::event(const RunEvent& e) {
+  {
+    std::lock_guard lock(events_mutex_);
+    events_.push_back(e);
+  }
+  wake();
+}
+
+void DdsPublisher::wake() {
+  wake_.fetch_add(1, std::memory_order_release);
+  wake_.notify_one();
+}
+
+void DdsPublisher::finish() {
+  if (finished_) return;
+  finished_ = true;
+  stopping_.store(true, std::memory_order_release);
+  wake();
+  if (thread_.joinable()) thread_.join();
+}
+
+DdsPublisher::Stats DdsPublisher::stats() const {
+  constexpr auto r = std::memory_order_relaxed;
+  return Stats{offered_.load(r), skipped_.load(r), dropped_.load(r),
+               published_.load(r), events_n_.load(r), write_errors_.load(r)};
+}
+
+// The publishing thread: events first (the start event precedes the first sample), then the
+// samples, sleeping on wake_ when there is nothing to do.
+void DdsPublisher::run_thread() {
+  for (;;) {
+    const std::uint32_t seen = wake_.load(std::memory_order_acquire);
+    const bool stopping = stopping_.load(std::memory_order_acquire);
+    const bool worked = publish_events() | publish_samples();  // both: no short-circuit
+    if (stopping && !worked) break;
+    if (!worked) wake_.wait(seen, std::memory_order_acquire);
+  }
+  publish_end_and_flush();
+}
+
+bool DdsPublisher::publish_events() {
+  std::deque<RunEvent> batch;
+  {
+    std::lock_guard lock(events_mutex_);
+    batch.swap(events_);
+  }
+  for (const RunEvent& e : batch) {
+    const omnitwin_msg_dds__RunEvent_ m = ddsmsg::to_message(e, info_.scenario);
+    if (dds_write(writers_->events, &m) < 0) write_errors_.fetch_add(1, std::memory_order_relaxed);
+    else events_n_.fetch_add(1, std::memory_order_relaxed);
+    end_seen_ = end_seen_ || e.kind == RunEventKind::end;
+  }
+  return !batch.empty();
+}
+
+bool DdsPublisher::publish_samples() {
+  Writers& w = *writers_;
+  StateSample s;
+  bool any = false;
+  while (ring_.pop(s)) {
+    any = true;
+    w.scratch.fill(s, info_.bus);
+    int failed = (dds_write(w.state, &w.scratch.state) < 0) + (dds_write(w.odom, &w.scratch.odom) < 0) +
+                 (dds_write(w.joints, &w.scratch.joints) < 0) + (dds_write(w.drives, &w.scratch.drives) < 0) +
+                 (dds_write(w.bus, &w.scratch.bus) < 0);
+    if (w.scratch.has_cmd_vel) failed += dds_write(w.cmd_vel, &w.scratch.cmd_vel) < 0;
+    published_.fetch_add(1, std::memory_order_relaxed);
+    if (failed) write_errors_.fetch_add(static_cast<std::uint64_t>(failed), std::memory_order_relaxed);
+  }
+  return any;
+}
+
+void DdsPublisher::publish_end_and_flush() {
+  if (!end_seen_) {
+    const Stats st = stats();
+    const std::string text = "published=" + std::to_string(st.published) + " dropped=" +
+                             std::to_string(st.dropped) + " skipped=" + std::to_string(st.skipped);
+    event(RunEvent{last_t_ns_.load(std::memory_order_relaxed), RunEventKind::end, "twin", text});
+    publish_events();
+  }
+  const auto timeout = static_cast<dds_duration_t>(settings_.finish_timeout_s * 1e9);
+  dds_wait_for_acks(writers_->events, timeout);  // a timeout only means a reader was slow
+}
+
+}  // namespace omnitwin::twin
