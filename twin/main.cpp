@@ -1,4 +1,5 @@
-// twin layer — the `omnitwin` command line (CLI11): run, check, model.
+// twin layer — the `omnitwin` command line (CLI11): run, twin, check, render, echo,
+// experiment, model.
 //
 // Exit codes (DESIGN §9): 0 ok and expectations met; 1 expectations failed; 2 bad usage or
 // bad input (the message names file, line and key); 3 runtime failure (including a run
@@ -19,10 +20,13 @@
 
 #include "physics/platform_mjcf.hpp"
 #include "twin/clock.hpp"
+#include "twin/dds/dds_echo.hpp"
+#include "twin/dds_observer.hpp"
 #include "twin/experiment.hpp"
 #include "twin/junit.hpp"
 #include "twin/progress.hpp"
 #include "twin/run.hpp"
+#include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
 
 namespace fs = std::filesystem;
@@ -31,9 +35,17 @@ using namespace omnitwin::twin;
 
 namespace {
 
-std::atomic<bool> g_interrupt{false};  // the one process-wide flag a signal handler may set
+// The flags a signal handler may set. The first SIGINT/SIGTERM ends the run (records
+// closed); the video of the part recorded is still rendered, unless a signal comes while it
+// renders, which finalises the frames so far.
+std::atomic<bool> g_interrupt{false};
+std::atomic<bool> g_rendering{false};
+std::atomic<bool> g_render_stop{false};
 
-void on_signal(int) { g_interrupt.store(true); }
+void on_signal(int) {
+  if (g_rendering.load()) g_render_stop.store(true);
+  g_interrupt.store(true);
+}
 
 // MuJoCo's own handlers print to stdout, append to MUJOCO_LOG.TXT in the working directory
 // and exit(1) on errors, which would read as "expectations failed". Route both through our
@@ -60,7 +72,46 @@ struct RunArgs {
   std::vector<std::string> sets;
   bool no_progress = false;
   bool external_master = false;  // `omnitwin twin`
+  std::string video_file;        // --video FILE
+  bool no_video = false;
+  bool no_report = false;
+  bool dds = false;
 };
+
+// The run's outputs: the scenario's outputs section, overridden by the command line.
+OutputPlan output_plan(const RunArgs& a, const Scenario& s) {
+  OutputPlan p;
+  p.video_spec = s.outputs.video;
+  p.video = !a.no_video && (s.outputs.video.enabled || !a.video_file.empty());
+  p.video_file = a.video_file;
+  p.report = !a.no_report && s.outputs.report;
+  return p;
+}
+
+DdsSettings dds_settings(const DdsSpec& d) {
+  DdsSettings s;
+  s.domain = d.domain;
+  s.interface = d.interface;
+  s.config_file = d.config;
+  s.rate_hz = d.rate_hz;
+  return s;
+}
+
+// Renders and reports after the run; prints where they are. Returns false if one failed.
+bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
+  if (!plan.video && !plan.report) return true;
+  if (plan.video)
+    std::cout << "  rendering the video (Ctrl-C stops it and keeps the frames so far)...\n" << std::flush;
+  g_rendering.store(true);
+  const OutputsResult o = make_run_outputs(run_dir, plan, &g_render_stop);
+  g_rendering.store(false);
+  if (!o.video.empty())
+    std::cout << fmt::format("  {} ({} frames, {:.2f} s of video, rendered in {:.1f} s{})\n", o.video, o.video_frames,
+                             o.video_s, o.render_wall_s, o.video_stopped_early ? ", STOPPED EARLY" : "");
+  if (!o.report.empty()) std::cout << "  " << o.report << "\n";
+  for (const std::string& e : o.errors) std::cerr << "omnitwin: " << e << "\n";
+  return o.errors.empty();
+}
 
 std::vector<Override> collect_overrides(const RunArgs& a) {
   std::vector<Override> o;
@@ -98,7 +149,7 @@ void print_summary(const RunResult& r) {
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
-  for (const char* f : {"metrics.json", "trajectory.csv", "events.log", "bus-can.pcap", "master.log"})
+  for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "master.log"})
     if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
 }
 
@@ -114,9 +165,25 @@ int cmd_run(const RunArgs& a) {
       std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
                                s.bus.can.transport, s.bus.can.bit_rate)
                 << std::flush;
+    std::unique_ptr<DdsRunObserver> dds;
+    if (a.dds || s.outputs.dds.enabled) {
+      try {
+        dds = std::make_unique<DdsRunObserver>(dds_settings(s.outputs.dds));
+      } catch (const DdsError& e) {
+        std::cerr << "omnitwin: " << a.scenario << ": outputs.dds: " << e.what() << "\n";
+        return 2;
+      }
+      o.observer = dds.get();
+    }
     const RunResult r = run_scenario(s, o);
     print_summary(r);
-    return r.exit_code;
+    if (dds) {
+      const DdsPublisher::Stats st = dds->stats();
+      std::cout << fmt::format("  DDS: {} states published, {} dropped, {} events\n", st.published, st.dropped,
+                               st.events);
+    }
+    const bool outputs_ok = make_outputs(r.out_dir, output_plan(a, s));
+    return r.exit_code == 0 && !outputs_ok ? 3 : r.exit_code;
   } catch (const ScenarioError& e) {
     std::cerr << "omnitwin: " << e.what() << "\n";
     return 2;
@@ -148,8 +215,30 @@ std::vector<std::string> scenario_files(const std::vector<std::string>& paths) {
   return files;
 }
 
-JunitCase check_one(const std::string& file, const std::string& out_root, std::map<std::string, std::string>& used,
-                    bool& bad_input) {
+struct CheckOptions {
+  std::string junit;
+  std::string out_root = "out/check";
+  bool video = false;   // --video: render every run (off by default: CI time)
+  bool report = true;   // each run's report.html and the index page
+};
+
+// One scenario's line of the check index (media/report/check_index.py).
+nlohmann::json index_entry(const std::string& file, const std::string& run_dir, const JunitCase& c,
+                           const nlohmann::json& metrics) {
+  nlohmann::json m = nlohmann::json::object();
+  for (const char* k : {"sim_time_s", "wall_time_s", "real_time_factor", "clock", "interrupted"})
+    if (metrics.contains(k)) m[k] = metrics[k];
+  for (const char* k : {"platform", "bus"})
+    if (metrics.contains(k)) m[k] = metrics[k];
+  return {{"scenario", c.name}, {"file", file}, {"run_dir", run_dir}, {"passed", c.passed},
+          {"exit_code", c.passed ? 0 : (c.error ? 2 : 1)}, {"failures", c.failures}, {"metrics", m}};
+}
+
+JunitCase check_one(const std::string& file, const CheckOptions& opt, std::map<std::string, std::string>& used,
+                    bool& bad_input, nlohmann::json& index) {
+  const std::string out_root = opt.out_root;
+  std::string run_dir;
+  nlohmann::json metrics;
   JunitCase c;
   c.name = fs::path(file).stem().string();
   c.classname = "omnitwin.check";
@@ -164,6 +253,14 @@ JunitCase check_one(const std::string& file, const std::string& out_root, std::m
     o.out_dir = (fs::path(out_root) / s.name).string();
     o.interrupt = &g_interrupt;
     const RunResult r = run_scenario(s, o);
+    run_dir = r.out_dir;
+    metrics = r.metrics;
+    OutputPlan plan;
+    plan.video = opt.video && !g_interrupt.load();
+    plan.video_spec = s.outputs.video;
+    plan.report = opt.report && s.outputs.report;
+    const OutputsResult out = make_run_outputs(r.out_dir, plan, &g_interrupt);
+    for (const std::string& e : out.errors) c.failures.push_back(e);
     c.passed = r.passed && !r.interrupted;
     for (const auto& f : r.metrics["expectations"]["failures"]) c.failures.push_back(f.get<std::string>());
     if (r.interrupted) c.failures.push_back("interrupted");
@@ -179,10 +276,11 @@ JunitCase check_one(const std::string& file, const std::string& out_root, std::m
     c.failures.push_back(std::string("run failed: ") + e.what());
   }
   c.time_s = (monotonic_ns() - t0) * 1e-9;
+  index.push_back(index_entry(file, run_dir, c, metrics));
   return c;
 }
 
-int cmd_check(const std::vector<std::string>& paths, const std::string& junit, const std::string& out_root) {
+int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
   const auto files = scenario_files(paths);
   if (files.empty()) {
     std::cerr << "omnitwin check: no scenario files under the given paths\n";
@@ -192,18 +290,29 @@ int cmd_check(const std::vector<std::string>& paths, const std::string& junit, c
   std::map<std::string, std::string> used;
   bool bad_input = false;
   int passed = 0, failed = 0;
+  nlohmann::json index = nlohmann::json::array();
   for (const auto& f : files) {
     if (g_interrupt.load()) break;
-    JunitCase c = check_one(f, out_root, used, bad_input);
+    JunitCase c = check_one(f, opt, used, bad_input, index);
     (c.passed ? passed : failed)++;
     std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
     for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
     cases.push_back(std::move(c));
   }
+  // The index first: the summary stays the last line, where CI logs show it.
+  std::string index_error;
+  if (opt.report) {
+    index_error = write_check_index(opt.out_root, "omnitwin check", index);
+    if (index_error.empty()) std::cout << "index: " << (fs::path(opt.out_root) / "index.html").string() << "\n";
+  }
   std::cout << passed << " passed, " << failed << " failed\n";
-  if (!junit.empty()) {
+  if (!index_error.empty()) {
+    std::cerr << "omnitwin check: cannot write the index page: " << index_error << "\n";
+    return 3;
+  }
+  if (!opt.junit.empty()) {
     try {
-      write_junit(junit, "omnitwin check", cases);
+      write_junit(opt.junit, "omnitwin check", cases);
     } catch (const std::exception& e) {
       std::cerr << "omnitwin check: cannot write the JUnit report: " << e.what() << "\n";
       return 3;
@@ -212,6 +321,32 @@ int cmd_check(const std::vector<std::string>& paths, const std::string& junit, c
   if (bad_input) return 2;
   if (g_interrupt.load()) return 3;
   return failed ? 1 : 0;
+}
+
+// `omnitwin render RUN_DIR`: the video of a recorded run (and, on request, its report).
+int cmd_render(const std::string& run_dir, const std::string& out, const VideoSpec& v, bool report) {
+  if (!fs::is_directory(run_dir) || !fs::exists(fs::path(run_dir) / "trajectory.csv")) {
+    std::cerr << "omnitwin render: " << run_dir << " is not a run directory (no trajectory.csv)\n";
+    return 2;
+  }
+  OutputPlan plan;
+  plan.video = true;
+  plan.video_file = out;
+  plan.video_spec = v;
+  plan.report = report;
+  return make_outputs(run_dir, plan) ? 0 : 3;
+}
+
+int cmd_echo(const EchoOptions& o) {
+  try {
+    return run_echo(o, std::cout, &g_interrupt);
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "omnitwin echo: " << e.what() << "\n";
+    return 2;
+  } catch (const DdsError& e) {
+    std::cerr << "omnitwin echo: " << e.what() << "\n";
+    return 2;
+  }
 }
 
 int cmd_model(const std::string& scenario, const std::string& variant, const std::string& out) {
@@ -243,6 +378,14 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
   }
 }
 
+// The output flags of `run` and `twin` (DESIGN §9).
+void add_output_flags(CLI::App* cmd, RunArgs& a) {
+  cmd->add_option("--video", a.video_file, "write the video to FILE (default RUN_DIR/video.mp4)");
+  cmd->add_flag("--no-video", a.no_video, "no video");
+  cmd->add_flag("--no-report", a.no_report, "no report.html");
+  cmd->add_flag("--dds", a.dds, "publish the run on DDS (outputs.dds sets domain, interface, rate)");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -264,6 +407,7 @@ int main(int argc, char** argv) {
   run->add_option("--set", ra.sets, "override a scenario key, e.g. --set controller.period=0.005")
       ->type_name("KEY=VALUE");
   run->add_flag("--no-progress", ra.no_progress, "never draw the progress bar");
+  add_output_flags(run, ra);
 
   RunArgs ta;
   ta.external_master = true;
@@ -273,13 +417,40 @@ int main(int argc, char** argv) {
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
+  add_output_flags(twin, ta);
 
   std::vector<std::string> check_paths;
-  std::string junit, check_out = "out/check";
+  CheckOptions co;
+  bool check_no_report = false;
   CLI::App* check = app.add_subcommand("check", "run regression scenarios and check their expectations");
   check->add_option("paths", check_paths, "scenario files or directories (searched for *.yaml)")->required();
-  check->add_option("--junit", junit, "write a JUnit XML report to FILE");
-  check->add_option("--out", check_out, "root of the run directories")->capture_default_str();
+  check->add_option("--junit", co.junit, "write a JUnit XML report to FILE");
+  check->add_option("--out", co.out_root, "root of the run directories")->capture_default_str();
+  check->add_flag("--video", co.video, "render every run's video.mp4 (off by default)");
+  check->add_flag("--no-report", check_no_report, "no report.html per run and no index.html");
+
+  std::string render_dir, render_out;
+  VideoSpec rv;
+  bool render_no_inset = false, render_report = false;
+  CLI::App* render = app.add_subcommand("render", "render the video of a recorded run directory");
+  render->add_option("run_dir", render_dir, "run directory (written by omnitwin run)")->required();
+  render->add_option("--out", render_out, "MP4 file (default RUN_DIR/video.mp4)");
+  render->add_option("--width", rv.width, "frame width [px], even")->check(CLI::Range(64, 3840))->capture_default_str();
+  render->add_option("--height", rv.height, "frame height [px], even")->check(CLI::Range(48, 2160))->capture_default_str();
+  render->add_option("--fps", rv.fps, "frames per simulated second")->check(CLI::Range(1.0, 120.0))->capture_default_str();
+  render->add_flag("--no-inset", render_no_inset, "no overview inset");
+  render->add_flag("--report", render_report, "also (re)write report.html");
+
+  EchoOptions eo;
+  CLI::App* echo = app.add_subcommand("echo", "print what a run publishes on DDS (docs/protocols/dds.md)");
+  echo->add_option("--topic", eo.topic, "all, or state|odom|joint_states|cmd_vel|drives|bus|events or a topic name")
+      ->capture_default_str();
+  echo->add_option("--domain", eo.domain, "DDS domain (default $OMNITWIN_DDS_DOMAIN, else 0)")->check(CLI::Range(0, 232));
+  echo->add_option("--interface", eo.interface, "network interface, e.g. lo (default $OMNITWIN_DDS_INTERFACE)");
+  echo->add_option("--config", eo.config_file, "a Cyclone DDS XML configuration file");
+  echo->add_option("--count", eo.count, "exit after N samples (0: never)");
+  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)");
+  echo->add_flag("--json", eo.json, "JSON lines instead of text");
 
   std::string exp_name, exp_out;
   bool exp_quick = false;
@@ -315,7 +486,19 @@ int main(int argc, char** argv) {
       ta.clock = "realtime";
       return cmd_run(ta);
     }
-    if (*check) return cmd_check(check_paths, junit, check_out);
+    if (*check) {
+      co.report = !check_no_report;
+      return cmd_check(check_paths, co);
+    }
+    if (*render) {
+      if (rv.width % 2 || rv.height % 2) {
+        std::cerr << "omnitwin render: --width and --height must be even (H.264 yuv420p)\n";
+        return 2;
+      }
+      rv.overview_inset = !render_no_inset;
+      return cmd_render(render_dir, render_out, rv, render_report);
+    }
+    if (*echo) return cmd_echo(eo);
     if (*model) return cmd_model(model_scenario, model_variant, model_out);
     if (*experiment) return run_experiment(exp_name, ExperimentOptions{exp_out, exp_quick});
   } catch (const std::exception& e) {

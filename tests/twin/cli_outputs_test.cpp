@@ -1,0 +1,184 @@
+// Integration tests of the run's outputs through the real command line (twin/main.cpp,
+// twin/run_outputs.cpp, twin/dds_observer.hpp), each side a real process:
+//  - DDS: `omnitwin run --dds` publishes on loopback and a separate `omnitwin echo` process
+//    receives platform states whose poses equal trajectory.csv's rows at the same sim time,
+//    and the run's start and end events; a bad DDS interface is bad input (exit 2);
+//  - video: `run --video FILE` writes an H.264 yuv420p MP4 with one frame per 1/fps of sim
+//    time (ffprobe); `render RUN_DIR` renders a recorded run again; a run stopped by SIGINT
+//    half-way still leaves a playable MP4 of the part recorded, a complete CSV and metrics
+//    marked interrupted;
+//  - report: `run` writes report.html; `check` writes one per run and an index page that
+//    counts "1 passed, 1 failed" and links both reports.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+using namespace omnitwin::twin::cli;
+using omnitwin::testing::lines_of;
+
+// A DDS domain of our own (parallel ctest processes must not hear each other).
+int own_domain(int offset) { return 1 + (static_cast<int>(::getpid()) * 7 + offset) % 200; }
+
+// ffprobe's view of a video stream: codec, pixel format, frames decoded, duration.
+struct Probe {
+  bool ok = false;
+  std::string codec, pix_fmt;
+  long frames = 0;
+  double duration_s = 0;
+  std::string raw;
+};
+
+Probe probe(const fs::path& file, const fs::path& io) {
+  Probe p;
+  const fs::path out = io / "ffprobe.json";
+  const std::string cmd = "ffprobe -v error -count_frames -select_streams v:0 -show_entries "
+                          "stream=codec_name,pix_fmt,nb_read_frames -show_entries format=duration -of json '" +
+                          file.string() + "' > '" + out.string() + "' 2>&1";
+  if (std::system(cmd.c_str()) != 0) {
+    p.raw = read_bytes(out);
+    return p;
+  }
+  p.raw = read_bytes(out);
+  const nlohmann::json j = nlohmann::json::parse(p.raw);
+  const auto& st = j["streams"][0];
+  p.codec = st.value("codec_name", "");
+  p.pix_fmt = st.value("pix_fmt", "");
+  p.frames = std::stol(st.value("nb_read_frames", "0"));
+  p.duration_s = std::stod(j["format"].value("duration", "0"));
+  p.ok = true;
+  return p;
+}
+
+// trajectory.csv rows by their time column, as text → numbers (first 7 columns).
+std::map<long, std::array<double, 7>> trajectory_by_ms(const fs::path& csv) {
+  std::map<long, std::array<double, 7>> rows;
+  const auto lines = lines_of(read_bytes(csv));
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::istringstream in(lines[i]);
+    std::array<double, 7> v{};
+    std::string cell;
+    for (double& x : v) {
+      std::getline(in, cell, ',');
+      x = std::stod(cell);
+    }
+    rows[std::lround(v[0] * 1000)] = v;
+  }
+  return rows;
+}
+
+// A small, fast video for tests (the scenario's outputs section, as YAML).
+const char* kSmallVideo = "outputs.video={enabled: true, width: 160, height: 120, fps: 10}";
+
+class CliOutputs : public CliTest {};
+
+// A separate `omnitwin echo` process on loopback receives the run's platform states; each
+// one's pose equals the trajectory row recorded at the same simulated time (to the CSV's
+// 10 significant digits), nearly all samples arrive (best effort, loopback), and the run's
+// start and end events come through.
+TEST_F(CliOutputs, EchoInAnotherProcessReceivesTheRunsStates) {
+  const std::string domain = std::to_string(own_domain(0));
+  Child echo(omnitwin_binary(), {"echo", "--json", "--domain", domain, "--interface", "lo", "--timeout", "4"}, work(),
+             io(), "echo-");
+  std::this_thread::sleep_for(1500ms);  // the reader is discovered before the run starts
+  const fs::path out = dir_ / "run";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress", "--dds",
+                          "--set", "outputs.dds.domain=" + domain, "--set", "outputs.dds.interface=lo"});
+  ASSERT_EQ(f.code, 0) << f.err;
+  EXPECT_TRUE(contains(f.out, "DDS: 351 states published")) << f.out;
+  ASSERT_EQ(echo.wait(20s), 0) << echo.err();
+  const auto rows = trajectory_by_ms(out / "trajectory.csv");
+  std::size_t states = 0;
+  std::vector<std::string> events;
+  for (const std::string& line : lines_of(echo.out())) {
+    const nlohmann::json j = nlohmann::json::parse(line);
+    if (j["topic"] == "run_events") events.push_back(j["kind"].get<std::string>());
+    if (j["topic"] != "platform_state") continue;
+    ++states;
+    const auto it = rows.find(std::lround(j["t"].get<double>() * 1000));
+    ASSERT_NE(it, rows.end()) << line;
+    EXPECT_NEAR(j["x"].get<double>(), it->second[4], 1e-9 + 1e-9 * std::abs(it->second[4])) << line;
+    EXPECT_NEAR(j["y"].get<double>(), it->second[5], 1e-9 + 1e-9 * std::abs(it->second[5])) << line;
+    EXPECT_NEAR(j["phi"].get<double>(), it->second[6], 1e-9 + 1e-9 * std::abs(it->second[6])) << line;
+  }
+  EXPECT_GE(states, 300u) << "of 351 published";
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.front(), "start");
+  EXPECT_EQ(events.back(), "end");
+}
+
+// A DDS interface that does not exist is bad input: exit 2, one line naming outputs.dds,
+// and no run directory.
+TEST_F(CliOutputs, UnknownDdsInterfaceIsBadInput) {
+  const fs::path out = dir_ / "never";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress", "--dds",
+                          "--set", "outputs.dds.interface=nosuchif0"});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "outputs.dds")) << f.err;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+// run --video FILE: H.264, yuv420p, floor(3.5 s · 10 fps) + 1 = 36 frames, 3.6 s; render
+// RUN_DIR makes the same video again from the records alone.
+TEST_F(CliOutputs, RunVideoAndRenderAgree) {
+  const fs::path out = dir_ / "run";
+  const fs::path mp4 = dir_ / "v.mp4";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress", "--video",
+                          mp4.string(), "--set", kSmallVideo});
+  ASSERT_EQ(f.code, 0) << f.err;
+  EXPECT_TRUE(contains(f.out, mp4.string() + " (36 frames")) << f.out;
+  const Probe p = probe(mp4, io());
+  ASSERT_TRUE(p.ok) << p.raw;
+  EXPECT_EQ(p.codec, "h264");
+  EXPECT_EQ(p.pix_fmt, "yuv420p");
+  EXPECT_EQ(p.frames, 36);
+  EXPECT_NEAR(p.duration_s, 3.6, 0.05);
+  const fs::path again = dir_ / "again.mp4";
+  const Finished r = run({"render", out.string(), "--out", again.string(), "--width", "160", "--height", "120", "--fps",
+                          "10"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Probe q = probe(again, io());
+  ASSERT_TRUE(q.ok) << q.raw;
+  EXPECT_EQ(q.frames, 36);
+  const Finished bad = run({"render", (dir_ / "nothing").string()});
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_TRUE(contains(bad.err, "not a run directory")) << bad.err;
+}
+
+// SIGINT half-way through a long lockstep run: exit 3, metrics say interrupted, the CSV is
+// complete up to the stop, and the video of the part recorded is playable with one frame
+// per 1/fps of the simulated time reached.
+TEST_F(CliOutputs, SigintHalfWayLeavesPlayableVideo) {
+  const fs::path out = dir_ / "run";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--out", out.string(), "--no-progress", "--set",
+           "outputs.video={enabled: true, width: 160, height: 120, fps: 5}"},
+          work(), io());
+  // Wait until a few seconds of the run are recorded, then interrupt.
+  const fs::path part = out / ".trajectory.csv.part";
+  for (int i = 0; i < 600 && !(fs::exists(part) && fs::file_size(part) > 300'000); ++i) std::this_thread::sleep_for(10ms);
+  c.signal(SIGINT);
+  ASSERT_EQ(c.wait(180s), 3) << c.err();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_TRUE(m["interrupted"].get<bool>());
+  const double sim_s = m["sim_time_s"].get<double>();
+  EXPECT_GT(sim_s, 1.0);
+  EXPECT_LT(sim_s, 100.0);
+  const auto rows = trajectory_by_ms(out / "trajectory.csv");
+  ASSERT_FALSE(rows.empty());
+  const Probe p = probe(out / "video.mp4", io());
+  ASSERT_TRUE(p.ok) << p.raw;
+  EXPECT_EQ(p.codec, "h264");
+  const double last_t = rows.rbegin()->second[0];
+  EXPECT_EQ(p.frames, static_cast<long>(std::floor(last_t * 5 + 1e-9)) + 1) << "last row t = " << last_t;
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

@@ -1,0 +1,72 @@
+// twin layer — the video and the report of a finished run; see run_outputs.hpp.
+#include "twin/run_outputs.hpp"
+
+#include <fmt/format.h>
+
+#include <filesystem>
+
+#include "media/run_report.hpp"
+#include "media/run_video.hpp"
+#include "twin/clock.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+
+media::ReportTools report_tools() {
+  media::ReportTools t;
+  t.scripts_dir = report_scripts_dir();
+  return t;
+}
+
+void render_video(const std::string& run_dir, const OutputPlan& plan, const std::atomic<bool>* stop,
+                  OutputsResult& r) {
+  media::VideoOptions o;
+  o.width = plan.video_spec.width;
+  o.height = plan.video_spec.height;
+  o.fps = plan.video_spec.fps;
+  o.overview_inset = plan.video_spec.overview_inset;
+  const std::string file = plan.video_file.empty() ? (fs::path(run_dir) / "video.mp4").string() : plan.video_file;
+  try {
+    const media::VideoResult v = media::render_run(run_dir, file, o, stop);
+    r.video = v.path;
+    r.video_frames = v.frames;
+    r.video_s = v.duration_s;
+    r.video_stopped_early = v.stopped_early;
+    r.render_wall_s = v.render_s;
+  } catch (const std::exception& e) {
+    r.errors.push_back(fmt::format("video: {}", e.what()));
+  }
+}
+
+void write_report(const std::string& run_dir, OutputsResult& r) {
+  const media::ReportResult rep = media::write_run_report(run_dir, report_tools());
+  if (rep.ok) {
+    r.report = rep.path;
+    r.report_wall_s = rep.seconds;
+  } else {
+    r.errors.push_back(fmt::format("report: {}", rep.error));
+  }
+}
+
+}  // namespace
+
+std::string report_scripts_dir() { return (fs::path(OMNITWIN_SOURCE_DIR) / "media" / "report").string(); }
+
+OutputsResult make_run_outputs(const std::string& run_dir, const OutputPlan& plan, const std::atomic<bool>* stop) {
+  OutputsResult r;
+  // The video first: the report links it when it exists.
+  if (plan.video) render_video(run_dir, plan, stop, r);
+  if (plan.report) write_report(run_dir, r);
+  return r;
+}
+
+std::string write_check_index(const std::string& out_root, const std::string& title, const nlohmann::json& results) {
+  const nlohmann::json summary = {{"title", title}, {"results", results}};
+  const media::ReportResult rep =
+      media::write_check_index((fs::path(out_root) / "index.html").string(), summary, report_tools());
+  return rep.ok ? "" : rep.error;
+}
+
+}  // namespace omnitwin::twin
