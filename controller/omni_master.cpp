@@ -157,6 +157,15 @@ void OmniMaster::stop_slaves(MasterState to, StopReason r, std::uint8_t node) {
 
 void OmniMaster::shutdown() { transition(MasterTransition::shutdown); }
 
+void OmniMaster::note_send_failures(std::uint64_t n) {
+  if (n == 0) return;
+  n = std::min(n, stats_.frames_sent);
+  stats_.frames_sent -= n;
+  stats_.send_failures += n;
+  if (state_ == MasterState::detecting || state_ == MasterState::running) transition(MasterTransition::bus_error);
+  send_failed_ = false;
+}
+
 // ---------------------------------------------------------------------------------------
 // Receive interrupt
 

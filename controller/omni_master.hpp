@@ -133,6 +133,13 @@ class OmniMaster {
   // Process exit: NMT stop all unless already stopped or finished (see shutdown). RT-safe.
   void shutdown();
 
+  // For a shell that batches its sends (the send callback queues and returns true, the
+  // transport gets the batch after on_tick()): `n` of the frames the callback accepted were
+  // refused by the transport after all. They are counted as send failures instead of sent,
+  // and an active master stops with bus_error, as on_tick() does for a refusal it saw itself
+  // (its NMT stop all goes through the callback). Real-time safe.
+  void note_send_failures(std::uint64_t n);
+
   MasterState state() const { return state_; }
   // State, reason, node, path origin [ns, -1 before the first running tick], reference and
   // odometry poses [m, m, rad]. Real-time safe.

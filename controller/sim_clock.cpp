@@ -4,6 +4,7 @@
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/time.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -290,23 +291,55 @@ bool send_message(int fd, const Message& m) {
   }
 }
 
+// The result of one received record: ok (decoded into out) or protocol (it does not decode).
+WaitStatus decode_into(const std::uint8_t* data, ssize_t n, Message& out) {
+  const auto d = decode(data, static_cast<std::size_t>(n));
+  if (const auto* m = std::get_if<Message>(&d)) {
+    out = *m;
+    return WaitStatus::ok;
+  }
+  return WaitStatus::protocol;
+}
+
 // Receives one message by `deadline`: ok (decoded into out), timeout, closed (end of stream or
 // a receive error) or protocol (it does not decode). Over-long records read as wrong_size.
+// It tries the socket first and polls only when nothing is there: the caller usually knows a
+// message is waiting (the master after its poll), so that is one system call, not two.
 WaitStatus receive_message(int fd, Clock::time_point deadline, Message& out) {
   std::array<std::uint8_t, kMessageSize + 1> buf;
   for (;;) {
-    const WaitStatus w = wait_readable(fd, deadline);
-    if (w != WaitStatus::ok) return w;
     const ssize_t n = ::recv(fd, buf.data(), buf.size(), MSG_DONTWAIT);
     if (n == 0) return WaitStatus::closed;
-    if (n < 0 && (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK)) continue;
-    if (n < 0) return WaitStatus::closed;
-    const auto d = decode(buf.data(), static_cast<std::size_t>(n));
-    if (const auto* m = std::get_if<Message>(&d)) {
-      out = *m;
-      return WaitStatus::ok;
+    if (n > 0) return decode_into(buf.data(), n, out);
+    if (errno == EINTR) continue;
+    if (errno != EAGAIN && errno != EWOULDBLOCK) return WaitStatus::closed;
+    const WaitStatus w = wait_readable(fd, deadline);
+    if (w != WaitStatus::ok) return w;
+  }
+}
+
+// As receive_message, for a message that is usually not there yet (the twin's Done): waits in
+// recv() itself, bounded by SO_RCVTIMEO (set only when the bound changes, cached in
+// *timeout_us), so a tick costs one system call instead of a poll and a recv. The descriptor
+// must be blocking.
+WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message& out, std::int64_t* timeout_us) {
+  std::array<std::uint8_t, kMessageSize + 1> buf;
+  for (;;) {
+    const auto left = deadline - Clock::now();
+    if (left <= Clock::duration::zero()) return receive_message(fd, deadline, out);  // one look, no wait
+    // Whole milliseconds (as poll() would wait), so the option is set once per distinct bound.
+    const std::int64_t us = std::chrono::ceil<std::chrono::milliseconds>(left).count() * 1000;
+    if (us != *timeout_us) {
+      const timeval tv{static_cast<time_t>(us / 1'000'000), static_cast<suseconds_t>(us % 1'000'000)};
+      if (::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv) != 0) return receive_message(fd, deadline, out);
+      *timeout_us = us;
     }
-    return WaitStatus::protocol;
+    const ssize_t n = ::recv(fd, buf.data(), buf.size(), 0);
+    if (n == 0) return WaitStatus::closed;
+    if (n > 0) return decode_into(buf.data(), n, out);
+    if (errno == EINTR) continue;
+    if (errno == EAGAIN || errno == EWOULDBLOCK) return Clock::now() >= deadline ? WaitStatus::timeout : receive_message(fd, deadline, out);
+    return WaitStatus::closed;
   }
 }
 
@@ -402,6 +435,7 @@ WaitStatus Server::accept(std::chrono::milliseconds timeout, Hello* hello) {
   // A new master replaces any earlier connection.
   const Clock::time_point deadline = deadline_after(timeout);
   close_fd(conn_fd_);
+  rcvtimeo_us_ = 0;  // a new socket has no receive timeout
   while (conn_fd_ < 0) {
     const WaitStatus w = wait_readable(listen_fd_, deadline);
     if (w != WaitStatus::ok) return w;
@@ -428,7 +462,7 @@ WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds t
   const Clock::time_point deadline = deadline_after(timeout);
   if (!send_message(conn_fd_, g)) return WaitStatus::closed;
   Message m;
-  const WaitStatus w = receive_message(conn_fd_, deadline, m);
+  const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_);
   if (w != WaitStatus::ok) return w;
   const Done* d = std::get_if<Done>(&m);
   if (d == nullptr || d->tick != g.tick) return WaitStatus::protocol;

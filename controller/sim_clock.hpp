@@ -142,6 +142,7 @@ class Server {
   std::string path_;
   int listen_fd_ = -1;
   int conn_fd_ = -1;
+  std::int64_t rcvtimeo_us_ = 0;  // SO_RCVTIMEO now set on conn_fd_ [µs]; 0 = none
 };
 
 // Master end.

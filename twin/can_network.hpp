@@ -24,6 +24,7 @@
 #include <random>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -55,10 +56,16 @@ class OmniCanNetwork {
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
   // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
   // tick), and the file is closed with the network, so SIGINT/SIGTERM leave it complete.
+  // In lockstep the slaves' frames for the transport are batched too (the master reads them
+  // only after its grant): flush_pcap() also hands them to the transport, all at once, so it
+  // must run before frames_to_transport() goes into a grant (the run calls it just before).
   void open_pcap(const std::string& path);
   void flush_pcap() {
+    flush_transport();
     if (pcap_) pcap_->flush();
   }
+  // Hands the batched frames to the transport (lockstep; nothing is batched in realtime).
+  void flush_transport();
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
   void advance(SimTime t);
@@ -131,7 +138,9 @@ class OmniCanNetwork {
   std::array<LossState, 6> loss_{};   // by FaultSpec node: 0..3 slaves, 4 master, 5 all
   std::array<DelayState, 5> delay_{}; // by FaultSpec node: 0..3 slaves, 4 master
   std::mt19937_64 rng_;
-  std::uint64_t to_transport_ = 0;
+  std::uint64_t to_transport_ = 0;  // frames the transport accepted
+  bool batch_ = false;               // lockstep: slave frames wait in pending_ for flush_transport()
+  std::vector<can::TimedFrame> pending_;
   std::uint64_t from_transport_ = 0;
   std::uint64_t lost_frames_ = 0;
   std::uint64_t send_failures_ = 0;

@@ -269,6 +269,7 @@ void PlatformRun::stop_master() {
 void PlatformRun::on_master_can(SimTime t) {
   pacer_->tick(t);
   net_->advance(t);
+  net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
   net_->flush_pcap();  // once per tick: a kill loses at most one tick of capture
   if (!clock_server_) return;  // realtime: the master keeps its own time
   const auto timeout = std::chrono::milliseconds(std::llround(s_.bus.can.handshake_timeout * 1e3));

@@ -138,6 +138,12 @@ std::unique_ptr<Transport> open_transport(std::string_view spec) {
   throw TransportError("unreachable transport kind");
 }
 
+std::size_t Transport::send_many(std::span<const TimedFrame> frames) {
+  std::size_t sent = 0;
+  for (const TimedFrame& f : frames) sent += send(f.frame, f.timestamp_ns) ? 1 : 0;
+  return sent;
+}
+
 bool wait_readable(const Transport& t, std::chrono::milliseconds timeout) {
   pollfd p{t.poll_fd(), POLLIN, 0};
   const auto deadline = std::chrono::steady_clock::now() + timeout;

@@ -16,7 +16,9 @@
 // waits (at most 100 ms) for room when the socket buffer is full — back-pressure from local
 // receivers that have not yet been handed earlier datagrams, which must not become loss; receive() is
 // non-blocking and returns the next good frame, counting and skipping bad input; poll_fd()
-// becomes readable when receive() may have a frame, so a caller's event loop can wait on it.
+// becomes readable when receive() may have a frame, so a caller's event loop can wait on it
+// once receive() has returned nothing (UDP fetches several datagrams per system call and hands
+// them out one by one: those already fetched do not make poll_fd() readable).
 // A transport does not deliver a frame back to the transport that sent it (as SocketCAN's
 // default and a CAN controller's receive path), except UDP with own=1.
 // One thread uses a transport at a time; the in-process hub itself is thread-safe.
@@ -28,6 +30,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -72,6 +75,11 @@ class Transport {
   // Queues one frame for the bus. Returns false (and counts it) when the frame is invalid or
   // the OS refused it. Never blocks.
   virtual bool send(const Frame& f, std::int64_t timestamp_ns = 0) = 0;
+  // Sends frames[0..n) in order, exactly as n calls of send() would (same datagrams, same
+  // counters), but may hand several to the OS at once (UDP: one segmented send per run of
+  // equal-size datagrams, which costs the kernel one network-device kick instead of one per
+  // frame). Returns how many were accepted. Never blocks, except as send() does.
+  virtual std::size_t send_many(std::span<const TimedFrame> frames);
   // The next good frame, or nothing when none is waiting. Never blocks.
   virtual std::optional<TimedFrame> receive() = 0;
   // A file descriptor that polls readable (POLLIN) while frames may be waiting.

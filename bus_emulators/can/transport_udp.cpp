@@ -5,8 +5,10 @@
 
 #include <arpa/inet.h>
 #include <ifaddrs.h>
+#include <linux/filter.h>
 #include <net/if.h>
 #include <netinet/in.h>
+#include <netinet/udp.h>
 #include <poll.h>
 #include <unistd.h>
 
@@ -21,6 +23,9 @@ namespace {
 
 #ifndef IPV6_MULTICAST_ALL
 #define IPV6_MULTICAST_ALL 29  // Linux >= 4.20
+#endif
+#ifndef UDP_SEGMENT
+#define UDP_SEGMENT 103  // Linux >= 4.18
 #endif
 
 [[noreturn]] void fail(const TransportSpec& s, const std::string& what) {
@@ -122,11 +127,64 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
       }
       ::freeifaddrs(ifs);
     }
+    if (!spec_.receive_own) attach_own_filter();
+    tx_buf_.resize(kMaxSegments * msgpack_wire::kMaxEncodedSize);
+    rx_buf_.resize(kRxBatch * kRxSlot);
+    for (std::size_t i = 0; i < kRxBatch; ++i) {
+      rx_iov_[i] = iovec{rx_buf_.data() + i * kRxSlot, kRxSlot};
+      rx_msgs_[i].msg_hdr.msg_iov = &rx_iov_[i];
+      rx_msgs_[i].msg_hdr.msg_iovlen = 1;
+      rx_msgs_[i].msg_hdr.msg_name = &rx_from_[i];
+    }
   } catch (...) {
     ::close(rx_fd_);
     ::close(tx_fd_);
     throw;
   }
+}
+
+// A classic BPF program on the receive socket that drops datagrams from our own send socket
+// (UDP source port = its port and IP source = one of this host's addresses, as is_own()), so
+// the kernel neither queues them nor wakes us for them. A UDP socket's filter sees the packet
+// from the UDP header on (offset 0 = source port); SKF_NET_OFF reaches the IP header. Best
+// effort: without it (too many addresses for 8-bit jumps, or refused) is_own() still drops them.
+void UdpTransport::attach_own_filter() {
+  std::vector<sock_filter> prog;
+  const auto stmt = [&](std::uint16_t code, std::uint32_t k) { prog.push_back(BPF_STMT(code, k)); };
+  const auto jump = [&](std::uint16_t code, std::uint32_t k, std::uint8_t jt, std::uint8_t jf) {
+    prog.push_back(BPF_JUMP(code, k, jt, jf));
+  };
+  const bool v6 = spec_.ipv6;
+  const std::size_t words = v6 ? 4 : 1;           // address words
+  const std::size_t per_addr = 2 * words;          // load + compare per word
+  const std::size_t n = local_addrs_.size();
+  const std::size_t body = n * per_addr;           // instructions after the port check
+  if (n == 0 || body + 2 > 250) return;            // jumps are 8 bits wide
+  stmt(BPF_LD | BPF_H | BPF_ABS, 0);               // A = UDP source port
+  jump(BPF_JMP | BPF_JEQ | BPF_K, ntohs(tx_port_), 0, static_cast<std::uint8_t>(body));  // other port: accept
+  for (std::size_t a = 0; a < n; ++a) {
+    std::uint32_t w[4] = {};
+    if (v6) {
+      std::memcpy(w, &reinterpret_cast<const sockaddr_in6&>(local_addrs_[a]).sin6_addr, sizeof w);
+    } else {
+      w[0] = reinterpret_cast<const sockaddr_in&>(local_addrs_[a]).sin_addr.s_addr;
+    }
+    const std::uint32_t src_off = v6 ? 8 : 12;     // IP source address in the IPv6 / IPv4 header
+    for (std::size_t i = 0; i < words; ++i) {
+      // Instructions after this compare up to the accept (the last of the body): a mismatch
+      // skips the rest of this address; a full match jumps past accept, to drop.
+      const std::size_t after = body - (a * per_addr + 2 * i + 2);
+      const std::size_t next_addr = (words - 1 - i) * 2;
+      stmt(BPF_LD | BPF_W | BPF_ABS, static_cast<std::uint32_t>(SKF_NET_OFF) + src_off + 4 * static_cast<std::uint32_t>(i));
+      const bool last_word = i + 1 == words;
+      jump(BPF_JMP | BPF_JEQ | BPF_K, ntohl(w[i]), last_word ? static_cast<std::uint8_t>(after + 1) : 0,
+           static_cast<std::uint8_t>(next_addr));
+    }
+  }
+  stmt(BPF_RET | BPF_K, 0xFFFFFFFFu);  // accept (whole datagram)
+  stmt(BPF_RET | BPF_K, 0);            // drop
+  sock_fprog fp{static_cast<unsigned short>(prog.size()), prog.data()};
+  kernel_filter_ = ::setsockopt(rx_fd_, SOL_SOCKET, SO_ATTACH_FILTER, &fp, sizeof fp) == 0;
 }
 
 UdpTransport::~UdpTransport() {
@@ -145,25 +203,102 @@ std::string UdpTransport::spec() const {
   return s;
 }
 
-bool UdpTransport::send_raw(const std::uint8_t* data, std::size_t size) {
+bool UdpTransport::wait_for_room(int& waits) {
   // A full socket buffer (EAGAIN/ENOBUFS: the kernel has not yet handed earlier datagrams to
   // the local receivers) is back-pressure, not loss: wait for room, a bounded time.
+  if (!(errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS) || waits >= kSendRetries) return false;
+  ++waits;
+  ++stats_.send_waits;
+  pollfd p{tx_fd_, POLLOUT, 0};
+  ::poll(&p, 1, kSendWaitMs);
+  return true;
+}
+
+bool UdpTransport::send_raw(const std::uint8_t* data, std::size_t size) {
   int waits = 0;
   for (;;) {
     const ssize_t n = ::sendto(tx_fd_, data, size, MSG_DONTWAIT | MSG_NOSIGNAL,
                                reinterpret_cast<const sockaddr*>(&group_), group_len_);
     if (n == static_cast<ssize_t>(size)) return true;
     if (n < 0 && errno == EINTR) continue;
-    if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS) && waits < kSendRetries) {
-      ++waits;
-      ++stats_.send_waits;
-      pollfd p{tx_fd_, POLLOUT, 0};
-      ::poll(&p, 1, kSendWaitMs);
-      continue;
-    }
+    if (n < 0 && wait_for_room(waits)) continue;
     ++stats_.send_errors;
     return false;
   }
+}
+
+std::size_t UdpTransport::send_run(const std::uint8_t* data, std::size_t size, std::size_t seg, std::size_t count) {
+  if (count > 1 && gso_ok_) {
+    // One send; the kernel cuts it every `seg` bytes into `count` datagrams.
+    alignas(cmsghdr) char ctrl[CMSG_SPACE(sizeof(std::uint16_t))] = {};
+    iovec iov{const_cast<std::uint8_t*>(data), size};
+    msghdr msg{};
+    msg.msg_name = &group_;
+    msg.msg_namelen = group_len_;
+    msg.msg_iov = &iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = ctrl;
+    msg.msg_controllen = sizeof ctrl;
+    cmsghdr* c = CMSG_FIRSTHDR(&msg);
+    c->cmsg_level = SOL_UDP;
+    c->cmsg_type = UDP_SEGMENT;
+    c->cmsg_len = CMSG_LEN(sizeof(std::uint16_t));
+    const auto seg16 = static_cast<std::uint16_t>(seg);
+    std::memcpy(CMSG_DATA(c), &seg16, sizeof seg16);
+    int waits = 0;
+    for (;;) {
+      const ssize_t n = ::sendmsg(tx_fd_, &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
+      if (n == static_cast<ssize_t>(size)) {
+        stats_.frames_tx += count;
+        return count;
+      }
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0 && wait_for_room(waits)) continue;
+      // Segmentation refused (old kernel, no checksum offload on the device, …): never again.
+      // Any other error: this run one datagram at a time, so each failure counts as send()'s.
+      if (n < 0 && (errno == EIO || errno == EINVAL || errno == ENOPROTOOPT || errno == EOPNOTSUPP ||
+                    errno == EMSGSIZE))
+        gso_ok_ = false;
+      break;
+    }
+  }
+  std::size_t sent = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t len = i + 1 < count ? seg : size - seg * (count - 1);
+    if (send_raw(data + i * seg, len)) {
+      ++stats_.frames_tx;
+      ++sent;
+    }
+  }
+  return sent;
+}
+
+std::size_t UdpTransport::send_many(std::span<const TimedFrame> frames) {
+  // Runs of equal-size datagrams, each optionally closed by one shorter datagram (the kernel
+  // allows the last segment to be short), in the frames' order.
+  std::size_t sent = 0;
+  std::size_t i = 0;
+  while (i < frames.size()) {
+    std::size_t used = 0, count = 0, seg = 0;
+    while (i < frames.size() && count < kMaxSegments) {
+      const TimedFrame& tf = frames[i];
+      const std::size_t n = msgpack_wire::encode(tf.frame, static_cast<double>(tf.timestamp_ns) * 1e-9,
+                                                 {tx_buf_.data() + used, msgpack_wire::kMaxEncodedSize});
+      if (n == 0) {  // refused as send() refuses it
+        ++stats_.invalid_tx;
+        ++i;
+        continue;
+      }
+      if (count > 0 && n > seg) break;  // starts the next run (encoded again there)
+      if (count == 0) seg = n;
+      used += n;
+      ++count;
+      ++i;
+      if (n < seg) break;  // a shorter datagram closes the run
+    }
+    if (count > 0) sent += send_run(tx_buf_.data(), used, seg, count);
+  }
+  return sent;
 }
 
 bool UdpTransport::send(const Frame& f, std::int64_t timestamp_ns) {
@@ -187,32 +322,40 @@ bool UdpTransport::is_own(const sockaddr_storage& from) const {
   return false;
 }
 
+bool UdpTransport::refill() {
+  for (;;) {
+    for (auto& m : rx_msgs_) {
+      m.msg_hdr.msg_namelen = sizeof(sockaddr_storage);
+      m.msg_hdr.msg_flags = 0;
+      m.msg_len = 0;
+    }
+    const int n = ::recvmmsg(rx_fd_, rx_msgs_.data(), static_cast<unsigned>(kRxBatch), MSG_DONTWAIT, nullptr);
+    if (n > 0) {
+      rx_next_ = 0;
+      rx_count_ = static_cast<std::size_t>(n);
+      return true;
+    }
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) ++stats_.rx_errors;
+    return false;
+  }
+}
+
 std::optional<TimedFrame> UdpTransport::receive() {
-  // One byte more than python-can reads, so that an oversized datagram shows as truncated.
-  std::array<std::uint8_t, msgpack_wire::kMaxDatagramSize + 1> buf;
   // Bounded, so that a flood of bad datagrams cannot hold the caller's loop; the descriptor
   // stays readable for the rest.
   for (int budget = 256; budget > 0; --budget) {
-    sockaddr_storage from{};
-    iovec iov{buf.data(), buf.size()};
-    msghdr msg{};
-    msg.msg_name = &from;
-    msg.msg_namelen = sizeof from;
-    msg.msg_iov = &iov;
-    msg.msg_iovlen = 1;
-    const ssize_t n = ::recvmsg(rx_fd_, &msg, MSG_DONTWAIT);
-    if (n < 0) {
-      if (errno == EINTR) continue;  // (uses one unit of budget)
-      if (errno != EAGAIN && errno != EWOULDBLOCK) ++stats_.rx_errors;
-      return std::nullopt;
-    }
-    if (!spec_.receive_own && is_own(from)) continue;
-    if ((msg.msg_flags & MSG_TRUNC) || static_cast<std::size_t>(n) > msgpack_wire::kMaxDatagramSize) {
+    if (rx_next_ == rx_count_ && !refill()) return std::nullopt;
+    const std::size_t k = rx_next_++;
+    const msghdr& msg = rx_msgs_[k].msg_hdr;
+    const std::size_t n = rx_msgs_[k].msg_len;
+    if (!spec_.receive_own && is_own(rx_from_[k])) continue;
+    if ((msg.msg_flags & MSG_TRUNC) || n > msgpack_wire::kMaxDatagramSize) {
       ++stats_.malformed_rx;
       continue;
     }
     msgpack_wire::Decoded d;
-    switch (msgpack_wire::decode({buf.data(), static_cast<std::size_t>(n)}, d)) {
+    switch (msgpack_wire::decode({rx_buf_.data() + k * kRxSlot, n}, d)) {
       case msgpack_wire::DecodeStatus::ok: {
         ++stats_.frames_rx;
         const double ns = d.timestamp * 1e9;

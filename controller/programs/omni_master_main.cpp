@@ -32,6 +32,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/master_config.hpp"
@@ -75,7 +76,29 @@ struct LoopStats {
   std::uint64_t overruns = 0;   // wall: ticks one period or more late
   std::int64_t max_late_ns = 0; // wall: the latest tick [ns]
   bool interrupted = false;     // SIGINT/SIGTERM ended the loop
+  bool backlog = false;         // wall: the last drain stopped at kDrainBatch (more may wait,
+                                // some already fetched by the transport, unseen by poll)
 };
+
+// Lockstep batches the master's frames: the send callback queues them, and after each tick
+// they go to the transport in one send_many() (UDP: one segmented send), before DONE. The
+// twin reads them only after DONE, so nothing it sees changes.
+struct Outbox {
+  bool hold = false;  // queue instead of sending (--clock sim)
+  std::vector<can::TimedFrame> frames;
+};
+
+// Sends what the outbox holds; refusals reach the core as note_send_failures().
+void flush(can::Transport& tr, Outbox& ob, OmniMaster& m, LoopStats& ls) {
+  // The core's reaction to a refusal (NMT stop all) is queued too: send until nothing is left.
+  while (!ob.frames.empty()) {
+    const std::size_t sent = tr.send_many(ob.frames);
+    const std::size_t refused = ob.frames.size() - sent;
+    ls.frames_tx += sent;
+    ob.frames.clear();
+    m.note_send_failures(refused);
+  }
+}
 
 // A runtime failure: the loop ends, the process exits 3 with this message.
 struct RuntimeFailure {
@@ -146,7 +169,7 @@ simclock::WaitStatus next_grant(simclock::Client& client, int sigfd, simclock::G
   pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
   const int r = ::poll(fds, 2, static_cast<int>(std::chrono::milliseconds(kGrantTimeout).count()));
   if (r == 0) return simclock::WaitStatus::timeout;
-  if (signalled(sigfd)) {
+  if (r > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) {
     ls.interrupted = true;
     return simclock::WaitStatus::closed;
   }
@@ -172,7 +195,7 @@ bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::i
 }
 
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
-            LoopStats& ls) {
+            LoopStats& ls, Outbox& ob) {
   simclock::Client client(o.sim_clock, kConnectTimeout);
   spdlog::debug("connected to the twin's sim clock at {}", o.sim_clock);
   StateLog log;
@@ -190,6 +213,7 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
       throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, ls.frames_rx, g.frames[0])};
     }
     m.on_tick(g.t_ns);
+    flush(tr, ob, m, ls);
     log.check(m);
     const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
@@ -201,6 +225,7 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
 
 // Handles up to kDrainBatch waiting frames at the current monotonic time.
 void drain_wall(can::Transport& tr, OmniMaster& m, std::int64_t start_ns, LoopStats& ls, StateLog& log) {
+  ls.backlog = false;
   for (int i = 0; i < kDrainBatch; ++i) {
     auto tf = tr.receive();
     if (!tf) return;
@@ -208,6 +233,7 @@ void drain_wall(can::Transport& tr, OmniMaster& m, std::int64_t start_ns, LoopSt
     m.on_frame(tf->frame, monotonic_ns() - start_ns);
     log.check(m);
   }
+  ls.backlog = true;
 }
 
 // One timer interrupt for the deadline that has passed; skips (and counts) missed periods.
@@ -227,6 +253,11 @@ void wall_tick(OmniMaster& m, std::int64_t start_ns, std::int64_t period_ns, std
 // Waits for frames, a signal or the wake-up time; sleeps to the wake-up time exactly.
 void wall_wait(can::Transport& tr, OmniMaster& m, int sigfd, std::int64_t start_ns, std::int64_t wake_ns,
                LoopStats& ls, StateLog& log) {
+  if (ls.backlog) {  // the rest of a burst first, without waiting (the loop checks the deadline)
+    if (signalled(sigfd)) ls.interrupted = true;
+    drain_wall(tr, m, start_ns, ls, log);
+    return;
+  }
   pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
   const timespec timeout = to_timespec(std::max<std::int64_t>(0, wake_ns - monotonic_ns()));
   const int r = ::ppoll(fds, 2, &timeout, nullptr);
@@ -318,7 +349,14 @@ void print_summary(const OmniMaster& m, const LoopStats& ls, const std::string& 
 int run(const Options& o, const controller::MasterConfig& cfg, can::Transport& tr) {
   LoopStats ls;
   std::int64_t stamp_ns = 0;
+  Outbox ob;
+  ob.hold = o.clock == "sim";
+  ob.frames.reserve(64);
   OmniMaster master(cfg, [&](const can::Frame& f) {
+    if (ob.hold) {
+      ob.frames.push_back(can::TimedFrame{f, stamp_ns});
+      return true;
+    }
     const bool ok = tr.send(f, stamp_ns);
     ls.frames_tx += ok ? 1 : 0;
     return ok;
@@ -327,7 +365,7 @@ int run(const Options& o, const controller::MasterConfig& cfg, can::Transport& t
   spdlog::info("state {} (transport {}, clock {})", simclock::to_string(master.state()), tr.spec(), o.clock);
   int code = kExitOk;
   try {
-    code = o.clock == "sim" ? run_sim(o, master, tr, stamp_ns, sigfd, ls) : run_wall(o, master, tr, stamp_ns, sigfd, ls);
+    code = o.clock == "sim" ? run_sim(o, master, tr, stamp_ns, sigfd, ls, ob) : run_wall(o, master, tr, stamp_ns, sigfd, ls);
   } catch (const RuntimeFailure& f) {
     spdlog::error("{}", f.message);
     code = kExitRuntime;
@@ -337,6 +375,8 @@ int run(const Options& o, const controller::MasterConfig& cfg, can::Transport& t
   }
   // Shutdown as a real master: stop the slaves unless they already are.
   if (code == kExitOk && (o.clock == "wall" || ls.interrupted)) master.shutdown();
+  flush(tr, ob, master, ls);  // what a failed tick or the shutdown queued
+  ob.hold = false;
   if (master.report().reason == controller::StopReason::bus_error) code = kExitRuntime;
   print_summary(master, ls, o.clock);
   if (sigfd >= 0) ::close(sigfd);

@@ -469,6 +469,27 @@ TEST(OmniMaster, ARefusingTransportIsABusError) {
   EXPECT_GE(h.master.stats().send_failures, 2u);  // the command, and the stop it tried
 }
 
+TEST(OmniMaster, ARefusalReportedAfterTheTickIsABusErrorToo) {
+  // A shell that batches its sends learns of a refusal only after on_tick().
+  Harness h(line_config());
+  h.start();
+  h.tick();
+  ASSERT_FALSE(h.take().empty());
+  const std::uint64_t sent = h.master.stats().frames_sent;
+  h.master.note_send_failures(1);
+  EXPECT_EQ(h.master.report().state, MasterState::stopped);
+  EXPECT_EQ(h.master.report().reason, StopReason::bus_error);
+  EXPECT_EQ(h.take(), (std::vector<Frame>{kStopAll}));  // the stop goes out at once
+  EXPECT_EQ(h.master.stats().frames_sent, sent);        // − the refused one + the stop
+  EXPECT_EQ(h.master.stats().send_failures, 1u);
+  // Stopped already: counted, nothing more.
+  h.master.note_send_failures(1);
+  EXPECT_TRUE(h.take().empty());
+  EXPECT_EQ(h.master.stats().send_failures, 2u);
+  h.master.note_send_failures(0);
+  EXPECT_EQ(h.master.stats().send_failures, 2u);
+}
+
 TEST(OmniMaster, ShutdownStopsTheSlavesUnlessAlreadyStopped) {
   Harness h(line_config());
   h.start();

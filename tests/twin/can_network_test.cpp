@@ -145,7 +145,10 @@ class Rig {
     net->advance(t);
     collect();
   }
+  // What the master can read: in lockstep the slaves' frames reach the transport when the run
+  // flushes them, before each grant (run.cpp: flush_pcap()); the rig's master reads here.
   void collect() {
+    net->flush_transport();
     while (auto r = master.receive()) heard.push_back(*r);
   }
 
@@ -479,6 +482,27 @@ TEST(OmniCanNetwork, FrameLossToASlaveStarvesOnlyThatSlave) {
   EXPECT_TRUE(r.logged("fault", "frame_loss to axis 3 (node 0x10) rate 1 burst 1 (ends)"));
 }
 
+TEST(OmniCanNetwork, LockstepHandsTheSlavesFramesOverAtTheFlushRealtimeAtOnce) {
+  for (const ClockMode mode : {ClockMode::lockstep, ClockMode::realtime}) {
+    Scenario sc = can_scenario(unique_bus());
+    sc.clock = mode;
+    Rig r(sc);
+    r.net->advance(0);
+    ASSERT_TRUE(r.master.send(detection_request(), 0));
+    ASSERT_TRUE(r.net->drain_transport(1, 0, 100ms));
+    r.net->advance(2 * kMs);  // the four answers complete on the wire
+    EXPECT_EQ(r.net->bus().stats().frames, 5u);
+    const bool lockstep = mode == ClockMode::lockstep;
+    EXPECT_EQ(r.net->frames_to_transport(), lockstep ? 0u : 4u);
+    EXPECT_EQ(r.net->bus_metrics(r.sched.now())["frames_tx"].get<std::uint64_t>(), 4u);  // sent or about to be
+    EXPECT_EQ(can::receive_within(r.master, 0ms).has_value(), !lockstep);
+    r.net->flush_pcap();  // what the run does before each grant
+    EXPECT_EQ(r.net->frames_to_transport(), 4u);
+    r.collect();
+    EXPECT_EQ(r.heard.size(), lockstep ? 4u : 3u);  // realtime: one was taken above
+  }
+}
+
 TEST(OmniCanNetwork, FrameLossToTheMasterDropsFeedbackOnTheWayToTheTransport) {
   Rig r(can_scenario(unique_bus()));
   FaultSpec f = can_fault(FaultSpec::Kind::frame_loss, FaultSpec::kMaster, 0.015, 0.020);
@@ -486,6 +510,7 @@ TEST(OmniCanNetwork, FrameLossToTheMasterDropsFeedbackOnTheWayToTheTransport) {
   r.schedule_fault(f);
   std::array<std::uint64_t, 2> to_transport{}, slave_tx{};
   auto take = [&](std::size_t k) {
+    r.net->flush_transport();  // (lockstep hands frames over at flushes; count all sent so far)
     to_transport[k] = r.net->frames_to_transport();
     slave_tx[k] = 0;
     for (int n = 1; n <= 4; ++n) slave_tx[k] += r.net->bus().node_stats(n).tx_frames;
