@@ -639,9 +639,22 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   return r;
 }
 
+// Lockstep frames are for the master and the twin on this host (a third sender would break
+// the per-tick frame counts anyway): unless the UDP spec names a TTL they stay on the host
+// (ttl=0), which spares a network-device send per datagram (docs/benchmarks.md).
+Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
+  Scenario e = s;
+  std::string& spec = e.bus.can.transport;
+  if (s.bus.kind != BusKind::can || s.clock != ClockMode::lockstep || external_master) return e;
+  if (!spec.starts_with("udp:") || spec.find("ttl=") != std::string::npos) return e;
+  spec += spec.find('?') == std::string::npos ? "?ttl=0" : "&ttl=0";
+  return e;
+}
+
 }  // namespace
 
-RunResult run_scenario(const Scenario& scenario, const RunOptions& options) {
+RunResult run_scenario(const Scenario& given, const RunOptions& options) {
+  const Scenario scenario = with_lockstep_transport(given, options.external_master);
   if (scenario.bus.kind != BusKind::direct && scenario.bus.kind != BusKind::can)
     throw RunSetupError(fmt::format("bus: the bus '{}' is not available in this build yet; only 'direct' and 'can' are",
                                     to_string(scenario.bus.kind)));
