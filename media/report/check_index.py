@@ -19,6 +19,8 @@ import os
 import sys
 import urllib.parse
 
+from report_common import metric_at  # the same dotted-path rule as the run report
+
 # Key metric columns: (heading, dotted metric path).
 KEY_METRICS = (
     ("final error [cm]", "platform.final_error_cm"),
@@ -52,15 +54,8 @@ def metric(metrics, path):
         return None
     if path in metrics:
         return metrics[path]
-    cur = metrics
-    for part in path.split("."):
-        if isinstance(cur, dict) and part in cur:
-            cur = cur[part]
-        elif isinstance(cur, list) and part.isdigit() and int(part) < len(cur):
-            cur = cur[int(part)]
-        else:
-            return None
-    return cur
+    found, value = metric_at(metrics, path)
+    return value if found else None
 
 
 def fmt_value(v):

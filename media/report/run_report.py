@@ -23,6 +23,8 @@ import re
 import sys
 import urllib.parse
 
+from report_common import metric_at
+
 try:
     import matplotlib
     matplotlib.use("Agg")
@@ -154,19 +156,6 @@ def read_events(path):
         if m:
             events.append((m.group(1), m.group(2), m.group(3)))
     return events, None
-
-
-def metric_at(metrics, path):
-    """(found, value) for a dotted metric path: objects by key, arrays by index."""
-    cur = metrics
-    for part in path.split("."):
-        if isinstance(cur, dict) and part in cur:
-            cur = cur[part]
-        elif isinstance(cur, list) and part.isdigit() and int(part) < len(cur):
-            cur = cur[int(part)]
-        else:
-            return False, None
-    return True, cur
 
 
 # ---------------------------------------------------------------------------------------

@@ -40,15 +40,8 @@ extern char** environ;
 namespace omnitwin::twin {
 namespace {
 
-using namespace omnitwin::twin::cli;
-
-namespace fs = std::filesystem;
-using namespace std::chrono_literals;
-using omnitwin::testing::binary_path;
-using omnitwin::testing::source_path;
-using omnitwin::testing::TempDir;
+using namespace omnitwin::twin::cli;  // Child, CliTest, fs, the path helpers
 using omnitwin::testing::lines_of;
-using omnitwin::testing::read_bytes;
 
 constexpr std::size_t kColumns = 16 + 4 * 9;  // trajectory.csv columns
 
