@@ -4,9 +4,9 @@
 //    receives platform states whose poses equal trajectory.csv's rows at the same sim time,
 //    and the run's start and end events; a bad DDS interface is bad input (exit 2);
 //  - video: `run --video FILE` writes an H.264 yuv420p MP4 with one frame per 1/fps of sim
-//    time (ffprobe); `render RUN_DIR` renders a recorded run again; a run stopped by SIGINT
-//    half-way still leaves a playable MP4 of the part recorded, a complete CSV and metrics
-//    marked interrupted;
+//    time (ffprobe); `render RUN_DIR` renders a recorded run again; a CAN run stopped by
+//    SIGINT half-way still leaves a playable MP4 of the part recorded, a complete CSV, a
+//    capture tshark decodes, and metrics marked interrupted;
 //  - report: `run` writes report.html; `check` writes one per run and an index page that
 //    counts "1 passed, 1 failed" and links both reports.
 #include <gtest/gtest.h>
@@ -153,13 +153,13 @@ TEST_F(CliOutputs, RunVideoAndRenderAgree) {
   EXPECT_TRUE(contains(bad.err, "not a run directory")) << bad.err;
 }
 
-// SIGINT half-way through a long lockstep run: exit 3, metrics say interrupted, the CSV is
-// complete up to the stop, and the video of the part recorded is playable with one frame
-// per 1/fps of the simulated time reached.
+// SIGINT half-way through a long lockstep CAN run: exit 3, metrics say interrupted, the CSV
+// is complete up to the stop, the video of the part recorded is playable with one frame per
+// 1/fps of the simulated time reached, and the capture decodes in tshark with every frame.
 TEST_F(CliOutputs, SigintHalfWayLeavesPlayableVideo) {
   const fs::path out = dir_ / "run";
-  Child c({"run", test_scenario("run_long_line.yaml"), "--out", out.string(), "--no-progress", "--set",
-           "outputs.video={enabled: true, width: 160, height: 120, fps: 5}"},
+  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", "bus.transport=udp:239.74.163.2:47607",
+           "--out", out.string(), "--no-progress", "--set", "outputs.video={enabled: true, width: 160, height: 120, fps: 5}"},
           work(), io());
   // Wait until a few seconds of the run are recorded, then interrupt.
   const fs::path part = out / ".trajectory.csv.part";
@@ -178,6 +178,14 @@ TEST_F(CliOutputs, SigintHalfWayLeavesPlayableVideo) {
   EXPECT_EQ(p.codec, "h264");
   const double last_t = rows.rbegin()->second[0];
   EXPECT_EQ(p.frames, static_cast<long>(std::floor(last_t * 5 + 1e-9)) + 1) << "last row t = " << last_t;
+  // The capture: every frame the bus completed, none malformed.
+  if (std::system("command -v tshark >/dev/null 2>&1") != 0) GTEST_SKIP() << "tshark is not installed";
+  const std::string pcap = (out / "bus-can.pcap").string();
+  const fs::path ids = dir_ / "ids.txt", bad = dir_ / "bad.txt";
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -T fields -e can.id > " + ids.string() + " 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -Y _ws.malformed > " + bad.string() + " 2>/dev/null").c_str()), 0);
+  EXPECT_EQ(lines_of(read_bytes(ids)).size(), m.at("bus").at("frames").get<std::size_t>());
+  EXPECT_TRUE(read_bytes(bad).empty()) << read_bytes(bad);
 }
 
 }  // namespace
