@@ -257,16 +257,23 @@ void validate(const VideoOptions& o) {
     throw std::invalid_argument(fmt::format("video fps must be in (0, 1000], got {}", o.fps));
 }
 
+// The backend the options name, else OMNITWIN_GL's; std::invalid_argument if unknown.
+GlBackend backend_of(const VideoOptions& o) {
+  return o.backend.empty() ? gl_backend_from_env() : gl_backend_from_name(o.backend);
+}
+
 }  // namespace
 
 VideoResult render_run(const std::string& run_dir, const std::string& out_file, const VideoOptions& o,
                        const std::atomic<bool>* stop) {
   validate(o);
+  const GlBackend backend = backend_of(o);
   const auto start = std::chrono::steady_clock::now();
   Recording rec(run_dir);
   SceneRenderer renderer(load_model(fs::path(run_dir) / "platform.xml"),
                          SceneOptions{.width = o.width, .height = o.height, .overview_inset = o.overview_inset,
-                                      .overlay = o.overlay, .high_quality = o.high_quality, .camera = o.camera});
+                                      .overlay = o.overlay, .high_quality = o.high_quality, .camera = o.camera,
+                                      .backend = backend});
   renderer.set_reference_path(rec.reference());
   VideoEncoder encoder(out_file, EncoderOptions{.width = o.width, .height = o.height, .fps = o.fps});
   const int total = static_cast<int>(std::floor(rec.end_time() * o.fps + 1e-6)) + 1;

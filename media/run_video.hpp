@@ -26,6 +26,10 @@ struct VideoOptions {
   bool overlay = true;          // text overlay top-left (time, pose, speed, bus, faults)
   bool high_quality = false;    // shadows + 4x multisampling: 3-5x slower in software
   std::string camera = "track"; // model camera filling the frame ("track", "top", "overview")
+  // Off-screen GL backend: "osmesa" (software, no GPU) or "egl" (a GPU through EGL if there
+  // is one, else Mesa llvmpipe; see media/offscreen_gl.hpp). Empty: the environment variable
+  // OMNITWIN_GL (osmesa|egl), osmesa if unset. One process renders with one backend only.
+  std::string backend;
   // Called after each encoded frame with (frames done, frames in all), on the rendering
   // thread; e.g. a progress bar. May be empty.
   std::function<void(int, int)> progress;

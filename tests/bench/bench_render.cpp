@@ -9,7 +9,11 @@
 //   BM_RenderFrameHighQuality  the same with shadows and 4x multisampling (high_quality).
 //   BM_Encode       H.264 encoding (RGB→yuv420p, libx264 veryfast, crf 23, MP4 in a temp
 //                   dir) of rendered frames cycling through 8 poses.
-// Each at 640x480 and 1280x720. OSMesa (llvmpipe) here; a GPU backend would differ.
+// Each at 640x480 and 1280x720. The GL backend is OMNITWIN_GL's (media/offscreen_gl.hpp),
+// OSMesa by default; one process renders with one backend, so the EGL rows are a second run:
+//   bench_render                  OSMesa (llvmpipe)
+//   OMNITWIN_GL=egl bench_render  EGL: a GPU if there is one, else Mesa surfaceless (llvmpipe)
+// The label of each row names the GL implementation used.
 #include <benchmark/benchmark.h>
 #include <mujoco/mujoco.h>
 
@@ -65,7 +69,8 @@ media::FrameState state(int k, const Paths& p) {
 
 void render_loop(benchmark::State& st, bool full, bool high_quality = false) {
   const int w = static_cast<int>(st.range(0)), h = static_cast<int>(st.range(1));
-  media::SceneOptions o{.width = w, .height = h, .overview_inset = full, .overlay = full, .high_quality = high_quality};
+  media::SceneOptions o{.width = w, .height = h, .overview_inset = full, .overlay = full, .high_quality = high_quality,
+                        .backend = media::gl_backend_from_env()};
   media::SceneRenderer r(platform_model(), o);
   Paths paths;
   if (full) r.set_reference_path(paths.reference);
@@ -87,7 +92,8 @@ void BM_Encode(benchmark::State& st) {
   const int w = static_cast<int>(st.range(0)), h = static_cast<int>(st.range(1));
   std::vector<std::vector<unsigned char>> frames;
   {
-    media::SceneRenderer r(platform_model(), media::SceneOptions{.width = w, .height = h});
+    media::SceneRenderer r(platform_model(),
+                           media::SceneOptions{.width = w, .height = h, .backend = media::gl_backend_from_env()});
     Paths paths;
     for (int k = 0; k < 8; ++k) frames.push_back(r.render(state(20 * k, paths)));
   }
