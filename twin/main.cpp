@@ -88,15 +88,6 @@ OutputPlan output_plan(const RunArgs& a, const Scenario& s) {
   return p;
 }
 
-DdsSettings dds_settings(const DdsSpec& d) {
-  DdsSettings s;
-  s.domain = d.domain;
-  s.interface = d.interface;
-  s.config_file = d.config;
-  s.rate_hz = d.rate_hz;
-  return s;
-}
-
 // Renders and reports after the run; prints where they are. Returns false if one failed.
 bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
   if (!plan.video && !plan.report) return true;
@@ -168,7 +159,7 @@ int cmd_run(const RunArgs& a) {
     std::unique_ptr<DdsRunObserver> dds;
     if (a.dds || s.outputs.dds.enabled) {
       try {
-        dds = std::make_unique<DdsRunObserver>(dds_settings(s.outputs.dds));
+        dds = std::make_unique<DdsRunObserver>(s.outputs.dds);
       } catch (const DdsError& e) {
         std::cerr << "omnitwin: " << a.scenario << ": outputs.dds: " << e.what() << "\n";
         return 2;

@@ -22,11 +22,7 @@ media::ReportTools report_tools() {
 
 void render_video(const std::string& run_dir, const OutputPlan& plan, const std::atomic<bool>* stop,
                   OutputsResult& r) {
-  media::VideoOptions o;
-  o.width = plan.video_spec.width;
-  o.height = plan.video_spec.height;
-  o.fps = plan.video_spec.fps;
-  o.overview_inset = plan.video_spec.overview_inset;
+  const media::VideoOptions& o = plan.video_spec;
   const std::string file = plan.video_file.empty() ? (fs::path(run_dir) / "video.mp4").string() : plan.video_file;
   try {
     const media::VideoResult v = media::render_run(run_dir, file, o, stop);

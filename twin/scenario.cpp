@@ -556,7 +556,7 @@ DdsSpec read_dds(const YamlField& f, double control_period) {
   read_bool(f, "enabled", d.enabled);
   read_integer(f, "domain", d.domain, Bounds::closed(0, 232));
   if (f["interface"].exists()) d.interface = f["interface"].string();
-  if (f["config"].exists()) d.config = f["config"].string();
+  if (f["config"].exists()) d.config_file = f["config"].string();
   read_number(f, "rate_hz", d.rate_hz, Bounds::positive());
   if (d.rate_hz > 1.0 / control_period + 1e-9)
     f["rate_hz"].fail(fmt::format("at most the control rate ({:g} Hz)", 1.0 / control_period));

@@ -15,7 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "media/run_video.hpp"
 #include "physics/platform_params.hpp"
+#include "twin/dds/dds_settings.hpp"
 
 namespace omnitwin::twin {
 
@@ -139,20 +141,15 @@ struct Expectation {
 // What a run produces besides its records (DESIGN §8): the video rendered after the run,
 // the HTML report, live DDS publishing. The command line (--video/--no-video, --no-report,
 // --dds) overrides these.
-struct VideoSpec {
+// The scenario sets width, height, fps and overview_inset of the renderer's own options.
+struct VideoSpec : media::VideoOptions {
   bool enabled = true;
-  int width = 640;            // [px], even
-  int height = 480;           // [px], even
-  double fps = 30;            // frames per simulated second
-  bool overview_inset = true; // the fixed overview camera as a picture-in-picture
 };
 
-struct DdsSpec {
+// The scenario sets domain, interface, config_file ("config:") and rate_hz (at most the
+// control rate) of the publisher's own settings.
+struct DdsSpec : DdsSettings {
   bool enabled = false;
-  int domain = -1;            // -1: $OMNITWIN_DDS_DOMAIN, else 0
-  std::string interface;      // e.g. "lo"; "": $OMNITWIN_DDS_INTERFACE, else Cyclone's choice
-  std::string config;         // a Cyclone DDS XML file (overrides interface)
-  double rate_hz = 100;       // state topics [Hz], at most the control rate
 };
 
 struct OutputsSpec {

@@ -19,21 +19,12 @@
 #include <thread>
 
 #include "twin/dds/dds_common.hpp"
+#include "twin/dds/dds_settings.hpp"
 #include "twin/dds/rate_decimator.hpp"
 #include "twin/dds/spsc_ring.hpp"
 #include "twin/run_state.hpp"
 
 namespace omnitwin::twin {
-
-struct DdsSettings {
-  int domain = -1;            // −1: $OMNITWIN_DDS_DOMAIN, else 0; otherwise 0..232
-  std::string interface;      // e.g. "lo"; "": $OMNITWIN_DDS_INTERFACE, else Cyclone's default
-                              // (which honours $CYCLONEDDS_URI)
-  std::string config_file;    // a Cyclone DDS XML file; overrides interface
-  double rate_hz = 100;       // state topics [Hz] (> 0), decimated by simulated time
-  std::size_t queue_capacity = 256;  // state samples the ring holds between the two threads
-  double finish_timeout_s = 1.0;     // finish(): longest wait for run events to be acknowledged [s]
-};
 
 class DdsPublisher {
  public:
