@@ -329,7 +329,7 @@ nlohmann::json OmniCanNetwork::slave_metrics() const {
 BusSample OmniCanNetwork::bus_sample() const {
   BusSample b;
   b.has_frames = true;
-  b.frames_tx = to_transport_;
+  b.frames_tx = to_transport_ + pending_.size();  // (any still batched are sent at the end)
   b.frames_rx = from_transport_;
   std::uint64_t bad = 0;
   for (std::size_t i = 0; i < 4; ++i) {
@@ -364,8 +364,8 @@ nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
   return {{"name", "can"},
           {"bit_rate", s_.bus.can.bit_rate},
           {"transport", transport_->spec()},
-          {"frames_tx", to_transport_ + pending_.size()},  // (any still batched are sent at the end)
-          {"frames_rx", from_transport_},
+          {"frames_tx", b.frames_tx},
+          {"frames_rx", b.frames_rx},
           {"frames", bus_.stats().frames},
           {"error_frames", bus_.stats().error_frames},
           {"lost_frames", lost_frames_},

@@ -56,15 +56,14 @@ class OmniCanNetwork {
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
   // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
   // tick), and the file is closed with the network, so SIGINT/SIGTERM leave it complete.
-  // In lockstep the slaves' frames for the transport are batched too (the master reads them
-  // only after its grant): flush_pcap() also hands them to the transport, all at once, so it
-  // must run before frames_to_transport() goes into a grant (the run calls it just before).
   void open_pcap(const std::string& path);
   void flush_pcap() {
-    flush_transport();
     if (pcap_) pcap_->flush();
   }
-  // Hands the batched frames to the transport (lockstep; nothing is batched in realtime).
+  // Hands the batched frames to the transport, all at once. In lockstep the slaves' frames
+  // are batched (the master reads them only after its grant), so this must run before
+  // frames_to_transport() goes into a grant (the run calls it just before); nothing is
+  // batched in realtime.
   void flush_transport();
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).

@@ -146,7 +146,7 @@ class Rig {
     collect();
   }
   // What the master can read: in lockstep the slaves' frames reach the transport when the run
-  // flushes them, before each grant (run.cpp: flush_pcap()); the rig's master reads here.
+  // flushes them, before each grant (run.cpp: flush_transport()); the rig's master reads here.
   void collect() {
     net->flush_transport();
     while (auto r = master.receive()) heard.push_back(*r);
@@ -496,7 +496,7 @@ TEST(OmniCanNetwork, LockstepHandsTheSlavesFramesOverAtTheFlushRealtimeAtOnce) {
     EXPECT_EQ(r.net->frames_to_transport(), lockstep ? 0u : 4u);
     EXPECT_EQ(r.net->bus_metrics(r.sched.now())["frames_tx"].get<std::uint64_t>(), 4u);  // sent or about to be
     EXPECT_EQ(can::receive_within(r.master, 0ms).has_value(), !lockstep);
-    r.net->flush_pcap();  // what the run does before each grant
+    r.net->flush_transport();  // what the run does before each grant
     EXPECT_EQ(r.net->frames_to_transport(), 4u);
     r.collect();
     EXPECT_EQ(r.heard.size(), lockstep ? 4u : 3u);  // realtime: one was taken above
