@@ -6,3 +6,16 @@ function(omnitwin_sources var dir)
   list(FILTER _srcs EXCLUDE REGEX ".*/main\\.cpp$")
   set(${var} ${_srcs} PARENT_SCOPE)
 endfunction()
+
+# omnitwin_library(NAME SRC...): a static library of the given sources, or an interface
+# library while a folder holds only headers. Sets OMNITWIN_LINK_KIND (PUBLIC or INTERFACE) in
+# the caller, for its target_link_libraries and target_include_directories calls.
+macro(omnitwin_library name)
+  if("${ARGN}" STREQUAL "")
+    add_library(${name} INTERFACE)
+    set(OMNITWIN_LINK_KIND INTERFACE)
+  else()
+    add_library(${name} STATIC ${ARGN})
+    set(OMNITWIN_LINK_KIND PUBLIC)
+  endif()
+endmacro()
