@@ -1,0 +1,119 @@
+// bus_emulators/ethercat — distributed clocks (see ec_dc.hpp).
+#include "bus_emulators/ethercat/ec_dc.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace omnitwin::ethercat {
+
+DcClock::DcClock(double drift, std::int64_t local_at_start, SimTime start)
+    : drift_(drift), local_at_start_(local_at_start) {
+  reset(start);
+}
+
+void DcClock::reset(SimTime t) {
+  anchor_t_ = t;
+  anchor_local_ = local_at_start_;
+  corr_ = 0;
+  rate_ = 1.0 + drift_;
+  offset_ = 0;
+  delay_ = 0;
+  diff_ = 0;
+  have_prev_ = false;
+  sync0_active_ = false;
+  next_sync0_ = 0;
+  cycle0_ = 0;
+}
+
+std::int64_t DcClock::local(SimTime t) const {
+  const long double dt = static_cast<long double>(t - anchor_t_);
+  return anchor_local_ + static_cast<std::int64_t>(std::llround(dt * rate_));
+}
+
+SimTime DcClock::sim_time_of_system(std::int64_t s) const {
+  // The first sim time at which system() reaches s (estimate, then exact on the rounding).
+  const long double dl = static_cast<long double>(s - static_cast<std::int64_t>(offset_) - anchor_local_);
+  SimTime t = anchor_t_ + static_cast<SimTime>(std::ceil(dl / rate_));
+  for (int i = 0; i < 4 && system(t - 1) >= s; ++i) --t;
+  for (int i = 0; i < 4 && system(t) < s; ++i) ++t;
+  return t;
+}
+
+void DcClock::set_drift(double drift, SimTime t) {
+  anchor_local_ = local(t);
+  anchor_t_ = t;
+  drift_ = drift;
+  rate_ = 1.0 + drift_ + corr_;
+}
+
+void DcClock::reanchor(SimTime t) {
+  anchor_local_ = local(t);
+  anchor_t_ = t;
+  rate_ = 1.0 + drift_ + corr_;
+}
+
+void DcClock::reset_loop(SimTime t) {
+  corr_ = 0;
+  reanchor(t);
+  have_prev_ = false;
+  diff_ = 0;
+}
+
+void DcClock::set_offset(std::uint64_t o) {
+  offset_ = o;
+  have_prev_ = false;  // a step of the offset is not a drift: no proportional kick from it
+}
+
+void DcClock::sample(std::uint64_t received, bool wide, SimTime t) {
+  const std::uint64_t expected = received + delay_;
+  const auto mine = static_cast<std::uint64_t>(system(t));
+  std::int64_t e = 0;
+  if (wide) {
+    e = static_cast<std::int64_t>(mine - expected);
+  } else {
+    e = static_cast<std::int32_t>(static_cast<std::uint32_t>(mine) - static_cast<std::uint32_t>(expected));
+  }
+  diff_ = e;
+  if (have_prev_ && t > prev_sample_t_) {
+    const double h = static_cast<double>(t - prev_sample_t_);
+    corr_ -= (kKi * static_cast<double>(e) + kKp * static_cast<double>(e - prev_diff_)) / h;
+    corr_ = std::clamp(corr_, -kMaxCorrection, kMaxCorrection);
+    reanchor(t);
+  }
+  prev_diff_ = e;
+  prev_sample_t_ = t;
+  have_prev_ = true;
+}
+
+std::uint32_t DcClock::difference_register() const {
+  const std::int64_t mag = diff_ < 0 ? -diff_ : diff_;
+  auto v = static_cast<std::uint32_t>(std::min<std::int64_t>(mag, 0x7FFFFFFF));
+  if (diff_ < 0) v |= 0x80000000u;
+  return v;
+}
+
+void DcClock::configure_sync(std::uint8_t activation, std::uint64_t start, std::uint32_t cycle0, SimTime t) {
+  cycle0_ = cycle0;
+  sync0_active_ = (activation & 0x03) == 0x03;
+  if (!sync0_active_) return;
+  next_sync0_ = start;
+  const auto now = static_cast<std::uint64_t>(system(t));
+  if (next_sync0_ < now && cycle0_ > 0) {
+    const std::uint64_t k = (now - next_sync0_ + cycle0_ - 1) / cycle0_;
+    next_sync0_ += k * cycle0_;
+  }
+}
+
+bool DcClock::pop_sync0(SimTime t, SimTime& when) {
+  if (!sync0_active_) return false;
+  if (static_cast<std::uint64_t>(system(t)) < next_sync0_) return false;
+  when = std::min(t, sim_time_of_system(static_cast<std::int64_t>(next_sync0_)));
+  if (cycle0_ == 0) {
+    sync0_active_ = false;
+  } else {
+    next_sync0_ += cycle0_;
+  }
+  return true;
+}
+
+}  // namespace omnitwin::ethercat

@@ -1,0 +1,87 @@
+// bus_emulators/ethercat — distributed clocks of one ESC: a drifting local clock, the system
+// time (local + offset 0x0920), the drift control loop and the SYNC0 cyclic unit.
+//
+// Local clock: local(t) = anchor_local + (t − anchor_t)·(1 + drift + correction), where drift is
+// the oscillator's own error (e.g. ±50 ppm) and correction the control loop's speed adjustment.
+// The clock is re-anchored whenever the correction changes, so it stays continuous and
+// monotonic (the loop never steps the time, as on a real ESC).
+//
+// Drift control: each write of the reference clock's system time to 0x0910 (the master's FRMW)
+// is a sample e = system(t) − (received + delay 0x0928). 0x092C shows |e| with bit 31 set when
+// the local copy is smaller. The loop is a second-order (PI) rate control:
+//   correction += −(Ki·e + Kp·(e − e_prev)) / h      (h: time since the previous sample)
+// with Kp = 0.1, Ki = 0.005 (closed-loop poles ≈ 0.95 per sample: a 1 ms FRMW cycle settles in
+// a few hundred ms, like a real ESC with its default speed-counter start) and the correction
+// limited to ±1000 ppm. Writing 0x0930 (speed counter start) resets the loop (correction 0);
+// writing the offset 0x0920 makes the next sample start afresh (no proportional kick). A constant
+// oscillator drift is cancelled with no residual error (integral action).
+//
+// SYNC0: activation 0x0981 (bit 0 cyclic unit, bit 1 SYNC0) starts pulses at the start time
+// 0x0990 (system time), then every cycle 0x09A0 ns (0 = a single pulse). Model choice: a start
+// time already in the past starts at the next cycle boundary after now (a real ESC would wait
+// for its 32-bit compare to wrap).
+#pragma once
+
+#include <cstdint>
+
+#include "bus_emulators/ethercat/ec_frame.hpp"
+
+namespace omnitwin::ethercat {
+
+class DcClock {
+ public:
+  static constexpr double kKp = 0.1;
+  static constexpr double kKi = 0.005;
+  static constexpr double kMaxCorrection = 1e-3;
+
+  DcClock(double drift = 0, std::int64_t local_at_start = 0, SimTime start = 0);
+
+  void reset(SimTime t);                        // power on at t: local time restarts
+  void set_drift(double drift, SimTime t);      // the oscillator changes at t (clock continuous)
+  double drift() const { return drift_; }
+  std::int64_t local(SimTime t) const;          // [ns]
+  std::int64_t system(SimTime t) const { return local(t) + static_cast<std::int64_t>(offset_); }
+  SimTime sim_time_of_system(std::int64_t system_time) const;  // inverse of system()
+
+  void set_offset(std::uint64_t o);  // also forgets the previous sample
+  std::uint64_t offset() const { return offset_; }
+  void set_delay(std::uint32_t d) { delay_ = d; }
+  std::uint32_t delay() const { return delay_; }
+
+  // A reference-time sample (write to 0x0910) arriving at t; wide: 64-bit write, else the low
+  // 32 bits are compared. Real-time safe.
+  void sample(std::uint64_t received, bool wide, SimTime t);
+  void reset_loop(SimTime t);  // speed-counter start written: correction 0, no previous sample
+  std::int64_t last_difference() const { return diff_; }  // e [ns]
+  std::uint32_t difference_register() const;               // 0x092C
+  double correction() const { return corr_; }
+
+  // SYNC0.
+  void configure_sync(std::uint8_t activation, std::uint64_t start, std::uint32_t cycle0, SimTime t);
+  bool sync0_active() const { return sync0_active_; }
+  std::uint64_t next_sync0() const { return next_sync0_; }  // system time
+  std::uint32_t sync0_cycle() const { return cycle0_; }
+  // Next pulse due at or before t: its sim time; advances the schedule. false when none.
+  bool pop_sync0(SimTime t, SimTime& when);
+
+ private:
+  void reanchor(SimTime t);
+
+  double drift_;
+  std::int64_t local_at_start_;
+  SimTime anchor_t_ = 0;
+  std::int64_t anchor_local_ = 0;
+  double rate_ = 1.0;
+  double corr_ = 0;
+  std::uint64_t offset_ = 0;
+  std::uint32_t delay_ = 0;
+  std::int64_t diff_ = 0;
+  std::int64_t prev_diff_ = 0;
+  SimTime prev_sample_t_ = 0;
+  bool have_prev_ = false;
+  bool sync0_active_ = false;
+  std::uint64_t next_sync0_ = 0;
+  std::uint32_t cycle0_ = 0;
+};
+
+}  // namespace omnitwin::ethercat
