@@ -1,0 +1,546 @@
+// bus_emulators/ethercat/device — DriveSlave, the servo slave firmware (see ec_slave.hpp).
+#include "bus_emulators/ethercat/device/ec_slave.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "bus_emulators/ethercat/device/ec_sii.hpp"
+
+namespace omnitwin::ethercat {
+
+const char* to_string(SlaveApp a) {
+  switch (a) {
+    case SlaveApp::cia402: return "cia402";
+    case SlaveApp::multiaxis: return "multiaxis";
+  }
+  return "?";
+}
+
+namespace {
+
+constexpr std::uint16_t kRxAssign = 0x1C12, kTxAssign = 0x1C13;
+constexpr std::size_t kCoeMailboxMax = 1024;
+
+// Multi-axis module objects of slot k (seed 001): command 0x7000 + 0x10·k, status 0x6000 + 0x10·k,
+// parameters 0x8000 + 0x10·k. Layout: docs/protocols/ethercat-multiaxis.md.
+constexpr std::uint16_t kCmdModule = 0x7000, kStatusModule = 0x6000, kAxisParams = 0x8000;
+constexpr std::uint16_t kHdrHandshake = 0x8000;
+constexpr std::uint16_t kCtlEnable = 0x0001, kCtlReset = 0x0002, kCtlStop = 0x0004;
+constexpr std::uint16_t kStEnabled = 0x0001, kStAlarm = 0x0002, kStReady = 0x0004, kStReached = 0x0008,
+                        kStHomed = 0x0010, kStFollowing = 0x0020, kStAddress = 0x0040, kStMode = 0x0080,
+                        kStQuickStop = 0x0100;
+enum WorkMode : std::uint8_t { wm_idle = 0, wm_position = 1, wm_velocity = 2, wm_homing = 3, wm_encoder = 4 };
+
+std::int8_t cia_mode(std::uint8_t work_mode) {
+  switch (work_mode) {
+    case wm_position: return static_cast<std::int8_t>(drive::Mode::csp);
+    case wm_velocity: return static_cast<std::int8_t>(drive::Mode::csv);
+    case wm_homing: return static_cast<std::int8_t>(drive::Mode::hm);
+    default: return static_cast<std::int8_t>(drive::Mode::none);
+  }
+}
+
+void copy_bits(std::uint8_t* dst, std::uint32_t dst_bit, const std::uint8_t* src, std::uint32_t src_bit,
+               std::uint32_t bits) noexcept {
+  if ((dst_bit | src_bit | bits) % 8 == 0) {
+    std::memcpy(dst + dst_bit / 8, src + src_bit / 8, bits / 8);
+    return;
+  }
+  for (std::uint32_t i = 0; i < bits; ++i) {
+    const std::uint32_t s = src_bit + i, d = dst_bit + i;
+    const bool v = (src[s >> 3] >> (s & 7)) & 1;
+    const auto m = static_cast<std::uint8_t>(1u << (d & 7));
+    dst[d >> 3] = static_cast<std::uint8_t>(v ? (dst[d >> 3] | m) : (dst[d >> 3] & ~m));
+  }
+}
+
+}  // namespace
+
+DriveSlave::DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& config) : desc_(desc), cfg_(config) {
+  app_ = desc.profile == 5001 ? SlaveApp::multiaxis : SlaveApp::cia402;
+  const int axes = cfg_.axes == 0 ? desc.axes : cfg_.axes;
+  if (axes < 1 || axes > desc.axes)
+    throw EsiError(fmt::format("{}: {} axes configured, '{}' has 1..{}", desc.source, axes, desc.name, desc.axes));
+  sm_mbx_out_ = desc.sm_of_kind(SmKind::mbox_out);
+  sm_mbx_in_ = desc.sm_of_kind(SmKind::mbox_in);
+  sm_out_ = desc.sm_of_kind(SmKind::outputs);
+  sm_in_ = desc.sm_of_kind(SmKind::inputs);
+  if (sm_mbx_out_ < 0 || sm_mbx_in_ < 0 || !desc.coe.present)
+    throw EsiError(fmt::format("{}: '{}' has no CoE mailbox SyncManagers", desc.source, desc.name));
+  if (sm_out_ < 0 || sm_in_ < 0)
+    throw EsiError(fmt::format("{}: '{}' has no Outputs/Inputs SyncManagers", desc.source, desc.name));
+  axes_.reserve(static_cast<std::size_t>(axes));
+  for (int a = 0; a < axes; ++a) axes_.push_back(std::make_unique<drive::Cia402Drive>(cfg_.drive));
+  cards_.assign(static_cast<std::size_t>(axes), Card{});
+
+  // The SII describes the fitted axes only: PDOs of absent cards are not assigned by default.
+  if (app_ == SlaveApp::multiaxis) {
+    for (auto& p : desc_.rx_pdos)
+      if (p.index - 0x1600 >= axes) p.sm = -1;
+    for (auto& p : desc_.tx_pdos)
+      if (p.index - 0x1A00 >= axes) p.sm = -1;
+  }
+  build_od();
+  install_pdo_checks();
+  if (!build_layout(true, rx_) || !build_layout(false, tx_))
+    throw EsiError(fmt::format("{}: '{}': default PDO assignment maps absent objects", desc.source, desc.name));
+  in_image_.assign(kCoeMailboxMax, 0);
+
+  CoeServerConfig cc;
+  cc.sdo_info = desc.coe.sdo_info;
+  cc.complete_access = desc.coe.complete_access;
+  cc.mailbox_size = kCoeMailboxMax;
+  coe_ = std::make_unique<CoeServer>(od_, cc);
+  coe_->set_mailbox_size(desc.sms[static_cast<std::size_t>(sm_mbx_in_)].size);
+
+  EscConfig ec = cfg_.esc;
+  ec.sii = build_sii(desc_, cfg_.alias, cfg_.serial);
+  esc_ = std::make_unique<Esc>(std::move(ec), this);
+}
+
+void DriveSlave::build_od() {
+  od_.add_from_esi(desc_);
+  if (auto* e = od_.entry(0x1018, 4)) e->set_int(static_cast<std::int64_t>(cfg_.serial));
+  if (app_ == SlaveApp::cia402) {
+    // Axes beyond the ESI's own objects get copies of axis 0's profile objects at +0x800·a.
+    std::vector<OdObject> base;
+    for (const auto& o : od_.objects())
+      if (o.index >= 0x6000 && o.index < 0x6000 + kAxisOffset) base.push_back(o);
+    for (int a = 1; a < axes(); ++a)
+      for (const auto& o : base) {
+        const auto idx = static_cast<std::uint16_t>(o.index + kAxisOffset * a);
+        if (od_.find(idx)) continue;
+        OdObject c = o;
+        c.index = idx;
+        od_.add(std::move(c));
+      }
+    for (int a = 0; a < axes(); ++a) bind_cia402_axis(a);
+  } else {
+    for (int a = 0; a < axes(); ++a) bind_multiaxis_axis(a);
+    if (auto* e = od_.entry(kRxAssign, 0)) e->set_int(axes());
+    if (auto* e = od_.entry(kTxAssign, 0)) e->set_int(axes());
+  }
+}
+
+void DriveSlave::bind_cia402_axis(int a) {
+  auto& o = axes_[static_cast<std::size_t>(a)]->objects();
+  const auto off = static_cast<std::uint16_t>(kAxisOffset * a);
+  auto b = [&](std::uint16_t idx, std::uint8_t sub, auto& field) { od_.bind(static_cast<std::uint16_t>(idx + off), sub, field); };
+  b(0x603F, 0, o.error_code);
+  b(0x6040, 0, o.controlword);
+  b(0x6041, 0, o.statusword);
+  b(0x605A, 0, o.quick_stop_option);
+  b(0x605D, 0, o.halt_option);
+  b(0x605E, 0, o.fault_reaction_option);
+  b(0x6060, 0, o.mode);
+  b(0x6061, 0, o.mode_display);
+  b(0x6062, 0, o.position_demand);
+  b(0x6064, 0, o.position_actual);
+  b(0x6065, 0, o.following_error_window);
+  b(0x6066, 0, o.following_error_timeout);
+  b(0x6067, 0, o.position_window);
+  b(0x6068, 0, o.position_window_time);
+  b(0x606B, 0, o.velocity_demand);
+  b(0x606C, 0, o.velocity_actual);
+  b(0x606D, 0, o.velocity_window);
+  b(0x606E, 0, o.velocity_window_time);
+  b(0x606F, 0, o.velocity_threshold);
+  b(0x6071, 0, o.target_torque);
+  b(0x6072, 0, o.max_torque);
+  b(0x6074, 0, o.torque_demand);
+  b(0x6077, 0, o.torque_actual);
+  b(0x607A, 0, o.target_position);
+  b(0x607C, 0, o.home_offset);
+  b(0x607D, 1, o.sw_limit_min);
+  b(0x607D, 2, o.sw_limit_max);
+  b(0x607E, 0, o.polarity);
+  b(0x607F, 0, o.max_profile_velocity);
+  b(0x6080, 0, o.max_motor_speed);
+  b(0x6081, 0, o.profile_velocity);
+  b(0x6082, 0, o.end_velocity);
+  b(0x6083, 0, o.profile_acceleration);
+  b(0x6084, 0, o.profile_deceleration);
+  b(0x6085, 0, o.quick_stop_deceleration);
+  b(0x6087, 0, o.torque_slope);
+  b(0x6098, 0, o.homing_method);
+  b(0x6099, 1, o.homing_speed_switch);
+  b(0x6099, 2, o.homing_speed_zero);
+  b(0x609A, 0, o.homing_acceleration);
+  b(0x60B1, 0, o.velocity_offset);
+  b(0x60B2, 0, o.torque_offset);
+  b(0x60F4, 0, o.following_error_actual);
+  b(0x60FD, 0, o.digital_inputs);
+  b(0x60FE, 1, o.digital_outputs);
+  b(0x60FE, 2, o.digital_outputs_mask);
+  b(0x60FF, 0, o.target_velocity);
+  b(0x6502, 0, o.supported_modes);
+  // 0x6060 accepts only the advertised modes (0 = none).
+  if (OdObject* m = od_.find(static_cast<std::uint16_t>(0x6060 + off))) {
+    drive::Cia402Drive* d = axes_[static_cast<std::size_t>(a)].get();
+    m->check = [d](const OdObject&, std::uint8_t, std::span<const std::uint8_t> data) {
+      const auto v = static_cast<std::int8_t>(data[0]);
+      if (v == 0) return SdoAbort::none;
+      if (v < 1 || v > 10 || !(d->objects().supported_modes & (1u << (v - 1)))) return SdoAbort::value_range;
+      return SdoAbort::none;
+    };
+  }
+}
+
+void DriveSlave::bind_multiaxis_axis(int a) {
+  auto& o = axes_[static_cast<std::size_t>(a)]->objects();
+  const auto idx = static_cast<std::uint16_t>(kAxisParams + 0x10 * a);
+  od_.bind(idx, 1, o.homing_method);
+  od_.bind(idx, 2, o.homing_speed_switch);
+  od_.bind(idx, 3, o.homing_speed_zero);
+  od_.bind(idx, 4, o.homing_acceleration);
+  od_.bind(idx, 5, o.following_error_window);
+  od_.bind(idx, 6, o.position_window);
+}
+
+void DriveSlave::install_pdo_checks() {
+  std::vector<std::uint16_t> indices;
+  for (const auto& o : od_.objects()) indices.push_back(o.index);
+  for (const std::uint16_t i : indices) {
+    OdObject* p = od_.find(i);
+    if ((i >= 0x1600 && i <= 0x17FF) || (i >= 0x1A00 && i <= 0x1BFF)) {
+      p->check = [this](const OdObject& obj, std::uint8_t sub, std::span<const std::uint8_t> data) {
+        return check_mapping(obj, sub, data);
+      };
+    } else if (i == kRxAssign || i == kTxAssign) {
+      p->check = [this](const OdObject& obj, std::uint8_t sub, std::span<const std::uint8_t> data) {
+        return check_assign(obj, sub, data);
+      };
+    }
+  }
+}
+
+SdoAbort DriveSlave::check_mapping(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const {
+  const bool rx = o.index < 0x1A00;
+  if (sub == 0) {
+    const std::uint8_t n = data[0];
+    if (n > o.max_subindex()) return SdoAbort::value_range;
+    std::uint32_t bits = 0;
+    for (std::uint8_t s = 1; s <= n; ++s) {
+      const OdEntry* e = o.entry(s);
+      if (!e) return SdoAbort::value_range;
+      bits += static_cast<std::uint32_t>(e->as_int() & 0xFF);
+    }
+    if (bits > 8 * 256) return SdoAbort::pdo_length_exceeded;
+    return SdoAbort::none;
+  }
+  if (o.entry(0) && o.entry(0)->as_int() != 0) return SdoAbort::subindex0_not_zero;
+  std::uint32_t v = 0;
+  std::memcpy(&v, data.data(), std::min<std::size_t>(data.size(), 4));
+  const auto idx = static_cast<std::uint16_t>(v >> 16);
+  const auto s = static_cast<std::uint8_t>(v >> 8);
+  const auto bits = static_cast<std::uint8_t>(v);
+  if (bits == 0) return SdoAbort::param_incompatible;
+  if (idx == 0) return SdoAbort::none;  // padding
+  const OdObject* target = od_.find(idx);
+  if (!target) return SdoAbort::no_object;
+  const OdEntry* e = target->entry(s);
+  if (!e) return SdoAbort::no_subindex;
+  if (!(e->access & (rx ? od_access::rxpdo : od_access::txpdo))) return SdoAbort::not_mappable;
+  if (e->bits != bits) return SdoAbort::param_incompatible;
+  return SdoAbort::none;
+}
+
+SdoAbort DriveSlave::check_assign(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const {
+  if (sub == 0) return data[0] > o.max_subindex() ? SdoAbort::value_range : SdoAbort::none;
+  if (o.entry(0) && o.entry(0)->as_int() != 0) return SdoAbort::subindex0_not_zero;
+  std::uint16_t v = 0;
+  std::memcpy(&v, data.data(), std::min<std::size_t>(data.size(), 2));
+  const bool rx = o.index == kRxAssign;
+  const bool in_range = rx ? (v >= 0x1600 && v <= 0x17FF) : (v >= 0x1A00 && v <= 0x1BFF);
+  if (!in_range || !od_.find(v)) return SdoAbort::value_range;
+  return SdoAbort::none;
+}
+
+std::size_t DriveSlave::assigned_bits(bool rx) const {
+  std::size_t bits = 0;
+  const OdObject* as = od_.find(rx ? kRxAssign : kTxAssign);
+  if (!as || !as->entry(0)) return 0;
+  const auto n = as->entry(0)->as_int();
+  for (std::int64_t i = 1; i <= n; ++i) {
+    const OdEntry* pe = as->entry(static_cast<std::uint8_t>(i));
+    if (!pe) continue;
+    const OdObject* map = od_.find(static_cast<std::uint16_t>(pe->as_int()));
+    if (!map || !map->entry(0)) continue;
+    for (std::int64_t k = 1; k <= map->entry(0)->as_int(); ++k)
+      if (const OdEntry* me = map->entry(static_cast<std::uint8_t>(k))) bits += static_cast<std::size_t>(me->as_int() & 0xFF);
+  }
+  return bits;
+}
+
+std::size_t DriveSlave::output_bytes() const { return (assigned_bits(true) + 7) / 8; }
+std::size_t DriveSlave::input_bytes() const { return (assigned_bits(false) + 7) / 8; }
+
+bool DriveSlave::build_layout(bool rx, std::vector<PdoSlot>& out) const {
+  out.clear();
+  const OdObject* as = od_.find(rx ? kRxAssign : kTxAssign);
+  if (!as || !as->entry(0)) return true;
+  std::uint32_t at = 0;
+  const auto n = as->entry(0)->as_int();
+  for (std::int64_t i = 1; i <= n; ++i) {
+    const OdEntry* pe = as->entry(static_cast<std::uint8_t>(i));
+    if (!pe) return false;
+    const OdObject* map = od_.find(static_cast<std::uint16_t>(pe->as_int()));
+    if (!map || !map->entry(0)) return false;
+    for (std::int64_t k = 1; k <= map->entry(0)->as_int(); ++k) {
+      const OdEntry* me = map->entry(static_cast<std::uint8_t>(k));
+      if (!me) return false;
+      const auto v = static_cast<std::uint32_t>(me->as_int());
+      PdoSlot slot;
+      slot.offset = at;
+      slot.bits = static_cast<std::uint16_t>(v & 0xFF);
+      const auto idx = static_cast<std::uint16_t>(v >> 16);
+      if (idx != 0) {
+        slot.entry = const_cast<ObjectDictionary&>(od_).entry(idx, static_cast<std::uint8_t>(v >> 8));
+        if (!slot.entry || slot.entry->bits != slot.bits) return false;
+      }
+      at += slot.bits;
+      out.push_back(slot);
+    }
+  }
+  return true;
+}
+
+OdState DriveSlave::od_state() const {
+  switch (esc_->al_state()) {
+    case AlState::safeop: return OdState::safeop;
+    case AlState::op: return OdState::op;
+    default: return OdState::preop;
+  }
+}
+
+AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
+  auto refuse = [&](AlStatusCode c) {
+    ++stats_.al_refused;
+    return c;
+  };
+  if (to == AlState::boot) return refuse(AlStatusCode::bootstrap_not_supported);
+  if (to == AlState::init) {
+    coe_->reset();
+    outputs_stopped();
+    return AlStatusCode::none;
+  }
+  if (from == AlState::init && to == AlState::preop) {
+    const SyncManager& out = esc_->sm(sm_mbx_out_);
+    const SyncManager& in = esc_->sm(sm_mbx_in_);
+    const bool ok = out.enabled && out.mailbox() && out.ecat_writes() && out.length >= 16 && in.enabled &&
+                    in.mailbox() && !in.ecat_writes() && in.length >= 16 &&
+                    !out.overlaps(in.start, in.length) && in.length <= kCoeMailboxMax;
+    if (!ok) return refuse(AlStatusCode::invalid_mailbox_config);
+    coe_->set_mailbox_size(in.length);
+    return AlStatusCode::none;
+  }
+  if (from == AlState::preop && to == AlState::safeop) {
+    const std::size_t ob = output_bytes(), ib = input_bytes();
+    const SyncManager& o = esc_->sm(sm_out_);
+    const SyncManager& i = esc_->sm(sm_in_);
+    const bool out_ok = ob == 0 ? (!o.enabled || o.length == 0)
+                                : (o.enabled && o.buffered() && o.ecat_writes() && o.length == ob);
+    if (!out_ok) return refuse(AlStatusCode::invalid_output_config);
+    const bool in_ok = ib == 0 ? (!i.enabled || i.length == 0)
+                               : (i.enabled && i.buffered() && !i.ecat_writes() && i.length == ib);
+    if (!in_ok) return refuse(AlStatusCode::invalid_input_config);
+    if (!build_layout(true, rx_) || !build_layout(false, tx_) || ib > in_image_.size())
+      return refuse(AlStatusCode::invalid_output_config);
+    if (app_ == SlaveApp::multiaxis) multiaxis_status();
+    pack_inputs();  // inputs valid from the first SAFE-OP read
+    (void)t;
+    return AlStatusCode::none;
+  }
+  if (to == AlState::preop || to == AlState::safeop) outputs_stopped();
+  return AlStatusCode::none;
+}
+
+void DriveSlave::on_mailbox(std::span<const std::uint8_t> mailbox, SimTime /*t*/) {
+  coe_->on_mailbox(mailbox, od_state(), esc_->sm_unit(sm_mbx_in_).full());
+  pump_mailbox();
+}
+
+void DriveSlave::on_outputs(std::span<const std::uint8_t> /*outputs*/, SimTime /*t*/) {
+  // Outputs are taken from the last complete SM2 buffer at the firmware cycle (seed 001: the
+  // slave reads the commands before t1 of its cycle), not at the moment the frame passes.
+}
+
+void DriveSlave::on_sync0(SimTime t) { firmware(t); }
+
+bool DriveSlave::sync0_driven() const { return (esc_->read8(0x0981) & 0x03) == 0x03; }
+
+void DriveSlave::cycle(SimTime t) noexcept {
+  pump_mailbox();
+  if (!sync0_driven()) firmware(t);
+}
+
+void DriveSlave::power_cycle(SimTime t) {
+  esc_->power_cycle(t);
+  coe_->reset();
+  for (auto& a : axes_) a->power_cycle();
+  od_.restore_defaults();
+  if (auto* e = od_.entry(0x1018, 4)) e->set_int(static_cast<std::int64_t>(cfg_.serial));
+  if (app_ == SlaveApp::multiaxis) {
+    if (auto* e = od_.entry(kRxAssign, 0)) e->set_int(axes());
+    if (auto* e = od_.entry(kTxAssign, 0)) e->set_int(axes());
+  }
+  build_layout(true, rx_);
+  build_layout(false, tx_);
+  cards_.assign(cards_.size(), Card{});
+  outputs_valid_ = false;
+}
+
+void DriveSlave::pump_mailbox() noexcept {
+  while (coe_->has_reply()) {
+    if (!esc_->post_mailbox(coe_->front())) break;
+    coe_->pop();
+    ++stats_.mailbox_posted;
+  }
+}
+
+void DriveSlave::outputs_stopped() noexcept {
+  if (!outputs_valid_) return;
+  outputs_valid_ = false;
+  for (auto& a : axes_) a->objects().controlword = 0;  // disable voltage: the drive stops
+  for (auto& c : cards_) c.prev_control = 0;
+}
+
+void DriveSlave::firmware(SimTime t) noexcept {
+  ++stats_.cycles;
+  pump_mailbox();
+  const AlState s = esc_->al_state();
+  if (s == AlState::op) {
+    const auto out = esc_->outputs();
+    const std::size_t need = (rx_.empty() ? 0 : (rx_.back().offset + rx_.back().bits + 7) / 8);
+    if (!out.empty() && out.size() >= need) {
+      for (const auto& slot : rx_)
+        if (slot.entry) copy_bits(slot.entry->data(), 0, out.data(), slot.offset, slot.bits);
+      outputs_valid_ = true;
+      ++stats_.outputs_applied;
+      if (app_ == SlaveApp::multiaxis) multiaxis_commands();
+    }
+  } else {
+    outputs_stopped();
+  }
+  if (hook_) hook_(t);
+  if (s == AlState::safeop || s == AlState::op) {
+    if (app_ == SlaveApp::multiaxis) multiaxis_status();
+    pack_inputs();
+  }
+}
+
+void DriveSlave::pack_inputs() noexcept {
+  const std::size_t n = tx_.empty() ? 0 : (tx_.back().offset + tx_.back().bits + 7) / 8;
+  std::fill_n(in_image_.begin(), n, 0);
+  for (const auto& slot : tx_)
+    if (slot.entry) copy_bits(in_image_.data(), slot.offset, slot.entry->data(), 0, slot.bits);
+  if (n) esc_->write_inputs(std::span<const std::uint8_t>(in_image_.data(), n));
+}
+
+void DriveSlave::multiaxis_commands() noexcept {
+  for (int k = 0; k < axes(); ++k) {
+    const auto ci = static_cast<std::uint16_t>(kCmdModule + 0x10 * k);
+    const OdEntry* h = od_.entry(ci, 1);
+    const OdEntry* c = od_.entry(ci, 2);
+    const OdEntry* v1 = od_.entry(ci, 3);
+    const OdEntry* v2 = od_.entry(ci, 4);
+    if (!h || !c || !v1 || !v2) continue;
+    const auto hdr = static_cast<std::uint16_t>(h->as_int());
+    const auto ctl = static_cast<std::uint16_t>(c->as_int());
+    const int addr = hdr & 0xFF;
+    Card& slot = cards_[static_cast<std::size_t>(k)];
+    slot.address_error = addr > axes();
+    if (slot.address_error) ++stats_.address_errors;
+    slot.card = (addr >= 1 && addr <= axes()) ? addr - 1 : -1;
+    if (slot.card < 0) continue;
+    Card& card = cards_[static_cast<std::size_t>(slot.card)];
+    drive::Cia402Drive& d = *axes_[static_cast<std::size_t>(slot.card)];
+    auto& o = d.objects();
+    // Work mode change with handshake: take the header's mode when its handshake bit differs
+    // from the acknowledged one; acknowledge once the drive displays the mode.
+    const auto mode = static_cast<std::uint8_t>((hdr >> 8) & 0x7F);
+    const std::uint8_t hs = (hdr & kHdrHandshake) ? 1 : 0;
+    card.mode_pending = false;
+    if (hs != card.handshake) {
+      if (mode > wm_encoder) {
+        card.mode_pending = true;  // rejected: reported, never acknowledged
+      } else {
+        o.mode = cia_mode(mode);
+        if (o.mode_display == o.mode) {
+          card.work_mode = mode;
+          card.handshake = hs;
+        }
+      }
+    }
+    switch (card.work_mode) {
+      case wm_position:
+        o.target_position = static_cast<std::int32_t>(v1->as_int());
+        o.velocity_offset = static_cast<std::int32_t>(v2->as_int());
+        break;
+      case wm_velocity:
+        o.target_velocity = static_cast<std::int32_t>(v1->as_int());
+        break;
+      default: break;
+    }
+    // Servo enable/reset/stop → CiA 402 controlword, one FSA step per cycle.
+    const drive::State st = d.state();
+    const bool reset_edge = (ctl & kCtlReset) && !(card.prev_control & kCtlReset);
+    std::uint16_t cw = 0x0006;
+    if (st == drive::State::fault || st == drive::State::fault_reaction_active) {
+      cw = reset_edge ? 0x0080 : 0x0000;
+    } else if (ctl & kCtlStop) {
+      cw = (st == drive::State::operation_enabled || st == drive::State::quick_stop_active) ? 0x0002 : 0x0000;
+    } else if (ctl & kCtlEnable) {
+      switch (st) {
+        case drive::State::ready_to_switch_on: cw = 0x0007; break;
+        case drive::State::switched_on:
+        case drive::State::operation_enabled: cw = 0x000F; break;
+        case drive::State::quick_stop_active: cw = 0x0000; break;
+        default: cw = 0x0006; break;
+      }
+      if (card.work_mode == wm_homing && cw == 0x000F && st == drive::State::operation_enabled) cw |= 0x0010;
+    }
+    o.controlword = cw;
+    card.prev_control = ctl;
+  }
+}
+
+void DriveSlave::multiaxis_status() noexcept {
+  for (int k = 0; k < axes(); ++k) {
+    const auto si = static_cast<std::uint16_t>(kStatusModule + 0x10 * k);
+    OdEntry* h = od_.entry(si, 1);
+    OdEntry* sw = od_.entry(si, 2);
+    OdEntry* v1 = od_.entry(si, 3);
+    OdEntry* v2 = od_.entry(si, 4);
+    if (!h || !sw || !v1 || !v2) continue;
+    const Card& slot = cards_[static_cast<std::size_t>(k)];
+    const int ci = slot.card >= 0 ? slot.card : k;
+    const Card& card = cards_[static_cast<std::size_t>(ci)];
+    const drive::Cia402Drive& d = *axes_[static_cast<std::size_t>(ci)];
+    const auto& o = d.objects();
+    const drive::State st = d.state();
+    h->set_int((ci + 1) | (card.work_mode << 8) | (card.handshake ? kHdrHandshake : 0));
+    std::uint16_t w = 0;
+    if (st == drive::State::operation_enabled) w |= kStEnabled;
+    if (st == drive::State::fault || st == drive::State::fault_reaction_active) w |= kStAlarm;
+    if (st == drive::State::ready_to_switch_on || st == drive::State::switched_on || st == drive::State::operation_enabled) w |= kStReady;
+    if (o.statusword & 0x0400) w |= kStReached;
+    if (d.homed()) w |= kStHomed;
+    if (o.error_code == drive::kErrorFollowing || (card.work_mode == wm_position && (o.statusword & 0x2000))) w |= kStFollowing;
+    if (slot.address_error) w |= kStAddress;
+    if (card.mode_pending) w |= kStMode;
+    if (st == drive::State::quick_stop_active) w |= kStQuickStop;
+    sw->set_int(w);
+    if (card.work_mode == wm_velocity) {
+      v1->set_int(o.velocity_actual);
+      v2->set_int(o.position_actual);
+    } else {
+      v1->set_int(o.position_actual);
+      v2->set_int(o.following_error_actual);
+    }
+  }
+}
+
+}  // namespace omnitwin::ethercat

@@ -1,0 +1,169 @@
+// bus_emulators/ethercat/device — the firmware of an emulated EtherCAT servo slave: an ESC
+// (ethercat/ec_esc) with N CiA 402 axes (drive/cia402_drive) behind it.
+//
+// DriveSlave is the EscApplication of one slave. From its DeviceDescription (ESI) it builds the
+// SII EEPROM image and the EscConfig, the object dictionary (ESI objects; CiA 402 objects of axis
+// a at index + 0x800·a bound to that axis' drive::Objects), the CoE server, and the PDO mapping
+// (assignment 0x1C12/0x1C13, mappings 0x16xx/0x1Axx: writable in PRE-OP when the ESI says so,
+// fixed otherwise). Two applications share this firmware (chosen by the ESI's ProfileNo):
+//  * cia402 (ProfileNo 402, models/ethercat/omnitwin_drive.xml): the PDOs map drive objects
+//    directly;
+//  * multiaxis (ProfileNo 5001, models/ethercat/omnitwin_multiaxis.xml): the multi-axis motion
+//    controller of seed 001: per axis card one 12-byte command data module and one 12-byte
+//    status data module (layout in docs/protocols/ethercat-multiaxis.md), translated each cycle
+//    to and from the axis' drive::Objects (controlword sequencing, modes, handshake).
+//
+// AL transitions the firmware checks (the ESC has already refused illegal ones):
+//   INIT → PRE-OP     SM0/SM1 enabled mailboxes (SM0 master-write, SM1 master-read), ≥ 16 bytes,
+//                     not overlapping; else 0x0016. The CoE reply size becomes SM1's length.
+//   PRE-OP → SAFE-OP  the assigned PDOs' sizes: SM2 (outputs) enabled, buffered, master-write,
+//                     length = RxPDO bytes, else 0x001D; SM3 likewise for TxPDO bytes, else 0x001E
+//                     (a direction with 0 bytes may be disabled). The process-data layout is
+//                     fixed here.
+//   SAFE-OP → OP      accepted; outputs are applied from then on.
+//   → INIT / PRE-OP   CoE transfers dropped (INIT), outputs no longer applied, axes' controlwords
+//                     set to 0 (the drives disable), as a real drive does when outputs stop.
+// The firmware cycle (cycle(t), or on_sync0(t) while DC SYNC0 is active): pending CoE replies
+// posted to SM1; in OP the last complete SM2 buffer is unpacked into the OD entries it maps
+// (the axes' Objects); the cycle hook runs (the twin steps the drives there, or separately
+// between cycles when no hook is set); in SAFE-OP/OP the TxPDO entries are packed and written
+// to SM3.
+// Set-up allocates and throws EsiError on an unusable description; the cyclic path does not
+// allocate and never throws.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "bus_emulators/drive/cia402_drive.hpp"
+#include "bus_emulators/ethercat/device/ec_coe.hpp"
+#include "bus_emulators/ethercat/device/ec_esi.hpp"
+#include "bus_emulators/ethercat/device/ec_od.hpp"
+#include "bus_emulators/ethercat/ec_esc.hpp"
+
+namespace omnitwin::ethercat {
+
+enum class SlaveApp : std::uint8_t { cia402, multiaxis };
+const char* to_string(SlaveApp a);
+
+inline constexpr std::uint16_t kAxisOffset = 0x0800;  // CiA 402 multi-axis object offset
+
+struct DriveSlaveConfig {
+  int axes = 0;                   // axis cards fitted: 0 = the ESI's ChannelCount; 1..ChannelCount
+  drive::DriveConfig drive;       // every axis
+  std::uint16_t alias = 0;        // SII word 4
+  std::uint32_t serial = 0;       // SII serial, 0x1018:4
+  EscConfig esc;                  // ESC parameters; its sii is replaced by build_sii()
+};
+
+struct DriveSlaveStats {
+  std::uint64_t cycles = 0;             // firmware cycles run
+  std::uint64_t outputs_applied = 0;    // cycles in OP that unpacked outputs
+  std::uint64_t mailbox_posted = 0;     // replies handed to SM1
+  std::uint64_t al_refused = 0;         // AL requests refused by the firmware checks
+  std::uint64_t address_errors = 0;     // multiaxis: command modules addressing no fitted card
+};
+
+// One PDO entry in the process image: `bits` bits at bit `offset` of the image ↔ the OD entry.
+struct PdoSlot {
+  std::uint32_t offset = 0;
+  std::uint16_t bits = 0;
+  OdEntry* entry = nullptr;       // nullptr = padding
+};
+
+class DriveSlave final : public EscApplication {
+ public:
+  // Throws EsiError when the description has no mailbox SMs, no process-data SMs or PDOs that
+  // map absent objects, or config.axes is outside 1..ChannelCount.
+  DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& config);
+  DriveSlave(const DriveSlave&) = delete;
+  DriveSlave& operator=(const DriveSlave&) = delete;
+
+  Esc& esc() { return *esc_; }
+  const Esc& esc() const { return *esc_; }
+  int axes() const { return static_cast<int>(axes_.size()); }
+  drive::Cia402Drive& axis(int i) { return *axes_.at(static_cast<std::size_t>(i)); }
+  const drive::Cia402Drive& axis(int i) const { return *axes_.at(static_cast<std::size_t>(i)); }
+  ObjectDictionary& od() { return od_; }
+  const CoeServer& coe() const { return *coe_; }
+  SlaveApp app() const { return app_; }
+  const DeviceDescription& description() const { return desc_; }
+  const DriveSlaveStats& stats() const { return stats_; }
+
+  // Bytes of the assigned RxPDOs / TxPDOs with the current 0x1C12/0x1C13 and mappings.
+  std::size_t output_bytes() const;
+  std::size_t input_bytes() const;
+  // The layout fixed at the last PRE-OP → SAFE-OP (the construction defaults before).
+  std::span<const PdoSlot> rx_layout() const { return rx_; }
+  std::span<const PdoSlot> tx_layout() const { return tx_; }
+  // SM2/SM3 indices (from the ESI).
+  int output_sm() const { return sm_out_; }
+  int input_sm() const { return sm_in_; }
+
+  // The firmware cycle at t (see the header comment). While DC SYNC0 is active it only posts
+  // mailbox replies: the process-data part runs on the SYNC0 pulses. RT-safe.
+  void cycle(SimTime t) noexcept;
+  bool sync0_driven() const;      // 0x0981 has cyclic unit and SYNC0 active
+  // Power loss and return at t: the ESC to its power-on state, the axes to theirs, the object
+  // dictionary (PDO assignment and mapping included) to the ESI defaults, CoE transfers and
+  // replies dropped. Set-up path (no allocation, but not meant for every cycle).
+  void power_cycle(SimTime t);
+  // Called by every firmware cycle at its time t, after the outputs were unpacked into the axes'
+  // objects and before the inputs are packed: where the twin steps the drives (axis(i).step with
+  // physics feedback), so that a SYNC0-driven cycle steps them at the pulse. Empty: nothing is
+  // called (the caller steps the drives itself). Set-up call; the hook must be RT-safe.
+  using CycleHook = std::function<void(SimTime t)>;
+  void set_cycle_hook(CycleHook hook) { hook_ = std::move(hook); }
+
+  // EscApplication.
+  AlStatusCode on_al_request(AlState from, AlState to, SimTime t) override;
+  void on_mailbox(std::span<const std::uint8_t> mailbox, SimTime t) override;
+  void on_outputs(std::span<const std::uint8_t> outputs, SimTime t) override;
+  void on_sync0(SimTime t) override;
+
+ private:
+  void build_od();
+  void bind_cia402_axis(int a);
+  void bind_multiaxis_axis(int a);
+  void install_pdo_checks();
+  SdoAbort check_mapping(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
+  SdoAbort check_assign(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
+  std::size_t assigned_bits(bool rx) const;
+  bool build_layout(bool rx, std::vector<PdoSlot>& out) const;
+  void firmware(SimTime t) noexcept;
+  void pack_inputs() noexcept;
+  void pump_mailbox() noexcept;
+  void outputs_stopped() noexcept;
+  void multiaxis_commands() noexcept;
+  void multiaxis_status() noexcept;
+  OdState od_state() const;
+
+  DeviceDescription desc_;
+  DriveSlaveConfig cfg_;
+  SlaveApp app_ = SlaveApp::cia402;
+  int sm_mbx_out_ = 0, sm_mbx_in_ = 1, sm_out_ = 2, sm_in_ = 3;
+  std::vector<std::unique_ptr<drive::Cia402Drive>> axes_;
+  ObjectDictionary od_;
+  std::unique_ptr<CoeServer> coe_;
+  std::unique_ptr<Esc> esc_;
+  std::vector<PdoSlot> rx_, tx_;
+  std::vector<std::uint8_t> in_image_;
+  bool outputs_valid_ = false;    // OP and outputs being applied
+  // multiaxis per-card state
+  struct Card {
+    std::uint8_t handshake = 0;   // last acknowledged handshake bit
+    std::uint8_t work_mode = 0;   // active work mode
+    std::uint16_t prev_control = 0;
+    bool address_error = false;
+    int card = -1;                // card addressed by this slot's command module (-1: none)
+    bool mode_pending = false;
+  };
+  std::vector<Card> cards_;
+  CycleHook hook_;
+  DriveSlaveStats stats_;
+};
+
+}  // namespace omnitwin::ethercat
