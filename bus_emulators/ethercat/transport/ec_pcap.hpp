@@ -1,0 +1,84 @@
+// bus_emulators/ethercat/transport — EtherCAT capture files (pcap, LINKTYPE_ETHERNET = 1) that
+// Wireshark and tshark decode as `eth` → `ecatf` → `ecat`.
+//
+// Both directions of every exchange are recorded as the Ethernet frames a wire would carry,
+// whatever transport moved them (raw, UDP, in-process): the frame going out is addressed from
+// the master's MAC to ff:ff:ff:ff:ff:ff, the frame coming back has bit 1 of the first
+// source-MAC byte set (as ESCs mark it), both with EtherType 0x88A4 and padded with zeros to
+// 60 bytes. Frames already carrying their Ethernet header (a raw capture) can be written as
+// they are with write_frame().
+//
+// Written through libpcap (pcap_open_dead_with_tstamp_precision + pcap_dump_fopen) with
+// nanosecond timestamps taken from SimTime (the file gets the nanosecond pcap magic), so the
+// records line up with the simulated timeline. Buffered (a 64 KiB stdio buffer by default;
+// one EtherCAT cycle is one or two records): the file is valid after every flush() and after
+// close() or destruction; the file header is flushed when it is opened, so an empty capture
+// is valid too. A run that must survive SIGKILL sets flush_each_frame; SIGINT/SIGTERM end the
+// run normally and the destructor closes the file (as bus_emulators/can/can_pcap).
+//
+// write() and flush() never throw and allocate nothing (the record buffer is a member), so the
+// cyclic path may call them; a full stdio buffer costs one write(2).
+#pragma once
+
+#include "bus_emulators/ethercat/ec_frame.hpp"
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+
+namespace omnitwin::ethercat {
+
+enum class Direction : std::uint8_t { out, back };  // out: master → slaves; back: the returned frame
+const char* to_string(Direction d);
+
+// 00:00:5e:00:53:01, from the range RFC 7042 reserves for documentation: bit 1 of its first
+// byte is clear, so the marked source of returned frames (02:00:5e:00:53:01) differs from it.
+inline constexpr Mac kDefaultMasterMac = {0x00, 0x00, 0x5e, 0x00, 0x53, 0x01};
+
+class PcapWriter {
+ public:
+  struct Options {
+    Mac master_mac = kDefaultMasterMac;  // source of out frames (a raw master: its NIC's MAC)
+    bool flush_each_frame = false;       // true: every record reaches the kernel at once
+    std::size_t buffer_bytes = 64 * 1024;
+  };
+
+  // Creates/truncates `path`; throws std::runtime_error naming the path on failure.
+  explicit PcapWriter(const std::string& path);
+  PcapWriter(const std::string& path, Options options);
+  ~PcapWriter();
+  PcapWriter(const PcapWriter&) = delete;
+  PcapWriter& operator=(const PcapWriter&) = delete;
+
+  // Appends one PDU as an Ethernet frame stamped t [ns] (see the file comment for the
+  // addresses). Returns false once closed, for a PDU over kMaxPdu bytes (counted in
+  // refused()), or when flushing (flush_each_frame) failed. RT-safe.
+  bool write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir);
+  // Appends a whole Ethernet frame (header included) as it is, padded to 60 bytes if shorter.
+  bool write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir);
+  // Hands buffered records to the kernel; the file is valid afterwards. false on an I/O error.
+  bool flush();
+  void close();
+  bool is_open() const { return dumper_ != nullptr; }
+
+  std::uint64_t written() const { return written_[0] + written_[1]; }
+  std::uint64_t written(Direction d) const { return written_[static_cast<int>(d)]; }
+  std::uint64_t refused() const { return refused_; }
+  const std::string& path() const { return path_; }
+
+  static constexpr int kLinkType = 1;  // LINKTYPE_ETHERNET / DLT_EN10MB
+
+ private:
+  bool emit(std::size_t size, SimTime t, Direction dir);
+
+  std::string path_;
+  Options options_;
+  void* pcap_ = nullptr;    // pcap_t*, opaque so users need not include <pcap.h>
+  void* dumper_ = nullptr;  // pcap_dumper_t*
+  std::array<std::uint8_t, kEthHeaderSize + kMaxPdu> frame_{};
+  std::uint64_t written_[2] = {0, 0};
+  std::uint64_t refused_ = 0;
+};
+
+}  // namespace omnitwin::ethercat

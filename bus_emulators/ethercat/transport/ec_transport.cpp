@@ -1,0 +1,148 @@
+// bus_emulators/ethercat/transport — spec parsing, dispatch and the PDU check; see ec_transport.hpp.
+#include "bus_emulators/ethercat/transport/ec_transport.hpp"
+
+#include "bus_emulators/ethercat/ec_frame.hpp"
+#include "bus_emulators/ethercat/transport/ec_transport_mem.hpp"
+#include "bus_emulators/ethercat/transport/ec_transport_raw.hpp"
+#include "bus_emulators/ethercat/transport/ec_transport_udp.hpp"
+
+#include <net/if.h>
+#include <poll.h>
+
+#include <cerrno>
+
+#include <charconv>
+
+namespace omnitwin::ethercat {
+
+namespace {
+
+[[noreturn]] void bad(std::string_view spec, const std::string& why) {
+  throw TransportError("bad EtherCAT transport spec '" + std::string(spec) + "': " + why +
+                       " (expected raw:IFACE, udp:HOST[:PORT], udp:[HOST6][:PORT] or mem:NAME)");
+}
+
+void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
+  std::string_view host;
+  std::string_view port;
+  if (!rest.empty() && rest.front() == '[') {
+    const auto close = rest.find(']');
+    if (close == std::string_view::npos) bad(spec, "missing ']' after the IPv6 address");
+    host = rest.substr(1, close - 1);
+    const std::string_view after = rest.substr(close + 1);
+    if (!after.empty()) {
+      if (after.front() != ':') bad(spec, "expected ':PORT' after ']'");
+      port = after.substr(1);
+      if (port.empty()) bad(spec, "empty port");
+    }
+  } else {
+    const auto colon = rest.find(':');
+    if (colon != std::string_view::npos && rest.find(':', colon + 1) != std::string_view::npos)
+      bad(spec, "an IPv6 address must be written in brackets, e.g. udp:[::1]:34980");
+    host = rest.substr(0, colon);
+    if (colon != std::string_view::npos) {
+      port = rest.substr(colon + 1);
+      if (port.empty()) bad(spec, "empty port");
+    }
+  }
+  if (host.empty()) bad(spec, "empty host");
+  t.name = std::string(host);
+  long v = kUdpPort;
+  if (!port.empty()) {
+    const auto [p, ec] = std::from_chars(port.data(), port.data() + port.size(), v);
+    if (ec != std::errc{} || p != port.data() + port.size() || v < 1 || v > 65535) bad(spec, "port must be 1..65535");
+  }
+  t.port = static_cast<std::uint16_t>(v);
+}
+
+}  // namespace
+
+const char* to_string(Role r) {
+  switch (r) {
+    case Role::master: return "master";
+    case Role::slaves: return "slaves";
+  }
+  return "?";
+}
+
+std::string TransportSpec::canonical() const {
+  switch (kind) {
+    case Kind::raw: return "raw:" + name;
+    case Kind::udp:
+      return (name.find(':') != std::string::npos ? "udp:[" + name + "]:" : "udp:" + name + ":") + std::to_string(port);
+    case Kind::mem: return "mem:" + name;
+  }
+  return "?";
+}
+
+TransportSpec parse_transport_spec(std::string_view spec) {
+  const auto colon = spec.find(':');
+  if (colon == std::string_view::npos) bad(spec, "missing ':' after the transport kind");
+  const std::string_view kind = spec.substr(0, colon);
+  const std::string_view rest = spec.substr(colon + 1);
+  TransportSpec t;
+  if (kind == "raw") {
+    t.kind = TransportSpec::Kind::raw;
+    if (rest.empty()) bad(spec, "missing interface name");
+    if (rest.size() >= IF_NAMESIZE) bad(spec, "interface name longer than 15 characters");
+    if (rest.find_first_of(":/ ?&") != std::string_view::npos) bad(spec, "bad interface name");
+    t.name = std::string(rest);
+  } else if (kind == "udp") {
+    t.kind = TransportSpec::Kind::udp;
+    parse_udp(spec, rest, t);
+  } else if (kind == "mem") {
+    t.kind = TransportSpec::Kind::mem;
+    if (rest.empty()) bad(spec, "missing pair name");
+    t.name = std::string(rest);
+  } else {
+    bad(spec, "unknown transport '" + std::string(kind) + "'");
+  }
+  return t;
+}
+
+std::unique_ptr<EcTransport> open_transport(std::string_view spec, Role role) {
+  const TransportSpec t = parse_transport_spec(spec);
+  switch (t.kind) {
+    case TransportSpec::Kind::raw: return std::make_unique<RawTransport>(t.name, role);
+    case TransportSpec::Kind::udp: return std::make_unique<UdpTransport>(t, role);
+    case TransportSpec::Kind::mem: return std::make_unique<MemTransport>(t.name, role);
+  }
+  throw TransportError("unreachable transport kind");
+}
+
+PduCheck check_pdu(const std::uint8_t* data, std::size_t n, std::size_t& size) noexcept {
+  // The smallest PDU: the EtherCAT header and one datagram without data.
+  constexpr std::size_t kMinPdu = kEcatHeaderSize + kDatagramHeaderSize + kWkcSize;
+  if (n < kEcatHeaderSize) return PduCheck::malformed;
+  const std::uint16_t header = get_u16(data);
+  if ((header >> 12) != kPduTypeSlaves) return PduCheck::foreign;  // type 1: EtherCAT datagrams
+  const std::size_t length = header & 0x07FFu;
+  if (n < kMinPdu || length + kEcatHeaderSize < kMinPdu || length + kEcatHeaderSize > n) return PduCheck::malformed;
+  size = length + kEcatHeaderSize;
+  return PduCheck::ok;
+}
+
+namespace detail {
+
+int ReadableWaiter::wait(int fd) noexcept {
+  if (timeout_.count() <= 0) return 0;
+  const auto now = std::chrono::steady_clock::now();
+  if (!started_) {
+    started_ = true;
+    deadline_ = now + timeout_;
+  }
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline_ - std::chrono::steady_clock::now());
+    if (left.count() <= 0) return 0;
+    timespec ts{static_cast<time_t>(left.count() / 1'000'000'000), static_cast<long>(left.count() % 1'000'000'000)};
+    pollfd p{fd, POLLIN, 0};
+    const int r = ::ppoll(&p, 1, &ts, nullptr);
+    if (r > 0) return 1;
+    if (r == 0) return 0;
+    if (errno != EINTR) return -1;
+  }
+}
+
+}  // namespace detail
+
+}  // namespace omnitwin::ethercat

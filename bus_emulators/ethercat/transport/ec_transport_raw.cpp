@@ -1,0 +1,185 @@
+// bus_emulators/ethercat/transport — EtherCAT on raw Ethernet; see ec_transport_raw.hpp.
+#include "bus_emulators/ethercat/transport/ec_transport_raw.hpp"
+
+#include <arpa/inet.h>
+#include <linux/filter.h>
+#include <net/if_arp.h>
+#include <linux/if_packet.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <fmt/format.h>
+
+namespace omnitwin::ethercat {
+
+namespace {
+
+#ifndef PACKET_QDISC_BYPASS
+#define PACKET_QDISC_BYPASS 20  // Linux >= 3.14
+#endif
+#ifndef PACKET_IGNORE_OUTGOING
+#define PACKET_IGNORE_OUTGOING 23  // Linux >= 4.20
+#endif
+
+constexpr Mac kBroadcast = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
+constexpr std::uint8_t kZeros[kMinEthFrame] = {};
+
+std::string mac_text(const Mac& m) {
+  return fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}", m[0], m[1], m[2], m[3], m[4], m[5]);
+}
+
+}  // namespace
+
+RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions options) : ifname_(ifname), role_(role) {
+  const std::string spec = "raw:" + ifname_;
+  if (ifname_.empty() || ifname_.size() >= IFNAMSIZ)
+    throw TransportError(spec + ": bad interface name (1 to 15 characters)");
+  // Protocol 0 until bind(): the socket receives nothing before it is bound to the interface.
+  fd_ = ::socket(AF_PACKET, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (fd_ < 0) {
+    if (errno == EPERM || errno == EACCES)
+      throw TransportError(fmt::format("{}: opening a raw AF_PACKET socket needs root or CAP_NET_RAW ({})", spec,
+                                       std::strerror(errno)));
+    throw TransportError(fmt::format("{}: socket(AF_PACKET, SOCK_RAW): {}", spec, std::strerror(errno)));
+  }
+  const auto fail = [&](const std::string& what) {
+    const std::string m = fmt::format("{}: {}: {}", spec, what, std::strerror(errno));
+    ::close(fd_);
+    fd_ = -1;
+    throw TransportError(m);
+  };
+  ifreq ifr{};
+  std::memcpy(ifr.ifr_name, ifname_.c_str(), ifname_.size());
+  if (::ioctl(fd_, SIOCGIFINDEX, &ifr) != 0) fail("no network interface '" + ifname_ + "'");
+  ifindex_ = ifr.ifr_ifindex;
+  if (::ioctl(fd_, SIOCGIFHWADDR, &ifr) != 0) fail("SIOCGIFHWADDR");
+  if (ifr.ifr_hwaddr.sa_family != ARPHRD_ETHER) {
+    errno = EINVAL;
+    fail("'" + ifname_ + "' is not an Ethernet interface (use a veth pair or a NIC)");
+  }
+  std::memcpy(mac_.data(), ifr.ifr_hwaddr.sa_data, mac_.size());
+  write_eth_header(tx_hdr_.data(), kBroadcast, mac_);
+
+  // Best effort, each: the checks in receive() cover what the kernel does not do.
+  const int one = 1;
+  ::setsockopt(fd_, SOL_PACKET, PACKET_IGNORE_OUTGOING, &one, sizeof one);
+  if (options.qdisc_bypass)
+    qdisc_bypass_ = ::setsockopt(fd_, SOL_PACKET, PACKET_QDISC_BYPASS, &one, sizeof one) == 0;
+  // Keep: incoming frames (not OUTGOING) with EtherType 0x88A4 whose EtherCAT header type (high
+  // nibble of byte 15: the header is little endian) is 1. A frame too short to load byte 15
+  // ends the program, which drops it.
+  sock_filter prog[] = {
+      BPF_STMT(BPF_LD | BPF_W | BPF_ABS, static_cast<std::uint32_t>(SKF_AD_OFF + SKF_AD_PKTTYPE)),  // 0
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, PACKET_OUTGOING, 6, 0),                                    // 1 → 8
+      BPF_STMT(BPF_LD | BPF_H | BPF_ABS, 12),                                                        // 2
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, kEtherType, 0, 4),                                         // 3 → 8
+      BPF_STMT(BPF_LD | BPF_B | BPF_ABS, 15),                                                        // 4
+      BPF_STMT(BPF_ALU | BPF_AND | BPF_K, 0xF0),                                                     // 5
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, static_cast<std::uint32_t>(kPduTypeSlaves) << 4, 0, 1),   // 6
+      BPF_STMT(BPF_RET | BPF_K, 0xFFFFFFFFu),                                                        // 7 keep
+      BPF_STMT(BPF_RET | BPF_K, 0),                                                                  // 8 drop
+  };
+  sock_fprog fp{static_cast<unsigned short>(sizeof prog / sizeof prog[0]), prog};
+  kernel_filter_ = ::setsockopt(fd_, SOL_SOCKET, SO_ATTACH_FILTER, &fp, sizeof fp) == 0;
+
+  sockaddr_ll sll{};
+  sll.sll_family = AF_PACKET;
+  sll.sll_protocol = htons(kEtherType);
+  sll.sll_ifindex = ifindex_;
+  if (::bind(fd_, reinterpret_cast<sockaddr*>(&sll), sizeof sll) != 0) fail("bind");
+}
+
+RawTransport::~RawTransport() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::string RawTransport::describe() const {
+  return fmt::format("raw:{} ({}, {})", ifname_, to_string(role_), mac_text(mac_));
+}
+
+bool RawTransport::send(std::span<const std::uint8_t> pdu) {
+  if (pdu.size() > kMaxPdu || (role_ == Role::slaves && !have_peer_)) {
+    ++stats_.send_errors;
+    return false;
+  }
+  const std::uint8_t* hdr = role_ == Role::master ? tx_hdr_.data() : reply_hdr_.data();
+  const std::size_t used = kEthHeaderSize + pdu.size();
+  const std::size_t pad = used < kMinEthFrame ? kMinEthFrame - used : 0;
+  iovec iov[3] = {{const_cast<std::uint8_t*>(hdr), kEthHeaderSize},
+                  {const_cast<std::uint8_t*>(pdu.data()), pdu.size()},
+                  {const_cast<std::uint8_t*>(kZeros), pad}};
+  msghdr msg{};
+  msg.msg_iov = iov;
+  msg.msg_iovlen = pad > 0 ? 3 : 2;
+  for (;;) {
+    const ssize_t n = ::sendmsg(fd_, &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n == static_cast<ssize_t>(used + pad)) {
+      ++stats_.sent;
+      return true;
+    }
+    if (n < 0 && errno == EINTR) continue;
+    ++stats_.send_errors;  // ENETDOWN, ENOBUFS (driver queue full), ENXIO (interface gone), …
+    return false;
+  }
+}
+
+int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) {
+  detail::ReadableWaiter waiter(timeout);
+  // Bounded, so that a flood of frames we drop cannot hold the caller; fd stays readable then.
+  for (int budget = 256; budget > 0;) {
+    sockaddr_ll from{};
+    iovec iov[2] = {{rx_hdr_.data(), rx_hdr_.size()}, {buf.data(), buf.size()}};
+    msghdr msg{};
+    msg.msg_name = &from;
+    msg.msg_namelen = sizeof from;
+    msg.msg_iov = iov;
+    msg.msg_iovlen = 2;
+    // MSG_TRUNC: the return value is the frame's real length even when buf is smaller.
+    const ssize_t n = ::recvmsg(fd_, &msg, MSG_DONTWAIT | MSG_TRUNC);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      if (errno == EAGAIN || errno == EWOULDBLOCK) {
+        const int w = waiter.wait(fd_);
+        if (w > 0) continue;
+        if (w == 0) return 0;
+      }
+      ++stats_.receive_errors;
+      return -1;
+    }
+    --budget;
+    if (from.sll_pkttype == PACKET_OUTGOING) {
+      ++stats_.dropped_own;
+      continue;
+    }
+    if (static_cast<std::size_t>(n) < kEthHeaderSize) {
+      ++stats_.dropped_malformed;
+      continue;
+    }
+    if (((rx_hdr_[12] << 8) | rx_hdr_[13]) != kEtherType) {
+      ++stats_.dropped_foreign;
+      continue;
+    }
+    const std::size_t got = std::min(static_cast<std::size_t>(n) - kEthHeaderSize, buf.size());
+    std::size_t size = 0;
+    switch (check_pdu(buf.data(), got, size)) {
+      case PduCheck::ok: break;
+      case PduCheck::foreign: ++stats_.dropped_foreign; continue;
+      case PduCheck::malformed: ++stats_.dropped_malformed; continue;
+    }
+    if (role_ == Role::slaves) {
+      reply_hdr_ = rx_hdr_;
+      reply_hdr_[6] |= 0x02;  // bit 1 of the first source-MAC byte: "passed a slave"
+      have_peer_ = true;
+    }
+    ++stats_.received;
+    return static_cast<int>(size);
+  }
+  return 0;
+}
+
+}  // namespace omnitwin::ethercat

@@ -1,0 +1,118 @@
+// bus_emulators/ethercat/transport — a veth pair (two virtual Ethernet interfaces joined back
+// to back) that lives as long as the object: the twin puts its slaves on one end and gives the
+// master the other (bus ethercat, transport auto/veth), and raw-socket tests do the same.
+//
+// Names are unique per process and instance ("ot" + pid + counter + "a"/"b", at most 15
+// characters), so tests running in parallel (ctest -j: one process each) never share or delete
+// each other's interfaces; a leftover pair with the same names (a crashed earlier process with
+// the same pid) is deleted first. Both ends are brought up with IPv6 disabled on them (no router
+// solicitations or DAD frames on the wire). The destructor deletes the pair (deleting one end
+// deletes both), also when the test fails, since a failed assertion returns from the test body
+// and unwinds the fixture.
+//
+// Needs root (CAP_NET_ADMIN) and the `ip` tool: callers ask unavailable_reason() first (tests
+// call GTEST_SKIP() << *reason when it is set; the twin falls back to EtherCAT over UDP).
+// Set-up code only: runs `ip` as child processes.
+#pragma once
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+namespace omnitwin::ethercat {
+
+class VethPair {
+ public:
+  // Why veth pairs cannot be made here (not root, no `ip`, the kernel refuses a probe pair),
+  // or nothing when they can. The probe runs once per process.
+  static std::optional<std::string> unavailable_reason() {
+    static const std::optional<std::string> reason = probe();
+    return reason;
+  }
+
+  // Creates the pair, both ends up; throws std::runtime_error with `ip`'s message on failure.
+  VethPair() {
+    static std::atomic<int> counter{0};
+    const std::string base = "ot" + std::to_string(::getpid()) + std::to_string(counter++);
+    a_ = base + "a";
+    b_ = base + "b";
+    if (b_.size() > 15) throw std::runtime_error("veth name too long: " + b_);
+    run(ip() + " link del " + a_);  // a leftover of a crashed process with the same pid
+    if (const auto err = run(ip() + " link add " + a_ + " type veth peer name " + b_))
+      throw std::runtime_error("cannot create veth pair " + a_ + "/" + b_ + ": " + *err);
+    for (const std::string& n : {a_, b_}) {
+      std::ofstream(std::string("/proc/sys/net/ipv6/conf/") + n + "/disable_ipv6") << "1\n";  // best effort
+      if (const auto err = run(ip() + " link set " + n + " up")) {
+        run(ip() + " link del " + a_);
+        throw std::runtime_error("cannot bring up " + n + ": " + *err);
+      }
+    }
+  }
+  ~VethPair() { run(ip() + " link del " + a_); }
+  VethPair(const VethPair&) = delete;
+  VethPair& operator=(const VethPair&) = delete;
+
+  const std::string& a() const { return a_; }
+  const std::string& b() const { return b_; }
+
+  // Sets the MAC address of one end (e.g. "00:00:5e:00:53:01": the kernel's random veth
+  // addresses have bit 1 of the first byte set, which hides the slaves' source marking).
+  void set_address(const std::string& ifname, const std::string& mac) const {
+    if (const auto err = run(ip() + " link set dev " + ifname + " address " + mac))
+      throw std::runtime_error("cannot set the address of " + ifname + ": " + *err);
+  }
+
+  // Whether an interface of this name exists now.
+  static bool exists(const std::string& ifname) {
+    return ::access(("/sys/class/net/" + ifname).c_str(), F_OK) == 0;
+  }
+
+ private:
+  // Runs a shell command (our own names and addresses only: no quoting needed); nothing on
+  // success, else its output and exit status.
+  static std::optional<std::string> run(const std::string& cmd) {
+    FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
+    if (!p) return "popen failed for: " + cmd;
+    std::string out;
+    std::array<char, 256> buf{};
+    while (std::fgets(buf.data(), static_cast<int>(buf.size()), p)) out += buf.data();
+    const int status = ::pclose(p);
+    if (status == 0) return std::nullopt;
+    while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
+    return "'" + cmd + "' failed (status " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "): " + out;
+  }
+
+  // The `ip` program's path (PATH may lack the sbin folders), "ip" when none was found.
+  static const std::string& ip() {
+    static const std::string path = [] {
+      for (const char* dir : {"/usr/sbin/", "/sbin/", "/usr/bin/", "/bin/"})
+        if (::access((std::string(dir) + "ip").c_str(), X_OK) == 0) return std::string(dir) + "ip";
+      return std::string("ip");
+    }();
+    return path;
+  }
+
+  static std::optional<std::string> probe() {
+    if (::geteuid() != 0) return "veth pairs need root (CAP_NET_ADMIN); run the tests as root, as CI does";
+    if (ip() == "ip") return "the `ip` tool (iproute2) is not installed";
+    try {
+      VethPair probe;
+    } catch (const std::exception& e) {
+      return std::string("this kernel does not let us create veth pairs: ") + e.what();
+    }
+    return std::nullopt;
+  }
+
+  std::string a_;
+  std::string b_;
+};
+
+}  // namespace omnitwin::ethercat

@@ -1,0 +1,60 @@
+// Tests bus_emulators/ethercat/transport/ec_veth.hpp: a VethPair creates two connected, up
+// interfaces with unique names of at most 15 characters and IPv6 off, and deletes them when it goes away (also when
+// the test using it fails: destruction is all it takes).
+#include "tests/support/veth.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace omnitwin::testing {
+namespace {
+
+std::string read_line(const std::string& path) {
+  std::ifstream f(path);
+  std::string s;
+  std::getline(f, s);
+  return s;
+}
+
+TEST(VethPair, CreatedUpUniqueAndGoneAfterwards) {
+  if (const auto why = VethPair::unavailable_reason()) GTEST_SKIP() << *why;
+  std::string a, b;
+  {
+    VethPair p;
+    VethPair q;
+    a = p.a();
+    b = p.b();
+    EXPECT_LE(a.size(), 15u);
+    EXPECT_LE(b.size(), 15u);
+    EXPECT_NE(a, b);
+    EXPECT_NE(p.a(), q.a());
+    EXPECT_NE(p.b(), q.b());
+    EXPECT_TRUE(VethPair::exists(a));
+    EXPECT_TRUE(VethPair::exists(b));
+    // Joined to each other: each end's peer index is the other's index.
+    EXPECT_EQ(read_line("/sys/class/net/" + a + "/iflink"), read_line("/sys/class/net/" + b + "/ifindex"));
+    EXPECT_EQ(read_line("/sys/class/net/" + b + "/iflink"), read_line("/sys/class/net/" + a + "/ifindex"));
+    EXPECT_EQ(read_line("/sys/class/net/" + a + "/operstate"), "up");
+    EXPECT_EQ(read_line("/sys/class/net/" + b + "/operstate"), "up");
+    if (std::filesystem::exists("/proc/sys/net/ipv6")) {  // only where the kernel has IPv6
+      EXPECT_EQ(read_line("/proc/sys/net/ipv6/conf/" + a + "/disable_ipv6"), "1");
+      EXPECT_EQ(read_line("/proc/sys/net/ipv6/conf/" + b + "/disable_ipv6"), "1");
+    }
+    p.set_address(a, "00:00:5e:00:53:07");
+    EXPECT_EQ(read_line("/sys/class/net/" + a + "/address"), "00:00:5e:00:53:07");
+  }
+  EXPECT_FALSE(VethPair::exists(a));
+  EXPECT_FALSE(VethPair::exists(b));
+}
+
+TEST(VethPair, BadAddressIsAClearError) {
+  if (const auto why = VethPair::unavailable_reason()) GTEST_SKIP() << *why;
+  VethPair p;
+  EXPECT_THROW(p.set_address(p.a(), "zz:zz"), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace omnitwin::testing
