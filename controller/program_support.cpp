@@ -1,8 +1,15 @@
 // controller layer — helpers shared by omni-master and omni-pc; see program_support.hpp.
 #include "controller/program_support.hpp"
 
+#include <sched.h>
 #include <signal.h>
+#include <spdlog/spdlog.h>
+#include <sys/mman.h>
 #include <sys/signalfd.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 
 namespace omnitwin::controller {
 
@@ -17,6 +24,35 @@ int open_signal_fd() {
   sigaddset(&set, SIGTERM);
   ::sigprocmask(SIG_BLOCK, &set, nullptr);
   return ::signalfd(-1, &set, SFD_CLOEXEC | SFD_NONBLOCK);
+}
+
+bool signalled(int sigfd) {
+  signalfd_siginfo info{};
+  return sigfd >= 0 && ::read(sigfd, &info, sizeof info) == static_cast<ssize_t>(sizeof info);
+}
+
+std::int64_t monotonic_ns() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::int64_t realtime_ns() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+timespec to_timespec(std::int64_t ns) {
+  return timespec{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
+}
+
+void try_realtime(int priority) {
+  sched_param sp{};
+  sp.sched_priority = priority;
+  if (::sched_setscheduler(0, SCHED_FIFO, &sp) != 0)
+    spdlog::debug("SCHED_FIFO {} not permitted ({}); running with normal priority", priority, std::strerror(errno));
+  if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0) spdlog::debug("mlockall not permitted ({})", std::strerror(errno));
 }
 
 }  // namespace omnitwin::controller

@@ -1,7 +1,10 @@
-// controller layer — small helpers shared by the master-side programs (omni-master, omni-pc):
-// how they name an interface and how they hear SIGINT/SIGTERM without a global flag.
+// controller layer — small helpers shared by the master-side programs (omni-master on CAN and
+// EtherCAT, omni-pc): how they name an interface, hear SIGINT/SIGTERM without a global flag,
+// read the clocks and ask for real-time scheduling.
 #pragma once
 
+#include <cstdint>
+#include <ctime>
 #include <string>
 
 namespace omnitwin::controller {
@@ -13,5 +16,16 @@ std::string normalize_iface(const std::string& iface);
 // Blocks SIGINT/SIGTERM for the process and returns a signalfd (non-blocking, close-on-exec)
 // that becomes readable when one arrives; -1 if the kernel refuses. Set-up only.
 int open_signal_fd();
+
+// True (and the signal consumed) if SIGINT/SIGTERM is pending on the signalfd. Real-time safe.
+bool signalled(int sigfd);
+
+// CLOCK_MONOTONIC and CLOCK_REALTIME [ns]; ns → timespec. Real-time safe.
+std::int64_t monotonic_ns();
+std::int64_t realtime_ns();
+timespec to_timespec(std::int64_t ns);
+
+// SCHED_FIFO at `priority` and locked memory where permitted; a debug line where not. Set-up.
+void try_realtime(int priority);
 
 }  // namespace omnitwin::controller

@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "bus_emulators/can/transport.hpp"
+#include "controller/ethercat/ec_program.hpp"
 #include "controller/master_config.hpp"
 #include "controller/omni_master.hpp"
 #include "controller/program_support.hpp"
@@ -42,7 +43,12 @@
 
 using namespace omnitwin;
 using controller::normalize_iface;
+using controller::monotonic_ns;
 using controller::open_signal_fd;
+using controller::realtime_ns;
+using controller::signalled;
+using controller::to_timespec;
+using controller::try_realtime;
 using controller::MasterState;
 using controller::OmniMaster;
 
@@ -67,6 +73,9 @@ struct Options {
   double duration = -1;  // [s]; < 0: until a signal
   std::string log_level = "info";
   bool print_config = false;
+  std::string script;  // ethercat: a Botnana script to run
+  std::string stats;   // ethercat: write the master's counters here (JSON) at exit
+  bool shell = false;  // `omni-master shell` (ethercat)
 };
 
 // What the loops count besides the core's own statistics.
@@ -105,40 +114,6 @@ struct RuntimeFailure {
   std::string message;
 };
 
-std::int64_t monotonic_ns() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-std::int64_t realtime_ns() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-timespec to_timespec(std::int64_t ns) {
-  return timespec{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
-}
-
-
-// True (and the signal consumed) if SIGINT/SIGTERM is pending on the signalfd.
-bool signalled(int sigfd) {
-  signalfd_siginfo info{};
-  return sigfd >= 0 && ::read(sigfd, &info, sizeof info) == static_cast<ssize_t>(sizeof info);
-}
-
-// SCHED_FIFO and locked memory where permitted; a debug line where not.
-void try_realtime() {
-  sched_param sp{};
-  sp.sched_priority = kRtPriority;
-  if (::sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
-    spdlog::debug("SCHED_FIFO {} not permitted ({}); running with normal priority", kRtPriority, std::strerror(errno));
-  }
-  if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
-    spdlog::debug("mlockall not permitted ({})", std::strerror(errno));
-  }
-}
 
 // Logs the master's state changes at info level (the only info output while running).
 class StateLog {
@@ -272,7 +247,7 @@ void wall_wait(can::Transport& tr, OmniMaster& m, int sigfd, std::int64_t start_
 }
 
 int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd, LoopStats& ls) {
-  try_realtime();
+  try_realtime(kRtPriority);
   const std::int64_t period_ns = std::llround(m.config().loop.period * 1e9);
   const std::int64_t start_ns = monotonic_ns();
   const std::int64_t end_ns = o.duration >= 0 ? start_ns + std::llround(o.duration * 1e9)
@@ -297,10 +272,12 @@ int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& 
 // main
 
 void add_options(CLI::App& app, Options& o) {
-  app.add_option("--bus", o.bus, "bus kind (only can is supported)")->capture_default_str();
+  app.add_option("--bus", o.bus, "bus kind: can or ethercat")->capture_default_str();
   app.add_option("--iface", o.iface, "transport: udp:GROUP[:PORT], socketcan:IFACE (or IFACE), mem:NAME")
       ->capture_default_str();
-  app.add_option("--config", o.config, "the master's configuration file (YAML)")->required();
+  app.add_option("--config", o.config, "the master's configuration file (YAML)");
+  app.add_option("--script", o.script, "ethercat: run this Botnana script, exit when its tasks end");
+  app.add_option("--stats", o.stats, "ethercat: write the master's counters to this JSON file at exit");
   app.add_option("--clock", o.clock, "sim: lockstep with the twin; wall: real time")
       ->check(CLI::IsMember({"sim", "wall"}))
       ->capture_default_str();
@@ -315,7 +292,13 @@ void add_options(CLI::App& app, Options& o) {
 
 // Option combinations CLI11 cannot check; the message of the first problem, or "".
 std::string usage_problem(const Options& o) {
-  if (o.bus != "can") return fmt::format("--bus {}: not supported yet (only can)", o.bus);
+  if (o.config.empty()) return "--config is required";
+  if (o.bus != "can" && o.bus != "ethercat") return fmt::format("--bus {}: not supported (can or ethercat)", o.bus);
+  if (o.bus == "ethercat") {
+    if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
+    if (o.shell && o.clock == "sim") return "shell runs on the wall clock";
+    return "";
+  }
   if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
   if (o.clock == "wall" && !o.sim_clock.empty()) return "--sim-clock is only used with --clock sim";
   if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
@@ -399,6 +382,10 @@ int main(int argc, char** argv) {
   CLI::App app{"omni-master: the thesis's Omni CAN master (seed 002, fig. 4-15)"};
   Options o;
   add_options(app, o);
+  CLI::App* shell = app.add_subcommand("shell", "interactive Botnana shell on the EtherCAT master (wall clock)");
+  shell->add_option("--iface", o.iface, "EtherCAT transport: raw:IFACE, udp:HOST:PORT, mem:NAME");
+  shell->add_option("--config", o.config, "the EtherCAT master's configuration file (YAML)");
+  shell->add_option("--script", o.script, "Botnana source to evaluate first");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -407,10 +394,18 @@ int main(int argc, char** argv) {
     std::cerr << "omni-master: " << e.what() << "\n";
     return kExitUsage;
   }
+  if (shell->parsed()) o.shell = true, o.bus = "ethercat", o.clock = "wall";
+  if (!o.script.empty()) o.bus = "ethercat";  // Botnana scripts drive the EtherCAT master
   setup_logging(o.log_level);
+  if (o.bus == "ethercat" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34980";
   if (const std::string p = usage_problem(o); !p.empty()) {
     spdlog::error("{}", p);
     return kExitUsage;
+  }
+  if (o.bus == "ethercat") {
+    controller::ethercat::ProgramOptions eo{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.shell, o.script,
+                                            o.print_config, o.stats};
+    return controller::ethercat::run_ethercat_program(eo);
   }
   const auto cfg = load(o.config);
   if (!cfg) return kExitUsage;

@@ -1,0 +1,101 @@
+// controller/ethercat — the master-side CiA 402 layer: one record per drive axis on top of the
+// EtherCAT master core (facts/cia402.md; controller/botnana/drive_access.hpp).
+//
+// Each cycle (update(), after the cyclic frame came back and before the next tick) it reads
+// the statusword, drives the controlword towards the axis's goal (shutdown / switch on /
+// enable operation / quick stop / disable voltage, with a fault-reset rising edge first when
+// a goal is set on a faulted axis), clears the `go` bit (controlword bit 4) once the drive
+// acknowledges (statusword bit 12) and writes the controlword into the process image.
+// Objects mapped into the PDOs are read and written in the image; any other object goes
+// through the master's SDO queue (reads answer the last uploaded value and refresh it).
+// Axes are (slave, channel), both 1-based as in the Botnana word set; channel n > 1 of a
+// multi-axis slave uses the CiA 402 objects offset by 0x800 × (n − 1). Signedness and sizes
+// come from the slave's ESI object dictionary. A homed record per axis is kept (set when the
+// drive reports homing attained in HM mode). No allocation in update() once the axes exist.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "controller/botnana/drive_access.hpp"
+#include "controller/ethercat/ec_master.hpp"
+
+namespace omnitwin::controller::ethercat {
+
+// CiA 402 power drive states as decoded from the statusword.
+enum class PdsState : std::uint8_t {
+  not_ready_to_switch_on, switch_on_disabled, ready_to_switch_on, switched_on, operation_enabled,
+  quick_stop_active, fault_reaction_active, fault
+};
+const char* to_string(PdsState s);
+PdsState decode_statusword(std::uint16_t sw);
+// The controlword bits 0–3 and 7 that take state `s` one transition towards `goal`
+// (fault handling apart: see EcDrives). Real-time safe.
+std::uint16_t controlword_towards(PdsState s, botnana::PdsGoal goal);
+
+class EcDrives : public botnana::DriveAccess {
+ public:
+  explicit EcDrives(EcMaster& master);
+
+  // Once per cycle after the cyclic exchange: builds the axis list when the image first
+  // exists, then per axis statusword → state, goal → controlword, go-bit acknowledge.
+  void update();
+
+  int axis_count() const { return static_cast<int>(axes_.size()); }
+  // The axis of (slave, ch) 1-based; nullopt when none.
+  std::optional<PdsState> state(int slave, int ch) const;
+  std::uint16_t statusword(int slave, int ch) const;
+  bool all_enabled() const;  // every axis in operation enabled (false without axes)
+  // Homed record per axis: set when the drive reports homing attained (mode display HM,
+  // statusword bits 12 and 10 set, 13 clear), or by set_homed(); nullopt for no such axis.
+  std::optional<bool> homed(int slave, int ch) const;
+  void set_homed(int slave, int ch, bool homed);
+
+  // botnana::DriveAccess
+  bool has_drive(int slave, int ch) const override;
+  std::optional<std::int64_t> read(int slave, int ch, std::uint16_t index, std::uint8_t sub) override;
+  bool write(int slave, int ch, std::uint16_t index, std::uint8_t sub, std::int64_t value) override;
+  void set_goal(int slave, int ch, botnana::PdsGoal goal) override;
+  bool requests_pending(int slave) const override;
+  std::string last_error() const override { return error_; }
+  int slaves() const override { return m_.slave_count(); }
+  std::optional<botnana::ObjectRef> user_pdo(int slave, int ch, botnana::UserPdo which) const override;
+
+  // The objects behind drive-wpdo1/2 and drive-rpdo1/2 (CiA 402 base indices, every axis).
+  void set_user_pdo(botnana::UserPdo which, botnana::ObjectRef object);
+
+ private:
+  struct Axis {
+    int slave = 0, ch = 0;                   // 1-based
+    std::optional<botnana::PdsGoal> goal;
+    bool reset_pending = false;              // a fault reset edge before going to the goal
+    int reset_phase = 0;
+    std::uint16_t cw_user = 0;               // the word set's controlword
+    std::uint16_t sw = 0;
+    PdsState state = PdsState::not_ready_to_switch_on;
+    int go_cycles = 0;                       // cycles bit 4 has been out
+    bool homed = false;
+    std::optional<EntryLocation> mode_display_at;
+    std::optional<EntryLocation> cw_at, sw_at;
+  };
+  Axis* find(int slave, int ch);
+  const Axis* find(int slave, int ch) const;
+  static std::uint16_t object(int ch, std::uint16_t index);
+  bool object_signed(int slave, std::uint16_t index, std::uint8_t sub) const;
+  unsigned object_bytes(int slave, std::uint16_t index, std::uint8_t sub) const;
+
+  EcMaster& m_;
+  std::vector<Axis> axes_;
+  bool built_ = false;
+  std::map<std::tuple<int, std::uint16_t, std::uint8_t>, std::int64_t> sdo_values_;
+  std::map<std::tuple<int, std::uint16_t, std::uint8_t>, bool> sdo_reading_;
+  std::array<std::optional<botnana::ObjectRef>, 4> user_pdos_{};
+  std::string error_;
+};
+
+}  // namespace omnitwin::controller::ethercat

@@ -1,0 +1,472 @@
+// controller/ethercat — the `--bus ethercat` program path (see ec_program.hpp).
+#include "controller/ethercat/ec_program.hpp"
+
+#include <editline/readline.h>
+#include <fmt/format.h>
+#include <poll.h>
+#include <sched.h>
+#include <spdlog/spdlog.h>
+#include <sys/mman.h>
+#include <sys/signalfd.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include "bus_emulators/ethercat/transport/ec_transport.hpp"
+#include "controller/botnana/botnana_interpreter.hpp"
+#include "controller/ethercat/ec_config.hpp"
+#include "controller/ethercat/ec_drive.hpp"
+#include "controller/ethercat/ec_master.hpp"
+#include "controller/master_config.hpp"
+#include "controller/platform_loop.hpp"
+#include "controller/program_support.hpp"
+#include "controller/sim_clock.hpp"
+
+namespace omnitwin::controller::ethercat {
+
+namespace {
+
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
+constexpr auto kConnectTimeout = std::chrono::seconds(10);
+constexpr auto kGrantTimeout = std::chrono::seconds(60);
+constexpr std::int64_t kDrainLimitNs = 5'000'000'000;
+constexpr int kRtPriority = 40;
+
+struct RuntimeFailure {
+  std::string message;
+};
+
+// Lines typed in the shell, read by a libedit thread and evaluated on the cycle thread.
+class LineQueue {
+ public:
+  void push(std::string s) {
+    std::lock_guard<std::mutex> l(m_);
+    q_.push_back(std::move(s));
+  }
+  std::optional<std::string> pop() {
+    std::lock_guard<std::mutex> l(m_);
+    if (q_.empty()) return std::nullopt;
+    std::string s = std::move(q_.front());
+    q_.pop_front();
+    return s;
+  }
+  std::atomic<bool> eof{false};
+
+ private:
+  std::mutex m_;
+  std::deque<std::string> q_;
+};
+
+// The master core, its drive layer, the platform loop and the interpreter, one cycle at a time.
+class Runner {
+ public:
+  Runner(EcMasterConfig mc, const EcConfig& ec, std::optional<MasterConfig> platform,
+         omnitwin::ethercat::EcTransport& tr)
+      : ec_(ec),
+        tr_(tr),
+        master_(std::move(mc), [this](std::span<const std::uint8_t> pdu) {
+          const bool ok = tr_.send(pdu);
+          frames_tx += ok ? 1 : 0;
+          return ok;
+        }),
+        drives_(master_),
+        platform_(std::move(platform)) {
+    master_.set_event_callback([](const std::string& e) { spdlog::info("{}", e); });
+    for (int i = 0; i < 4; ++i) {
+      if (ec_.user_pdos[i].first)
+        drives_.set_user_pdo(static_cast<botnana::UserPdo>(i), botnana::ObjectRef{ec_.user_pdos[i].first, ec_.user_pdos[i].second});
+    }
+    if (platform_) {
+      PlatformLoopConfig lc = platform_->loop;
+      lc.counts_per_rev = static_cast<int>(std::lround(ec_.wheel_counts_per_rev));
+      loop_.emplace(lc, build_path(platform_->path));
+      every_ = std::max<std::int64_t>(1, std::llround(lc.period / ec_.cycle));
+    }
+    buf_.resize(2048);
+  }
+
+  EcMaster& master() { return master_; }
+  EcDrives& drives() { return drives_; }
+
+  // Every PDU waiting now; while the last frame sent is still out, waits up to `grace` for it.
+  void receive(SimTime t, std::chrono::nanoseconds grace = std::chrono::nanoseconds(0)) {
+    for (;;) {
+      const int n = tr_.receive(buf_, master_.awaiting_reply() ? grace : std::chrono::nanoseconds(0));
+      if (n <= 0) return;
+      ++frames_rx;
+      master_.on_frame(std::span<std::uint8_t>(buf_.data(), static_cast<std::size_t>(n)), t);
+    }
+  }
+  // Until `target` PDUs were received in all (lockstep); false after kDrainLimitNs.
+  bool drain_until(std::uint64_t target, SimTime t) {
+    const std::int64_t give_up = monotonic_ns() + kDrainLimitNs;
+    while (frames_rx < target) {
+      const int n = tr_.receive(buf_, std::chrono::milliseconds(10));
+      if (n > 0) {
+        ++frames_rx;
+        master_.on_frame(std::span<std::uint8_t>(buf_.data(), static_cast<std::size_t>(n)), t);
+      } else if (n < 0 || monotonic_ns() >= give_up) {
+        return false;
+      }
+    }
+    receive(t);
+    return true;
+  }
+
+  // One cycle at t: drive layer, platform loop, interpreter tasks, then the master's frame.
+  void cycle(SimTime t, botnana::Interpreter* interp) {
+    drives_.update();
+    platform(t);
+    if (interp) interp->step_tasks();
+    master_.tick(t);
+  }
+
+  simclock::MasterReport report() const {
+    simclock::MasterReport r;
+    if (master_.phase() == MasterPhase::failed || failure_) {
+      r.state = simclock::MasterState::stopped;
+      r.reason = simclock::StopReason::startup_timeout;
+    } else if (finished_) {
+      r.state = simclock::MasterState::finished;
+    } else if (started_) {
+      r.state = simclock::MasterState::running;
+    } else {
+      r.state = simclock::MasterState::detecting;
+    }
+    for (int i = 0; i < master_.slave_count(); ++i) {
+      if (master_.slave(i).step == SlaveStep::offline && r.state == simclock::MasterState::running) {
+        r.reason = simclock::StopReason::node_missing;
+        r.node = static_cast<std::uint8_t>(i + 1);
+        break;
+      }
+    }
+    r.path_origin_ns = started_ ? origin_ : -1;
+    if (loop_) {
+      const Pose2& ref = out_.reference.pose;
+      const Pose2& odo = loop_->odometry().pose();
+      r.reference = {ref.x, ref.y, ref.phi};
+      r.odometry = {odo.x, odo.y, odo.phi};
+    }
+    return r;
+  }
+  const std::optional<std::string>& failure() const { return failure_; }
+  bool finished() const { return finished_; }
+
+  std::uint64_t frames_tx = 0, frames_rx = 0;
+
+ private:
+  WheelCounts counts() {
+    WheelCounts c{};
+    for (int i = 0; i < 4; ++i) {
+      const auto v = drives_.read(ec_.wheels[i].slave, ec_.wheels[i].channel, 0x6064, 0);
+      c[i] = static_cast<std::int32_t>(v.value_or(0));
+    }
+    return c;
+  }
+  void command(const std::array<double, 4>& counts_per_s) {
+    for (int i = 0; i < 4; ++i) {
+      const AxisRef& w = ec_.wheels[i];
+      if (ec_.wheel_mode == WheelMode::csv) {
+        drives_.write(w.slave, w.channel, 0x60FF, 0, std::llround(counts_per_s[i]));
+      } else {
+        target_[i] += counts_per_s[i] * ec_.cycle;
+        drives_.write(w.slave, w.channel, 0x607A, 0, std::llround(target_[i]));
+      }
+    }
+  }
+  void platform(SimTime t) {
+    if (!loop_ || failure_) return;
+    if (!started_) {
+      if (!master_.operational()) return;
+      if (!goals_set_) {
+        for (const auto& w : ec_.wheels) {
+          if (!drives_.has_drive(w.slave, w.channel)) {
+            failure_ = fmt::format("wheel axis slave {} channel {} is not a drive on this bus", w.slave, w.channel);
+            spdlog::error("{}", *failure_);
+            return;
+          }
+          drives_.write(w.slave, w.channel, 0x6060, 0, ec_.wheel_mode == WheelMode::csv ? 9 : 8);
+          drives_.set_goal(w.slave, w.channel, botnana::PdsGoal::operation_enabled);
+        }
+        goals_set_ = true;
+        const WheelCounts c = counts();
+        for (int i = 0; i < 4; ++i) target_[i] = c[i];
+        command({0, 0, 0, 0});
+        spdlog::info("all slaves in OP: enabling the wheel drives");
+      }
+      for (const auto& w : ec_.wheels)
+        if (drives_.state(w.slave, w.channel) != PdsState::operation_enabled) return;
+      counts_ = counts();
+      loop_->reset(loop_->path().start_pose(), counts_);
+      origin_ = t;
+      started_ = true;
+      n_ = 0;
+      spdlog::info("wheel drives enabled: platform loop running");
+    }
+    if (finished_) {
+      command({0, 0, 0, 0});
+      return;
+    }
+    const double ts = static_cast<double>(t - origin_) * 1e-9;
+    if (n_++ % every_ == 0) {
+      counts_ = counts();
+      out_ = loop_->step(ts, counts_);
+      const double k = ec_.wheel_counts_per_rev / (2 * std::numbers::pi);
+      for (int i = 0; i < 4; ++i) wheel_cps_[i] = out_.wheel_rad_s[i] * k;
+    }
+    command(wheel_cps_);
+    if (platform_->settle >= 0 && ts >= loop_->path().duration() + platform_->settle) {
+      finished_ = true;
+      command({0, 0, 0, 0});
+      spdlog::info("path done");
+    }
+  }
+
+  const EcConfig& ec_;
+  omnitwin::ethercat::EcTransport& tr_;
+  EcMaster master_;
+  EcDrives drives_;
+  std::optional<MasterConfig> platform_;
+  std::optional<PlatformLoop> loop_;
+  PlatformLoopOutput out_;
+  std::int64_t every_ = 1, n_ = 0;
+  bool goals_set_ = false, started_ = false, finished_ = false;
+  SimTime origin_ = -1;
+  WheelCounts counts_{};
+  std::array<double, 4> wheel_cps_{}, target_{};
+  std::optional<std::string> failure_;
+  std::vector<std::uint8_t> buf_;
+};
+
+// The interpreter side of shell and script.
+struct Botnana {
+  std::unique_ptr<botnana::Interpreter> interp;
+  std::vector<std::string> script;  // lines still to evaluate once the bus is up
+  bool script_mode = false, script_loaded = false;
+  LineQueue* lines = nullptr;
+  std::optional<std::string> error;
+
+  // After each cycle: evaluates the script once the master is operational, and typed lines.
+  // Returns false when the program should end.
+  bool after_cycle(Runner& r) {
+    if (!interp) return true;
+    if (script_mode) {
+      if (!script_loaded) {
+        if (!r.master().operational()) return true;
+        for (const auto& line : script) {
+          const botnana::Status s = interp->evaluate(line);
+          if (!s) {
+            error = s.to_string();
+            return false;
+          }
+        }
+        script_loaded = true;
+      }
+      if (!interp->last_task_error().ok) {
+        error = interp->last_task_error().to_string();
+        return false;
+      }
+      return interp->tasks_running() > 0;
+    }
+    while (auto line = lines->pop()) {
+      const botnana::Status s = interp->evaluate(*line);
+      std::cout << (s ? " ok" : " " + s.to_string()) << std::endl;
+    }
+    return !lines->eof.load();
+  }
+};
+
+int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
+  simclock::Client client(o.sim_clock, kConnectTimeout);
+  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  for (;;) {
+    simclock::Grant g;
+    simclock::End end{kNoEnd};
+    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const int pr = ::poll(fds, 2, static_cast<int>(std::chrono::milliseconds(kGrantTimeout).count()));
+    if (pr == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
+    if (pr > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return kExitOk;
+    const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
+    if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
+    if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    if (!r.drain_until(g.frames[0], g.t_ns)) {
+      throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick,
+                                       r.frames_rx, g.frames[0])};
+    }
+    r.cycle(g.t_ns, bn.interp.get());
+    const bool go_on = bn.after_cycle(r);
+    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
+    if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+    if (!go_on) return bn.error ? kExitRuntime : kExitOk;
+  }
+}
+
+int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::int64_t period_ns) {
+  try_realtime(kRtPriority);
+  const std::int64_t start = monotonic_ns();
+  const std::int64_t end = o.duration >= 0 ? start + std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
+  std::int64_t deadline = start;
+  std::uint64_t overruns = 0;
+  for (;;) {
+    const timespec at{static_cast<time_t>(deadline / 1'000'000'000), static_cast<long>(deadline % 1'000'000'000)};
+    while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, nullptr) == EINTR) {
+    }
+    if (signalled(sigfd) || deadline >= end) break;
+    const SimTime t = deadline - start;
+    r.receive(t, std::chrono::nanoseconds(period_ns / 4));  // the previous cycle's frame
+    r.cycle(t, bn.interp.get());
+    if (!bn.after_cycle(r)) break;
+    if (r.master().phase() == MasterPhase::failed && !o.shell) break;
+    deadline += period_ns;
+    const std::int64_t now = monotonic_ns();
+    if (now - deadline >= period_ns) {
+      ++overruns;
+      deadline += ((now - deadline) / period_ns) * period_ns;
+    }
+  }
+  if (overruns) spdlog::info("{} cycles overran", overruns);
+  return bn.error ? kExitRuntime : kExitOk;
+}
+
+std::string json_escape(const std::string& in) {
+  std::string out;
+  for (const char c : in) {
+    if (c == '"' || c == '\\') out += '\\', out += c;
+    else if (static_cast<unsigned char>(c) < 0x20) out += fmt::format("\\u{:04x}", static_cast<int>(c));
+    else out += c;
+  }
+  return out;
+}
+
+}  // namespace
+
+int run_ethercat_program(const ProgramOptions& o) {
+  EcConfig ec;
+  EcMasterConfig mc;
+  std::optional<MasterConfig> platform;
+  try {
+    ec = load_ec_config(o.config);
+    mc = make_master_config(ec);
+    if (!ec.platform_file.empty()) platform = load_master_config(ec.platform_file);
+    else if (!ec.platform_yaml.empty()) platform = parse_master_config(ec.platform_yaml, o.config + " (platform)");
+  } catch (const EcConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  } catch (const MasterConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  }
+  if (o.print_config) {
+    std::cout << fmt::format("esi: {} device(s) from {} file(s)\ncycle: {}\ndc: {}\nstartup SDOs: {}\nwheels: {}\n",
+                             mc.devices.size(), ec.esi_files.size(), ec.cycle, ec.dc ? "on" : "off", ec.startup.size(),
+                             ec.has_wheels ? "yes" : "no");
+    if (platform) std::cout << dump_master_config(*platform);
+    return kExitOk;
+  }
+  std::vector<std::string> script;
+  if (!o.script.empty()) {
+    std::ifstream in(o.script);
+    if (!in) {
+      spdlog::error("--script {}: cannot read the file", o.script);
+      return kExitUsage;
+    }
+    for (std::string line; std::getline(in, line);) script.push_back(line);
+  }
+  std::unique_ptr<omnitwin::ethercat::EcTransport> tr;
+  try {
+    tr = omnitwin::ethercat::open_transport(o.iface, omnitwin::ethercat::Role::master);
+  } catch (const omnitwin::ethercat::TransportError& e) {
+    spdlog::error("--iface {}: {}", o.iface, e.what());
+    return kExitUsage;
+  }
+  const std::int64_t period_ns = mc.cycle_ns;
+  Runner runner(std::move(mc), ec, std::move(platform), *tr);
+  Botnana bn;
+  LineQueue lines;
+  if (o.shell || !o.script.empty()) {
+    bn.interp = std::make_unique<botnana::Interpreter>(runner.drives(), [](std::string_view s) { std::cout << s << std::flush; });
+    bn.interp->set_cycle_period_ns(period_ns);
+    bn.script = std::move(script);
+    bn.script_mode = !o.shell;
+    bn.lines = &lines;
+  }
+  if (o.shell) {
+    for (const auto& line : bn.script) lines.push(line);  // --script with shell: evaluated first
+    bn.script.clear();
+    std::thread([&lines] {
+      using_history();
+      for (;;) {
+        char* raw = ::readline("botnana> ");
+        if (!raw) break;
+        std::string line(raw);
+        std::free(raw);
+        if (!line.empty()) add_history(line.c_str());
+        lines.push(std::move(line));
+      }
+      lines.eof = true;
+    }).detach();
+  }
+  const int sigfd = open_signal_fd();
+  spdlog::info("EtherCAT master on {} (clock {}, cycle {} µs)", tr->describe(), o.clock, period_ns / 1000);
+  int code = kExitOk;
+  try {
+    code = o.clock == "sim" ? run_sim(o, runner, sigfd, bn) : run_wall(o, runner, sigfd, bn, period_ns);
+  } catch (const RuntimeFailure& f) {
+    spdlog::error("{}", f.message);
+    code = kExitRuntime;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = kExitRuntime;
+  }
+  if (bn.error) spdlog::error("script: {}", *bn.error);
+  const EcMaster& m = runner.master();
+  if (m.phase() == MasterPhase::failed) {
+    spdlog::error("master failed: {}", m.error());
+    code = kExitRuntime;
+  }
+  if (runner.failure()) code = kExitRuntime;
+  const auto& s = m.stats();
+  spdlog::info("end: phase {}, {} slaves, frames tx {} rx {}, cycles {}, WKC errors {}, lost frames {}, timeouts {}, "
+               "SDO done {} failed {}, slaves lost {}, recoveries {}",
+               to_string(m.phase()), m.slave_count(), runner.frames_tx, runner.frames_rx, s.cycles, s.wkc_errors,
+               s.lost_frames, s.timeouts, s.sdo_done, s.sdo_failed, s.slaves_lost, s.recoveries);
+  if (!o.stats.empty()) {
+    const std::string tmp = o.stats + ".tmp";
+    std::ofstream f(tmp);
+    f << fmt::format(
+        "{{\"ecat_phase\": \"{}\", \"slaves\": {}, \"operational\": {}, \"frames_tx\": {}, \"frames_rx\": {}, "
+        "\"cycles\": {}, \"wkc_errors\": {}, \"expected_wkc\": {}, \"last_wkc\": {}, \"lost_frames\": {}, "
+        "\"stray_frames\": {}, \"timeouts\": {}, \"sdo_done\": {}, \"sdo_failed\": {}, \"slaves_lost\": {}, "
+        "\"recoveries\": {}, \"master_error\": \"{}\"}}\n",
+        to_string(m.phase()), m.slave_count(), m.operational() ? "true" : "false", runner.frames_tx, runner.frames_rx,
+        s.cycles, s.wkc_errors, s.expected_wkc, s.last_wkc, s.lost_frames, s.stray_frames, s.timeouts, s.sdo_done,
+        s.sdo_failed, s.slaves_lost, s.recoveries, json_escape(m.error()));
+    f.close();
+    if (!f || std::rename(tmp.c_str(), o.stats.c_str()) != 0) spdlog::error("--stats {}: cannot write", o.stats);
+  }
+  for (int i = 0; i < m.slave_count(); ++i) {
+    const SlaveStatus& sl = m.slave(i);
+    spdlog::info("slave {} station 0x{:04X}: step {}, AL {} (code 0x{:04X}), recoveries {}", i, sl.station,
+                 to_string(sl.step), to_string(sl.al_state), sl.al_code, sl.recoveries);
+  }
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
+}
+
+}  // namespace omnitwin::controller::ethercat

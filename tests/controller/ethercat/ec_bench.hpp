@@ -1,0 +1,98 @@
+// Test support for the ecmaster tests (not a test file): our master core wired in-process to
+// A's EscChain of B's DriveSlaves built from models/ethercat/omnitwin_drive.xml, each axis on
+// C's AxisModel. One step() = drive/firmware cycle, one master tick, the frame through the
+// chain and back (unless dropped), the drive layer's update.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "bus_emulators/drive/axis_model.hpp"
+#include "bus_emulators/ethercat/device/ec_esi.hpp"
+#include "bus_emulators/ethercat/device/ec_slave.hpp"
+#include "bus_emulators/ethercat/ec_chain.hpp"
+#include "controller/ethercat/ec_drive.hpp"
+#include "controller/ethercat/ec_master.hpp"
+
+namespace ecbench {
+
+namespace ec = omnitwin::ethercat;
+namespace me = omnitwin::controller::ethercat;
+
+inline std::vector<ec::DeviceDescription> drive_esi() {
+  return ec::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_drive.xml");
+}
+
+struct Bench {
+  std::vector<ec::DeviceDescription> devices = drive_esi();
+  std::vector<std::unique_ptr<ec::DriveSlave>> slaves;
+  std::vector<omnitwin::drive::AxisModel> models;
+  ec::EscChain chain;
+  std::unique_ptr<me::EcMaster> master;
+  std::unique_ptr<me::EcDrives> drives;
+  std::vector<std::uint8_t> frame;
+  bool sent = false;
+  int drop_next = 0;  // frames to lose
+  int late_every = 0; // > 0: every n-th frame passes the slaves but comes back too late
+  std::uint64_t frames = 0;
+  me::SimTime t = 0;
+  me::SimTime cycle = 1'000'000;
+
+  explicit Bench(int n = 4, me::EcMasterConfig cfg = {}, std::vector<ec::DeviceDescription> master_devices = {}) {
+    for (int i = 0; i < n; ++i) {
+      ec::DriveSlaveConfig sc;
+      sc.serial = static_cast<std::uint32_t>(100 + i);
+      slaves.push_back(std::make_unique<ec::DriveSlave>(devices[0], sc));
+      models.emplace_back();
+    }
+    for (auto& s : slaves) chain.add(&s->esc());
+    cfg.devices = master_devices.empty() ? devices : master_devices;
+    cycle = cfg.cycle_ns;
+    master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
+      frame.assign(pdu.begin(), pdu.end());
+      sent = true;
+      return true;
+    });
+    drives = std::make_unique<me::EcDrives>(*master);
+  }
+
+  void step() {
+    for (std::size_t i = 0; i < slaves.size(); ++i) {
+      if (!chain.powered(static_cast<int>(i))) continue;
+      auto& ax = slaves[i]->axis(0);
+      const auto cmd = ax.step(t, models[i].feedback());
+      models[i].step(cmd, static_cast<double>(cycle) * 1e-9);
+      slaves[i]->cycle(t);
+    }
+    chain.advance(t);
+    sent = false;
+    master->tick(t);
+    if (sent) {
+      ++frames;
+      if (drop_next > 0) {
+        --drop_next;
+      } else if (late_every > 0 && frames % late_every == 0) {
+        chain.process(frame, t);  // the slaves act on it; the master never sees it in time
+      } else if (chain.process(frame, t)) {
+        master->on_frame(frame, t + 50'000);
+      }
+    }
+    drives->update();
+    t += cycle;
+  }
+  // Steps until pred() or max steps; returns whether pred() held.
+  template <class P>
+  bool run_until(P pred, int max_steps = 20000) {
+    for (int i = 0; i < max_steps; ++i) {
+      if (pred()) return true;
+      step();
+    }
+    return pred();
+  }
+  bool to_op(int max_steps = 20000) {
+    return run_until([&] { return master->operational() || master->phase() == me::MasterPhase::failed; }, max_steps) &&
+           master->operational();
+  }
+};
+
+}  // namespace ecbench

@@ -1,0 +1,135 @@
+// Tests controller/ethercat/ec_drive: statusword decoding and the goal → controlword table,
+// then the drive layer on the master against four emulated drives (EscChain + DriveSlaves):
+// goals drive the axes to operation enabled, PDO objects are written/read through the image,
+// other objects through queued SDOs (requests_pending), and the `go` bit is cleared once the
+// drive acknowledges a profile-position set-point.
+#include "controller/ethercat/ec_drive.hpp"
+
+#include <gtest/gtest.h>
+
+#include "ec_bench.hpp"
+
+using namespace omnitwin::controller::ethercat;
+using omnitwin::botnana::PdsGoal;
+using ecbench::Bench;
+
+TEST(EcDrive, DecodesTheStatusword) {
+  EXPECT_EQ(decode_statusword(0x0000), PdsState::not_ready_to_switch_on);
+  EXPECT_EQ(decode_statusword(0x0250), PdsState::switch_on_disabled);
+  EXPECT_EQ(decode_statusword(0x0231), PdsState::ready_to_switch_on);
+  EXPECT_EQ(decode_statusword(0x0233), PdsState::switched_on);
+  EXPECT_EQ(decode_statusword(0x0237), PdsState::operation_enabled);
+  EXPECT_EQ(decode_statusword(0x1637), PdsState::operation_enabled);  // mode bits ignored
+  EXPECT_EQ(decode_statusword(0x0217), PdsState::quick_stop_active);
+  EXPECT_EQ(decode_statusword(0x021F), PdsState::fault_reaction_active);
+  EXPECT_EQ(decode_statusword(0x0218), PdsState::fault);
+}
+
+TEST(EcDrive, ControlwordTowardsEachGoal) {
+  EXPECT_EQ(controlword_towards(PdsState::switch_on_disabled, PdsGoal::operation_enabled), 0x0006);
+  EXPECT_EQ(controlword_towards(PdsState::ready_to_switch_on, PdsGoal::operation_enabled), 0x0007);
+  EXPECT_EQ(controlword_towards(PdsState::switched_on, PdsGoal::operation_enabled), 0x000F);
+  EXPECT_EQ(controlword_towards(PdsState::operation_enabled, PdsGoal::operation_enabled), 0x000F);
+  EXPECT_EQ(controlword_towards(PdsState::quick_stop_active, PdsGoal::operation_enabled), 0x000F);
+  EXPECT_EQ(controlword_towards(PdsState::operation_enabled, PdsGoal::quick_stop_active), 0x0002);
+  EXPECT_EQ(controlword_towards(PdsState::operation_enabled, PdsGoal::switched_on), 0x0007);
+  EXPECT_EQ(controlword_towards(PdsState::operation_enabled, PdsGoal::ready_to_switch_on), 0x0006);
+  EXPECT_EQ(controlword_towards(PdsState::operation_enabled, PdsGoal::switch_on_disabled), 0x0000);
+  EXPECT_EQ(controlword_towards(PdsState::switch_on_disabled, PdsGoal::switched_on), 0x0006);
+  EXPECT_EQ(controlword_towards(PdsState::quick_stop_active, PdsGoal::switched_on), 0x0000);
+}
+
+TEST(EcDrive, GoalsEnableEveryAxisAndVelocityFlowsBothWays) {
+  EcMasterConfig cfg;
+  cfg.startup.push_back(StartupSdo{-1, 0x6060, 0, {9}});  // CSV
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  EXPECT_EQ(d.axis_count(), 4);
+  EXPECT_TRUE(d.has_drive(4, 1));
+  EXPECT_FALSE(d.has_drive(5, 1));
+  EXPECT_FALSE(d.has_drive(1, 2));
+  for (int s = 1; s <= 4; ++s) d.set_goal(s, 1, PdsGoal::operation_enabled);
+  ASSERT_TRUE(b.run_until([&] { return d.all_enabled(); }, 2000));
+  for (int s = 1; s <= 4; ++s) EXPECT_EQ(d.state(s, 1), PdsState::operation_enabled);
+  EXPECT_EQ(b.slaves[0]->axis(0).objects().controlword & 0x008F, 0x000F);
+  ASSERT_TRUE(d.write(2, 1, 0x60FF, 0, 5000));  // counts/s, PDO
+  for (int k = 0; k < 300; ++k) b.step();
+  EXPECT_EQ(b.slaves[1]->axis(0).objects().target_velocity, 5000);
+  const auto v = d.read(2, 1, 0x606C, 0);
+  ASSERT_TRUE(v.has_value());
+  EXPECT_GT(*v, 4000);
+  EXPECT_EQ(*v, b.slaves[1]->axis(0).objects().velocity_actual);
+  const auto p = d.read(2, 1, 0x6064, 0);
+  ASSERT_TRUE(p.has_value());
+  EXPECT_GT(*p, 0);
+  EXPECT_EQ(d.read(1, 1, 0x6041, 0), b.slaves[0]->axis(0).objects().statusword);
+  EXPECT_FALSE(d.write(2, 1, 0x6064, 0, 1)) << "an input object cannot be written";
+  EXPECT_EQ(d.slaves(), 4);
+  EXPECT_FALSE(d.user_pdo(1, 1, omnitwin::botnana::UserPdo::wpdo1).has_value());
+  d.set_user_pdo(omnitwin::botnana::UserPdo::wpdo1, {0x60B1, 0});
+  const auto ref = d.user_pdo(1, 1, omnitwin::botnana::UserPdo::wpdo1);
+  ASSERT_TRUE(ref.has_value());
+  EXPECT_EQ(ref->index, 0x60B1);
+  EXPECT_FALSE(d.user_pdo(9, 1, omnitwin::botnana::UserPdo::wpdo1).has_value());
+  EXPECT_FALSE(d.last_error().empty());
+}
+
+TEST(EcDrive, ObjectsOutsideThePdoGoThroughSdo) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  ASSERT_TRUE(d.write(3, 1, 0x6083, 0, 250000));  // profile acceleration: not mapped
+  EXPECT_TRUE(d.requests_pending(3));
+  EXPECT_FALSE(d.requests_pending(2));
+  ASSERT_TRUE(b.run_until([&] { return !d.requests_pending(3); }, 500));
+  EXPECT_EQ(b.slaves[2]->axis(0).objects().profile_acceleration, 250000u);
+  EXPECT_FALSE(d.read(3, 1, 0x6081, 0).has_value());  // first read queues an upload
+  EXPECT_TRUE(d.requests_pending(3));
+  ASSERT_TRUE(b.run_until([&] { return !d.requests_pending(3); }, 500));
+  EXPECT_EQ(d.read(3, 1, 0x6081, 0), static_cast<std::int64_t>(b.slaves[2]->axis(0).objects().profile_velocity));
+  EXPECT_FALSE(d.write(7, 1, 0x6083, 0, 1));
+  EXPECT_NE(d.last_error().find("slave 7"), std::string::npos);
+}
+
+TEST(EcDrive, GoBitIsClearedWhenTheDriveAcknowledges) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  ASSERT_TRUE(d.write(1, 1, 0x6060, 0, 1));  // PP through the PDO
+  d.write(1, 1, 0x6081, 0, 20000);
+  d.write(1, 1, 0x6083, 0, 200000);
+  d.write(1, 1, 0x6084, 0, 200000);
+  d.set_goal(1, 1, PdsGoal::operation_enabled);
+  ASSERT_TRUE(b.run_until([&] { return d.state(1, 1) == PdsState::operation_enabled && !d.requests_pending(1); }, 2000));
+  ASSERT_TRUE(d.write(1, 1, 0x607A, 0, 1000));
+  const auto cw = d.read(1, 1, 0x6040, 0);
+  ASSERT_TRUE(cw.has_value());
+  ASSERT_TRUE(d.write(1, 1, 0x6040, 0, *cw | 0x10));  // go
+  EXPECT_EQ(*d.read(1, 1, 0x6040, 0) & 0x10, 0x10);
+  ASSERT_TRUE(b.run_until([&] { return (*d.read(1, 1, 0x6040, 0) & 0x10) == 0; }, 200));
+  EXPECT_EQ(b.slaves[0]->axis(0).objects().target_position, 1000);
+  ASSERT_TRUE(b.run_until([&] { return (d.statusword(1, 1) & 0x0400) && b.slaves[0]->axis(0).objects().position_actual > 900; }, 5000));
+}
+
+TEST(EcDrive, HomingAttainedSetsTheHomedRecord) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  EXPECT_EQ(d.homed(1, 1), false);
+  EXPECT_FALSE(d.homed(9, 1).has_value());
+  ASSERT_TRUE(d.write(1, 1, 0x6060, 0, 6));   // HM through the PDO
+  ASSERT_TRUE(d.write(1, 1, 0x6098, 0, 37));  // method 37: the current position is home (SDO)
+  d.set_goal(1, 1, PdsGoal::operation_enabled);
+  ASSERT_TRUE(b.run_until([&] { return d.state(1, 1) == PdsState::operation_enabled && !d.requests_pending(1); }, 2000));
+  EXPECT_EQ(d.homed(1, 1), false);
+  ASSERT_TRUE(d.write(1, 1, 0x6040, 0, *d.read(1, 1, 0x6040, 0) | 0x10));  // start homing
+  ASSERT_TRUE(b.run_until([&] { return d.homed(1, 1) == true; }, 3000)) << std::hex << d.statusword(1, 1);
+  EXPECT_EQ(d.homed(2, 1), false);
+  d.set_homed(1, 1, false);
+  EXPECT_EQ(d.homed(1, 1), false);
+}

@@ -1,0 +1,416 @@
+// Tests controller/ethercat/ec_master: the master core against A's EscChain of four of B's
+// DriveSlaves (models/ethercat/omnitwin_drive.xml) in-process — scan and identity, station
+// addresses, the PDO mapping read over CoE against the ESI, all slaves to OP, the expected
+// WKC every cycle, process data both ways, a slave powered off (WKC drop found and reported)
+// and on again (brought back to OP), SDO aborts reported, lost frames counted, an unknown
+// device refused by name, DC registers written.
+#include "controller/ethercat/ec_master.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "bus_emulators/ethercat/device/ec_sii.hpp"
+#include "ec_bench.hpp"
+
+using namespace omnitwin::controller::ethercat;
+using ecbench::Bench;
+
+namespace {
+bool has_event(const EcMaster& m, const std::string& part) {
+  return std::any_of(m.events().begin(), m.events().end(), [&](const std::string& e) { return e.find(part) != std::string::npos; });
+}
+std::string events(const EcMaster& m) {
+  std::string s = std::string("phase ") + to_string(m.phase()) + "\n";
+  for (int i = 0; i < m.slave_count(); ++i)
+    s += "slave " + std::to_string(i) + " step " + to_string(m.slave(i).step) + " al " + to_string(m.slave(i).al_state) +
+         " code " + std::to_string(m.slave(i).al_code) + "\n";
+  for (const auto& e : m.events()) s += e + "\n";
+  return s;
+}
+}  // namespace
+
+TEST(EcMaster, FirstTickCountsSlavesWithBrd) {
+  Bench b;
+  b.master->tick(0);
+  ASSERT_TRUE(b.sent);
+  // EtherCAT header: length 14, type 1; BRD, index 1, ADP 0, ADO 0x0000, 2 bytes, WKC 0
+  const std::vector<std::uint8_t> golden{0x0E, 0x10, 0x07, 0x01, 0x00, 0x00, 0x00, 0x00,
+                                         0x02, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00};
+  EXPECT_EQ(b.frame, golden);
+  ASSERT_TRUE(b.chain.process(b.frame, 0));
+  EXPECT_EQ(omnitwin::ethercat::get_u16(b.frame.data() + 14), 4);  // WKC = slave count
+}
+
+TEST(EcMaster, ScanFindsFourSlavesWithTheirIdentity) {
+  Bench b;
+  ASSERT_TRUE(b.run_until([&] { return b.master->phase() >= MasterPhase::configure; })) << b.master->error();
+  ASSERT_EQ(b.master->slave_count(), 4);
+  for (int i = 0; i < 4; ++i) {
+    const SlaveStatus& s = b.master->slave(i);
+    EXPECT_EQ(s.station, 0x1001 + i);
+    EXPECT_EQ(b.chain.esc(i).station_address(), 0x1001 + i);
+    EXPECT_EQ(s.sii.vendor, b.devices[0].vendor_id);
+    EXPECT_EQ(s.sii.product, b.devices[0].product_code);
+    EXPECT_EQ(s.sii.revision, b.devices[0].revision);
+    EXPECT_EQ(s.sii.serial, static_cast<std::uint32_t>(100 + i));
+    ASSERT_NE(s.esi, nullptr);
+    EXPECT_EQ(s.esi->name, b.devices[0].name);
+  }
+}
+
+TEST(EcMaster, PdoMappingReadOverCoeMatchesTheEsi) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
+  const auto& d = b.devices[0];
+  for (int i = 0; i < 4; ++i) {
+    const SlaveStatus& s = b.master->slave(i);
+    EXPECT_TRUE(s.pdo_from_coe);
+    std::vector<const omnitwin::ethercat::EsiPdo*> rx, tx;
+    for (const auto& p : d.rx_pdos) if (p.sm == 2) rx.push_back(&p);
+    for (const auto& p : d.tx_pdos) if (p.sm == 3) tx.push_back(&p);
+    ASSERT_EQ(s.rx_pdos.size(), rx.size());
+    ASSERT_EQ(s.tx_pdos.size(), tx.size());
+    for (std::size_t k = 0; k < rx.size(); ++k) {
+      EXPECT_EQ(s.rx_pdos[k].index, rx[k]->index);
+      ASSERT_EQ(s.rx_pdos[k].entries.size(), rx[k]->entries.size());
+      for (std::size_t e = 0; e < rx[k]->entries.size(); ++e) {
+        EXPECT_EQ(s.rx_pdos[k].entries[e].index, rx[k]->entries[e].index);
+        EXPECT_EQ(s.rx_pdos[k].entries[e].bits, rx[k]->entries[e].bit_length);
+      }
+    }
+    for (std::size_t k = 0; k < tx.size(); ++k) {
+      EXPECT_EQ(s.tx_pdos[k].index, tx[k]->index);
+      EXPECT_EQ(s.tx_pdos[k].bits(), tx[k]->bit_size());
+    }
+    EXPECT_EQ(s.out_bytes, b.slaves[i]->output_bytes());
+    EXPECT_EQ(s.in_bytes, b.slaves[i]->input_bytes());
+  }
+}
+
+TEST(EcMaster, AllReachOpAndEveryCycleHasTheExpectedWkc) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(b.chain.esc(i).al_state(), omnitwin::ethercat::AlState::op);
+  EXPECT_EQ(b.master->stats().expected_wkc, 12);  // 2 × 4 with outputs + 4 with inputs
+  const auto cycles = b.master->stats().cycles;
+  for (int k = 0; k < 500; ++k) {
+    b.step();
+    ASSERT_EQ(b.master->stats().last_wkc, 12) << "cycle " << k;
+  }
+  EXPECT_EQ(b.master->stats().cycles, cycles + 500);
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);
+  EXPECT_EQ(b.master->stats().lost_frames, 0u);
+  EXPECT_TRUE(b.master->operational());
+}
+
+TEST(EcMaster, ProcessDataTravelsBothWays) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  const auto tv = b.master->find_entry(2, 0x60FF, 0);
+  ASSERT_TRUE(tv.has_value());
+  EXPECT_TRUE(tv->output);
+  EXPECT_EQ(tv->bits, 32);
+  b.master->write_entry(*tv, -4321);
+  for (int k = 0; k < 5; ++k) b.step();
+  EXPECT_EQ(b.slaves[2]->axis(0).objects().target_velocity, -4321);
+  EXPECT_EQ(b.slaves[1]->axis(0).objects().target_velocity, 0);
+  const auto pa = b.master->find_entry(3, 0x6064, 0);
+  ASSERT_TRUE(pa.has_value());
+  EXPECT_FALSE(pa->output);
+  b.step();
+  EXPECT_EQ(b.master->read_entry(*pa, true), b.slaves[3]->axis(0).objects().position_actual);
+  const auto sw = b.master->find_entry(0, 0x6041, 0);
+  ASSERT_TRUE(sw.has_value());
+  EXPECT_EQ(b.master->read_entry(*sw, false), b.slaves[0]->axis(0).objects().statusword);
+}
+
+TEST(EcMaster, PoweredOffSlaveIsFoundAndBroughtBackToOp) {
+  EcMasterConfig cfg;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.chain.set_powered(2, false, b.t);
+  for (int k = 0; k < 20; ++k) b.step();
+  EXPECT_GT(b.master->stats().wkc_errors, 0u);
+  EXPECT_LT(b.master->stats().last_wkc, 12);
+  EXPECT_FALSE(b.master->operational());
+  EXPECT_TRUE(has_event(*b.master, "slave 2 (station 0x1003) lost")) << events(*b.master);
+  EXPECT_EQ(b.master->slave(2).step, SlaveStep::offline);
+  EXPECT_GE(b.master->stats().slaves_lost, 1u);
+  b.chain.set_powered(2, true, b.t);
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000)) << events(*b.master);
+  EXPECT_EQ(b.chain.esc(2).station_address(), 0x1003);
+  EXPECT_EQ(b.chain.esc(2).al_state(), omnitwin::ethercat::AlState::op);
+  EXPECT_GE(b.master->slave(2).recoveries, 1u);
+  EXPECT_TRUE(has_event(*b.master, "slave 2 (station 0x1003) back in OP")) << events(*b.master);
+  const auto errors = b.master->stats().wkc_errors;
+  for (int k = 0; k < 100; ++k) b.step();
+  EXPECT_EQ(b.master->stats().wkc_errors, errors);
+  EXPECT_EQ(b.master->stats().last_wkc, 12);
+}
+
+TEST(EcMaster, SdoUploadOfAMissingObjectReportsTheAbortCode) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  std::optional<SdoResult> got;
+  const auto id = b.master->sdo_upload(1, 0x2345, 0, [&](const SdoResult& r) { got = r; });
+  ASSERT_NE(id, 0u);
+  EXPECT_EQ(b.master->sdo_pending(1), 1u);
+  ASSERT_TRUE(b.run_until([&] { return got.has_value(); }, 2000));
+  EXPECT_EQ(got->id, id);
+  EXPECT_EQ(got->status, SdoStatus::aborted);
+  EXPECT_EQ(got->abort_code, 0x06020000u);
+  EXPECT_EQ(b.master->sdo_pending(1), 0u);
+  EXPECT_TRUE(has_event(*b.master, "0x06020000"));
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);  // served between cycles without disturbing them
+}
+
+TEST(EcMaster, SdoUploadAndDownloadRoundTrip) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  std::optional<SdoResult> down, up;
+  b.master->sdo_download(0, 0x6081, 0, value_bytes(12345, 4), [&](const SdoResult& r) { down = r; });
+  b.master->sdo_upload(0, 0x6081, 0, [&](const SdoResult& r) { up = r; });
+  ASSERT_TRUE(b.run_until([&] { return up.has_value(); }, 2000));
+  EXPECT_EQ(down->status, SdoStatus::done);
+  EXPECT_EQ(up->status, SdoStatus::done);
+  EXPECT_EQ(bytes_value(up->data, false), 12345);
+  EXPECT_EQ(b.slaves[0]->axis(0).objects().profile_velocity, 12345u);
+}
+
+TEST(EcMaster, LostFramesAreCountedAndConfigurationStillCompletes) {
+  Bench b;
+  for (int k = 0; k < 30; ++k) b.step();
+  b.drop_next = 3;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  EXPECT_EQ(b.master->stats().lost_frames, 3u);
+  b.drop_next = 2;
+  for (int k = 0; k < 10; ++k) b.step();
+  EXPECT_EQ(b.master->stats().lost_frames, 5u);
+  EXPECT_TRUE(b.master->operational());
+}
+
+TEST(EcMaster, StartupSdoIsWrittenBeforeOp) {
+  EcMasterConfig cfg;
+  cfg.startup.push_back(StartupSdo{-1, 0x6060, 0, {9}});
+  cfg.startup.push_back(StartupSdo{1, 0x6081, 0, value_bytes(777, 4)});
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(b.slaves[i]->axis(0).objects().mode, 9);
+  EXPECT_EQ(b.slaves[1]->axis(0).objects().profile_velocity, 777u);
+  EXPECT_NE(b.slaves[0]->axis(0).objects().profile_velocity, 777u);
+}
+
+TEST(EcMaster, UnknownDeviceIsRefusedByPositionAndIdentity) {
+  auto devs = ecbench::drive_esi();
+  devs[0].product_code ^= 0x1;
+  Bench b(4, {}, devs);
+  b.run_until([&] { return b.master->phase() == MasterPhase::failed; }, 5000);
+  ASSERT_EQ(b.master->phase(), MasterPhase::failed);
+  EXPECT_NE(b.master->error().find("slave 0 (vendor 0x"), std::string::npos) << b.master->error();
+  EXPECT_NE(b.master->error().find("matches no ESI"), std::string::npos);
+}
+
+TEST(EcMaster, ExpectedSlaveCountMismatchFails) {
+  EcMasterConfig cfg;
+  cfg.expected_slaves = 5;
+  Bench b(4, cfg);
+  for (int k = 0; k < 3; ++k) b.step();
+  EXPECT_EQ(b.master->phase(), MasterPhase::failed);
+  EXPECT_EQ(b.master->error(), "found 4 slaves, the configuration expects 5");
+}
+
+TEST(EcMaster, DistributedClocksAreConfigured) {
+  EcMasterConfig cfg;
+  cfg.dc = true;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_TRUE(b.master->slave(i).dc);
+    EXPECT_EQ(b.chain.esc(i).read32(0x09A0), 1'000'000u);
+    EXPECT_EQ(b.chain.esc(i).read8(0x0981) & 0x03, 0x03);
+  }
+  EXPECT_EQ(b.master->slave(0).dc_delay_ns, 0);
+  EXPECT_GT(b.master->slave(3).dc_delay_ns, b.master->slave(1).dc_delay_ns);
+  for (int k = 0; k < 100; ++k) b.step();
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);
+}
+
+TEST(EcMaster, FramesThatComeBackTooLateAreSurvived) {
+  for (int every : {7, 11, 13, 17, 23}) {
+    EcMasterConfig cfg;
+    cfg.dc = true;
+    cfg.startup.push_back(StartupSdo{-1, 0x6060, 0, {9}});
+    Bench b(4, cfg);
+    b.late_every = every;
+    ASSERT_TRUE(b.to_op(60000)) << "every " << every << ": " << b.master->error() << "\n" << events(*b.master);
+    EXPECT_GT(b.master->stats().lost_frames, 0u);
+  }
+}
+
+TEST(EcMaster, PdoRemappingThroughStartupSdosIsReadBackAndLaidOut) {
+  // Assign RxPDO 0x1601 (controlword + target position) instead of 0x1600.
+  EcMasterConfig cfg;
+  cfg.startup.push_back(StartupSdo{-1, 0x1C12, 0, {0}});
+  cfg.startup.push_back(StartupSdo{-1, 0x1C12, 1, {0x01, 0x16}});
+  cfg.startup.push_back(StartupSdo{-1, 0x1C12, 0, {1}});
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
+  const SlaveStatus& s = b.master->slave(0);
+  ASSERT_EQ(s.rx_pdos.size(), 1u);
+  EXPECT_EQ(s.rx_pdos[0].index, 0x1601);
+  EXPECT_EQ(s.out_bytes, 6u);
+  EXPECT_EQ(b.master->stats().expected_wkc, 12);
+  EXPECT_FALSE(b.master->find_entry(0, 0x60FF, 0).has_value());
+  const auto tp = b.master->find_entry(1, 0x607A, 0);
+  ASSERT_TRUE(tp.has_value());
+  b.master->write_entry(*tp, 98765);
+  for (int k = 0; k < 5; ++k) b.step();
+  EXPECT_EQ(b.slaves[1]->axis(0).objects().target_position, 98765);
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);
+}
+
+TEST(EcMaster, SlaveFallingToSafeOpWithAnErrorIsReportedAndBroughtBack) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.chain.esc(1).set_al_error(omnitwin::ethercat::AlState::safeop, omnitwin::ethercat::AlStatusCode::watchdog);
+  ASSERT_TRUE(b.run_until([&] { return has_event(*b.master, "left OP"); }, 200)) << events(*b.master);
+  EXPECT_TRUE(has_event(*b.master,
+                        "slave 1 (station 0x1002) left OP: state SAFE-OP + error, AL status code 0x001B (sync manager watchdog)"))
+      << events(*b.master);
+  EXPECT_EQ(b.master->slave(1).al_code, 0x001B);
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 5000)) << events(*b.master);
+  EXPECT_EQ(b.chain.esc(1).al_state(), omnitwin::ethercat::AlState::op);
+  EXPECT_FALSE(b.chain.esc(1).al_error());
+  EXPECT_EQ(b.master->slave(1).recoveries, 1u);
+  EXPECT_EQ(b.master->stats().slaves_lost, 0u);
+}
+
+TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
+  const auto multi = omnitwin::ethercat::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
+  ASSERT_FALSE(multi.empty());
+  omnitwin::ethercat::DriveSlave slave(multi[0], omnitwin::ethercat::DriveSlaveConfig{});
+  omnitwin::ethercat::EscChain chain;
+  chain.add(&slave.esc());
+  EcMasterConfig cfg;
+  cfg.devices = multi;
+  std::vector<std::uint8_t> frame;
+  EcMaster m(cfg, [&](std::span<const std::uint8_t> pdu) {
+    frame.assign(pdu.begin(), pdu.end());
+    return true;
+  });
+  SimTime t = 0;
+  for (int k = 0; k < 20000 && !m.operational() && m.phase() != MasterPhase::failed; ++k, t += 1'000'000) {
+    slave.cycle(t);
+    chain.advance(t);
+    frame.clear();
+    m.tick(t);
+    if (!frame.empty() && chain.process(frame, t)) m.on_frame(frame, t);
+  }
+  ASSERT_TRUE(m.operational()) << m.error() << "\n" << events(m);
+  EXPECT_EQ(m.slave(0).out_bytes, slave.output_bytes());
+  EXPECT_EQ(m.slave(0).in_bytes, slave.input_bytes());
+  EXPECT_EQ(m.stats().expected_wkc, 3);
+  EXPECT_EQ(m.slave(0).esi->product_code, 0x00000801u);
+}
+
+TEST(EcMaster, PoweredOffDcSlaveRejoinsDistributedClocks) {
+  EcMasterConfig cfg;
+  cfg.dc = true;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int k = 0; k < 50; ++k) b.step();
+  b.chain.set_powered(3, false, b.t);
+  for (int k = 0; k < 30; ++k) b.step();
+  EXPECT_EQ(b.master->slave(3).step, SlaveStep::offline);
+  b.chain.set_powered(3, true, b.t);
+  EXPECT_EQ(b.chain.esc(3).read8(0x0981), 0);  // power-on state: SYNC0 off
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000)) << events(*b.master);
+  EXPECT_TRUE(has_event(*b.master, "slave 3 (station 0x1004) rejoins distributed clocks")) << events(*b.master);
+  EXPECT_EQ(b.chain.esc(3).read8(0x0981) & 0x03, 0x03);
+  EXPECT_EQ(b.chain.esc(3).read32(0x09A0), 1'000'000u);
+  // right after rejoining its system time is within microseconds of the reference's, and the
+  // FRMW 0x0910 every cycle lets the ESC's drift control close the rest
+  auto diff = [&] { return std::llabs(static_cast<long long>(b.chain.esc(3).system_time(b.t) - b.chain.esc(0).system_time(b.t))); };
+  EXPECT_LT(diff(), 20'000);
+  for (int k = 0; k < 500; ++k) b.step();
+  EXPECT_LT(diff(), 100);
+  EXPECT_EQ(b.master->stats().last_wkc, 12);
+}
+
+namespace {
+// A mailbox-less digital I/O slave (no CoE): 1 output byte at SM0, 2 input bytes at SM1.
+struct IoApp : omnitwin::ethercat::EscApplication {
+  std::vector<std::uint8_t> outputs;
+  omnitwin::ethercat::AlStatusCode on_al_request(omnitwin::ethercat::AlState, omnitwin::ethercat::AlState,
+                                                 omnitwin::ethercat::SimTime) override {
+    return omnitwin::ethercat::AlStatusCode::none;
+  }
+  void on_mailbox(std::span<const std::uint8_t>, omnitwin::ethercat::SimTime) override {}
+  void on_outputs(std::span<const std::uint8_t> o, omnitwin::ethercat::SimTime) override { outputs.assign(o.begin(), o.end()); }
+};
+omnitwin::ethercat::DeviceDescription io_device() {
+  namespace ec = omnitwin::ethercat;
+  ec::DeviceDescription d;
+  d.vendor_id = 0x00000F1C;
+  d.product_code = 0x00001010;
+  d.name = "io 8/16";
+  d.sms = {{0x1000, 0, 0x64, true, ec::SmKind::outputs}, {0x1100, 0, 0x20, true, ec::SmKind::inputs}};
+  d.rx_pdos = {{0x1600, "out", 0, true, true, {{0x7000, 1, 8, "out", "USINT"}}}};
+  d.tx_pdos = {{0x1A00, "in", 1, true, true, {{0x6000, 1, 16, "in", "UINT"}}}};
+  return d;
+}
+}  // namespace
+
+TEST(EcMaster, SlaveWithoutCoeIsLaidOutFromItsSiiPdoCategories) {
+  namespace ec = omnitwin::ethercat;
+  const ec::DeviceDescription io = io_device();
+  IoApp app;
+  ec::EscConfig ecfg;
+  ecfg.sii = ec::build_sii(io);
+  ec::Esc esc(ecfg, &app);
+  auto devs = ecbench::drive_esi();
+  ec::DriveSlave drive(devs[0], ec::DriveSlaveConfig{});
+  ec::EscChain chain;
+  chain.add(&esc);
+  chain.add(&drive.esc());
+  EcMasterConfig cfg;
+  cfg.devices = devs;
+  cfg.devices.push_back(io);
+  std::vector<std::uint8_t> frame;
+  EcMaster m(cfg, [&](std::span<const std::uint8_t> pdu) {
+    frame.assign(pdu.begin(), pdu.end());
+    return true;
+  });
+  SimTime t = 0;
+  auto step = [&] {
+    drive.cycle(t);
+    const std::uint8_t in[2] = {0x34, 0x12};
+    esc.write_inputs(in);
+    chain.advance(t);
+    frame.clear();
+    m.tick(t);
+    if (!frame.empty() && chain.process(frame, t)) m.on_frame(frame, t);
+    t += 1'000'000;
+  };
+  for (int k = 0; k < 20000 && !m.operational() && m.phase() != MasterPhase::failed; ++k) step();
+  ASSERT_TRUE(m.operational()) << m.error() << "\n" << events(m);
+  EXPECT_FALSE(m.slave(0).sii.has_coe());
+  EXPECT_FALSE(m.slave(0).pdo_from_coe);
+  EXPECT_TRUE(m.slave(1).pdo_from_coe);
+  EXPECT_EQ(m.slave(0).out_bytes, 1u);
+  EXPECT_EQ(m.slave(0).in_bytes, 2u);
+  EXPECT_EQ(m.stats().expected_wkc, 6);
+  EXPECT_EQ(m.slave(1).out_offset, 1u);  // outputs of both slaves first, then the inputs
+  EXPECT_EQ(m.slave(0).in_offset, 1u + m.slave(1).out_bytes);
+  const auto out = m.find_entry(0, 0x7000, 1);
+  ASSERT_TRUE(out.has_value());
+  m.write_entry(*out, 0xA5);
+  for (int k = 0; k < 3; ++k) step();
+  EXPECT_EQ(app.outputs, std::vector<std::uint8_t>{0xA5});
+  EXPECT_EQ(m.read_entry(*m.find_entry(0, 0x6000, 1), false), 0x1234);
+  EXPECT_EQ(m.stats().last_wkc, 6);
+  EXPECT_EQ(m.sdo_upload(0, 0x1000, 0), 0u);  // no mailbox: refused
+}
