@@ -1,6 +1,8 @@
 // twin layer — the twin's side of the thesis CAN network; see can_network.hpp.
 #include "twin/can_network.hpp"
 
+#include <numbers>
+
 #include <fmt/format.h>
 
 #include <cmath>
@@ -352,6 +354,20 @@ DriveStateCode OmniCanNetwork::drive_state(int axis0) const {
     case omni::SlaveState::awaiting_sync: return DriveStateCode::syncing;
   }
   return DriveStateCode::waiting;
+}
+
+WheelRecord OmniCanNetwork::wheel_record(int axis0) const {
+  const omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(axis0)];
+  const physics::WheelDriveSample& w = sl.drive_chain().last();
+  const double per_sample = s_.platform.velocity_loop.period * s_.platform.counts_per_rev() / (2 * std::numbers::pi);
+  WheelRecord r;
+  r.command_rad_s = sl.command() / per_sample;
+  r.count = static_cast<double>(sl.drive_chain().counter().count());
+  r.command_counts = w.command;
+  r.measured_counts = static_cast<double>(w.delta_counts);
+  r.output = static_cast<double>(w.code);
+  r.node = static_cast<std::uint16_t>(sl.config().node_id);
+  return r;
 }
 
 nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {

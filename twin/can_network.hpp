@@ -32,72 +32,75 @@
 #include "bus_emulators/can/can_pcap.hpp"
 #include "bus_emulators/can/transport.hpp"
 #include "bus_emulators/omni/omni_slave.hpp"
+#include "twin/bus_network.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
 
 namespace omnitwin::twin {
 
-class OmniCanNetwork {
+class OmniCanNetwork final : public BusNetwork {
  public:
-  struct Hooks {
-    std::function<double(int wheel)> wheel_angle;             // shaft angle of wheel 0..3 [rad]
-    std::function<void(int wheel, double rad_s)> set_setpoint; // driver speed setpoint [rad/s]
-    std::function<void(int wheel, double err_pulses)> axis_sample;  // command − measured [pulses]
-    std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
-  };
+  // Hooks: wheel_angle feeds the counters, set_setpoint the drivers; axis_sample gets
+  // command − measured [pulses] each slave sample (wheel_speed is not used).
 
   // Builds the bus and the slaves and opens the transport (throws can::TransportError for a
   // bad spec or a socket that cannot be opened). Timers are added to `sched` (all off: the
   // slaves start stopped). Not real-time safe.
   OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks);
-  ~OmniCanNetwork();
+  ~OmniCanNetwork() override;
+
+  const char* name() const override { return "can"; }
+  std::string master_iface() const override { return s_.bus.can.transport; }
 
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
   // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
   // tick), and the file is closed with the network, so SIGINT/SIGTERM leave it complete.
-  void open_pcap(const std::string& path);
-  void flush_pcap() {
+  void open_pcap(const std::string& path) override;
+  void flush_pcap() override {
     if (pcap_) pcap_->flush();
   }
   // Hands the batched frames to the transport, all at once. In lockstep the slaves' frames
   // are batched (the master reads them only after its grant), so this must run before
   // frames_to_transport() goes into a grant (the run calls it just before); nothing is
   // batched in realtime.
-  void flush_transport();
+  void flush_transport() override;
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
-  void advance(SimTime t);
+  void advance(SimTime t) override;
 
   // Lockstep: receives frames from the transport until `count` frames have arrived in all
   // since the start, queueing each on node 0 at t + T_pre (+ any delay fault). Returns false
   // when they did not all arrive within `timeout`.
-  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout);
+  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
   // Realtime: queues whatever the transport holds now at t + T_pre. Returns the number taken.
-  int poll_transport(SimTime t);
+  int poll_transport(SimTime t) override;
 
   // Every physics step: the counters follow the shafts. Real-time safe.
-  void observe_wheels();
+  void observe_wheels() override;
 
   // A scenario CAN fault begins or ends at t. Not real-time safe (logs).
-  void apply_fault(const FaultSpec& f, bool begin, SimTime t);
+  void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;
 
-  std::uint64_t frames_to_transport() const { return to_transport_; }
-  std::uint64_t frames_from_transport() const { return from_transport_; }
+  std::uint64_t frames_to_transport() const override { return to_transport_; }
+  std::uint64_t frames_from_transport() const override { return from_transport_; }
   const can::CanBus& bus() const { return bus_; }
   const omni::OmniSlave& slave(int axis0) const { return *slaves_[static_cast<std::size_t>(axis0)]; }
   const can::Transport& transport() const { return *transport_; }
   // Time the master's NMT start-all completed on the wire [ns], or -1.
-  SimTime master_start_ns() const { return master_start_ns_; }
+  SimTime master_start_ns() const override { return master_start_ns_; }
 
   // bus.* of metrics.json (frames_tx, frames_rx, dropouts, dropout_rate, errors, …) and the
   // per-slave figures. Not real-time safe.
-  nlohmann::json bus_metrics(SimTime now) const;
-  nlohmann::json slave_metrics() const;
+  nlohmann::json bus_metrics(SimTime now) const override;
+  nlohmann::json slave_metrics() const override;
   // The cumulative counters of bus_metrics (load left 0: the caller knows its interval) and
   // a slave's state for observers. Real-time safe (no allocation).
-  BusSample bus_sample() const;
-  DriveStateCode drive_state(int axis0) const;
+  BusSample bus_sample() const override;
+  std::int64_t wire_busy_ns() const override { return bus_.stats().busy_ns; }
+  DriveStateCode drive_state(int axis0) const override;
+  // The slave's held command, counter, PI and DA (output = DA code). Real-time safe.
+  WheelRecord wheel_record(int axis0) const override;
 
  private:
   struct LossState {

@@ -1,6 +1,8 @@
 // twin layer — clock modes; see clock.hpp.
 #include "twin/clock.hpp"
 
+#include <poll.h>
+
 #include <algorithm>
 #include <pthread.h>
 #include <sched.h>
@@ -54,12 +56,36 @@ void RealtimePacer::start() {
 
 void RealtimePacer::wait_until(SimTime t) {
   const std::int64_t deadline = wall_start_ + t;
+  if (wake_fd_ >= 0) return wait_waking(deadline);
   if (monotonic_ns() >= deadline) return;
   timespec ts{};
   ts.tv_sec = static_cast<time_t>(deadline / kNsPerSecond);
   ts.tv_nsec = static_cast<long>(deadline % kNsPerSecond);
   // Absolute deadline: an interrupted sleep simply resumes towards the same instant.
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+void RealtimePacer::set_wake(int fd, std::function<void(SimTime)> on_readable) {
+  wake_fd_ = fd;
+  on_wake_ = std::move(on_readable);
+}
+
+// Sleeps towards the deadline but answers the wake descriptor at once: a frame that arrives
+// between two events is handed over at the instant it arrived (sim time = wall time since
+// start), as a slave answers a frame on the wire, instead of at the next event.
+void RealtimePacer::wait_waking(std::int64_t deadline) {
+  for (;;) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= deadline) return;
+    const std::int64_t left_ns = deadline - now;
+    timespec ts{};
+    ts.tv_sec = static_cast<time_t>(left_ns / kNsPerSecond);
+    ts.tv_nsec = static_cast<long>(left_ns % kNsPerSecond);
+    pollfd p{wake_fd_, POLLIN, 0};
+    const int n = ppoll(&p, 1, &ts, nullptr);
+    if (n > 0 && (p.revents & POLLIN) != 0) on_wake_(monotonic_ns() - wall_start_);
+    if (n < 0 && errno != EINTR) return;
   }
 }
 

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <ctime>
 #include <string>
 #include <vector>
@@ -54,8 +55,12 @@ class RealtimePacer final : public Pacer {
   RealtimePacer& operator=(const RealtimePacer&) = delete;
 
   void start() override;
-  // Sleeps until wall_start + t. Real-time safe.
+  // Sleeps until wall_start + t; with a wake descriptor set, calls its callback whenever the
+  // descriptor becomes readable meanwhile. Real-time safe.
   void wait_until(SimTime t) override;
+  // A descriptor to answer while sleeping (e.g. the bus transport's socket) and what to do
+  // with it, given the sim time it became readable at. -1 stops it. Not real-time safe.
+  void set_wake(int fd, std::function<void(SimTime)> on_readable);
   // Records the lateness of the instant t (call right after wait_until(t)). Real-time safe
   // while fewer than expected_ticks were recorded.
   void tick(SimTime t) override;
@@ -64,7 +69,11 @@ class RealtimePacer final : public Pacer {
   RealtimeStats stats() const;
 
  private:
+  void wait_waking(std::int64_t deadline);
+
   SimTime tick_period_;
+  int wake_fd_ = -1;
+  std::function<void(SimTime)> on_wake_;
   std::int64_t wall_start_ = 0;
   std::uint64_t overruns_ = 0;
   std::vector<double> lateness_us_;

@@ -20,15 +20,20 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
     "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
-constexpr std::array<std::string_view, 11> kBusMetrics = {
-    "frames_tx", "frames_rx",  "dropouts",       "dropout_rate", "errors", "frames",
-    "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed"};
-// The master's reaction (bus can): when it stopped, why (simclock::StopReason code), which node.
-constexpr std::array<std::string_view, 5> kMasterMetrics = {"stopped_at_s", "stop_reason_code", "missing_node",
-                                                            "path_origin_s", "ticks"};
-constexpr std::array<std::string_view, 8> kSlaveMetrics = {"samples",  "dropouts",     "dropout_percent",
-                                                           "resyncs",  "commands",     "bad_frames",
-                                                           "tec",      "bus_off_events"};
+// bus can and bus ethercat (not_returned … op_since_s are EtherCAT's).
+constexpr std::array<std::string_view, 16> kBusMetrics = {
+    "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
+    "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",
+    "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s"};
+// The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
+// bus ethercat also its own counters (from the master's statistics file).
+constexpr std::array<std::string_view, 13> kMasterMetrics = {
+    "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",    "cycles",  "wkc_errors",
+    "lost_frames",  "recoveries",       "slaves_lost",  "timeouts",      "sdo_failed", "last_wkc"};
+// Per slave: CAN's first eight, EtherCAT's last three.
+constexpr std::array<std::string_view, 11> kSlaveMetrics = {
+    "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",  "bad_frames",
+    "tec",     "bus_off_events", "al_status_code",  "station_address", "error_code"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;

@@ -128,7 +128,16 @@ void print_summary(const RunResult& r) {
                              rt.value("scheduling", "?"), rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
-  if (m.contains("master")) {
+  if (m.contains("master") && m["bus"].value("name", "") == "ethercat") {
+    const auto& ms = m["master"];
+    const auto& b = m["bus"];
+    std::cout << fmt::format("  master {} ({}), {}; {} cycles, WKC errors {}, lost frames {}, recoveries {}; "
+                             "segment {} frames in, {} returned, {} lost\n",
+                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             ms.value("cycles", 0), ms.value("wkc_errors", 0), ms.value("lost_frames", 0),
+                             ms.value("recoveries", 0), b.value("frames_rx", 0), b.value("frames_tx", 0),
+                             b.value("dropouts", 0));
+  } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
     std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} %, dropouts {} ({:.2f} %)\n",
@@ -140,7 +149,8 @@ void print_summary(const RunResult& r) {
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
-  for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "master.log"})
+  for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "bus-ethercat.pcap",
+                        "master.log"})
     if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
 }
 
@@ -152,10 +162,17 @@ int cmd_run(const RunArgs& a) {
     o.progress = !a.no_progress && stderr_is_terminal();
     o.interrupt = &g_interrupt;
     o.external_master = a.external_master;
-    if (a.external_master)
+    if (a.external_master && s.bus.kind == BusKind::ethercat) {
+      o.on_bus_ready = [&s](const std::string& iface) {
+        std::cout << fmt::format("twin {}: EtherCAT segment of 4 drives; a master connects on {} (Ctrl-C ends)\n",
+                                 s.name, iface)
+                  << std::flush;
+      };
+    } else if (a.external_master) {
       std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
                                s.bus.can.transport, s.bus.can.bit_rate)
                 << std::flush;
+    }
     std::unique_ptr<DdsRunObserver> dds;
     if (a.dds || s.outputs.dds.enabled) {
       try {
@@ -402,10 +419,12 @@ int main(int argc, char** argv) {
 
   RunArgs ta;
   ta.external_master = true;
-  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, realtime) for an external master");
+  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can or ethercat, realtime) for an external master");
   twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
   twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
+  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, or ethercat)")
+      ->check(CLI::IsMember({"can", "ethercat"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
   add_output_flags(twin, ta);
@@ -472,8 +491,8 @@ int main(int argc, char** argv) {
   try {
     if (*run) return cmd_run(ra);
     if (*twin) {
-      // The twin alone: the CAN bus and the realtime clock are implied.
-      ta.bus = "can";
+      // The twin alone: realtime is implied, and the CAN bus unless --bus says otherwise.
+      if (ta.bus.empty()) ta.bus = "can";
       ta.clock = "realtime";
       return cmd_run(ta);
     }

@@ -1,6 +1,8 @@
 // twin layer — the master program as a child process; see master_process.hpp.
 #include "twin/master_process.hpp"
 
+#include "twin/ethercat_network.hpp"
+
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -147,6 +149,33 @@ controller::MasterConfig master_config(const Scenario& s) {
 std::string master_config_yaml(const Scenario& s) {
   return fmt::format("# omni-master configuration written by omnitwin for scenario {}\n", s.name) +
          controller::dump_master_config(master_config(s));
+}
+
+std::string ethercat_platform_yaml(const Scenario& s) {
+  controller::MasterConfig m = master_config(s);
+  // The platform loop's odometry counts what the drives report: position actual values.
+  m.loop.counts_per_rev = s.bus.ethercat.counts_per_rev;
+  return fmt::format("# platform loop of omni-master --bus ethercat, written by omnitwin for scenario {}\n", s.name) +
+         controller::dump_master_config(m);
+}
+
+std::string ethercat_master_config_yaml(const Scenario& s, const std::string& platform_file) {
+  const EthercatSpec& e = s.bus.ethercat;
+  const bool csv = e.mode == "csv";
+  std::string out = fmt::format("# omni-master --bus ethercat configuration written by omnitwin for scenario {}\n", s.name);
+  out += fmt::format("esi: {}\n", ethercat_esi_path(e));
+  out += fmt::format("cycle: {}\n", s.controller.period);
+  out += fmt::format("dc: {}\n", e.dc ? "true" : "false");
+  out += "expected_slaves: 4\n";
+  // Every drive in the wheels' cyclic mode (0x6060 modes of operation: 9 CSV, 8 CSP).
+  out += "startup:\n";
+  out += fmt::format("  - slave: all\n    index: 0x6060\n    sub: 0\n    size: 1\n    value: {}\n", csv ? 9 : 8);
+  out += "wheels:\n";
+  for (int i = 1; i <= 4; ++i) out += fmt::format("  - slave: {}\n    channel: 1\n", i);
+  out += fmt::format("wheel_mode: {}\n", e.mode);
+  out += fmt::format("wheel_counts_per_rev: {}\n", e.counts_per_rev);
+  out += fmt::format("platform: {}\n", platform_file);
+  return out;
 }
 
 }  // namespace omnitwin::twin

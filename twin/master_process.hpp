@@ -57,4 +57,9 @@ controller::MasterConfig master_config(const Scenario& s);
 // The same as the master's configuration file (docs/protocols/omni-master.md).
 std::string master_config_yaml(const Scenario& s);
 
+// bus ethercat: the platform loop's file (master_config vocabulary, counts = the drives'
+// position units) and the master's own file naming it (controller/ethercat/ec_config.hpp).
+std::string ethercat_platform_yaml(const Scenario& s);
+std::string ethercat_master_config_yaml(const Scenario& s, const std::string& platform_file);
+
 }  // namespace omnitwin::twin

@@ -15,6 +15,7 @@
 #include <numbers>
 
 #include "bus_emulators/can/transport.hpp"
+#include "bus_emulators/ethercat/transport/ec_transport.hpp"
 #include "controller/path.hpp"
 #include "controller/platform_loop.hpp"
 #include "controller/sim_clock.hpp"
@@ -22,6 +23,7 @@
 #include "physics/platform_mjcf.hpp"
 #include "physics/platform_sim.hpp"
 #include "twin/can_network.hpp"
+#include "twin/ethercat_network.hpp"
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
 #include "twin/master_process.hpp"
@@ -75,6 +77,7 @@ RunEventKind event_kind(std::string_view kind) {
 
 std::string fault_target(const FaultSpec& f) {
   if (f.kind == FaultSpec::Kind::wheel_slip) return fmt::format("wheel {}", f.wheel + 1);
+  if (f.kind == FaultSpec::Kind::link_break) return f.wheel == 0 ? "master" : fmt::format("after slave {}", f.wheel);
   if (f.wheel == FaultSpec::kMaster) return "master";
   if (f.wheel == FaultSpec::kAllNodes) return "all";
   return fmt::format("node {}", f.wheel + 1);
@@ -107,9 +110,10 @@ class PlatformRun {
     end_ = seconds_to_ns(s.duration);
   }
 
-  // The CAN network (bus `can`): built after the platform, whose wheels it drives. Throws
-  // can::TransportError for a transport that cannot be opened.
-  void build_can_network();
+  // The bus network (bus `can` or `ethercat`): built after the platform, whose wheels it
+  // drives. Throws the transport's error for a transport that cannot be opened.
+  void build_network();
+  std::string master_iface() const { return net_ ? net_->master_iface() : std::string(); }
 
   RunResult execute();
 
@@ -124,7 +128,7 @@ class PlatformRun {
   void on_master(SimTime t);
   void on_device(int wheel);
   void on_record(SimTime t);
-  void record_can(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v);
+  void record_bus(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v);
   // bus.csv and the observers' sample, from the row just recorded. Real-time safe.
   void record_bus_and_state(SimTime t);
   std::uint32_t active_faults(SimTime t) const;
@@ -133,15 +137,15 @@ class PlatformRun {
   // run.json and platform.xml: what ran, for render and report (before the first step).
   void write_run_description() const;
   void on_fault(const FaultSpec& f, bool begin, SimTime t);
-  // bus `can`: the master process, the sim-clock tick, the master's report.
-  bool can_bus() const { return net_ != nullptr; }
+  // A bus network: the master process, the sim-clock tick, the master's report.
+  bool on_bus() const { return net_ != nullptr; }
   void start_master();
   void stop_master();
-  void on_master_can(SimTime t);
-  void on_physics_can(SimTime t);
+  void on_master_bus(SimTime t);
+  void on_physics_bus(SimTime t);
   void note_report(const simclock::MasterReport& r, SimTime t);
   void fail(std::string why);
-  controller::Pose2 can_reference(SimTime t) const;
+  controller::Pose2 bus_reference(SimTime t) const;
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
   // the first reason and stop the scheduler. Real-time safe on the success path.
   template <class Writer>
@@ -184,30 +188,39 @@ class PlatformRun {
   std::array<VelocityErrorStats, 4> axis_stats_;
   std::vector<double> row_;
 
-  // bus `can`
-  std::unique_ptr<OmniCanNetwork> net_;
+  // a bus network (`can`, `ethercat`)
+  std::unique_ptr<BusNetwork> net_;
   std::unique_ptr<simclock::Server> clock_server_;
   std::unique_ptr<MasterProcess> master_;
   std::string master_program_;
   simclock::MasterReport report_{};
   std::uint64_t tick_ = 0;
   SimTime master_stop_ns_ = -1;
-  std::array<double, 4> can_setpoint_{};
+  std::array<double, 4> bus_setpoint_{};  // what the network last asked of each wheel [rad/s]
+  double handshake_timeout_s_ = 10;
 };
 
-void PlatformRun::build_can_network() {
-  master_program_ = find_master_program(s_.bus.can.master);
-  OmniCanNetwork::Hooks h;
+void PlatformRun::build_network() {
+  BusNetwork::Hooks h;
   h.wheel_angle = [this](int i) { return sim_.wheel_angle(i); };
+  h.wheel_speed = [this](int i) { return sim_.wheel_speed(i); };
   h.set_setpoint = [this](int i, double w) {
-    can_setpoint_[static_cast<std::size_t>(i)] = w;
+    bus_setpoint_[static_cast<std::size_t>(i)] = w;
     sim_.set_wheel_speed_setpoint(i, w);
   };
   h.axis_sample = [this](int i, double e) { axis_stats_[static_cast<std::size_t>(i)].add(e); };
   h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
     if (events_) note(log_event(t, kind, text), *events_);
   };
-  net_ = std::make_unique<OmniCanNetwork>(s_, sched_, std::move(h));
+  if (s_.bus.kind == BusKind::ethercat) {
+    master_program_ = find_master_program(s_.bus.ethercat.master);
+    handshake_timeout_s_ = s_.bus.ethercat.handshake_timeout;
+    net_ = std::make_unique<EthercatNetwork>(s_, sched_, std::move(h));
+  } else {
+    master_program_ = find_master_program(s_.bus.can.master);
+    handshake_timeout_s_ = s_.bus.can.handshake_timeout;
+    net_ = std::make_unique<OmniCanNetwork>(s_, sched_, std::move(h));
+  }
 }
 
 void PlatformRun::fail(std::string why) {
@@ -222,10 +235,17 @@ void PlatformRun::start_master() {
   const std::string cfg = (dir / "master.yaml").string();
   {
     std::ofstream f(cfg);
-    f << master_config_yaml(s_);
+    if (s_.bus.kind == BusKind::ethercat) {
+      const std::string platform = (dir / "master-platform.yaml").string();
+      write_text_atomic(platform, ethercat_platform_yaml(s_));
+      f << ethercat_master_config_yaml(s_, platform);
+    } else {
+      f << master_config_yaml(s_);
+    }
     if (!f) throw std::runtime_error(fmt::format("cannot write {}", cfg));
   }
-  std::vector<std::string> args{"--bus", "can", "--iface", s_.bus.can.transport, "--config", cfg};
+  std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
+  if (s_.bus.kind == BusKind::ethercat) args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
   const bool lockstep = s_.clock == ClockMode::lockstep;
   if (lockstep) {
     // A short socket path (sun_path holds 108 bytes; run directories can be longer).
@@ -243,7 +263,7 @@ void PlatformRun::start_master() {
     share_cpu_with(master_->pid());
     // Wait for its Hello, noticing at once a master that died instead of connecting.
     const auto deadline = std::chrono::steady_clock::now() +
-                          std::chrono::milliseconds(std::llround(s_.bus.can.handshake_timeout * 1e3));
+                          std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
     simclock::WaitStatus st = simclock::WaitStatus::timeout;
     while (st == simclock::WaitStatus::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
       st = clock_server_->accept(std::chrono::milliseconds(100));
@@ -266,13 +286,13 @@ void PlatformRun::stop_master() {
 // One master tick in lockstep: the bus is run to t, the master is granted t with the count
 // of frames put on the transport so far, and its frames (exactly as many as it says it sent)
 // are queued on the wire at t + T_pre.
-void PlatformRun::on_master_can(SimTime t) {
+void PlatformRun::on_master_bus(SimTime t) {
   pacer_->tick(t);
   net_->advance(t);
   net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
   net_->flush_pcap();  // once per tick: a kill loses at most one tick of capture
   if (!clock_server_) return;  // realtime: the master keeps its own time
-  const auto timeout = std::chrono::milliseconds(std::llround(s_.bus.can.handshake_timeout * 1e3));
+  const auto timeout = std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
   simclock::Grant g;
   g.tick = tick_++;
   g.t_ns = t;
@@ -284,7 +304,7 @@ void PlatformRun::on_master_can(SimTime t) {
                             master_->running() ? "still running" : master_->describe_exit()));
   if (!net_->drain_transport(d.frames[0], t, timeout))
     return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
-                            net_->frames_from_transport(), s_.bus.can.transport));
+                            net_->frames_from_transport(), net_->master_iface()));
   note_report(d.report, t);
 }
 
@@ -299,7 +319,7 @@ void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
   report_ = r;
 }
 
-void PlatformRun::on_physics_can(SimTime t) {
+void PlatformRun::on_physics_bus(SimTime t) {
   net_->advance(t);
   if (!clock_server_) net_->poll_transport(t);  // realtime: frames as they come
   sim_.step();
@@ -308,7 +328,7 @@ void PlatformRun::on_physics_can(SimTime t) {
 }
 
 // The plan at t: the master's own (lockstep), else the path from when its start-all completed.
-controller::Pose2 PlatformRun::can_reference(SimTime t) const {
+controller::Pose2 PlatformRun::bus_reference(SimTime t) const {
   SimTime origin = report_.path_origin_ns;
   if (!clock_server_) origin = net_->master_start_ns();
   if (origin < 0) return path_.start_pose();
@@ -319,11 +339,11 @@ void PlatformRun::schedule() {
   const SimTime dt = seconds_to_ns(s_.platform.sim.timestep);
   const SimTime tm = seconds_to_ns(s_.controller.period);
   const SimTime ts = seconds_to_ns(s_.platform.velocity_loop.period);
-  if (can_bus()) {
-    // The slaves' timers belong to the network (they start with NMT start).
-    sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master_can(t); });
+  if (on_bus()) {
+    // The slaves' timers belong to the network (CAN: they start with NMT start).
+    sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master_bus(t); });
     sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
-    sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime t) { on_physics_can(t); });
+    sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime t) { on_physics_bus(t); });
   } else {
     sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master(t); });
     for (int i = 0; i < 4; ++i)
@@ -369,8 +389,8 @@ void PlatformRun::on_device(int wheel) {
 void PlatformRun::on_record(SimTime t) {
   const physics::Pose p = sim_.pose();
   const Eigen::Vector3d v = sim_.twist_world();
-  if (can_bus()) {
-    record_can(t, p, v);
+  if (on_bus()) {
+    record_bus(t, p, v);
   } else {
     const controller::Pose2& ref = out_.reference.pose;
     const controller::Pose2& odo = out_.odom_pose;
@@ -413,16 +433,16 @@ void PlatformRun::record_bus_and_state(SimTime t) {
     const double* w = &row_[16 + 9 * i];
     st.wheel_cmd[i] = w[0], st.wheel_speed[i] = w[1], st.wheel_angle[i] = w[2], st.wheel_torque[i] = w[8];
     DriveSample& d = st.drives[i];
-    d.node = can_bus() ? static_cast<std::uint8_t>(net_->slave(static_cast<int>(i)).config().node_id) : 0;
-    d.state = can_bus() ? net_->drive_state(static_cast<int>(i)) : DriveStateCode::running;
+    d.node = on_bus() ? net_->wheel_record(static_cast<int>(i)).node : 0;
+    d.state = on_bus() ? net_->drive_state(static_cast<int>(i)) : DriveStateCode::running;
     d.command_rad_s = w[0], d.setpoint_rad_s = w[7];
     d.dac_code = static_cast<std::int32_t>(w[6]);
     d.encoder_count = static_cast<std::int64_t>(w[3]);
   }
-  st.bus = can_bus() ? net_->bus_sample() : BusSample{};
-  if (can_bus()) {
+  st.bus = on_bus() ? net_->bus_sample() : BusSample{};
+  if (on_bus()) {
     // Load over the last control period, from the wire's busy time.
-    const std::int64_t busy = net_->bus().stats().busy_ns;
+    const std::int64_t busy = net_->wire_busy_ns();
     st.bus.load = t > last_record_ns_ ? static_cast<double>(busy - last_busy_ns_) / static_cast<double>(t - last_record_ns_) : 0.0;
     last_busy_ns_ = busy;
   }
@@ -469,10 +489,10 @@ void PlatformRun::write_run_description() const {
   write_json_atomic((dir / "run.json").string(), j);
 }
 
-// A CAN run's row: the master's plan and odometry (lockstep; NaN where it cannot be known),
-// the slaves' held commands and chains.
-void PlatformRun::record_can(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v) {
-  const controller::Pose2 ref = can_reference(t);
+// A bus run's row: the master's plan and odometry (lockstep; NaN where it cannot be known),
+// the drives' held commands and what they measure.
+void PlatformRun::record_bus(SimTime t, const physics::Pose& p, const Eigen::Vector3d& v) {
+  const controller::Pose2 ref = bus_reference(t);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const bool lockstep = clock_server_ != nullptr;
   const std::array<double, 3> odo = lockstep ? report_.odometry : std::array<double, 3>{nan, nan, nan};
@@ -480,14 +500,11 @@ void PlatformRun::record_can(SimTime t, const physics::Pose& p, const Eigen::Vec
   if (lockstep) odom_stats_.add(ref.x - odo[0], ref.y - odo[1], ref.phi - odo[2]);
   row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo[0], odo[1], odo[2], v(0), v(1), v(2),
                nan, nan, nan});
-  const double per_sample = s_.platform.velocity_loop.period * s_.platform.counts_per_rev() / (2 * std::numbers::pi);
   for (int i = 0; i < 4; ++i) {
-    const omni::OmniSlave& sl = net_->slave(i);
-    const physics::WheelDriveSample& w = sl.drive_chain().last();
-    row_.insert(row_.end(), {sl.command() / per_sample, sim_.wheel_speed(i), sim_.wheel_angle(i),
-                             static_cast<double>(sl.drive_chain().counter().count()), w.command,
-                             static_cast<double>(w.delta_counts), static_cast<double>(w.code),
-                             can_setpoint_[static_cast<std::size_t>(i)], sim_.wheel_torque(i)});
+    const WheelRecord w = net_->wheel_record(i);
+    row_.insert(row_.end(), {w.command_rad_s, sim_.wheel_speed(i), sim_.wheel_angle(i), w.count, w.command_counts,
+                             w.measured_counts, w.output, bus_setpoint_[static_cast<std::size_t>(i)],
+                             sim_.wheel_torque(i)});
   }
 }
 
@@ -505,7 +522,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   nlohmann::json m;
   m["scenario"] = s_.name;
   m["scenario_file"] = s_.file;
-  if (can_bus()) {
+  if (on_bus()) {
     m["bus"] = net_->bus_metrics(sched_.now());
     m["slaves"] = net_->slave_metrics();
     // Only a lockstep master reports (on the sim clock); one on its own wall clock does not.
@@ -519,6 +536,12 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"ticks", tick_},
                    {"clock", clock_server_ ? "sim" : "wall"},
                    {"exit", master_ ? master_->describe_exit() : "not started"}};
+    // A master that keeps its own counters (bus ethercat) leaves them in master-stats.json.
+    const fs::path stats = fs::path(o_.out_dir) / "master-stats.json";
+    if (std::ifstream f(stats); f) {
+      const nlohmann::json j = nlohmann::json::parse(f, nullptr, false);
+      if (j.is_object()) m["master"].update(j);
+    }
   } else {
     m["bus"] = {{"name", to_string(s_.bus.kind)}, {"frames_tx", 0}, {"frames_rx", 0}, {"dropouts", 0},
                 {"dropout_rate", 0.0}, {"errors", 0}};
@@ -552,8 +575,8 @@ RunResult PlatformRun::execute() {
             fmt::format("scenario {} bus {} clock {} model {} params {}", s_.name, to_string(s_.bus.kind),
                         to_string(s_.clock), model_name(s_.platform), s_.platform.source));
 
-  if (can_bus()) {
-    net_->open_pcap((fs::path(o_.out_dir) / "bus-can.pcap").string());
+  if (on_bus()) {
+    net_->open_pcap((fs::path(o_.out_dir) / fmt::format("bus-{}.pcap", net_->name())).string());
     try {
       if (!o_.external_master) start_master();
     } catch (const std::exception& e) {
@@ -567,6 +590,8 @@ RunResult PlatformRun::execute() {
     const SimTime tm = seconds_to_ns(s_.controller.period);
     realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(end_ / tm) + 2);
     pacer_ = realtime.get();
+    // A master on its own wall clock waits for its frames: answer them as they arrive.
+    if (net_ && net_->wake_fd() >= 0) realtime->set_wake(net_->wake_fd(), [this](SimTime t) { net_->on_wake(t); });
   } else {
     pacer_ = &lockstep;
   }
@@ -655,9 +680,10 @@ Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
 
 RunResult run_scenario(const Scenario& given, const RunOptions& options) {
   const Scenario scenario = with_lockstep_transport(given, options.external_master);
-  if (scenario.bus.kind != BusKind::direct && scenario.bus.kind != BusKind::can)
-    throw RunSetupError(fmt::format("bus: the bus '{}' is not available in this build yet; only 'direct' and 'can' are",
-                                    to_string(scenario.bus.kind)));
+  const BusKind bus = scenario.bus.kind;
+  if (bus != BusKind::direct && bus != BusKind::can && bus != BusKind::ethercat)
+    throw RunSetupError(fmt::format(
+        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can' and 'ethercat' are", to_string(bus)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
   std::unique_ptr<PlatformRun> run;
@@ -667,16 +693,20 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
     const char* key = scenario.platform.sim.mjcf.empty() ? "platform" : "platform.mjcf";
     throw RunSetupError(fmt::format("{}: {}", key, one_line(e.what())));
   }
-  if (options.external_master && (scenario.bus.kind != BusKind::can || scenario.clock != ClockMode::realtime))
-    throw RunSetupError("the twin alone needs bus: can and clock: realtime (an external master keeps its own time)");
-  if (scenario.bus.kind == BusKind::can) {
+  if (options.external_master && (bus == BusKind::direct || scenario.clock != ClockMode::realtime))
+    throw RunSetupError(
+        "the twin alone needs bus: can or ethercat and clock: realtime (an external master keeps its own time)");
+  if (bus != BusKind::direct) {
     try {
-      run->build_can_network();
+      run->build_network();
     } catch (const can::TransportError& e) {
+      throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+    } catch (const ethercat::TransportError& e) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const std::exception& e) {
       throw RunSetupError(one_line(e.what()));
     }
+    if (options.on_bus_ready) options.on_bus_ready(run->master_iface());
   }
   return run->execute();
 }

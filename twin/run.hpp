@@ -15,6 +15,7 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -42,9 +43,12 @@ struct RunOptions {
   std::string out_dir;                        // run directory (created if missing)
   bool progress = false;                      // terminal progress bar on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set by SIGINT/SIGTERM: end cleanly
-  // bus `can`: the master is someone else's program on the transport (`omnitwin twin`); the
-  // twin starts none and runs in realtime.
+  // A bus: the master is someone else's program on the transport (`omnitwin twin`); the twin
+  // starts none and runs in realtime.
   bool external_master = false;
+  // Told, once the bus network is up, where a master must connect (the transport spec it
+  // should use, e.g. the master's end of a veth pair made for the run). May be empty.
+  std::function<void(const std::string& master_iface)> on_bus_ready;
   RunObserver* observer = nullptr;            // live state and events (may be null)
 };
 

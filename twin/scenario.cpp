@@ -329,7 +329,46 @@ void read_can(const YamlField& f, CanSpec& c) {
   read_number(f, "handshake_timeout", c.handshake_timeout, Bounds::positive());
 }
 
-BusSpec read_bus(const YamlField& f) {
+// The `ethercat` bus's settings (bus: {type: ethercat, …}); paths relative to the scenario.
+void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scenario_file) {
+  if (const YamlField t = f["transport"]; t.exists()) {
+    e.transport = t.string();
+    const bool ok = e.transport == "auto" || e.transport == "veth" || e.transport.starts_with("raw:") ||
+                    e.transport.starts_with("udp:");
+    if (!ok) t.fail("expected auto, veth, raw:IFACE or udp:HOST:PORT");
+  }
+  if (f["master_iface"].exists()) e.master_iface = f["master_iface"].string();
+  if (e.transport.starts_with("raw:") && e.master_iface.empty())
+    f["transport"].fail("raw:IFACE needs master_iface: the interface the master sends on");
+  if (const YamlField esi = f["esi"]; esi.exists()) {
+    const fs::path given = esi.string();
+    const fs::path resolved =
+        given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();
+    if (!fs::is_regular_file(resolved)) esi.fail(fmt::format("cannot open device description '{}'", resolved.string()));
+    e.esi = resolved.string();
+  }
+  if (f["mode"].exists()) e.mode = f["mode"].choice({"csv", "csp"});
+  read_number(f, "drive_period", e.drive_period, Bounds::closed(50e-6, 0.01));
+  read_integer(f, "counts_per_rev", e.counts_per_rev, Bounds::closed(4, 1 << 24));
+  read_bool(f, "dc", e.dc);
+  if (const YamlField d = f["drift"]; d.exists()) {
+    const Bounds b{-1e-3, 1e-3};  // crystal oscillators: within ±1000 ppm
+    if (d.node().IsSequence()) {
+      const auto v = d.numbers(4, b);
+      std::copy(v.begin(), v.end(), e.drift.begin());
+    } else {
+      e.drift.fill(d.number(b));
+    }
+  }
+  read_number(f, "t_pre_us", e.t_pre_us, Bounds::non_negative());
+  read_number(f, "startup", e.startup, Bounds::non_negative());
+  if (f["master"].exists()) e.master = f["master"].string();
+  int seed = static_cast<int>(e.seed);
+  if (read_integer(f, "seed", seed, Bounds::non_negative())) e.seed = static_cast<std::uint64_t>(seed);
+  read_number(f, "handshake_timeout", e.handshake_timeout, Bounds::positive());
+}
+
+BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   BusSpec bus;
   if (!f.present()) return bus;
   // Either `bus: can` or `bus: {type: can, …settings}`. (No YamlField reassignment: assigning
@@ -346,6 +385,10 @@ BusSpec read_bus(const YamlField& f) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
                   "detect_every", "master", "seed", "handshake_timeout"});
     read_can(f, bus.can);
+  } else if (bus.kind == BusKind::ethercat) {
+    f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
+                  "startup", "master", "seed", "handshake_timeout"});
+    read_ethercat(f, bus.ethercat, scenario_file);
   } else {
     f.allow_keys({"type"});
   }
@@ -439,8 +482,8 @@ double path_duration(const PathSpec& path) {
 // Faults and expectations
 
 // The fault kinds a scenario may name.
-const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",
-                                                   "drift",      "power_loss", "bus_off"};
+const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",     "drift",
+                                                   "power_loss", "bus_off",    "link_break"};
 
 // `node:` of a CAN fault: 1..4 (a slave), or `master` / `all` where the kind allows them.
 int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
@@ -459,7 +502,10 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   FaultSpec f;
   f.line = v.line();
   const std::string& kind = v.name();
-  if (kind != "wheel_slip" && bus.kind != BusKind::can) v.fail("a bus fault needs bus: can");
+  const bool can = bus.kind == BusKind::can, ethercat = bus.kind == BusKind::ethercat;
+  if (kind != "wheel_slip" && !can && !ethercat) v.fail("a bus fault needs bus: can or ethercat");
+  if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can)");
+  if (kind == "link_break" && !ethercat) v.fail("link_break is an EtherCAT fault (bus: ethercat)");
   if (kind == "wheel_slip") {
     v.allow_keys({"wheel", "at", "duration", "friction_scale"});
     f.kind = K::wheel_slip;
@@ -482,6 +528,10 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
     f.kind = K::drift;
     f.wheel = read_fault_node(v, false, false);
     f.drift = v.required("drift").number(Bounds{-0.5, 0.5});
+  } else if (kind == "link_break") {
+    v.allow_keys({"after", "at", "duration"});
+    f.kind = K::link_break;
+    f.wheel = v.required("after").integer(Bounds::closed(0, 3));  // slaves 1..after stay reachable
   } else {  // power_loss, bus_off
     v.allow_keys({"node", "at", "duration"});
     f.kind = kind == "power_loss" ? K::power_loss : K::bus_off;
@@ -592,7 +642,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   }
   if (root["description"].exists()) s.description = root["description"].string();
   s.platform = read_platform(root["platform"], file);
-  s.bus = read_bus(root["bus"]);
+  s.bus = read_bus(root["bus"], file);
   if (root["clock"].exists()) {
     s.clock = root["clock"].choice({"lockstep", "realtime"}) == "realtime" ? ClockMode::realtime
                                                                            : ClockMode::lockstep;
@@ -601,6 +651,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   s.path = read_path(root["path"]);
   read_number(root, "settle", s.settle, Bounds::non_negative());
   s.duration = path_duration(s.path) + s.settle;
+  if (s.bus.kind == BusKind::ethercat) s.duration += s.bus.ethercat.startup;
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   for (const auto& item : root["faults"].elements()) {
@@ -667,6 +718,7 @@ const char* to_string(FaultSpec::Kind k) {
     case FaultSpec::Kind::drift: return "drift";
     case FaultSpec::Kind::power_loss: return "power_loss";
     case FaultSpec::Kind::bus_off: return "bus_off";
+    case FaultSpec::Kind::link_break: return "link_break";
   }
   return "?";
 }

@@ -96,12 +96,38 @@ struct CanSpec {
   double handshake_timeout = 10.0;            // [s] the master must answer a tick within
 };
 
+// Settings of the `ethercat` bus: four single-axis CiA 402 drives (one per wheel) on one
+// EtherCAT segment, driven by our master in CSV or CSP mode.
+struct EthercatSpec {
+  // Where the master process and the twin meet: `auto` (a veth pair made for the run when the
+  // twin may create one, i.e. as root; EtherCAT over UDP on loopback otherwise), `veth`
+  // (always a fresh veth pair), `raw:IFACE` (the twin answers on IFACE; the master is given
+  // `master_iface`), or `udp:HOST:PORT` (EtherCAT over UDP).
+  std::string transport = "auto";
+  std::string master_iface;                 // raw: the master's interface (the peer of IFACE)
+  std::string esi;                          // device description; "" = models/ethercat/omnitwin_drive.xml
+  std::string mode = "csv";                 // csv | csp: how the master commands the wheels
+  double drive_period = 0.001;              // the drives' own update period [s]
+  int counts_per_rev = 131072;              // the drives' motor encoder (17 bit) [counts/rev]
+  bool dc = true;                           // distributed clocks: drives run on SYNC0
+  std::array<double, 4> drift{20e-6, -15e-6, 35e-6, -30e-6};  // slave oscillators [-]
+  double t_pre_us = 5.0;                    // master processing before a frame leaves [µs]
+  // Time the master is given to bring the segment to OP (scan, SII, CoE, states) before its
+  // path starts; added to the default duration so that the path and settle still fit. [s]
+  double startup = 3.0;
+  std::string master;                       // master program; "" = omni-master beside omnitwin
+  std::uint64_t seed = 1;                   // random faults (frame loss)
+  double handshake_timeout = 10.0;          // [s] the master must answer a tick within
+};
+
 struct BusSpec {
   BusKind kind = BusKind::direct;
   CanSpec can;
+  EthercatSpec ethercat;
 };
 
-// A scripted fault. wheel_slip acts on the physics; the others on the CAN bus (bus: can).
+// A scripted fault. wheel_slip acts on the physics; the others on the bus (bus: can or
+// ethercat; bus_off is CAN's, link_break EtherCAT's).
 struct FaultSpec {
   enum class Kind {
     wheel_slip,  // the wheel's floor friction scaled by friction_scale
@@ -111,6 +137,8 @@ struct FaultSpec {
     power_loss,  // the slave loses power (off the bus, drive off) and returns at the end
     bus_off,     // the slave's transmissions are corrupted until it is bus-off; it asks for
                  // recovery at the end (duration 0: never)
+    link_break,  // EtherCAT: the cable after slave `wheel` (0 = between master and slave 1) is
+                 // cut; frames return from the last slave still reached (none for 0)
   };
   Kind kind = Kind::wheel_slip;
   double at = 0;              // start [s]
@@ -168,7 +196,8 @@ struct Scenario {
   ControllerSpec controller;
   PathSpec path;
   double settle = 2.0;         // time after the path ends before the run stops [s]
-  double duration = 0;         // total simulated time [s] (path length + settle if absent)
+  double duration = 0;         // total simulated time [s] (path length + settle if absent,
+                               // + bus.ethercat.startup on an EtherCAT bus)
   std::vector<FaultSpec> faults;
   std::vector<Expectation> expectations;
   OutputsSpec outputs;

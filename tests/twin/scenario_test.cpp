@@ -336,6 +336,45 @@ TEST(ScenarioCan, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
 }
 
+// Every EtherCAT setting and fault kind is read as written (the ESI path relative to the
+// scenario); the defaults when the bus is given by name.
+TEST(ScenarioEthercat, SettingsAndFaultsAreRead) {
+  const Scenario s = load_scenario(scenario("good_ethercat.yaml"));
+  const EthercatSpec& e = s.bus.ethercat;
+  EXPECT_EQ(s.bus.kind, BusKind::ethercat);
+  EXPECT_EQ(e.transport, "udp:127.0.0.1:48999");
+  EXPECT_EQ(e.esi, source_path("models/ethercat/omnitwin_drive.xml"));
+  EXPECT_EQ(e.mode, "csp");
+  EXPECT_DOUBLE_EQ(e.drive_period, 0.0005);
+  EXPECT_EQ(e.counts_per_rev, 65536);
+  EXPECT_FALSE(e.dc);
+  EXPECT_DOUBLE_EQ(e.drift[3], -40e-6);
+  EXPECT_DOUBLE_EQ(e.t_pre_us, 2.0);
+  EXPECT_EQ(e.seed, 7u);
+  EXPECT_DOUBLE_EQ(e.handshake_timeout, 4.0);
+  ASSERT_EQ(s.faults.size(), 5u);
+  EXPECT_EQ(s.faults[0].wheel, FaultSpec::kMaster);
+  EXPECT_DOUBLE_EQ(s.faults[0].rate, 1.0);
+  EXPECT_EQ(s.faults[3].kind, FaultSpec::Kind::power_loss);
+  EXPECT_EQ(s.faults[3].wheel, 1);
+  EXPECT_EQ(s.faults[4].kind, FaultSpec::Kind::link_break);
+  EXPECT_EQ(s.faults[4].wheel, 2);
+  const Scenario by_name = load_scenario(scenario("minimal.yaml"), {{"bus", "ethercat"}});
+  EXPECT_EQ(by_name.bus.ethercat.transport, "auto");
+  EXPECT_EQ(by_name.bus.ethercat.mode, "csv");
+  EXPECT_TRUE(by_name.bus.ethercat.dc);
+}
+
+TEST(ScenarioErrors, EthercatSettingsAndFaultsOfTheOtherBus) {
+  expect_error(load_error(scenario("bad_ethercat_bus_off.yaml")), scenario("bad_ethercat_bus_off.yaml"), 5,
+               "faults.0.bus_off");
+  expect_error(load_error(scenario("bad_ethercat_transport.yaml")), scenario("bad_ethercat_transport.yaml"), 4,
+               "bus.transport");
+  expect_error(load_error(scenario("bad_ethercat_link_break_on_can.yaml")),
+               scenario("bad_ethercat_link_break_on_can.yaml"), 5, "faults.0.link_break");
+  expect_error(load_error(scenario("bad_ethercat_esi.yaml")), scenario("bad_ethercat_esi.yaml"), 4, "bus.esi");
+}
+
 // The outputs section: video size, rate and inset, DDS domain/interface/rate, report; a
 // plain `video: false` form; the defaults when absent (video and report on, DDS off).
 TEST(ScenarioOutputs, EveryKeyIsReadAndDefaultsHold) {

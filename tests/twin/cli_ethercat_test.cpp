@@ -1,0 +1,119 @@
+// Tests `omnitwin run --bus ethercat` and `omnitwin twin --bus ethercat` end to end through
+// the real programs: the twin's EtherCAT segment of four CiA 402 drives and our master
+// (`omni-master --bus ethercat`) as two processes over a real transport (a veth pair made for
+// the run, or EtherCAT over UDP). Lockstep runs are byte-identical (trajectory and capture);
+// the capture decodes in tshark with no malformed frames and holds exactly the frames the
+// segment saw; the master reaches OP with the expected working counter every cycle; and seed
+// 004's PP-TEST, run by `omni-master --script` against the twin alone, reaches its target.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <csignal>
+#include <cstdlib>
+#include <string>
+#include <thread>
+
+#include "tests/support/veth.hpp"
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::twin::cli {
+namespace {
+
+using omnitwin::testing::lines_of;
+
+class CliEthercat : public CliTest {
+ protected:
+  // One lockstep run of the short scenario; the transport is given (or the default).
+  Finished run_short(const fs::path& out, const std::string& transport = "") {
+    std::vector<std::string> args{"run", test_scenario("ethercat_short.yaml"), "--out", out.string(), "--no-progress"};
+    if (!transport.empty()) args.insert(args.end(), {"--set", "bus.transport=" + transport});
+    return run(args);
+  }
+  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
+};
+
+// The master configured the segment and ran the path with the expected WKC every cycle.
+void expect_clean_run(const Finished& f, const nlohmann::json& m) {
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_EQ(ms.at("state"), "finished");
+  EXPECT_EQ(ms.at("slaves"), 4);
+  EXPECT_EQ(ms.at("wkc_errors"), 0);
+  EXPECT_EQ(ms.at("expected_wkc"), 12);
+  EXPECT_EQ(ms.at("last_wkc"), 12);
+  EXPECT_GT(ms.at("cycles").get<int>(), 300);
+  EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
+  EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
+}
+
+// Over a veth pair (root): two runs are byte-identical, and tshark reads every frame of the
+// capture as EtherCAT, none malformed, with the commands of a scan, configuration and cycle.
+TEST_F(CliEthercat, LockstepOverVethIsByteIdenticalAndDecodes) {
+  if (const auto why = omnitwin::testing::VethPair::unavailable_reason()) GTEST_SKIP() << *why;
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  const Finished fa = run_short(a, "veth");
+  const Finished fb = run_short(b, "veth");
+  const nlohmann::json m = metrics(a);
+  expect_clean_run(fa, m);
+  EXPECT_TRUE(m.at("bus").at("transport").get<std::string>().starts_with("raw:"));
+  EXPECT_EQ(read_bytes(a / "trajectory.csv"), read_bytes(b / "trajectory.csv"));
+  EXPECT_EQ(read_bytes(a / "bus-ethercat.pcap"), read_bytes(b / "bus-ethercat.pcap"));
+  if (std::system("command -v tshark >/dev/null 2>&1") != 0) GTEST_SKIP() << "tshark is not installed";
+  const std::string pcap = (a / "bus-ethercat.pcap").string();
+  const fs::path cmds = dir_ / "cmds.txt", bad = dir_ / "bad.txt";
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -T fields -e ecat.cmd > " + cmds.string() + " 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -Y '_ws.malformed || _ws.expert.severity >= error' > " +
+                         bad.string() + " 2>/dev/null").c_str()), 0);
+  const auto lines = lines_of(read_bytes(cmds));
+  const nlohmann::json& bus = m.at("bus");
+  // Every frame the master sent that reached the segment before the end, and every frame that
+  // came back.
+  EXPECT_EQ(lines.size(), bus.at("frames_rx").get<std::size_t>() - bus.at("in_flight").get<std::size_t>() +
+                              bus.at("frames_tx").get<std::size_t>());
+  EXPECT_TRUE(read_bytes(bad).empty()) << read_bytes(bad);
+  const auto has = [&](const std::string& cmd) {
+    return std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return contains(l, cmd); });
+  };
+  for (const char* cmd : {"0x07", "0x02", "0x04", "0x05", "0x0c"})  // BRD APWR FPRD FPWR LRW
+    EXPECT_TRUE(has(cmd)) << "no datagram with command " << cmd;
+}
+
+// EtherCAT over UDP on loopback (what a run uses without root) drives the same run.
+TEST_F(CliEthercat, LockstepOverUdp) {
+  const fs::path out = dir_ / "udp";
+  const Finished f = run_short(out, "udp:127.0.0.1:47611");
+  const nlohmann::json m = metrics(out);
+  expect_clean_run(f, m);
+  EXPECT_EQ(m.at("bus").at("transport"), "udp:127.0.0.1:47611");
+  EXPECT_EQ(m.at("bus").at("dropouts"), 0);
+}
+
+// Seed 004's PP-TEST, as `omni-master --script`, against the twin alone in real time: the
+// master configures the drives, the script switches drive 1 to PP, enables it and moves it
+// to 1000 counts; the twin's drive really moves its wheel there.
+TEST_F(CliEthercat, PpTestScriptReachesItsTarget) {
+  const std::string iface = "udp:127.0.0.1:47612";
+  Child twin({"twin", test_scenario("ethercat_short.yaml"), "--bus", "ethercat", "--set",
+              "bus.transport=" + iface, "--set", "duration=60", "--out", (dir_ / "twin").string(), "--no-progress"},
+             work(), io());
+  // The twin says where a master connects once its segment is up.
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "a master connects on " + iface)) << twin.out() << twin.err();
+  Child master(binary_path("controller/omni-master"),
+               {"--bus", "ethercat", "--iface", iface, "--config",
+                source_path("tests/controller/ethercat/data/drives_only.yaml"), "--script",
+                source_path("tests/controller/ethercat/data/pp_test.fs")},
+               work(), io(), "master-");
+  const int code = master.wait(60s);
+  EXPECT_EQ(code, 0) << master.out() << master.err();
+  EXPECT_TRUE(contains(master.out() + master.err(), "target reached")) << master.out() << master.err();
+  twin.signal(SIGINT);
+  EXPECT_NE(twin.wait(30s), -1);
+}
+
+}  // namespace
+}  // namespace omnitwin::twin::cli

@@ -1,0 +1,105 @@
+// twin layer — what the run needs from a simulated bus network, whatever the bus.
+//
+// A bus network is the twin's side of one fieldbus: the simulated wire (or segment), the
+// emulated slaves that drive the four wheels, the real transport the master process talks
+// over, the capture file and the bus faults. The run (run.cpp) owns the physics, the master
+// process and the sim-clock handshake; it drives a network only through this interface, so
+// the CAN network of the thesis nodes (can_network) and the EtherCAT segment of CiA 402
+// drives (ethercat_network) run under the same lockstep and realtime loops, records and
+// observers.
+//
+// Time: every entry point first runs the network to the caller's instant (advance()), so the
+// network's own events (bus deliveries, device timers) interleave with the run's in exact
+// time order. Set-up allocates; the per-tick paths do not (apart from event logging).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "twin/run_state.hpp"
+#include "twin/scenario.hpp"
+#include "twin/scheduler.hpp"
+
+namespace omnitwin::twin {
+
+// One wheel's drive for trajectory.csv (docs/run-directory.md gives each bus's meaning). The
+// motor setpoint is not here: the run records what the network last asked of the physics.
+struct WheelRecord {
+  double command_rad_s = 0;     // the speed command the drive holds [rad/s]
+  double count = 0;             // encoder / position actual [counts]
+  double command_counts = 0;    // the command in the drive's own units
+  double measured_counts = 0;   // the measured speed in the drive's own units
+  double output = 0;            // CAN: DA code; EtherCAT: torque demand [0.1 % rated]
+  std::uint16_t node = 0;       // bus address (CAN node id, EtherCAT station address)
+};
+
+// What a network may ask of the run: the wheels' shafts and amplifiers, statistics, the log.
+struct NetworkHooks {
+  std::function<double(int wheel)> wheel_angle;              // shaft angle of wheel 0..3 [rad]
+  std::function<double(int wheel)> wheel_speed;              // shaft speed [rad/s]
+  std::function<void(int wheel, double rad_s)> set_setpoint; // amplifier speed setpoint [rad/s]
+  std::function<void(int wheel, double err)> axis_sample;    // velocity error, drive units
+  std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
+};
+
+class BusNetwork {
+ public:
+  using Hooks = NetworkHooks;
+
+  virtual ~BusNetwork() = default;
+
+  // "can", "ethercat": the master's --bus and the capture's name (bus-<name>.pcap).
+  virtual const char* name() const = 0;
+  // The transport spec the master process is given (--iface).
+  virtual std::string master_iface() const = 0;
+
+  // Starts the capture (set-up; throws std::runtime_error if the file cannot be created).
+  virtual void open_pcap(const std::string& path) = 0;
+  // Pushes buffered capture records to the kernel (once per tick).
+  virtual void flush_pcap() = 0;
+  // Hands frames batched for the master to the transport (lockstep: before each grant).
+  virtual void flush_transport() = 0;
+
+  // Runs the network to t [ns]. Real-time safe.
+  virtual void advance(SimTime t) = 0;
+  // Lockstep: receives frames until `count` have arrived since the start, each entering the
+  // network at t + the master's processing time. False when they did not all come in time.
+  virtual bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) = 0;
+  // Realtime: takes whatever the transport holds now. Returns the number taken.
+  virtual int poll_transport(SimTime t) = 0;
+  // Realtime: a descriptor that becomes readable when the master's frames arrive (-1: none),
+  // and what to do then, at sim time t: take them and answer at once, between the run's own
+  // events. Real-time safe.
+  virtual int wake_fd() const { return -1; }
+  virtual void on_wake(SimTime /*t*/) {}
+  // After every physics step: the drives' sensors follow the shafts. Real-time safe.
+  virtual void observe_wheels() = 0;
+
+  // A scenario bus fault begins or ends at t. Not real-time safe (logs).
+  virtual void apply_fault(const FaultSpec& f, bool begin, SimTime t) = 0;
+
+  virtual std::uint64_t frames_to_transport() const = 0;
+  virtual std::uint64_t frames_from_transport() const = 0;
+  // Realtime runs: when the master's start completed on the bus [ns], or -1 (the reference
+  // path is timed from it when the master does not report its own).
+  virtual SimTime master_start_ns() const = 0;
+
+  // bus.* and slaves of metrics.json. Not real-time safe.
+  virtual nlohmann::json bus_metrics(SimTime now) const = 0;
+  virtual nlohmann::json slave_metrics() const = 0;
+  // Cumulative counters for bus.csv and observers; load is the caller's (see wire_busy_ns).
+  // Real-time safe.
+  virtual BusSample bus_sample() const = 0;
+  // Time the wire or segment has been busy since the start [ns] (load = Δbusy / Δt).
+  virtual std::int64_t wire_busy_ns() const = 0;
+  virtual DriveStateCode drive_state(int axis0) const = 0;
+  virtual WheelRecord wheel_record(int axis0) const = 0;
+};
+
+}  // namespace omnitwin::twin

@@ -1,0 +1,147 @@
+// twin layer — the twin's side of the EtherCAT segment (bus `ethercat`): four single-axis
+// CiA 402 drive slaves, one per wheel, on one simulated line between a real transport and
+// the physics.
+//
+// The slaves are built from the ESI file (models/ethercat/omnitwin_drive.xml by default):
+// each is a DriveSlave (ESC core + object dictionary + CoE + a drive::Cia402Drive) with its
+// own drifting oscillator. The segment is an EscChain. A frame the master sends enters the
+// chain at the receiving instant + T_pre; it passes the slaves (each reads and writes its
+// datagrams on the fly) and comes back, and the returned frame goes to the transport (in
+// lockstep batched until the next grant, in realtime at once). Both directions go into the
+// capture. The drives run at the drive period: on SYNC0 when the master activated
+// distributed clocks, else on their own oscillator's timer. Each drive cycle reads its wheel
+// shaft from the physics and sets the wheel amplifier's speed setpoint.
+//
+// Faults: frame loss (the frame never returns), delay of the returned frames, oscillator
+// drift, a slave's power loss and return, a link break after slave k.
+//
+// Time: every entry point first runs the segment to the caller's instant (advance()).
+// Nothing here reads the wall clock except drain_transport()'s timeout. Set-up allocates; the
+// per-frame and per-cycle paths do not (apart from the event log on state changes).
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "bus_emulators/ethercat/device/ec_esi.hpp"
+#include "bus_emulators/ethercat/ec_chain.hpp"
+#include "bus_emulators/ethercat/ec_frame.hpp"
+#include "twin/bus_network.hpp"
+#include "twin/scenario.hpp"
+#include "twin/scheduler.hpp"
+
+namespace omnitwin::ethercat {
+class DriveSlave;
+class EcTransport;
+class PcapWriter;
+class VethPair;
+}  // namespace omnitwin::ethercat
+
+namespace omnitwin::twin {
+
+// The ESI file a scenario's ethercat bus uses (its `esi`, else the shipped drive).
+std::string ethercat_esi_path(const EthercatSpec& e);
+
+class EthercatNetwork final : public BusNetwork {
+ public:
+  // Builds the slaves from the ESI file, the chain and the transport (a veth pair is made
+  // here when the spec asks for one). Throws ethercat::TransportError for a transport that
+  // cannot be opened and EsiError for a bad device description. Not real-time safe.
+  EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hooks);
+  ~EthercatNetwork() override;
+
+  const char* name() const override { return "ethercat"; }
+  std::string master_iface() const override { return master_iface_; }
+
+  void open_pcap(const std::string& path) override;
+  void flush_pcap() override;
+  void flush_transport() override;
+
+  void advance(SimTime t) override;
+  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
+  int poll_transport(SimTime t) override;
+  int wake_fd() const override;
+  void on_wake(SimTime t) override;
+  void observe_wheels() override {}  // the drives read their shafts at each cycle
+
+  void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;
+
+  std::uint64_t frames_to_transport() const override { return to_transport_; }
+  std::uint64_t frames_from_transport() const override { return from_transport_; }
+  SimTime master_start_ns() const override { return op_since_ns_; }
+
+  nlohmann::json bus_metrics(SimTime now) const override;
+  nlohmann::json slave_metrics() const override;
+  BusSample bus_sample() const override;
+  std::int64_t wire_busy_ns() const override { return busy_ns_; }
+  DriveStateCode drive_state(int axis0) const override;
+  WheelRecord wheel_record(int axis0) const override;
+
+  const ethercat::DriveSlave& slave(int axis0) const { return *slaves_[static_cast<std::size_t>(axis0)]; }
+
+ private:
+  struct Pending {               // a frame from the master, waiting for its instant
+    SimTime at = 0;
+    std::uint16_t size = 0;
+    std::array<std::uint8_t, ethercat::kMaxPdu> pdu{};
+  };
+  struct Reply {                 // a returned frame, waiting for its instant / the next grant
+    SimTime at = 0;
+    std::uint16_t size = 0;
+    std::array<std::uint8_t, ethercat::kMaxPdu> pdu{};
+  };
+
+  void open_transport(const Scenario& s);
+  void take_frame(const std::uint8_t* pdu, std::size_t size, SimTime t);
+  void process_frame(Pending& p);
+  void send_reply(const std::uint8_t* pdu, std::size_t size, SimTime t);
+  void release_replies(SimTime t);
+  void on_drive_timer(int axis0, SimTime t);
+  void drive_cycle(int axis0, SimTime t);
+  void drive_step(int axis0, SimTime t);
+  void watch_states(SimTime t);
+  bool lose_frame();
+
+  const Scenario& s_;
+  const EthercatSpec& spec_;
+  Scheduler& sched_;
+  Hooks hooks_;
+  ethercat::DeviceDescription device_;
+  std::array<std::unique_ptr<ethercat::DriveSlave>, 4> slaves_;
+  ethercat::EscChain chain_;
+  std::unique_ptr<ethercat::VethPair> veth_;
+  std::unique_ptr<ethercat::EcTransport> transport_;
+  std::unique_ptr<ethercat::PcapWriter> pcap_;
+  std::string transport_spec_, master_iface_;
+  std::array<Scheduler::TimerId, 4> timers_{};
+  std::array<bool, 4> powered_{true, true, true, true};
+  std::array<double, 4> drift_{};
+  std::array<std::int64_t, 4> last_cycle_ns_{};
+  std::array<std::uint8_t, 4> last_al_{};   // for state-change events
+  std::array<std::uint8_t, 4> last_fsa_{};
+  std::vector<Pending> pending_;           // ring of frames in flight towards the chain
+  std::size_t pending_head_ = 0, pending_count_ = 0;
+  std::vector<Reply> replies_;             // returned frames not yet handed to the transport
+  std::size_t replies_count_ = 0;
+  bool batch_ = false;                     // lockstep: replies wait for flush_transport()
+  std::array<std::uint8_t, 2048> rx_{};
+  std::mt19937_64 rng_;
+  double loss_rate_ = 0;
+  int loss_burst_ = 1, loss_left_ = 0;
+  double delay_ns_ = 0;
+  int link_break_ = -1;
+  std::uint64_t to_transport_ = 0, from_transport_ = 0;
+  std::uint64_t lost_frames_ = 0, not_returned_ = 0, malformed_ = 0, send_failures_ = 0, overflow_ = 0;
+  std::int64_t busy_ns_ = 0;
+  SimTime op_since_ns_ = -1;
+};
+
+}  // namespace omnitwin::twin
