@@ -391,6 +391,7 @@ nlohmann::json EthercatNetwork::bus_metrics(SimTime now) const {
           {"send_failures", send_failures_},
           {"overflow", overflow_},
           {"in_flight", pending_count_},  // taken from the transport, not yet on the segment at the end
+          {"replies_held", replies_count_},  // returned (and captured), not yet handed to the transport
           {"load", sim_s > 0 ? static_cast<double>(busy_ns_) * 1e-9 / sim_s : 0.0},
           {"op_since_s", op_since_ns_ < 0 ? -1.0 : static_cast<double>(op_since_ns_) * 1e-9}};
 }
