@@ -379,7 +379,7 @@ std::optional<controller::MasterConfig> load(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"omni-master: the thesis's Omni CAN master (seed 002, fig. 4-15)"};
+  CLI::App app{"omni-master: the master program — the thesis's Omni CAN master (seed 002, fig. 4-15) or our EtherCAT master"};
   Options o;
   add_options(app, o);
   CLI::App* shell = app.add_subcommand("shell", "interactive Botnana shell on the EtherCAT master (wall clock)");
