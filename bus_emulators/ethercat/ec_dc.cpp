@@ -6,6 +6,16 @@
 
 namespace omnitwin::ethercat {
 
+namespace {
+// Time arithmetic as the ESC's 64-bit registers do it: modulo 2^64 (no signed overflow).
+std::int64_t wrap_add(std::int64_t a, std::uint64_t b) {
+  return static_cast<std::int64_t>(static_cast<std::uint64_t>(a) + b);
+}
+std::int64_t wrap_diff(std::int64_t a, std::int64_t b) {  // a − b, the nearest way round
+  return static_cast<std::int64_t>(static_cast<std::uint64_t>(a) - static_cast<std::uint64_t>(b));
+}
+}  // namespace
+
 DcClock::DcClock(double drift, std::int64_t local_at_start, SimTime start)
     : drift_(drift), local_at_start_(local_at_start) {
   reset(start);
@@ -21,21 +31,32 @@ void DcClock::reset(SimTime t) {
   diff_ = 0;
   have_prev_ = false;
   sync0_active_ = false;
+  sync0_invalid_ = false;
   next_sync0_ = 0;
   cycle0_ = 0;
 }
 
 std::int64_t DcClock::local(SimTime t) const {
-  const long double dt = static_cast<long double>(t - anchor_t_);
-  return anchor_local_ + static_cast<std::int64_t>(std::llround(dt * rate_));
+  const long double dt = static_cast<long double>(t) - static_cast<long double>(anchor_t_);
+  // The ESC's 64-bit time registers wrap modulo 2^64: add in unsigned arithmetic.
+  return wrap_add(anchor_local_, static_cast<std::uint64_t>(std::llround(dt * rate_)));
 }
 
+std::int64_t DcClock::system(SimTime t) const { return wrap_add(local(t), offset_); }
+
 SimTime DcClock::sim_time_of_system(std::int64_t s) const {
-  // The first sim time at which system() reaches s (estimate, then exact on the rounding).
-  const long double dl = static_cast<long double>(s - static_cast<std::int64_t>(offset_) - anchor_local_);
-  SimTime t = anchor_t_ + static_cast<SimTime>(std::ceil(dl / rate_));
-  for (int i = 0; i < 4 && system(t - 1) >= s; ++i) --t;
-  for (int i = 0; i < 4 && system(t) < s; ++i) ++t;
+  // The first sim time at which system() reaches s (estimate, then exact on the rounding). The
+  // distance s − offset − anchor is taken modulo 2^64 (the nearest way round, as the ESC's
+  // wrapping compare does); a target beyond the sim time range answers the range's end.
+  const auto dl = static_cast<std::int64_t>(static_cast<std::uint64_t>(s) - offset_ -
+                                            static_cast<std::uint64_t>(anchor_local_));
+  const long double est = static_cast<long double>(anchor_t_) + std::ceil(static_cast<long double>(dl) / rate_);
+  constexpr long double kLimit = static_cast<long double>(kSimTimeLimit);
+  if (est >= kLimit) return kSimTimeLimit;
+  if (est <= -kLimit) return -kSimTimeLimit;
+  SimTime t = static_cast<SimTime>(est);
+  for (int i = 0; i < 4 && wrap_diff(system(t - 1), s) >= 0; ++i) --t;
+  for (int i = 0; i < 4 && wrap_diff(system(t), s) < 0; ++i) ++t;
   return t;
 }
 
@@ -75,8 +96,11 @@ void DcClock::sample(std::uint64_t received, bool wide, SimTime t) {
   }
   diff_ = e;
   if (have_prev_ && t > prev_sample_t_) {
-    const double h = static_cast<double>(t - prev_sample_t_);
-    corr_ -= (kKi * static_cast<double>(e) + kKp * static_cast<double>(e - prev_diff_)) / h;
+    const double h = static_cast<double>(t) - static_cast<double>(prev_sample_t_);
+    // e − e_prev in floating point: two far-apart samples (up to ±2^63 each) must not overflow;
+    // the correction then saturates at ±kMaxCorrection as the ESC's speed counter does.
+    const double de = static_cast<double>(e) - static_cast<double>(prev_diff_);
+    corr_ -= (kKi * static_cast<double>(e) + kKp * de) / h;
     corr_ = std::clamp(corr_, -kMaxCorrection, kMaxCorrection);
     reanchor(t);
   }
@@ -86,15 +110,18 @@ void DcClock::sample(std::uint64_t received, bool wide, SimTime t) {
 }
 
 std::uint32_t DcClock::difference_register() const {
-  const std::int64_t mag = diff_ < 0 ? -diff_ : diff_;
-  auto v = static_cast<std::uint32_t>(std::min<std::int64_t>(mag, 0x7FFFFFFF));
+  // |e| saturated to 31 bits; |INT64_MIN| is taken in unsigned arithmetic.
+  const std::uint64_t mag = diff_ < 0 ? 0 - static_cast<std::uint64_t>(diff_) : static_cast<std::uint64_t>(diff_);
+  auto v = static_cast<std::uint32_t>(std::min<std::uint64_t>(mag, 0x7FFFFFFF));
   if (diff_ < 0) v |= 0x80000000u;
   return v;
 }
 
 void DcClock::configure_sync(std::uint8_t activation, std::uint64_t start, std::uint32_t cycle0, SimTime t) {
   cycle0_ = cycle0;
-  sync0_active_ = (activation & 0x03) == 0x03;
+  const bool requested = (activation & 0x03) == 0x03;
+  sync0_invalid_ = requested && cycle0 != 0 && cycle0 < kMinSyncCycleNs;
+  sync0_active_ = requested && !sync0_invalid_;  // an invalid cycle: the unit stays off, no pulses
   if (!sync0_active_) return;
   next_sync0_ = start;
   const auto now = static_cast<std::uint64_t>(system(t));
@@ -114,6 +141,13 @@ bool DcClock::pop_sync0(SimTime t, SimTime& when) {
     next_sync0_ += cycle0_;
   }
   return true;
+}
+
+void DcClock::skip_sync0_to(SimTime t) {
+  if (!sync0_active_ || cycle0_ == 0) return;
+  const auto now = static_cast<std::uint64_t>(system(t));
+  if (next_sync0_ > now) return;
+  next_sync0_ += ((now - next_sync0_) / cycle0_ + 1) * cycle0_;  // the first boundary after now
 }
 
 }  // namespace omnitwin::ethercat

@@ -20,6 +20,16 @@
 // 0x0990 (system time), then every cycle 0x09A0 ns (0 = a single pulse). Model choice: a start
 // time already in the past starts at the next cycle boundary after now (a real ESC would wait
 // for its 32-bit compare to wrap).
+// Minimum SYNC0 cycle: kMinSyncCycleNs = 10 µs. Model choice, a conservative value: no ESC
+// datasheet or ETG minimum was verified when this was written (the slave stack's
+// MIN_PD_CYCLE_TIME is device specific); a non-zero cycle below it is an invalid
+// SYNC configuration — the cyclic unit stays off (no pulses, activation status 0) and
+// sync0_invalid() says so; the firmware answers a request for SAFE-OP/OP with AL status code
+// 0x0030 (invalid DC SYNC configuration).
+//
+// Arithmetic: local, system and sample times are 64-bit registers on the ESC and wrap modulo
+// 2^64; the model computes them in unsigned arithmetic (never signed overflow) and the control
+// loop's correction saturates at ±kMaxCorrection.
 #pragma once
 
 #include <cstdint>
@@ -33,6 +43,9 @@ class DcClock {
   static constexpr double kKp = 0.1;
   static constexpr double kKi = 0.005;
   static constexpr double kMaxCorrection = 1e-3;
+  static constexpr std::uint32_t kMinSyncCycleNs = 10'000;  // see the header comment
+  // sim_time_of_system() answers at most ±this (a system time beyond the sim time range).
+  static constexpr SimTime kSimTimeLimit = static_cast<SimTime>(1) << 61;
 
   DcClock(double drift = 0, std::int64_t local_at_start = 0, SimTime start = 0);
 
@@ -40,7 +53,7 @@ class DcClock {
   void set_drift(double drift, SimTime t);      // the oscillator changes at t (clock continuous)
   double drift() const { return drift_; }
   std::int64_t local(SimTime t) const;          // [ns]
-  std::int64_t system(SimTime t) const { return local(t) + static_cast<std::int64_t>(offset_); }
+  std::int64_t system(SimTime t) const;  // local + offset, modulo 2^64
   SimTime sim_time_of_system(std::int64_t system_time) const;  // inverse of system()
 
   void set_offset(std::uint64_t o);  // also forgets the previous sample
@@ -59,10 +72,14 @@ class DcClock {
   // SYNC0.
   void configure_sync(std::uint8_t activation, std::uint64_t start, std::uint32_t cycle0, SimTime t);
   bool sync0_active() const { return sync0_active_; }
+  // SYNC0 was requested (activation bits 0 and 1) with a cycle below kMinSyncCycleNs: refused.
+  bool sync0_invalid() const { return sync0_invalid_; }
   std::uint64_t next_sync0() const { return next_sync0_; }  // system time
   std::uint32_t sync0_cycle() const { return cycle0_; }
   // Next pulse due at or before t: its sim time; advances the schedule. false when none.
   bool pop_sync0(SimTime t, SimTime& when);
+  // Drops the pulses due at or before t: the schedule moves on to the first one after t.
+  void skip_sync0_to(SimTime t);
 
  private:
   void reanchor(SimTime t);
@@ -80,6 +97,7 @@ class DcClock {
   SimTime prev_sample_t_ = 0;
   bool have_prev_ = false;
   bool sync0_active_ = false;
+  bool sync0_invalid_ = false;
   std::uint64_t next_sync0_ = 0;
   std::uint32_t cycle0_ = 0;
 };

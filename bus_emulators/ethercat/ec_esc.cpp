@@ -122,6 +122,18 @@ bool Esc::writable(std::uint32_t a) const {
   return true;
 }
 
+// SyncManagers act on the process memory only: the ESC datasheets describe them as guarding
+// areas of the process data RAM (from 0x1000), never the registers below it (the exact datasheet
+// wording was not at hand when this was written; the behaviour is a model choice). An SM whose
+// area — for a 3-buffer SM all three buffers, start .. start + 3·length — is not entirely inside
+// process RAM (0x1000 .. end of RAM) is not activated: its registers keep what was written, but
+// it stays disabled (status and handshake inactive), ECAT accesses to its area go to the plain
+// memory without redirection and the PDI cannot post into it.
+bool Esc::sm_in_process_ram(const SyncManager& r) const {
+  const std::size_t buffers = r.buffered() ? 3 : 1;
+  return r.start >= kProcessRam && static_cast<std::size_t>(r.start) + buffers * r.length <= mem_.size();
+}
+
 void Esc::raise_event(std::uint16_t bits, bool on) {
   const std::uint16_t ev = read16(reg::kEcatEventRequest);
   put_u16(&mem_[reg::kEcatEventRequest], static_cast<std::uint16_t>(on ? (ev | bits) : (ev & ~bits)));
@@ -199,6 +211,7 @@ void Esc::after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_i
       auto& u = sms_[static_cast<std::size_t>(i)];
       const bool repeat_before = (u.reg.activate & 0x02) != 0;
       u.configure(&mem_[base]);
+      if (u.reg.enabled && !sm_in_process_ram(u.reg)) u.reg.enabled = false;  // not activated
       const bool repeat_now = (u.reg.activate & 0x02) != 0;
       if (repeat_before != repeat_now && u.reg.enabled && u.reg.mailbox() && !u.reg.ecat_writes()) {
         // Repeat request: put the last reply back into the read mailbox, then acknowledge.
@@ -322,12 +335,23 @@ void Esc::advance(SimTime t) noexcept {
   if (t < now_) t = now_;
   watchdog_check(t);
   if (dc_supported()) {
+    // At most kMaxSync0PerAdvance pulses reach the firmware per call; pulses missed beyond
+    // that (a long jump of t) are dropped, as a firmware busy that long would miss interrupts.
     SimTime when = 0;
-    int guard = 0;
-    while (guard++ < 100000 && dc_.pop_sync0(t, when)) {
+    int delivered = 0;
+    while (dc_.pop_sync0(t, when)) {
       mem_[reg::kDcSync0Status] = 0x01;
       put_u64(&mem_[reg::kDcStartTime], dc_.next_sync0());
       if (app_ != nullptr) app_->on_sync0(when);
+      if (++delivered == kMaxSync0PerAdvance) {
+        const std::uint64_t before = dc_.next_sync0();
+        dc_.skip_sync0_to(t);
+        if (dc_.sync0_cycle() != 0 && dc_.next_sync0() != before) {
+          stats_.sync0_dropped += (dc_.next_sync0() - before) / dc_.sync0_cycle();
+        }
+        put_u64(&mem_[reg::kDcStartTime], dc_.next_sync0());
+        break;
+      }
     }
   }
   now_ = t;
@@ -431,7 +455,8 @@ Esc::Access Esc::physical(std::uint16_t ado, std::uint8_t* data, std::uint16_t n
     }
     const std::uint8_t in = data[k];
     if (acc.read) data[k] = or_read ? static_cast<std::uint8_t>(in | mem_at(p)) : mem_at(p);
-    if (acc.write && p < mem_.size() && writable(x)) mem_[p] = in;
+    // Both the datagram's address and the (redirected) buffer address must be writable.
+    if (acc.write && writable(x) && writable(p)) mem_[p] = in;
   }
   for (int h = 0; h < hits; ++h) {
     const int i = hit[static_cast<std::size_t>(h)];
@@ -489,7 +514,7 @@ void Esc::logical(Datagram& d, SimTime t, bool& did_read, bool& did_write) {
         if (p >= mem_.size()) continue;
         const std::uint32_t pb = (p << 3) | (pbit & 7);
         if (writing) {
-          if (writable(x)) set_bit(mem_.data(), pb, get_bit(data, s.frame_bit + b));
+          if (writable(x) && writable(p)) set_bit(mem_.data(), pb, get_bit(data, s.frame_bit + b));
         } else {
           set_bit(data, s.frame_bit + b, get_bit(mem_.data(), pb));
         }
@@ -583,8 +608,7 @@ bool Esc::post_mailbox(std::span<const std::uint8_t> reply) {
   const int i = find_sm(true, false);
   if (i < 0) return false;
   auto& u = sms_[static_cast<std::size_t>(i)];
-  if (u.full() || reply.size() > u.reg.length ||
-      static_cast<std::size_t>(u.reg.start) + u.reg.length > mem_.size()) {
+  if (u.full() || reply.size() > u.reg.length || !sm_in_process_ram(u.reg)) {
     return false;
   }
   std::memset(&mem_[u.reg.start], 0, u.reg.length);
@@ -613,7 +637,7 @@ std::span<const std::uint8_t> Esc::outputs() const {
 bool Esc::write_inputs(int i, std::span<const std::uint8_t> in) {
   if (i < 0 || i >= cfg_.sync_managers) return false;
   auto& u = sms_[static_cast<std::size_t>(i)];
-  if (!u.reg.enabled || !u.reg.buffered() || u.reg.ecat_writes()) return false;
+  if (!u.reg.enabled || !u.reg.buffered() || u.reg.ecat_writes() || !sm_in_process_ram(u.reg)) return false;
   const int b = u.pdi_write_buffer();
   const std::size_t off = u.reg.start + static_cast<std::size_t>(b) * u.reg.length;
   if (off + u.reg.length > mem_.size()) return false;

@@ -26,6 +26,10 @@
 // bit 2 DL status changed (cleared by reading 0x0110), bit 3 AL status changed (cleared by
 // reading 0x0130), bit 4 + i: SM i is a read mailbox holding a reply (i < 8).
 //
+// SyncManagers act on process RAM (>= 0x1000) only: one configured over the registers or past
+// the end of RAM is not activated (see Esc::sm_in_process_ram). SYNC0 pulses: at most
+// kMaxSync0PerAdvance per advance(), the rest are dropped (Stats::sync0_dropped).
+//
 // Model choices: all datagrams of a frame reach one ESC at the same time t (the frame's arrival);
 // logical writes do not trigger register side effects (FMMUs map RAM); the AL watchdog reaction
 // (OP → SAFE-OP + 0x001B, outputs zeroed) is done here rather than by the firmware; the SM0
@@ -50,6 +54,8 @@ namespace omnitwin::ethercat {
 inline constexpr int kMaxFmmus = 16;
 inline constexpr SimTime kNoEscEvent = std::numeric_limits<SimTime>::max();  // next_event_time(): nothing scheduled
 inline constexpr int kMaxSyncManagers = 16;
+inline constexpr int kMaxSync0PerAdvance = 1000;  // SYNC0 pulses delivered per Esc::advance()
+inline constexpr std::uint32_t kProcessRam = 0x1000;  // process RAM starts here (registers below)
 
 struct EscConfig {
   std::uint8_t type = 0x11, revision = 0;
@@ -84,6 +90,7 @@ class Esc {
     std::uint64_t addressed = 0;  // … of which touched it (WKC candidates)
     std::uint64_t refused = 0;    // accesses refused by a SyncManager
     std::uint64_t malformed = 0;  // unknown commands
+    std::uint64_t sync0_dropped = 0;  // SYNC0 pulses beyond kMaxSync0PerAdvance in one advance()
   };
 
   Esc(EscConfig config, EscApplication* app);
@@ -142,6 +149,7 @@ class Esc {
   Access physical(std::uint16_t ado, std::uint8_t* data, std::uint16_t n, bool rd, bool wr, bool or_read, SimTime t);
   void logical(Datagram& d, SimTime t, bool& did_read, bool& did_write);
   bool writable(std::uint32_t a) const;
+  bool sm_in_process_ram(const SyncManager& r) const;  // see ec_esc.cpp
   std::uint8_t mem_at(std::uint32_t a) const { return a < mem_.size() ? mem_[a] : 0; }
   void refresh_for_read(std::uint32_t a, std::uint32_t n, SimTime t);
   void after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_in, SimTime t);

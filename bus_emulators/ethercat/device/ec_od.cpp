@@ -85,7 +85,9 @@ OdObject& ObjectDictionary::add(OdObject obj) {
   for (auto& e : obj.entries) {
     e.bound_ = nullptr;
     e.own_.assign(std::max<std::size_t>(e.bytes(), 1), 0);
-    std::memcpy(e.own_.data(), e.default_value.data(), std::min(e.default_value.size(), e.bytes()));
+    // No default (empty: data() may be null): the value starts at zero.
+    if (!e.default_value.empty())
+      std::memcpy(e.own_.data(), e.default_value.data(), std::min(e.default_value.size(), e.bytes()));
   }
   auto it = std::lower_bound(objects_.begin(), objects_.end(), obj.index,
                              [](const OdObject& o, std::uint16_t i) { return o.index < i; });
@@ -127,8 +129,8 @@ bool ObjectDictionary::bind(std::uint16_t index, std::uint8_t sub, void* storage
   OdEntry* e = entry(index, sub);
   if (!e || e->bytes() != size || storage == nullptr) return false;
   e->bound_ = static_cast<std::uint8_t*>(storage);
-  if ((e->access & od_access::write_all) && !e->default_value.empty())
-    std::memcpy(e->bound_, e->default_value.data(), std::min(size, e->default_value.size()));
+  const std::size_t n = std::min(size, e->default_value.size());
+  if ((e->access & od_access::write_all) && n != 0) std::memcpy(e->bound_, e->default_value.data(), n);
   return true;
 }
 
@@ -140,7 +142,8 @@ void ObjectDictionary::restore_defaults() {
         continue;
       }
       if (e.bound_ && !(e.access & od_access::write_all)) continue;
-      std::memcpy(e.data(), e.default_value.data(), std::min(e.default_value.size(), e.bytes()));
+      const std::size_t n = std::min(e.default_value.size(), e.bytes());
+      if (n != 0) std::memcpy(e.data(), e.default_value.data(), n);
     }
 }
 

@@ -336,6 +336,11 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
     coe_->set_mailbox_size(in.length);
     return AlStatusCode::none;
   }
+  // SYNC0 requested with a cycle the ESC refuses (below DcClock::kMinSyncCycleNs): no process
+  // data operation on it (AL status code 0x0030 invalid DC SYNC configuration). Only the steps
+  // up (PRE-OP → SAFE-OP, SAFE-OP → OP) are refused; going down is always accepted.
+  const bool up = (from == AlState::preop && to == AlState::safeop) || (from == AlState::safeop && to == AlState::op);
+  if (up && esc_->dc().sync0_invalid()) return refuse(AlStatusCode::invalid_dc_sync_config);
   if (from == AlState::preop && to == AlState::safeop) {
     const std::size_t ob = output_bytes(), ib = input_bytes();
     const SyncManager& o = esc_->sm(sm_out_);
@@ -369,7 +374,8 @@ void DriveSlave::on_outputs(std::span<const std::uint8_t> /*outputs*/, SimTime /
 
 void DriveSlave::on_sync0(SimTime t) { firmware(t); }
 
-bool DriveSlave::sync0_driven() const { return (esc_->read8(0x0981) & 0x03) == 0x03; }
+// SYNC0 activated and accepted by the ESC (an invalid cycle gives no pulses: free run instead).
+bool DriveSlave::sync0_driven() const { return (esc_->read8(0x0981) & 0x03) == 0x03 && !esc_->dc().sync0_invalid(); }
 
 void DriveSlave::cycle(SimTime t) noexcept {
   pump_mailbox();
@@ -412,7 +418,7 @@ void DriveSlave::firmware(SimTime t) noexcept {
   pump_mailbox();
   const AlState s = esc_->al_state();
   if (s == AlState::op) {
-    const auto out = esc_->outputs();
+    const auto out = esc_->outputs(sm_out_);  // the Outputs SM of the ESI, as for the inputs
     const std::size_t need = (rx_.empty() ? 0 : (rx_.back().offset + rx_.back().bits + 7) / 8);
     if (!out.empty() && out.size() >= need) {
       for (const auto& slot : rx_)
@@ -436,7 +442,9 @@ void DriveSlave::pack_inputs() noexcept {
   std::fill_n(in_image_.begin(), n, 0);
   for (const auto& slot : tx_)
     if (slot.entry) copy_bits(in_image_.data(), slot.offset, slot.entry->data(), 0, slot.bits);
-  if (n) esc_->write_inputs(std::span<const std::uint8_t>(in_image_.data(), n));
+  // Into the Inputs SM of the ESI (sm_in_), never "the first buffered master-read SM": a master
+  // may configure another SM (e.g. SM1) that way.
+  if (n) esc_->write_inputs(sm_in_, std::span<const std::uint8_t>(in_image_.data(), n));
 }
 
 void DriveSlave::multiaxis_commands() noexcept {

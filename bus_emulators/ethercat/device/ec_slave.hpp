@@ -21,13 +21,16 @@
 //                     (a direction with 0 bytes may be disabled). The process-data layout is
 //                     fixed here.
 //   SAFE-OP → OP      accepted; outputs are applied from then on.
+//   → SAFE-OP / OP    (steps up only) refused with 0x0030 invalid DC SYNC configuration while
+//                     SYNC0 is activated with a cycle the ESC refuses (DcClock::sync0_invalid).
 //   → INIT / PRE-OP   CoE transfers dropped (INIT), outputs no longer applied, axes' controlwords
 //                     set to 0 (the drives disable), as a real drive does when outputs stop.
 // The firmware cycle (cycle(t), or on_sync0(t) while DC SYNC0 is active): pending CoE replies
-// posted to SM1; in OP the last complete SM2 buffer is unpacked into the OD entries it maps
-// (the axes' Objects); the cycle hook runs (the twin steps the drives there, or separately
-// between cycles when no hook is set); in SAFE-OP/OP the TxPDO entries are packed and written
-// to SM3.
+// posted to SM1; in OP the last complete buffer of the ESI's Outputs SM (SM2) is unpacked into
+// the OD entries it maps (the axes' Objects); the cycle hook runs (the twin steps the drives
+// there, or separately between cycles when no hook is set); in SAFE-OP/OP the TxPDO entries are
+// packed and written to the ESI's Inputs SM (SM3) — by index, never "the first buffered SM", so
+// a master configuring another SM as buffered does not divert the process data.
 // Set-up allocates and throws EsiError on an unusable description; the cyclic path does not
 // allocate and never throws.
 #pragma once
@@ -106,7 +109,7 @@ class DriveSlave final : public EscApplication {
   // The firmware cycle at t (see the header comment). While DC SYNC0 is active it only posts
   // mailbox replies: the process-data part runs on the SYNC0 pulses. RT-safe.
   void cycle(SimTime t) noexcept;
-  bool sync0_driven() const;      // 0x0981 has cyclic unit and SYNC0 active
+  bool sync0_driven() const;      // 0x0981 has cyclic unit and SYNC0 active, and the ESC accepted the cycle
   // Power loss and return at t: the ESC to its power-on state, the axes to theirs, the object
   // dictionary (PDO assignment and mapping included) to the ESI defaults, CoE transfers and
   // replies dropped. Set-up path (no allocation, but not meant for every cycle).

@@ -1,12 +1,14 @@
 // Tests bus_emulators/ethercat/ec_dc: the drifting local clock, system time with offset, the
 // difference register's sign convention, the drift control loop converging from ±50 ppm (and
 // staying monotonic), SYNC0 schedules (start, cycle, single shot, start in the past), and the
-// same through an Esc's registers with on_sync0 callbacks at the configured cycle.
+// same through an Esc's registers with on_sync0 callbacks at the configured cycle; arithmetic
+// modulo 2^64 with far-apart samples and offsets, and the minimum SYNC0 cycle.
 #include "bus_emulators/ethercat/ec_dc.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <limits>
 #include <vector>
 
 #include "bus_emulators/ethercat/ec_esc.hpp"
@@ -117,6 +119,57 @@ void apwr(Esc& e, std::uint16_t ado, const std::vector<std::uint8_t>& d, SimTime
   ASSERT_EQ(v.datagrams[0].wkc(), 1);
 }
 
+// Two wide samples ±2^63 apart: e − e_prev does not wrap (the correction saturates the right
+// way: the local copy is far behind, so the clock speeds up), and |INT64_MIN| saturates 0x092C.
+TEST(EcDc, FarApartSamplesSaturateTheCorrectionAndTheDifference) {
+  DcClock c(0, 0, 0);
+  c.sample(0, true, 1'000);  // e = +1000
+  EXPECT_EQ(c.last_difference(), 1'000);
+  const std::uint64_t far = 2'000 + (std::uint64_t{1} << 63) - 100;  // e = −(2^63 − 100)
+  c.sample(far, true, 2'000);
+  EXPECT_EQ(c.last_difference(), -static_cast<std::int64_t>((std::uint64_t{1} << 63) - 100));
+  EXPECT_DOUBLE_EQ(c.correction(), DcClock::kMaxCorrection);
+  EXPECT_EQ(c.difference_register(), 0xFFFFFFFFu);  // 31-bit magnitude saturated, local smaller
+
+  DcClock d(0, 0, 0);
+  d.sample(d.system(500) - (std::uint64_t{1} << 63), true, 500);  // e = INT64_MIN
+  EXPECT_EQ(d.last_difference(), std::numeric_limits<std::int64_t>::min());
+  EXPECT_EQ(d.difference_register(), 0xFFFFFFFFu);
+}
+
+// System time = local + offset modulo 2^64; the inverse works across the wrap, and a target
+// beyond the sim time range is answered with the range's end, not a wrapped (negative) time.
+TEST(EcDc, SystemTimeWrapsAndTheInverseStaysInRange) {
+  DcClock c(0, 1'000, 0);
+  c.set_offset(0x7FFF'FFFF'FFFF'FF00ull);
+  EXPECT_EQ(static_cast<std::uint64_t>(c.system(1'000)), 0x7FFF'FFFF'FFFF'FF00ull + 2'000u);
+  EXPECT_EQ(c.sim_time_of_system(c.system(777)), 777);
+  DcClock slow(-1e-3, 0, 0);  // 0.999: INT64_MAX of system time lies beyond the SimTime range
+  const SimTime far = slow.sim_time_of_system(std::numeric_limits<std::int64_t>::max() - 10);
+  EXPECT_GT(far, 0);
+  EXPECT_EQ(far, DcClock::kSimTimeLimit);
+}
+
+// A non-zero SYNC0 cycle below the minimum is an invalid configuration: no pulses at all.
+TEST(EcDc, Sync0CycleBelowTheMinimumIsRefused) {
+  DcClock c(0, 0, 0);
+  c.configure_sync(0x03, 0, 1, 0);  // 1 ns
+  EXPECT_FALSE(c.sync0_active());
+  EXPECT_TRUE(c.sync0_invalid());
+  SimTime when = 0;
+  EXPECT_FALSE(c.pop_sync0(1'000'000, when));
+  c.configure_sync(0x03, 0, DcClock::kMinSyncCycleNs - 1, 0);
+  EXPECT_TRUE(c.sync0_invalid());
+  c.configure_sync(0x03, 0, DcClock::kMinSyncCycleNs, 0);  // the minimum itself is fine
+  EXPECT_TRUE(c.sync0_active());
+  EXPECT_FALSE(c.sync0_invalid());
+  EXPECT_TRUE(c.pop_sync0(0, when));
+  c.configure_sync(0x03, 0, 0, 0);  // single shot: no cycle, valid
+  EXPECT_FALSE(c.sync0_invalid());
+  c.configure_sync(0x01, 0, 1, 0);  // SYNC0 not requested: nothing to refuse
+  EXPECT_FALSE(c.sync0_invalid());
+}
+
 TEST(EcDc, EscSync0PulsesAtTheConfiguredCycle) {
   Counter app;
   EscConfig cfg;
@@ -142,6 +195,21 @@ TEST(EcDc, EscSync0PulsesAtTheConfiguredCycle) {
   apwr(e, reg::kDcActivation, {0}, 2'100'000);
   e.advance(5'000'000);
   EXPECT_EQ(app.pulses.size(), 5u);
+  EXPECT_EQ(e.next_event_time(), kNoEscEvent);
+}
+
+TEST(EcDc, EscIgnoresASync0CycleBelowTheMinimum) {
+  Counter app;
+  Esc e(EscConfig{}, &app);
+  std::vector<std::uint8_t> d4(4), d8(8);
+  put_u32(d4.data(), 1);  // 1 ns
+  apwr(e, reg::kDcSync0Cycle, d4, 0);
+  put_u64(d8.data(), 1'000);
+  apwr(e, reg::kDcStartTime, d8, 0);
+  apwr(e, reg::kDcActivation, {0x03}, 0);
+  EXPECT_EQ(e.read8(reg::kDcActivationStatus) & 1, 0);  // not activated
+  e.advance(1'000'000);
+  EXPECT_TRUE(app.pulses.empty());
   EXPECT_EQ(e.next_event_time(), kNoEscEvent);
 }
 

@@ -2,8 +2,10 @@
 // kind (incl. ARMW/FRMW and refused accesses), ADP increment for position addressing, node and
 // alias addressing, read-only and reset-only registers, AL control/status with the firmware's
 // answers and error acknowledge, SII access through registers, mailbox full/empty refusals and
-// the repeat handshake, 3-buffer process data through FMMUs, the process-data watchdog, and
-// that unknown commands are counted without effect.
+// the repeat handshake, 3-buffer process data through FMMUs, the process-data watchdog, that
+// unknown commands are counted without effect, that SyncManagers outside process RAM are not
+// activated (neither ECAT nor PDI reach the registers through them), and the cap on SYNC0 pulses
+// per advance.
 #include "bus_emulators/ethercat/ec_esc.hpp"
 
 #include <gtest/gtest.h>
@@ -472,6 +474,86 @@ TEST(EcEsc, WatchdogTakesOpToSafeOpAndZeroesOutputs) {
   e.advance(44'000'000);
   EXPECT_EQ(e.al_state(), AlState::op);
   EXPECT_EQ(e.read16(reg::kWatchdogStatusPd) & 1, 1);
+}
+
+// An SM configured over the register space (3 buffers 0x0128, 0x012C, 0x0130) is not activated:
+// ECAT writes through its area are plain register writes, never redirected into AL status.
+TEST(EcEsc, SmOverTheRegistersIsNotActivatedForEcatAccesses) {
+  for (const bool logical : {false, true}) {
+    App app;
+    Esc e(EscConfig{}, &app);
+    go(e, AlState::preop);
+    go(e, AlState::safeop);
+    ASSERT_EQ(e.read16(reg::kAlStatus), 0x0004);
+    apwr(e, reg::kSm0 + 16, sm_bytes(0x0128, 4, 0x24, true));  // buffered, ECAT writes
+    EXPECT_FALSE(e.sm(2).enabled) << logical;
+    EXPECT_EQ(e.read16(reg::kSm0 + 16), 0x0128);  // the registers keep what the master wrote
+    apwr(e, reg::kFmmu0, fmmu_bytes(0x30000, 4, 0, 7, 0x0128, 0, 2));
+    for (int k = 0; k < 3; ++k) {
+      if (logical) {
+        lrw(e, 0x30000, {0xFF, 0xFF, 0xFF, 0xFF}, Cmd::lwr);
+      } else {
+        apwr(e, 0x0128, {0xFF, 0xFF, 0xFF, 0xFF});
+      }
+    }
+    EXPECT_EQ(e.read16(reg::kAlStatus), 0x0004) << logical;
+    EXPECT_EQ(e.read16(reg::kAlStatusCode), 0x0000) << logical;
+    EXPECT_EQ(u16(aprd(e, reg::kAlStatus, 2)), 0x0004) << logical;
+    EXPECT_EQ(e.read32(0x0128), 0xFFFFFFFFu) << logical;  // written in place
+    EXPECT_EQ(e.read32(0x012C), 0u) << logical;
+    EXPECT_EQ(e.al_state(), AlState::safeop);
+  }
+}
+
+// The PDI cannot post inputs or a mailbox reply into an SM placed over the registers.
+TEST(EcEsc, SmOverTheRegistersIsNotActivatedForThePdi) {
+  App app;
+  Esc e(EscConfig{}, &app);
+  go(e, AlState::preop);
+  go(e, AlState::safeop);
+  apwr(e, reg::kSm0 + 24, sm_bytes(0x0130, 2, 0x20, true));  // buffered, ECAT reads: over AL status
+  apwr(e, reg::kSm0 + 8, sm_bytes(0x0130, 6, 0x02, true));   // mailbox, ECAT reads: the same
+  EXPECT_FALSE(e.sm(3).enabled);
+  EXPECT_FALSE(e.sm(1).enabled);
+  EXPECT_FALSE(e.write_inputs(3, std::vector<std::uint8_t>{0xFF, 0xFF}));
+  e.write_inputs(std::vector<std::uint8_t>{0xFF, 0xFF});
+  EXPECT_FALSE(e.post_mailbox(std::vector<std::uint8_t>{0xEE, 0xEE, 0xEE, 0xEE, 0xEE, 0xEE}));
+  EXPECT_EQ(e.read16(reg::kAlStatus), 0x0004);
+  EXPECT_EQ(e.read16(reg::kAlStatusCode), 0x0000);
+  EXPECT_EQ(e.al_state(), AlState::safeop);
+  // Moved into process RAM, the same SMs work.
+  apwr(e, reg::kSm0 + 24, sm_bytes(0x1200, 2, 0x20, true));
+  EXPECT_TRUE(e.sm(3).enabled);
+  EXPECT_TRUE(e.write_inputs(3, std::vector<std::uint8_t>{0x12, 0x34}));
+}
+
+// All three buffers (or the mailbox) must lie inside process RAM (8 KiB: up to 0x2FFF).
+TEST(EcEsc, SmPastTheEndOfRamIsNotActivated) {
+  Esc e(EscConfig{}, nullptr);
+  apwr(e, reg::kSm0 + 16, sm_bytes(0x2FF0, 8, 0x64, true));  // buffers up to 0x3007
+  EXPECT_FALSE(e.sm(2).enabled);
+  apwr(e, reg::kSm0 + 16, sm_bytes(0x2FE8, 8, 0x64, true));  // up to 0x2FFF
+  EXPECT_TRUE(e.sm(2).enabled);
+  apwr(e, reg::kSm0, sm_bytes(0x2FF8, 8, 0x26, true));       // mailbox: one buffer, fits
+  EXPECT_TRUE(e.sm(0).enabled);
+  apwr(e, reg::kSm0, sm_bytes(0x0FF8, 16, 0x26, true));      // starts in the registers
+  EXPECT_FALSE(e.sm(0).enabled);
+}
+
+// A long jump of time delivers at most kMaxSync0PerAdvance SYNC0 pulses; the rest are dropped
+// and the schedule goes on from the first boundary after t.
+TEST(EcEsc, Sync0PulsesPerAdvanceAreCapped) {
+  App app;
+  Esc e(EscConfig{}, &app);
+  apwr(e, reg::kDcSync0Cycle, le32(10'000));  // 10 µs, the minimum
+  apwr(e, reg::kDcActivation, {0x03});        // start time 0: pulses at 0, 10 µs, …
+  ASSERT_EQ(e.read8(reg::kDcActivationStatus) & 1, 1);
+  e.advance(1'000'000'000);  // 100001 pulses due
+  EXPECT_EQ(app.sync0, kMaxSync0PerAdvance);
+  EXPECT_EQ(e.stats().sync0_dropped, 100'001u - static_cast<std::uint64_t>(kMaxSync0PerAdvance));
+  EXPECT_EQ(e.next_event_time(), 1'000'010'000);
+  e.advance(1'000'020'000);
+  EXPECT_EQ(app.sync0, kMaxSync0PerAdvance + 2);
 }
 
 TEST(EcEsc, UnknownCommandsAreCountedAndLeftAlone) {

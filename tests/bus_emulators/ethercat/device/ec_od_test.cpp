@@ -1,6 +1,7 @@
 // Tests bus_emulators/ethercat/device/ec_od: the object dictionary built from the shipped drive
 // ESI — defaults, binding to application storage, access rights per state, length and range
-// checks with their SDO abort codes, check/after-write hooks, and complete access layout.
+// checks with their SDO abort codes, check/after-write hooks, complete access layout, and
+// entries without a default value (zero, never a copy from an empty default).
 #include "bus_emulators/ethercat/device/ec_od.hpp"
 
 #include <gtest/gtest.h>
@@ -133,6 +134,37 @@ TEST_F(EcOd, CompleteAccessLayout) {
   EXPECT_EQ(od.write_complete(0x1C12, 0, OdState::safeop, ca), SdoAbort::state);
   EXPECT_EQ(od.read_complete(0x1C12, 2, OdState::preop, buf, len), SdoAbort::unsupported_access);
   EXPECT_EQ(od.complete_size(0x1018, 0), 2u + 16u);
+}
+
+// Entries without a default (empty default_value, whose data() may be null): added, bound and
+// restored without copying from it — the value is zero and bound storage keeps its value.
+TEST(EcOdNoDefault, EntriesWithoutADefaultStartAtZero) {
+  ObjectDictionary od;
+  OdObject o;
+  o.index = 0x2100;
+  o.object_code = 7;
+  OdEntry e;
+  e.subindex = 0;
+  e.data_type = coe_type::uint32;
+  e.bits = 32;
+  e.access = od_access::read_all | od_access::write_all;
+  ASSERT_TRUE(e.default_value.empty());
+  o.entries.push_back(e);
+  od.add(o);
+  ASSERT_NE(od.entry(0x2100, 0), nullptr);
+  EXPECT_EQ(od.entry(0x2100, 0)->as_int(), 0);
+  std::uint32_t storage = 0xA5A5A5A5u;
+  ASSERT_TRUE(od.bind(0x2100, 0, storage));
+  EXPECT_EQ(storage, 0xA5A5A5A5u);  // nothing to take over
+  od.restore_defaults();
+  EXPECT_EQ(storage, 0xA5A5A5A5u);  // bound without a default: left as it is
+  const std::uint8_t v[4] = {1, 2, 3, 4};
+  std::array<std::uint8_t, 8> buf{};
+  std::size_t len = 0;
+  ASSERT_EQ(od.write(0x2100, 0, OdState::preop, v), SdoAbort::none);
+  ASSERT_EQ(od.read(0x2100, 0, OdState::preop, buf, len), SdoAbort::none);
+  EXPECT_EQ(len, 4u);
+  EXPECT_EQ(storage, 0x04030201u);
 }
 
 }  // namespace

@@ -4,7 +4,9 @@
 // AL refusals (0x0016 mailbox SMs, 0x001D/0x001E process-data SM lengths), CoE SDO round trips
 // (expedited, segmented, complete access, PDO mapping aborts) through the SM0/SM1 mailbox
 // registers, process data via LRW reaching the axis' drive::Objects and coming back, and the
-// seed-001 multi-axis slave's command/status modules (card address, handshake, servo enable).
+// seed-001 multi-axis slave's command/status modules (card address, handshake, servo enable);
+// process data only through the ESI's Outputs/Inputs SMs even when the master configures another
+// SM as a buffered one, and the refusal of SAFE-OP/OP with an invalid DC SYNC0 cycle (0x0030).
 #include "bus_emulators/ethercat/device/ec_slave.hpp"
 
 #include <gtest/gtest.h>
@@ -403,6 +405,53 @@ TEST_F(EcSlave, Sync0DrivesTheCycleWhenDcIsActive) {
   slave.esc().advance(m.t + 3'500'000);
   EXPECT_GE(slave.stats().cycles, cycles + 1);
   EXPECT_EQ(slave.axis(0).objects().target_velocity, 321);
+}
+
+// The master configures SM1 as a buffered master-read SM (lower index than SM3) and SM0 as a
+// buffered master-write SM: the firmware still exchanges process data through SM2/SM3 only.
+TEST_F(EcSlave, ProcessDataOnlyThroughTheEsiSyncManagers) {
+  to_preop();
+  m.fpwr(0x0800, Master::sm(0x1400, 18, 0x64, true));  // SM0: buffered, master writes
+  m.fpwr(0x0808, Master::sm(0x1500, 24, 0x20, true));  // SM1: buffered, master reads
+  m.pd_sms(0x1100, 18, 0x1180, 24);
+  ASSERT_EQ(m.request(4), 4);
+  ASSERT_EQ(m.request(8), 8);
+  auto& o = slave.axis(0).objects();
+  o.position_actual = 4242;
+  Bytes out(18 + 24, 0);
+  put_u16(out.data(), 0x0006);
+  put_u32(out.data() + 6, 321);  // target velocity
+  m.lrw(out);
+  slave.cycle(m.t);
+  EXPECT_EQ(o.target_velocity, 321);  // from SM2, not from the never-written SM0
+  EXPECT_EQ(slave.stats().outputs_applied, 1u);
+  const auto r = m.lrw(out);
+  EXPECT_EQ(r.wkc, 3);
+  EXPECT_EQ(static_cast<std::int32_t>(get_u32(r.data.data() + 18 + 2)), 4242);  // inputs in SM3
+  EXPECT_EQ(slave.esc().sm_unit(1).latest(), -1);  // nothing was posted into SM1
+}
+
+// SYNC0 activated with a 1 ns cycle: the ESC gives no pulses and the firmware refuses SAFE-OP
+// with 0x0030 (invalid DC SYNC configuration); a valid cycle is then accepted.
+TEST_F(EcSlave, InvalidSync0CycleRefusesSafeop) {
+  to_preop();
+  m.pd_sms(0x1100, 18, 0x1180, 24);
+  Bytes cyc(4, 0);
+  put_u32(cyc.data(), 1);
+  m.fpwr(0x09A0, cyc);
+  m.fpwr(0x0980, {0x00, 0x03});
+  EXPECT_EQ(m.fprd(0x0984, 1).data[0] & 1, 0);  // SYNC0 not activated
+  EXPECT_FALSE(slave.sync0_driven());
+  const auto cycles = slave.stats().cycles;
+  slave.esc().advance(m.t + 1'000'000);
+  EXPECT_EQ(slave.stats().cycles, cycles);  // no pulses ran the firmware
+  EXPECT_EQ(m.request(4), 0x12);
+  EXPECT_EQ(m.read16(0x0134), 0x0030);
+  put_u32(cyc.data(), 1'000'000);
+  m.fpwr(0x09A0, cyc);
+  EXPECT_EQ(m.fprd(0x0984, 1).data[0] & 1, 1);
+  EXPECT_TRUE(slave.sync0_driven());
+  EXPECT_EQ(m.request(0x14), 4);
 }
 
 TEST_F(EcSlave, WatchdogDropToSafeopDisablesTheDrive) {
