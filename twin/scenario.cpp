@@ -334,8 +334,8 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   if (const YamlField t = f["transport"]; t.exists()) {
     e.transport = t.string();
     const bool ok = e.transport == "auto" || e.transport == "veth" || e.transport.starts_with("raw:") ||
-                    e.transport.starts_with("udp:");
-    if (!ok) t.fail("expected auto, veth, raw:IFACE or udp:HOST:PORT");
+                    e.transport.starts_with("udp:") || e.transport.starts_with("mem:");
+    if (!ok) t.fail("expected auto, veth, raw:IFACE, udp:HOST:PORT or mem:NAME");
   }
   if (f["master_iface"].exists()) e.master_iface = f["master_iface"].string();
   if (e.transport.starts_with("raw:") && e.master_iface.empty())

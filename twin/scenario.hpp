@@ -102,7 +102,8 @@ struct EthercatSpec {
   // Where the master process and the twin meet: `auto` (a veth pair made for the run when the
   // twin may create one, i.e. as root; EtherCAT over UDP on loopback otherwise), `veth`
   // (always a fresh veth pair), `raw:IFACE` (the twin answers on IFACE; the master is given
-  // `master_iface`), or `udp:HOST:PORT` (EtherCAT over UDP).
+  // `master_iface`), `udp:HOST:PORT` (EtherCAT over UDP), or `mem:NAME` (a master in the same
+  // process: tests and embedding).
   std::string transport = "auto";
   std::string master_iface;                 // raw: the master's interface (the peer of IFACE)
   std::string esi;                          // device description; "" = models/ethercat/omnitwin_drive.xml
