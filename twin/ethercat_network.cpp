@@ -72,7 +72,6 @@ EthercatNetwork::EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hook
     c.drive.max_speed_rad_s = s.platform.motor.speed_limit;
     c.drive.rated_torque_nm = s.platform.motor.torque_limit;
     slaves_[k] = std::make_unique<ethercat::DriveSlave>(device_, c);
-    slaves_[k]->set_cycle_hook([this, i](SimTime t) { drive_step(i, t); });
     chain_.add(&slaves_[k]->esc());
     last_al_[k] = static_cast<std::uint8_t>(ethercat::AlState::init);
   }
@@ -248,17 +247,20 @@ void EthercatNetwork::on_drive_timer(int axis0, SimTime t) {
   drive_cycle(axis0, t);
 }
 
-// One firmware cycle of a slave on its own timer: it posts mailbox replies and, unless SYNC0
-// drives it, exchanges process data, calling drive_step() in between. Real-time safe.
+// One cycle of a slave on its own oscillator: the firmware posts mailbox replies and, unless
+// SYNC0 drives the process data, exchanges it; then the drive runs its loops against its
+// wheel. With DC the process data moves on the (synchronised) SYNC0 pulses while the drive's
+// loops keep their own rate, as in a real servo drive. Real-time safe.
 void EthercatNetwork::drive_cycle(int axis0, SimTime t) {
   const auto k = static_cast<std::size_t>(axis0);
   if (!powered_[k]) return;
   slaves_[k]->cycle(t);
+  drive_step(axis0, t);
   watch_states(t);
 }
 
-// The drive's own cycle, between the firmware unpacking the outputs into its objects and
-// packing its actual values: the drive against its wheel. Real-time safe.
+// The drive against its wheel: feedback from the shaft, the amplifier's setpoint back.
+// Real-time safe.
 void EthercatNetwork::drive_step(int axis0, SimTime t) {
   const auto k = static_cast<std::size_t>(axis0);
   if (!powered_[k]) return;

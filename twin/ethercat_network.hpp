@@ -8,9 +8,9 @@
 // chain at the receiving instant + T_pre; it passes the slaves (each reads and writes its
 // datagrams on the fly) and comes back, and the returned frame goes to the transport (in
 // lockstep batched until the next grant, in realtime at once). Both directions go into the
-// capture. The drives run at the drive period: on SYNC0 when the master activated
-// distributed clocks, else on their own oscillator's timer. Each drive cycle reads its wheel
-// shaft from the physics and sets the wheel amplifier's speed setpoint.
+// capture. Each drive runs its loops at the drive period on its own oscillator, reading its
+// wheel shaft from the physics and setting the wheel amplifier's speed setpoint; its process
+// data moves on SYNC0 when the master activated distributed clocks, else at the same cycle.
 //
 // Faults: frame loss (the frame never returns), delay of the returned frames, oscillator
 // drift, a slave's power loss and return, a link break after slave k.

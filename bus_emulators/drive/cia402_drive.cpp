@@ -82,6 +82,9 @@ void Cia402Drive::enter_mode(Mode m, double pos, double vel) {
   (void)m;
 }
 
+// Longest gap between CSP set-points still interpolated over [s]; a longer one is a jump.
+constexpr double kMaxCspInterval = 0.1;
+
 Command Cia402Drive::step(SimTime t, const Feedback& fb) {
   double dt = cfg_.period_s;
   if (!first_step_ && t > last_t_) dt = static_cast<double>(t - last_t_) * 1e-9;
@@ -321,10 +324,29 @@ Command Cia402Drive::step(SimTime t, const Feedback& fb) {
           target = cl;
         }
         const double phys = sp * (target - offset_);
-        const double ff = csp_first_ ? 0.0 : (phys - csp_prev_target_) / dt;
-        csp_first_ = false;
-        csp_prev_target_ = phys;
-        dpos = phys;
+        // Set-points come once per bus cycle, which may be several drive periods: the drive
+        // interpolates linearly from the previous set-point to the new one over the interval
+        // the set-points arrive at (one bus cycle of delay, as interpolating drives have),
+        // with that slope as velocity feed-forward.
+        if (csp_first_) {
+          csp_from_ = csp_prev_target_ = phys;
+          csp_change_t_ = t;
+          csp_interval_ = dt;
+          csp_first_ = false;
+        } else if (phys != csp_prev_target_) {
+          const double since = static_cast<double>(t - csp_change_t_) * 1e-9;
+          csp_interval_ = std::clamp(since, dt, kMaxCspInterval);
+          csp_from_ = csp_demand_;
+          csp_prev_target_ = phys;
+          csp_change_t_ = t;
+        }
+        // This period moves the demand from `done` to `along` of the way (a set-point arriving
+        // every period is reached in that period, as without interpolation).
+        const double done = static_cast<double>(t - csp_change_t_) * 1e-9 / csp_interval_;
+        const double along = std::min(1.0, done + dt / csp_interval_);
+        csp_demand_ = csp_from_ + (csp_prev_target_ - csp_from_) * along;
+        const double ff = done < 1.0 ? (csp_prev_target_ - csp_from_) / csp_interval_ : 0.0;
+        dpos = csp_demand_;
         dvel = ff + sv * obj_.velocity_offset;
         position_controlled_ = true;
         bit12 = true;  // the drive follows the command value

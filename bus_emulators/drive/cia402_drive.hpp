@@ -196,7 +196,11 @@ class Cia402Drive {
   bool first_step_ = true, prev_nl_ = false, prev_pl_ = false, prev_home_ = false;
   bool prev_m_nl_ = false, prev_m_pl_ = false, prev_m_home_ = false;  // modelled switches
   bool demand_pos_valid_ = false, csp_first_ = true, stop_hold_ = false;
-  double csp_prev_target_ = 0;
+  double csp_prev_target_ = 0;   // the last CSP set-point [counts, physical]
+  double csp_from_ = 0;          // where the interpolation towards it started
+  double csp_demand_ = 0;        // the interpolated demand
+  double csp_interval_ = 0;      // set-point interval being interpolated over [s]
+  SimTime csp_change_t_ = 0;     // when the last set-point arrived
   double nl_edge_ = 0, pl_edge_ = 0, home_edge_ = 0;
   SimTime last_t_ = 0;
   std::uint32_t external_inputs_ = 0, physical_outputs_ = 0;

@@ -68,6 +68,25 @@ TEST(Cia402Drive, CspTracksARampOnTheAxisModel) {
   EXPECT_EQ(r.o().position_demand, 20000);
 }
 
+// Set-points once per bus cycle of five drive periods: the drive interpolates between them,
+// so its velocity command stays near the set-points' slope instead of jumping five-fold on
+// the period a set-point arrives and resting on the other four.
+TEST(Cia402Drive, CspInterpolatesSetPointsThatComeLessOftenThanItsPeriod) {
+  Rig r;
+  r.enable();
+  r.set_mode(Mode::csp);
+  const double slope = 20000.0;  // counts/s
+  double worst_ff = 0;
+  for (int k = 1; k <= 1000; ++k) {
+    if (k % 5 == 0) r.o().target_position = static_cast<std::int32_t>(slope * k * 1e-3);
+    r.step();
+    if (k > 100) worst_ff = std::max(worst_ff, std::fabs(r.last.velocity_rad_s * r.drive.counts_per_load_rad() - slope));
+  }
+  EXPECT_LT(worst_ff, 0.5 * slope);  // without interpolation: 4 × slope on one period in five
+  r.run(0.2);
+  EXPECT_NEAR(r.o().position_actual, slope, 1);
+}
+
 TEST(Cia402Drive, CsvTracksAVelocityRampWithOffset) {
   Rig r;
   r.enable();
