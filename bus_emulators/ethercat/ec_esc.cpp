@@ -503,14 +503,33 @@ void Esc::logical(Datagram& d, SimTime t, bool& did_read, bool& did_write) {
         continue;
       }
       for (int h = 0; h < hits; ++h) sms_[static_cast<std::size_t>(hit[static_cast<std::size_t>(h)])].ecat_begin(pa, pn, writing);
-      for (std::uint32_t b = 0; b < s.bits; ++b) {
-        const std::uint32_t pbit = s.physical_bit + b;
-        const std::uint32_t x = pbit >> 3;
+      // The physical byte behind address x: a 3-buffer SM redirects to its current buffer.
+      const auto target = [&](std::uint32_t x) {
         std::uint32_t p = x;
         for (int h = 0; h < hits; ++h) {
           const auto& u = sms_[static_cast<std::size_t>(hit[static_cast<std::size_t>(h)])];
           if (u.reg.overlaps(x, 1)) p = u.redirect(x, writing);
         }
+        return p;
+      };
+      // Byte-aligned spans (every FMMU a master lays out for byte-sized PDOs) move byte by
+      // byte with the same checks; bit-granular ones bit by bit.
+      const bool bytes = (s.physical_bit & 7) == 0 && (s.frame_bit & 7) == 0 && (s.bits & 7) == 0;
+      for (std::uint32_t k = 0; bytes && k < s.bits / 8; ++k) {
+        const std::uint32_t x = (s.physical_bit >> 3) + k;
+        const std::uint32_t p = target(x);
+        if (p >= mem_.size()) continue;
+        std::uint8_t* fb = data + (s.frame_bit >> 3) + k;
+        if (writing) {
+          if (writable(x) && writable(p)) mem_[p] = *fb;
+        } else {
+          *fb = mem_[p];
+        }
+      }
+      for (std::uint32_t b = 0; !bytes && b < s.bits; ++b) {
+        const std::uint32_t pbit = s.physical_bit + b;
+        const std::uint32_t x = pbit >> 3;
+        const std::uint32_t p = target(x);
         if (p >= mem_.size()) continue;
         const std::uint32_t pb = (p << 3) | (pbit & 7);
         if (writing) {

@@ -1,0 +1,208 @@
+// Benchmarks whole EtherCAT runs through the real programs: `omnitwin run` (built beside this
+// benchmark) with `--bus ethercat`, which starts `omni-master --bus ethercat` as its own process.
+// Every figure is read from the run's metrics.json; the baseline is the same scenario with
+// `--bus direct`, run in the same benchmark (DESIGN §11).
+//
+//   BM_EthercatLockstep/P/T  the thesis line (22 s simulated) in lockstep over EtherCAT:
+//                    master period P ms (10 or 1: --set controller.period), transport T
+//                    (0: a veth pair made for the run, raw AF_PACKET on both ends — needs root,
+//                    skipped otherwise; 1: EtherCAT over UDP on 127.0.0.1, ports 47950–47959),
+//                    the sim-clock handshake every master tick, four drive slaves at 1 kHz with
+//                    distributed clocks. Each iteration runs the EtherCAT command and then the
+//                    same command with --bus direct (same period), so both see the same
+//                    machine load. Counters: rtf and direct_rtf (metrics.json
+//                    real_time_factor: simulated seconds per wall second of the run itself),
+//                    slowdown = direct_rtf / rtf, us_per_tick (EtherCAT wall time per master
+//                    tick), process_rtf (simulated seconds per wall second of the whole command,
+//                    start-up, master start and OP included), wkc_errors / lost_frames / cycles
+//                    per run from the master's statistics (metrics.json master.*), passed (1 when
+//                    every EtherCAT run met the scenario's expectations).
+//   BM_EthercatRealtime/P    `--clock realtime` for 60 s of simulated time (--set duration=60:
+//                    the 20 s path and 40 s standing still) at master period P ms (1), the
+//                    transport the default `auto` (veth as root). One run. Counters:
+//                    metrics.json realtime.{ticks, overruns, jitter_mean_us, jitter_p99_us,
+//                    jitter_max_us} (the twin's master tick against its CLOCK_MONOTONIC deadline)
+//                    and the master's own statistics (cycles, wkc_errors, lost_frames,
+//                    recoveries, … whatever master-stats.json holds; printed whole on stderr).
+//   BM_DirectRealtime/P      the same realtime run with --bus direct: the baseline of the
+//                    deadline figures (the twin's clock without a bus).
+// The exact command of every run is printed on stderr. A run that cannot start (exit 2 or 3)
+// skips with the tail of its log.
+#include <benchmark/benchmark.h>
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kScenario = std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line.yaml";
+
+struct RunOutcome {
+  int exit_code = -1;
+  double wall_s = 0;            // the whole command
+  nlohmann::json metrics;       // metrics.json (null when absent)
+  std::string log;              // stdout + stderr of the command
+  std::string command;
+};
+
+std::string quoted(const std::vector<std::string>& args) {
+  std::string s;
+  for (const auto& a : args) s += (s.empty() ? "" : " ") + a;
+  return s;
+}
+
+// Runs `omnitwin run <thesis_line> <extra…> --out DIR --no-video --no-report --no-progress`,
+// stdout and stderr into DIR.log; reads DIR/metrics.json.
+RunOutcome run_omnitwin(const std::string& name, const std::vector<std::string>& extra) {
+  const fs::path root = fs::temp_directory_path() / "omnitwin-bench-ethercat";
+  const fs::path out = root / name;
+  fs::remove_all(out);
+  fs::create_directories(root);
+  const fs::path log = root / (name + ".log");
+  std::vector<std::string> args{OMNITWIN_EXE, "run", kScenario};
+  args.insert(args.end(), extra.begin(), extra.end());
+  args.insert(args.end(), {"--no-video", "--no-report", "--no-progress", "--out", out.string()});
+  RunOutcome r;
+  r.command = quoted(args);
+  std::cerr << "  $ " << r.command << "\n";
+
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  const auto t0 = std::chrono::steady_clock::now();
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc != 0) {
+    r.log = std::string("posix_spawn failed: ") + std::strerror(rc);
+    return r;
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  std::ifstream lf(log);
+  std::stringstream ss;
+  ss << lf.rdbuf();
+  r.log = ss.str();
+  std::ifstream mf(out / "metrics.json");
+  if (mf) r.metrics = nlohmann::json::parse(mf, nullptr, false);
+  fs::remove_all(out);
+  return r;
+}
+
+// False (and the benchmark skipped with the log's tail) when the run produced no metrics.
+bool usable(benchmark::State& state, const RunOutcome& r) {
+  if ((r.exit_code == 0 || r.exit_code == 1) && r.metrics.is_object()) return true;
+  const std::string tail = r.log.size() > 600 ? r.log.substr(r.log.size() - 600) : r.log;
+  state.SkipWithError(("exit " + std::to_string(r.exit_code) + ": " + r.command + "\n" + tail).c_str());
+  return false;
+}
+
+double number(const nlohmann::json& j, const char* section, const char* key) {
+  if (!j.contains(section) || !j[section].is_object()) return -1;
+  const auto& s = j[section];
+  return s.contains(key) && s[key].is_number() ? s[key].get<double>() : -1;
+}
+
+std::string period_s(std::int64_t ms) { return ms == 10 ? "0.01" : ms == 1 ? "0.001" : std::to_string(ms / 1000.0); }
+
+void BM_EthercatLockstep(benchmark::State& state) {
+  const std::int64_t ms = state.range(0);
+  const bool udp = state.range(1) == 1;
+  std::vector<std::string> ecat{"--bus", "ethercat", "--set", "controller.period=" + period_s(ms)};
+  if (udp)
+    ecat.insert(ecat.end(), {"--set", "bus.transport=udp:127.0.0.1:" + std::to_string(47950 + (ms == 1 ? 1 : 0))});
+  else
+    ecat.insert(ecat.end(), {"--set", "bus.transport=veth"});
+  const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=" + period_s(ms)};
+  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0;
+  double wkc = 0, lost = 0, cycles = 0, passed = 1;
+  for (auto _ : state) {
+    const RunOutcome e = run_omnitwin("ecat", ecat);
+    if (!usable(state, e)) break;
+    const RunOutcome d = run_omnitwin("direct", direct);
+    if (!usable(state, d)) break;
+    sim += e.metrics.at("sim_time_s").get<double>();
+    wall += e.metrics.at("wall_time_s").get<double>();
+    process_wall += e.wall_s;
+    dsim += d.metrics.at("sim_time_s").get<double>();
+    dwall += d.metrics.at("wall_time_s").get<double>();
+    wkc += number(e.metrics, "master", "wkc_errors");
+    lost += number(e.metrics, "master", "lost_frames");
+    cycles += number(e.metrics, "master", "cycles");
+    passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
+    std::cerr << "    ethercat: rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code
+              << ", master " << (e.metrics.contains("master") ? e.metrics["master"].dump() : "{}") << "\n"
+              << "    direct:   rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
+  }
+  if (wall <= 0 || dwall <= 0) return;
+  state.counters["rtf"] = sim / wall;
+  state.counters["direct_rtf"] = dsim / dwall;
+  state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
+  state.counters["process_rtf"] = sim / process_wall;
+  state.counters["us_per_tick"] = 1e6 * wall / (sim / (static_cast<double>(ms) / 1000.0));
+  const auto runs = static_cast<double>(state.iterations());
+  state.counters["wkc_errors"] = wkc / runs;  // per run
+  state.counters["lost_frames"] = lost / runs;
+  state.counters["cycles"] = cycles / runs;
+  state.counters["passed"] = passed;
+}
+
+void realtime(benchmark::State& state, const char* bus) {
+  const std::vector<std::string> args{"--bus", bus, "--clock", "realtime", "--set",
+                                      "controller.period=" + period_s(state.range(0)), "--set", "duration=60"};
+  for (auto _ : state) {
+    const RunOutcome r = run_omnitwin(std::string("realtime-") + bus, args);
+    if (!usable(state, r)) break;
+    const auto& m = r.metrics;
+    state.counters["sim_s"] = m.value("sim_time_s", 0.0);
+    state.counters["wall_s"] = m.value("wall_time_s", 0.0);
+    for (const char* k : {"ticks", "overruns", "jitter_mean_us", "jitter_p99_us", "jitter_max_us"})
+      state.counters[k] = number(m, "realtime", k);
+    if (m.contains("realtime")) std::cerr << "    realtime: " << m["realtime"].dump() << "\n";
+    if (m.contains("master") && m["master"].is_object()) {
+      std::cerr << "    master:   " << m["master"].dump() << "\n";
+      for (const auto& [k, v] : m["master"].items())
+        if (v.is_number()) state.counters["master." + k] = v.get<double>();
+    }
+    if (m.contains("bus")) std::cerr << "    bus:      " << m["bus"].dump() << "\n";
+    state.counters["passed"] = r.exit_code == 0 ? 1 : 0;
+  }
+}
+
+void BM_EthercatRealtime(benchmark::State& state) { realtime(state, "ethercat"); }
+void BM_DirectRealtime(benchmark::State& state) { realtime(state, "direct"); }
+
+}  // namespace
+
+BENCHMARK(BM_EthercatLockstep)
+    ->ArgsProduct({{10, 1}, {0, 1}})
+    ->ArgNames({"period_ms", "udp"})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(3)
+    ->UseRealTime();
+BENCHMARK(BM_EthercatRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_DirectRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK_MAIN();
