@@ -169,9 +169,11 @@ int cmd_run(const RunArgs& a) {
                   << std::flush;
       };
     } else if (a.external_master) {
-      std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
-                               s.bus.can.transport, s.bus.can.bit_rate)
-                << std::flush;
+      o.on_bus_ready = [&s](const std::string& iface) {
+        std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
+                                 iface, s.bus.can.bit_rate)
+                  << std::flush;
+      };
     }
     std::unique_ptr<DdsRunObserver> dds;
     if (a.dds || s.outputs.dds.enabled) {

@@ -518,9 +518,15 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
   const std::string spec = "udp:239.74.163.2:47606";
   const fs::path cfg = dir_ / "master.yaml";
   std::ofstream(cfg) << "path:\n  segments:\n    - line: {dx: 0.2, duration: 2}\nstartup_timeout: 3\n";
-  Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--set", "duration=3",
+  Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--set", "duration=5",
               "--out", out.string(), "--no-progress"},
              work(), io());
+  // The master starts once the twin is up (on a loaded machine building the model takes a
+  // while), and the twin outlives the master's 3 s.
+  const auto ready = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "3"}, work(), io(), "m-");
   EXPECT_EQ(master.wait(20s), 0) << master.err();
