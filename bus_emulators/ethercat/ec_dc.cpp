@@ -135,11 +135,42 @@ bool DcClock::pop_sync0(SimTime t, SimTime& when) {
   if (!sync0_active_) return false;
   if (static_cast<std::uint64_t>(system(t)) < next_sync0_) return false;
   when = std::min(t, sim_time_of_system(static_cast<std::int64_t>(next_sync0_)));
+  arm_sync1(next_sync0_);
   if (cycle0_ == 0) {
     sync0_active_ = false;
   } else {
     next_sync0_ += cycle0_;
   }
+  return true;
+}
+
+void DcClock::configure_sync1(bool active, std::uint32_t cycle1) {
+  sync1_active_ = active;
+  cycle1_ = cycle1;
+  sync1_pending_ = false;
+  sync0_count_ = 0;
+  if (cycle0_ == 0 || cycle1 < cycle0_) {
+    sync1_every_ = 1;
+    sync1_shift_ = cycle1;
+  } else {
+    sync1_every_ = cycle1 / cycle0_;
+    sync1_shift_ = cycle1 % cycle0_;
+  }
+}
+
+void DcClock::arm_sync1(std::uint64_t sync0_time) {
+  if (sync1_active_ && sync0_count_ % sync1_every_ == 0) {
+    next_sync1_ = sync0_time + sync1_shift_;
+    sync1_pending_ = true;
+  }
+  ++sync0_count_;
+}
+
+bool DcClock::pop_sync1(SimTime t, SimTime& when) {
+  if (!sync1_active() || !sync1_pending_) return false;
+  if (static_cast<std::uint64_t>(system(t)) < next_sync1_) return false;
+  when = std::min(t, sim_time_of_system(static_cast<std::int64_t>(next_sync1_)));
+  sync1_pending_ = false;
   return true;
 }
 

@@ -20,6 +20,10 @@
 // 0x0990 (system time), then every cycle 0x09A0 ns (0 = a single pulse). Model choice: a start
 // time already in the past starts at the next cycle boundary after now (a real ESC would wait
 // for its 32-bit compare to wrap).
+// SYNC1 (activation bit 2, with SYNC0 on): its cycle 0x09A4 counts from the SYNC0 pulses. With
+// c1 < c0 (or 0) SYNC1 follows every SYNC0 pulse by c1; with c1 >= c0 it follows every n-th
+// SYNC0 pulse (n = c1 / c0, the first pulse included) by c1 mod c0. 0x0998 holds the next
+// SYNC1 time.
 // Minimum SYNC0 cycle: kMinSyncCycleNs = 10 µs. Model choice, a conservative value: no ESC
 // datasheet or ETG minimum was verified when this was written (the slave stack's
 // MIN_PD_CYCLE_TIME is device specific); a non-zero cycle below it is an invalid
@@ -81,6 +85,13 @@ class DcClock {
   // Drops the pulses due at or before t: the schedule moves on to the first one after t.
   void skip_sync0_to(SimTime t);
 
+  // SYNC1 (see the header comment); configure after configure_sync. pop_sync1 gives the next
+  // pulse due at or before t; next_sync1 its system time (0 when none is scheduled).
+  void configure_sync1(bool active, std::uint32_t cycle1);
+  bool sync1_active() const { return sync1_active_ && sync0_active_; }
+  bool pop_sync1(SimTime t, SimTime& when);
+  std::uint64_t next_sync1() const { return sync1_pending_ ? next_sync1_ : 0; }
+
  private:
   void reanchor(SimTime t);
 
@@ -100,6 +111,15 @@ class DcClock {
   bool sync0_invalid_ = false;
   std::uint64_t next_sync0_ = 0;
   std::uint32_t cycle0_ = 0;
+  // SYNC1: armed by each SYNC0 pulse whose count is a multiple of every_.
+  void arm_sync1(std::uint64_t sync0_time);
+  bool sync1_active_ = false;
+  bool sync1_pending_ = false;
+  std::uint32_t cycle1_ = 0;
+  std::uint64_t sync1_every_ = 1;    // SYNC0 pulses per SYNC1 pulse
+  std::uint64_t sync1_shift_ = 0;    // after the SYNC0 pulse [ns]
+  std::uint64_t sync0_count_ = 0;    // SYNC0 pulses since activation
+  std::uint64_t next_sync1_ = 0;     // system time
 };
 
 }  // namespace omnitwin::ethercat

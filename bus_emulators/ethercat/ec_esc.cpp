@@ -244,11 +244,14 @@ void Esc::after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_i
     dc_.reset_loop(t);
     put_u32(&mem_[reg::kDcSystemTimeDiff], 0);
   }
-  if (overlaps(a, n, reg::kDcActivation, 1) || overlaps(a, n, reg::kDcSync0Cycle, 4)) {
-    // Start time 0x0990 is taken when the activation (or cycle) is written.
+  if (overlaps(a, n, reg::kDcActivation, 1) || overlaps(a, n, reg::kDcSync0Cycle, 4) ||
+      overlaps(a, n, reg::kDcSync1Cycle, 4)) {
+    // Start time 0x0990 is taken when the activation (or a cycle) is written.
     dc_.configure_sync(mem_[reg::kDcActivation], get_u64(&mem_[reg::kDcStartTime]),
                        get_u32(&mem_[reg::kDcSync0Cycle]), t);
-    mem_[reg::kDcActivationStatus] = dc_.sync0_active() ? 0x01 : 0x00;
+    dc_.configure_sync1((mem_[reg::kDcActivation] & 0x04) != 0, get_u32(&mem_[reg::kDcSync1Cycle]));
+    mem_[reg::kDcActivationStatus] =
+        static_cast<std::uint8_t>((dc_.sync0_active() ? 0x01 : 0x00) | (dc_.sync1_active() ? 0x02 : 0x00));
     if (dc_.sync0_active()) put_u64(&mem_[reg::kDcStartTime], dc_.next_sync0());
   }
 }
@@ -343,6 +346,8 @@ void Esc::advance(SimTime t) noexcept {
       mem_[reg::kDcSync0Status] = 0x01;
       put_u64(&mem_[reg::kDcStartTime], dc_.next_sync0());
       if (app_ != nullptr) app_->on_sync0(when);
+      put_u64(&mem_[reg::kDcNextSync1], dc_.next_sync1());
+      deliver_sync1(t);
       if (++delivered == kMaxSync0PerAdvance) {
         const std::uint64_t before = dc_.next_sync0();
         dc_.skip_sync0_to(t);
@@ -353,14 +358,26 @@ void Esc::advance(SimTime t) noexcept {
         break;
       }
     }
+    deliver_sync1(t);  // a SYNC1 pulse shifted after the last SYNC0 pulse
   }
   now_ = t;
+}
+
+// The SYNC1 pulse armed by the last SYNC0 pulse, if it is due by t.
+void Esc::deliver_sync1(SimTime t) noexcept {
+  SimTime when = 0;
+  if (!dc_.pop_sync1(t, when)) return;
+  mem_[reg::kDcSync1Status] = 0x01;
+  if (app_ != nullptr) app_->on_sync1(when);
 }
 
 SimTime Esc::next_event_time() const noexcept {
   SimTime next = kNoEscEvent;
   if (dc_supported() && dc_.sync0_active()) {
     next = std::max(now_, dc_.sim_time_of_system(static_cast<std::int64_t>(dc_.next_sync0())));
+  }
+  if (dc_supported() && dc_.next_sync1() != 0) {
+    next = std::min(next, std::max(now_, dc_.sim_time_of_system(static_cast<std::int64_t>(dc_.next_sync1()))));
   }
   if (state_ == AlState::op && !wd_expired_) {
     const std::uint16_t wd_time = read16(reg::kWatchdogTimePd);

@@ -81,6 +81,7 @@ class EscApplication {  // the slave firmware behind the PDI (ethercat/device im
   // The master completed a write of the SM2 (outputs) buffer.
   virtual void on_outputs(std::span<const std::uint8_t> outputs, SimTime t) = 0;
   virtual void on_sync0(SimTime /*t*/) {}  // a SYNC0 pulse (DC active)
+  virtual void on_sync1(SimTime /*t*/) {}  // a SYNC1 pulse (SYNC1 active)
 };
 
 class Esc {
@@ -164,6 +165,7 @@ class Esc {
   void init_registers();
   int find_sm(bool mailbox, bool ecat_writes) const;
   void watchdog_check(SimTime t);
+  void deliver_sync1(SimTime t) noexcept;
 
   EscConfig cfg_;
   EscApplication* app_;

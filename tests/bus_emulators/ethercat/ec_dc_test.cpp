@@ -80,6 +80,34 @@ TEST(EcDc, DriftLoopConvergesAndStaysMonotonic) {
   }
 }
 
+// SYNC1 below the SYNC0 cycle follows every SYNC0 pulse by its cycle; at a multiple of it,
+// every n-th SYNC0 pulse plus the remainder.
+TEST(EcDc, Sync1FollowsSync0) {
+  DcClock c(0, 0, 0);
+  c.configure_sync(0x07, 1'000'000, 1'000'000, 0);
+  c.configure_sync1(true, 250'000);
+  EXPECT_TRUE(c.sync1_active());
+  std::vector<SimTime> s0, s1;
+  SimTime when = 0;
+  for (SimTime t = 0; t <= 3'500'000; t += 50'000) {
+    while (c.pop_sync0(t, when)) s0.push_back(when);
+    if (c.pop_sync1(t, when)) s1.push_back(when);
+  }
+  EXPECT_EQ(s0, (std::vector<SimTime>{1'000'000, 2'000'000, 3'000'000}));
+  EXPECT_EQ(s1, (std::vector<SimTime>{1'250'000, 2'250'000, 3'250'000}));
+  c.configure_sync(0x07, 1'000'000, 1'000'000, 0);
+  c.configure_sync1(true, 2'100'000);  // every 2nd SYNC0 pulse, 100 µs after it
+  s1.clear();
+  for (SimTime t = 0; t <= 5'500'000; t += 50'000) {
+    while (c.pop_sync0(t, when)) {
+    }
+    if (c.pop_sync1(t, when)) s1.push_back(when);
+  }
+  EXPECT_EQ(s1, (std::vector<SimTime>{1'100'000, 3'100'000, 5'100'000}));
+  c.configure_sync1(false, 250'000);
+  EXPECT_FALSE(c.sync1_active());
+}
+
 TEST(EcDc, Sync0Schedule) {
   DcClock c(0, 0, 0);
   c.configure_sync(0x03, 5'000'000, 1'000'000, 0);

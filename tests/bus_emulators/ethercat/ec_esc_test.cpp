@@ -62,6 +62,7 @@ class App : public EscApplication {
   std::vector<std::vector<std::uint8_t>> mailboxes;
   std::vector<std::vector<std::uint8_t>> outputs;
   int sync0 = 0;
+  std::vector<SimTime> sync1_at;
   AlStatusCode on_al_request(AlState from, AlState to, SimTime) override {
     requests.emplace_back(from, to);
     return answer;
@@ -69,6 +70,7 @@ class App : public EscApplication {
   void on_mailbox(std::span<const std::uint8_t> m, SimTime) override { mailboxes.emplace_back(m.begin(), m.end()); }
   void on_outputs(std::span<const std::uint8_t> o, SimTime) override { outputs.emplace_back(o.begin(), o.end()); }
   void on_sync0(SimTime) override { ++sync0; }
+  void on_sync1(SimTime t) override { sync1_at.push_back(t); }
 };
 
 std::vector<std::uint8_t> sm_bytes(std::uint16_t start, std::uint16_t len, std::uint8_t control, bool enable) {
@@ -554,6 +556,21 @@ TEST(EcEsc, Sync0PulsesPerAdvanceAreCapped) {
   EXPECT_EQ(e.next_event_time(), 1'000'010'000);
   e.advance(1'000'020'000);
   EXPECT_EQ(app.sync0, kMaxSync0PerAdvance + 2);
+}
+
+// SYNC1 through the registers: activation bit 2, cycle 0x09A4 after each SYNC0 pulse; status
+// bits in 0x0984 and 0x098F, the next SYNC1 time in 0x0998.
+TEST(EcEsc, Sync1PulsesThroughTheRegisters) {
+  App app;
+  Esc e(EscConfig{}, &app);
+  apwr(e, reg::kDcSync0Cycle, le32(1'000'000));
+  apwr(e, reg::kDcSync1Cycle, le32(300'000));
+  apwr(e, reg::kDcActivation, {0x07});
+  EXPECT_EQ(e.read8(reg::kDcActivationStatus), 0x03);
+  for (SimTime t = 100'000; t <= 2'400'000; t += 100'000) e.advance(t);
+  EXPECT_EQ(app.sync0, 3);  // 0, 1, 2 ms
+  EXPECT_EQ(app.sync1_at, (std::vector<SimTime>{300'000, 1'300'000, 2'300'000}));
+  EXPECT_EQ(e.read8(reg::kDcSync1Status), 0x01);
 }
 
 TEST(EcEsc, UnknownCommandsAreCountedAndLeftAlone) {
