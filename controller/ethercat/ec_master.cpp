@@ -30,34 +30,9 @@ constexpr int kSiiRetries = 20;
 std::uint16_t position_adp(int position) { return static_cast<std::uint16_t>(0 - position); }
 }  // namespace
 
-const char* to_string(AlState s) {
-  switch (s) {
-    case AlState::none: return "NONE";
-    case AlState::init: return "INIT";
-    case AlState::preop: return "PRE-OP";
-    case AlState::boot: return "BOOT";
-    case AlState::safeop: return "SAFE-OP";
-    case AlState::op: return "OP";
-  }
-  return "?";
-}
-
 const char* al_status_text(std::uint16_t code) {
-  switch (code) {
-    case 0x0000: return "no error";
-    case 0x0001: return "unspecified error";
-    case 0x0011: return "invalid requested state change";
-    case 0x0012: return "unknown requested state";
-    case 0x0013: return "bootstrap not supported";
-    case 0x0016: return "invalid mailbox configuration";
-    case 0x0017: return "invalid sync manager configuration";
-    case 0x001B: return "sync manager watchdog";
-    case 0x001D: return "invalid output configuration";
-    case 0x001E: return "invalid input configuration";
-    case 0x002C: return "fatal sync error";
-    case 0x0030: return "invalid DC SYNC configuration";
-  }
-  return "unknown AL status code";
+  const char* text = omnitwin::ethercat::to_string(static_cast<omnitwin::ethercat::AlStatusCode>(code));
+  return std::strcmp(text, "?") == 0 ? "unknown AL status code" : text;
 }
 
 const char* to_string(MasterPhase p) {

@@ -58,6 +58,7 @@
 #include <vector>
 
 #include "bus_emulators/ethercat/device/ec_esi.hpp"
+#include "bus_emulators/ethercat/ec_al.hpp"
 #include "bus_emulators/ethercat/ec_frame.hpp"
 #include "controller/ethercat/ec_sdo.hpp"
 #include "controller/ethercat/ec_sii_reader.hpp"
@@ -67,10 +68,11 @@ namespace omnitwin::controller::ethercat {
 using SimTime = omnitwin::ethercat::SimTime;
 using omnitwin::ethercat::DeviceDescription;
 
-// AL states as written to 0x0120 / read from 0x0130 (bits 3:0).
-enum class AlState : std::uint8_t { none = 0, init = 1, preop = 2, boot = 3, safeop = 4, op = 8 };
-const char* to_string(AlState s);
-const char* al_status_text(std::uint16_t code);  // ETG AL status codes, "unknown" otherwise
+// AL states as written to 0x0120 / read from 0x0130 (bits 3:0): the ESC's own type.
+using omnitwin::ethercat::AlState;
+// The text of an AL status code (0x0134) as read from the wire, "unknown AL status code" for a
+// code the ETG list does not have. Real-time safe.
+const char* al_status_text(std::uint16_t code);
 
 enum class MasterPhase : std::uint8_t { count, reset, address, sii, configure, dc, running, failed };
 const char* to_string(MasterPhase p);
@@ -124,7 +126,7 @@ struct SlaveStatus {
   bool pdo_from_coe = false;               // mapping read over CoE (else SII/ESI)
   std::uint32_t out_offset = 0, out_bytes = 0;  // byte offsets within the image
   std::uint32_t in_offset = 0, in_bytes = 0;
-  AlState al_state = AlState::none;        // last AL status read
+  AlState al_state = AlState::init;        // last AL status read (INIT until read)
   std::uint16_t al_code = 0;               // last AL status code read (0x0134)
   SlaveStep step = SlaveStep::sii_cmd;
   std::int64_t dc_delay_ns = 0;            // propagation delay from the reference clock

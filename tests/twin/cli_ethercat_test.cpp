@@ -134,8 +134,8 @@ TEST_F(CliEthercat, PpTestScriptReachesItsTarget) {
   ASSERT_TRUE(contains(twin.out(), "a master connects on " + iface)) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--bus", "ethercat", "--iface", iface, "--config",
-                source_path("tests/controller/ethercat/data/drives_only.yaml"), "--script",
-                source_path("tests/controller/ethercat/data/pp_test.fs")},
+                source_path("tests/data/ethercat/drives_only.yaml"), "--script",
+                source_path("tests/data/ethercat/pp_test.fs")},
                work(), io(), "master-");
   const int code = master.wait(60s);
   EXPECT_EQ(code, 0) << master.out() << master.err();

@@ -48,7 +48,7 @@ class EthercatNetworkTest : public ::testing::Test {
     net_ = std::make_unique<EthercatNetwork>(scenario_, sched_, std::move(h));
     net_->open_pcap((dir_ / "bus-ethercat.pcap").string());
     master_link_ = ethercat::open_transport("mem:" + name, ethercat::Role::master);
-    me::EcConfig cfg = me::load_ec_config(source_path("tests/controller/ethercat/data/drives_only.yaml"));
+    me::EcConfig cfg = me::load_ec_config(source_path("tests/data/ethercat/drives_only.yaml"));
     master_ = std::make_unique<me::EcMaster>(me::make_master_config(cfg), [this](std::span<const std::uint8_t> pdu) {
       if (!master_link_->send(pdu)) return false;
       ++sent_;

@@ -1,5 +1,5 @@
 \ Seed 004's PP-TEST on slave 1 of the EtherCAT master:
-\ omni-master --script tests/controller/ethercat/data/pp_test.fs --iface SPEC --config tests/controller/ethercat/data/drives_only.yaml
+\ omni-master --script tests/data/ethercat/pp_test.fs --iface SPEC --config tests/data/ethercat/drives_only.yaml
 : pp-test
     pp 1 1 op-mode!
     until-no-requests
