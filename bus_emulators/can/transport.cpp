@@ -4,6 +4,7 @@
 #include "bus_emulators/can/transport_mem.hpp"
 #include "bus_emulators/can/transport_socketcan.hpp"
 #include "bus_emulators/can/transport_udp.hpp"
+#include "bus_emulators/transport_spec.hpp"
 
 #include <arpa/inet.h>
 #include <net/if.h>
@@ -41,25 +42,9 @@ void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
   std::string_view port;
   if (rest.empty()) {
     host = kPythonCanGroupV6;  // python-can's default channel
-  } else if (rest.front() == '[') {
-    const auto close = rest.find(']');
-    if (close == std::string_view::npos) bad(spec, "missing ']' after the IPv6 group");
-    host = rest.substr(1, close - 1);
-    std::string_view after = rest.substr(close + 1);
-    if (!after.empty()) {
-      if (after.front() != ':') bad(spec, "expected ':PORT' after ']'");
-      port = after.substr(1);
-      if (port.empty()) bad(spec, "empty port");
-    }
-  } else {
-    const auto colon = rest.find(':');
-    if (colon != std::string_view::npos && rest.find(':', colon + 1) != std::string_view::npos)
-      bad(spec, "an IPv6 group must be written in brackets, e.g. udp:[ff15::1]:43113");
-    host = rest.substr(0, colon);
-    if (colon != std::string_view::npos) {
-      port = rest.substr(colon + 1);
-      if (port.empty()) bad(spec, "empty port");
-    }
+  } else if (const std::string why = bus_emulators::split_host_port(rest, host, port, "group", "udp:[ff15::1]:43113");
+             !why.empty()) {
+    bad(spec, why);
   }
   t.name = std::string(host);
   if (t.name.empty()) bad(spec, "empty multicast group");
@@ -74,9 +59,12 @@ void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
   } else {
     bad(spec, "'" + t.name + "' is not a numeric IPv4 or IPv6 multicast address");
   }
-  long v = kPythonCanUdpPort;
-  if (!port.empty() && !parse_int(port, 1, 65535, v)) bad(spec, "port must be 1..65535");
-  t.port = static_cast<std::uint16_t>(v);
+  t.port = kPythonCanUdpPort;
+  if (!port.empty()) {
+    const auto p = bus_emulators::parse_port(port);
+    if (!p) bad(spec, "port must be 1..65535");
+    t.port = *p;
+  }
 
   while (!opts.empty()) {
     const auto amp = opts.find('&');
@@ -111,9 +99,7 @@ TransportSpec parse_transport_spec(std::string_view spec) {
   TransportSpec t;
   if (kind == "socketcan") {
     t.kind = TransportSpec::Kind::socketcan;
-    if (rest.empty()) bad(spec, "missing interface name");
-    if (rest.size() >= IF_NAMESIZE) bad(spec, "interface name longer than 15 characters");
-    if (rest.find_first_of(":/ ?&") != std::string_view::npos) bad(spec, "bad interface name");
+    if (const std::string why = bus_emulators::interface_name_problem(rest); !why.empty()) bad(spec, why);
     t.name = std::string(rest);
   } else if (kind == "udp") {
     t.kind = TransportSpec::Kind::udp;

@@ -2,6 +2,7 @@
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
 
 #include "bus_emulators/ethercat/ec_frame.hpp"
+#include "bus_emulators/transport_spec.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport_mem.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport_raw.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport_udp.hpp"
@@ -11,7 +12,6 @@
 
 #include <cerrno>
 
-#include <charconv>
 
 namespace omnitwin::ethercat {
 
@@ -23,36 +23,18 @@ namespace {
 }
 
 void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
-  std::string_view host;
-  std::string_view port;
-  if (!rest.empty() && rest.front() == '[') {
-    const auto close = rest.find(']');
-    if (close == std::string_view::npos) bad(spec, "missing ']' after the IPv6 address");
-    host = rest.substr(1, close - 1);
-    const std::string_view after = rest.substr(close + 1);
-    if (!after.empty()) {
-      if (after.front() != ':') bad(spec, "expected ':PORT' after ']'");
-      port = after.substr(1);
-      if (port.empty()) bad(spec, "empty port");
-    }
-  } else {
-    const auto colon = rest.find(':');
-    if (colon != std::string_view::npos && rest.find(':', colon + 1) != std::string_view::npos)
-      bad(spec, "an IPv6 address must be written in brackets, e.g. udp:[::1]:34980");
-    host = rest.substr(0, colon);
-    if (colon != std::string_view::npos) {
-      port = rest.substr(colon + 1);
-      if (port.empty()) bad(spec, "empty port");
-    }
-  }
+  std::string_view host, port;
+  if (const std::string why = bus_emulators::split_host_port(rest, host, port, "address", "udp:[::1]:34980");
+      !why.empty())
+    bad(spec, why);
   if (host.empty()) bad(spec, "empty host");
   t.name = std::string(host);
-  long v = kUdpPort;
+  t.port = kUdpPort;
   if (!port.empty()) {
-    const auto [p, ec] = std::from_chars(port.data(), port.data() + port.size(), v);
-    if (ec != std::errc{} || p != port.data() + port.size() || v < 1 || v > 65535) bad(spec, "port must be 1..65535");
+    const auto p = bus_emulators::parse_port(port);
+    if (!p) bad(spec, "port must be 1..65535");
+    t.port = *p;
   }
-  t.port = static_cast<std::uint16_t>(v);
 }
 
 }  // namespace
@@ -83,9 +65,7 @@ TransportSpec parse_transport_spec(std::string_view spec) {
   TransportSpec t;
   if (kind == "raw") {
     t.kind = TransportSpec::Kind::raw;
-    if (rest.empty()) bad(spec, "missing interface name");
-    if (rest.size() >= IF_NAMESIZE) bad(spec, "interface name longer than 15 characters");
-    if (rest.find_first_of(":/ ?&") != std::string_view::npos) bad(spec, "bad interface name");
+    if (const std::string why = bus_emulators::interface_name_problem(rest); !why.empty()) bad(spec, why);
     t.name = std::string(rest);
   } else if (kind == "udp") {
     t.kind = TransportSpec::Kind::udp;
