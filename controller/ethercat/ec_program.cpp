@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <poll.h>
 #include <sched.h>
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 #include <sys/mman.h>
 #include <sys/signalfd.h>
@@ -344,16 +345,6 @@ int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::in
   return bn.error ? kExitRuntime : kExitOk;
 }
 
-std::string json_escape(const std::string& in) {
-  std::string out;
-  for (const char c : in) {
-    if (c == '"' || c == '\\') out += '\\', out += c;
-    else if (static_cast<unsigned char>(c) < 0x20) out += fmt::format("\\u{:04x}", static_cast<int>(c));
-    else out += c;
-  }
-  return out;
-}
-
 }  // namespace
 
 int run_ethercat_program(const ProgramOptions& o) {
@@ -449,14 +440,15 @@ int run_ethercat_program(const ProgramOptions& o) {
   if (!o.stats.empty()) {
     const std::string tmp = o.stats + ".tmp";
     std::ofstream f(tmp);
-    f << fmt::format(
-        "{{\"ecat_phase\": \"{}\", \"slaves\": {}, \"operational\": {}, \"frames_tx\": {}, \"frames_rx\": {}, "
-        "\"cycles\": {}, \"wkc_errors\": {}, \"expected_wkc\": {}, \"last_wkc\": {}, \"lost_frames\": {}, "
-        "\"stray_frames\": {}, \"timeouts\": {}, \"sdo_done\": {}, \"sdo_failed\": {}, \"slaves_lost\": {}, "
-        "\"recoveries\": {}, \"master_error\": \"{}\"}}\n",
-        to_string(m.phase()), m.slave_count(), m.operational() ? "true" : "false", runner.frames_tx, runner.frames_rx,
-        s.cycles, s.wkc_errors, s.expected_wkc, s.last_wkc, s.lost_frames, s.stray_frames, s.timeouts, s.sdo_done,
-        s.sdo_failed, s.slaves_lost, s.recoveries, json_escape(m.error()));
+    const nlohmann::json j = {{"ecat_phase", to_string(m.phase())}, {"slaves", m.slave_count()},
+                              {"operational", m.operational()}, {"frames_tx", runner.frames_tx},
+                              {"frames_rx", runner.frames_rx}, {"cycles", s.cycles}, {"wkc_errors", s.wkc_errors},
+                              {"expected_wkc", s.expected_wkc}, {"last_wkc", s.last_wkc},
+                              {"lost_frames", s.lost_frames}, {"stray_frames", s.stray_frames},
+                              {"timeouts", s.timeouts}, {"sdo_done", s.sdo_done}, {"sdo_failed", s.sdo_failed},
+                              {"slaves_lost", s.slaves_lost}, {"recoveries", s.recoveries},
+                              {"master_error", m.error()}};
+    f << j.dump() << "\n";
     f.close();
     if (!f || std::rename(tmp.c_str(), o.stats.c_str()) != 0) spdlog::error("--stats {}: cannot write", o.stats);
   }
