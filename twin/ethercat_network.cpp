@@ -331,8 +331,7 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       what = fmt::format("power_loss slave {}", k + 1);
       break;
     case FaultSpec::Kind::link_break:
-      link_break_ = begin ? f.wheel : -1;
-      chain_.set_link_break(link_break_);
+      chain_.set_link_break(begin ? f.wheel : -1);
       what = f.wheel == 0 ? std::string("link_break between master and slave 1")
                           : fmt::format("link_break after slave {}", f.wheel);
       break;
@@ -345,13 +344,18 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
 
 // ---- observation -----------------------------------------------------------------------
 
+// Frames that were not EtherCAT or did not parse: dropped by the transport or the line.
+std::uint64_t EthercatNetwork::malformed() const {
+  return transport_->stats().dropped_malformed + chain_.stats().malformed;
+}
+
 BusSample EthercatNetwork::bus_sample() const {
   BusSample b;
   b.has_frames = true;
   b.frames_tx = to_transport_;
   b.frames_rx = from_transport_;
   b.dropouts = lost_frames_ + not_returned_;
-  b.errors = malformed_ + send_failures_ + overflow_ + chain_.stats().malformed;
+  b.errors = malformed() + send_failures_ + overflow_;
   return b;
 }
 
@@ -389,7 +393,7 @@ nlohmann::json EthercatNetwork::bus_metrics(SimTime now) const {
           {"errors", b.errors},
           {"lost_frames", lost_frames_},
           {"not_returned", not_returned_},
-          {"malformed", malformed_ + chain_.stats().malformed},
+          {"malformed", malformed()},
           {"send_failures", send_failures_},
           {"overflow", overflow_},
           {"in_flight", pending_count_},  // taken from the transport, not yet on the segment at the end

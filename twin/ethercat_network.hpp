@@ -24,7 +24,6 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
-#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -109,6 +108,7 @@ class EthercatNetwork final : public BusNetwork {
   void drive_step(int axis0, SimTime t);
   void watch_states(SimTime t);
   bool lose_frame();
+  std::uint64_t malformed() const;
 
   const Scenario& s_;
   const EthercatSpec& spec_;
@@ -124,7 +124,6 @@ class EthercatNetwork final : public BusNetwork {
   std::array<Scheduler::TimerId, 4> timers_{};
   std::array<bool, 4> powered_{true, true, true, true};
   std::array<double, 4> drift_{};
-  std::array<std::int64_t, 4> last_cycle_ns_{};
   std::array<std::uint8_t, 4> last_al_{};   // for state-change events
   std::array<std::uint8_t, 4> last_fsa_{};
   std::vector<Pending> pending_;           // ring of frames in flight towards the chain
@@ -137,9 +136,8 @@ class EthercatNetwork final : public BusNetwork {
   double loss_rate_ = 0;
   int loss_burst_ = 1, loss_left_ = 0;
   double delay_ns_ = 0;
-  int link_break_ = -1;
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
-  std::uint64_t lost_frames_ = 0, not_returned_ = 0, malformed_ = 0, send_failures_ = 0, overflow_ = 0;
+  std::uint64_t lost_frames_ = 0, not_returned_ = 0, send_failures_ = 0, overflow_ = 0;
   std::int64_t busy_ns_ = 0;
   SimTime op_since_ns_ = -1;
 };
