@@ -224,4 +224,17 @@ class History {
   bool replayed_ = false;
 };
 
+// A failed invariant: says where, writes the history for replay, and traps (libFuzzer keeps
+// the input). Targets wrap it as CHECK(cond) with their own history.
+[[noreturn]] inline void check_failed(const History& h, const char* file, int line, const char* what) {
+  std::fprintf(stderr, "%s:%d: check failed: %s\n", file, line, what);
+  h.dump();
+  __builtin_trap();
+}
+
+#define EC_FUZZ_CHECK(history, cond)                                                    \
+  do {                                                                                  \
+    if (!(cond)) ::omnitwin::ethercat::fuzz::check_failed(history, __FILE__, __LINE__, #cond); \
+  } while (0)
+
 }  // namespace omnitwin::ethercat::fuzz

@@ -52,16 +52,7 @@ fuzz::History& history() {
   return h;
 }
 
-[[noreturn]] void check_failed(int line, const char* what) {
-  std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, line, what);
-  history().dump();
-  __builtin_trap();
-}
-
-#define CHECK(cond) \
-  do {              \
-    if (!(cond)) check_failed(__LINE__, #cond); \
-  } while (0)
+#define CHECK(cond) EC_FUZZ_CHECK(history(), cond)
 
 struct Rig {
   DeviceDescription desc = fuzz::shipped_device("omnitwin_drive.xml");
