@@ -27,10 +27,11 @@
 //                     set to 0 (the drives disable), as a real drive does when outputs stop.
 // The firmware cycle (cycle(t), or on_sync0(t) while DC SYNC0 is active): pending CoE replies
 // posted to SM1; in OP the last complete buffer of the ESI's Outputs SM (SM2) is unpacked into
-// the OD entries it maps (the axes' Objects); the cycle hook runs (the twin steps the drives
-// there, or separately between cycles when no hook is set); in SAFE-OP/OP the TxPDO entries are
-// packed and written to the ESI's Inputs SM (SM3) — by index, never "the first buffered SM", so
-// a master configuring another SM as buffered does not divert the process data.
+// the OD entries it maps (the axes' Objects); the cycle hook runs, if one is set (a caller may
+// step the drives there; the twin steps them on their own timer instead); in SAFE-OP/OP the
+// TxPDO entries are packed and written to the ESI's Inputs SM (SM3) — by index, never "the
+// first buffered SM", so a master configuring another SM as buffered does not divert the
+// process data.
 // Set-up allocates and throws EsiError on an unusable description; the cyclic path does not
 // allocate and never throws.
 #pragma once
