@@ -147,7 +147,7 @@ void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, cons
     return;
   }
   omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
-  const std::uint64_t before = sl.stats().samples;
+  const std::uint64_t before = sl.stats().steps();
   const omni::TimerAction a = sl.on_frame(f, timing.end_ns);
   after_slave_input(i, before, a);
 }
@@ -190,19 +190,19 @@ void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {
 void OmniCanNetwork::on_slave_timer(int i, SimTime t) {
   bus_.advance(t);  // frames that complete at or before the interrupt are in its FIFO
   omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
-  const std::uint64_t before = sl.stats().samples;
+  const std::uint64_t before = sl.stats().steps();
   const omni::TimerAction a = sl.on_timer(t, hooks_.wheel_angle(i));
   after_slave_input(i, before, a);
 }
 
-void OmniCanNetwork::after_slave_input(int i, std::uint64_t samples_before, const omni::TimerAction& a) {
+void OmniCanNetwork::after_slave_input(int i, std::uint64_t steps_before, const omni::TimerAction& a) {
   const Scheduler::TimerId id = timers_[static_cast<std::size_t>(i)];
   if (a.request == omni::TimerRequest::stop) sched_.cancel(id);
   if (a.request == omni::TimerRequest::restart) sched_.restart(id, a.first_ns);
   const omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
   // The driver follows the chain's output (the zero code after a stop).
   hooks_.set_setpoint(i, sl.setpoint());
-  if (sl.stats().samples > samples_before) {
+  if (sl.stats().steps() > steps_before) {  // a skipped interrupt (no new command) logs nothing
     const physics::WheelDriveSample& w = sl.drive_chain().last();
     hooks_.axis_sample(i, w.command - w.delta_counts);
   }

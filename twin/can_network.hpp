@@ -121,7 +121,7 @@ class OmniCanNetwork final : public BusNetwork {
   void on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing);
   void on_bus_event(const can::BusEvent& e);
   void on_slave_timer(int axis0, SimTime t);
-  void after_slave_input(int axis0, std::uint64_t samples_before, const omni::TimerAction& a);
+  void after_slave_input(int axis0, std::uint64_t steps_before, const omni::TimerAction& a);
   void submit_from_far(const can::Frame& f, SimTime t);
   void make_slave(int axis0);
   bool lose(int target);  // frame_loss roll for a receiver (0..3 slaves, kMaster)

@@ -8,10 +8,9 @@
 // (bus_emulators/omni/OmniSlave handles only the 5-byte 0x102 command and runs a drive
 // chain). TestSlave below keeps OmniSlave's dropout rule IDENTICAL: a sample is a dropout when
 // the number of commands received since start differs from the sample's number; an
-// event-driven (sync) sample realigns the sample number to the command count. It differs in
-// one timing detail the synchronisation needs: the command is counted when its receive
-// interrupt starts (frame end), and the timer count restarts when that interrupt ends,
-// T_post = 88.8 µs later (table 2-1); OmniSlave does both at the same instant.
+// event-driven (sync) sample realigns the sample number to the command count; its timing is
+// OmniSlave's too: the command is counted when its receive interrupt starts (frame end), and
+// the timer count restarts when that interrupt ends, T_post = 88.8 µs later (table 2-1).
 //
 // Model choices (docs/experiments.md explains them with numbers):
 //  - drift sign: the slave's samples come 0.362 % of a period EARLIER each period (slave

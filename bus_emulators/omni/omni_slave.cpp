@@ -230,7 +230,7 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       run_samples_ = 0;
       timer_since_restart_ = 0;
       state_ = SlaveState::running;
-      return {TimerRequest::restart, now_ns + actual_period_ns_};
+      return {TimerRequest::restart, now_ns + config_.t_post_ns + actual_period_ns_};
 
     case SlaveTransition::stop:
       if (state_ == SlaveState::stopped) break;
@@ -262,7 +262,7 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       control_step(now_ns, shaft_angle_rad);
       timer_since_restart_ = 0;
       state_ = SlaveState::running;
-      return {TimerRequest::restart, now_ns + actual_period_ns_};
+      return {TimerRequest::restart, now_ns + config_.t_post_ns + actual_period_ns_};
   }
   ++stats_.illegal_transitions;
   return {};
@@ -276,8 +276,11 @@ void OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
     }
     ++stats_.dropouts;
   }
-  if (!command_new_) ++stats_.stale_samples;
   ++stats_.samples;
+  if (!command_new_) {  // fig. 4-16: no new command, no velocity loop and no feedback
+    ++stats_.stale_samples;
+    return;
+  }
   command_new_ = false;
 
   chain_.sample(shaft_angle_rad, static_cast<double>(command_));

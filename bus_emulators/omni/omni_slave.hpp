@@ -5,9 +5,13 @@
 // receive model (acceptance filter, 64-byte FIFO, INT line → the receive interrupt), the
 // timer interrupt on the node's own drifting oscillator runs the velocity loop of the wheel
 // drive chain (counter + PI + DA + driver, physics/drive_chain.hpp) and sends the speed
-// feedback, and the optional synchronisation of 3-2-2 switches every N timer interrupts to
-// event-driven reception (timer off, next command's receive interrupt runs the step and
-// restarts the timer count from zero). Frames are decoded/encoded only through the Omni codec.
+// feedback when a new command has arrived since the last step (fig. 4-16; an interrupt that
+// finds none skips the loop: the DA holds its output, no feedback goes out, and the next step's
+// counter reading spans both periods), and the optional synchronisation of 3-2-2 switches every
+// N timer interrupts to event-driven reception (timer off, next command's receive interrupt
+// runs the step and restarts the timer count from zero when it ends, T_post later — the timing
+// the can-dropout experiment's TestSlave uses). Frames are decoded/encoded only through the
+// Omni codec.
 //
 // Protocol core: no sockets, no wall clock, no globals. Time comes in as integer ns; frames
 // go out through a callback with their send time (now + T_post); the timer is owned by the
@@ -88,9 +92,10 @@ struct TimerAction {
 //  stopped       — after construction and after NMT stop. Answers detection requests; accepts
 //                  parameter set-up; ignores speed commands; the timer is off (a timer
 //                  interrupt is answered with stop); sends no feedback; setpoint = zero code.
-//  running       — after NMT start. Timer-driven: each timer interrupt runs one control step
-//                  with the command held and sends the feedback; commands are stored for the
-//                  next interrupt; parameter frames are refused (counted); detection answered.
+//  running       — after NMT start. Timer-driven: each timer interrupt that finds a new
+//                  command runs one control step with it and sends the feedback (one that
+//                  finds none skips the step); commands are stored for the next interrupt;
+//                  parameter frames are refused (counted); detection answered.
 //  awaiting_sync — sync enabled, after the sync_interval-th timer interrupt: the timer is off;
 //                  the next speed command runs the control step in the receive interrupt and
 //                  restarts the timer (→ running). Detection answered, parameters refused.
@@ -101,12 +106,14 @@ const char* to_string(SlaveState s);
 
 // The named transitions of the state machine (see SlaveState). One flat switch executes them.
 enum class SlaveTransition : std::uint8_t {
-  start,         // stopped → running: chain reset, run indices cleared, timer restart at now + period
+  start,         // stopped → running: chain reset, run indices cleared, timer restart when the
+                 // receive interrupt ends: now + T_post + period
   stop,          // running | awaiting_sync → stopped: timer stop, chain reset (zero setpoint)
-  timer_sample,  // running → running: control step + feedback in the timer interrupt
-  enter_sync,    // running → awaiting_sync: control step + feedback, then timer stop
+  timer_sample,  // running → running: control step + feedback in the timer interrupt (skipped
+                 // without a new command)
+  enter_sync,    // running → awaiting_sync: as timer_sample, then timer stop
   event_sample,  // awaiting_sync → running: control step + feedback in the receive interrupt,
-                 // timer restart at now + period (resync)
+                 // timer restart when it ends: now + T_post + period (resync)
 };
 const char* to_string(SlaveTransition t);
 
@@ -139,7 +146,8 @@ struct OmniSlaveStats {
   // Dropout (2-2-1): the command held at a sample does not belong to that sample, i.e. the
   // number of commands received in this run differs from the sample's number in this run.
   std::uint64_t dropouts = 0;
-  // Samples that ran without a new command since the previous sample (held command reused).
+  // Timer interrupts that found no new command since the previous step: the velocity loop and
+  // the feedback were skipped (fig. 4-16). They still count as samples for the dropout rule.
   std::uint64_t stale_samples = 0;
   // 0-based index (in `samples`) of the first dropout, i.e. the number of samples run before
   // it; -1 while there has been none. With pure clock drift every later sample is a dropout
@@ -154,6 +162,8 @@ struct OmniSlaveStats {
   std::uint64_t feedback_sent = 0;
   std::uint64_t detection_answers = 0;
 
+  // Control steps that ran (velocity loop + feedback) [-].
+  std::uint64_t steps() const { return samples - stale_samples; }
   // eq. 2-3 as the thesis writes it: N_drift = N − N_dropout [samples].
   std::int64_t n_drift_eq23() const {
     return static_cast<std::int64_t>(samples) - static_cast<std::int64_t>(dropouts);
@@ -190,11 +200,11 @@ class OmniSlave {
   TimerAction on_frame(const can::Frame& frame, std::int64_t now_ns);
 
   // The timer interrupt at now_ns [ns] with the wheel shaft angle [rad] at that instant.
-  // running: one control step (timer_sample, or enter_sync on every sync_interval-th
-  // interrupt since the last (re)start when sync is on → stop). The step uses the command
-  // held: the new one if one arrived since the last step, else the last one again (stale);
-  // either way it is a dropout when the command count of the run differs from the sample's
-  // number in the run. Sends the speed feedback (counts in this sample) at now + T_post.
+  // running: one sample (timer_sample, or enter_sync on every sync_interval-th interrupt
+  // since the last (re)start when sync is on → stop). It is a dropout when the command count
+  // of the run differs from the sample's number in the run. With a new command since the last
+  // step it runs the control step and sends the speed feedback (counts since the last step) at
+  // now + T_post; without one it skips both (stale_samples), the DA holding its output.
   // stopped / awaiting_sync: no step, returns stop. Real-time safe.
   TimerAction on_timer(std::int64_t now_ns, double shaft_angle_rad);
 

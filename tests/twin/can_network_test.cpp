@@ -197,10 +197,11 @@ class Rig {
 };
 
 // The instants of slave timer interrupts after an NMT start completed at e_ns, for drift d:
-// restart at e + round(P·(1+d)), then every P·(1+d) computed from the firing number.
+// restart when the receive interrupt ends, at e + T_post + round(P·(1+d)), then every
+// P·(1+d) computed from the firing number.
 SimTime sample_time(SimTime e_ns, double d, int k /* 1-based */) {
   const double p = static_cast<double>(kPeriod) * (1.0 + d);
-  return e_ns + std::llround(p) + std::llround(static_cast<double>(k - 1) * p);
+  return e_ns + kTPost + std::llround(p) + std::llround(static_cast<double>(k - 1) * p);
 }
 
 omni::SpeedFeedback feedback_of(const can::Frame& f) {
@@ -327,12 +328,13 @@ TEST(OmniCanNetwork, NmtStartRunsEachSlaveOnItsOwnPeriodWithFeedbackFromTheCount
 TEST(OmniCanNetwork, DriftStretchesTheSamplePeriodOfThatAxisOnly) {
   Rig r(can_scenario(unique_bus(), {0.0, 0.01, 0.0, 0.0}));
   r.tick(0, {nmt_start_all()});
-  for (SimTime t = kPeriod; t < 100 * kMs; t += kPeriod) r.tick(t);
+  // A command every tick: each interrupt finds a new one and runs its step (fig. 4-16).
+  for (SimTime t = kPeriod; t < 100 * kMs; t += kPeriod) r.tick(t, {speed_command({0, 0, 0, 0})});
   ASSERT_GE(r.samples[0].size(), 9u);
   ASSERT_GE(r.samples[1].size(), 9u);
   const SimTime e = r.net->master_start_ns();
   for (std::size_t k = 0; k < 9; ++k) {
-    EXPECT_EQ(r.samples[0][k].t, e + static_cast<SimTime>(k + 1) * kPeriod);
+    EXPECT_EQ(r.samples[0][k].t, e + kTPost + static_cast<SimTime>(k + 1) * kPeriod);
     EXPECT_EQ(r.samples[2][k].t, r.samples[0][k].t);
     // 10 ms · 1.01 = 10.1 ms: the drifting axis falls 100 µs further behind each period.
     EXPECT_EQ(r.samples[1][k].t - r.samples[0][k].t, static_cast<SimTime>(k + 1) * 100'000) << k;
@@ -396,9 +398,8 @@ TEST(OmniCanNetwork, PowerLossTakesTheNodeOffAndItReturnsStopped) {
     const nlohmann::json sm = r.net->slave_metrics();
     EXPECT_EQ(sm[1]["state"], "off");
     // The samples and dropouts run before the outage are counted once, in the slave's
-    // figures and in the bus totals.
+    // figures and in the bus totals (no dropout here: each sample follows its command).
     EXPECT_EQ(sm[1]["samples"].get<std::uint64_t>(), samples_before);
-    EXPECT_GT(dropouts_before, 0u);
     EXPECT_EQ(sm[1]["dropouts"].get<std::uint64_t>(), dropouts_before);
     std::uint64_t total = 0;
     for (const auto& v : r.samples) total += v.size();
@@ -472,8 +473,10 @@ TEST(OmniCanNetwork, FrameLossToASlaveStarvesOnlyThatSlave) {
   EXPECT_EQ(snap[1].lost - snap[0].lost, snap[1].node3_rx - snap[0].node3_rx);
   // The others kept receiving (two commands and the feedback of the others at least).
   for (std::size_t i : {0u, 1u, 3u}) EXPECT_GE(snap[1].received[i] - snap[0].received[i], 2u) << i;
-  // Axis 3 itself still ran on its timer and sent its feedback.
-  EXPECT_EQ(r.heard_id(0x502, 15 * kMs, 35 * kMs).size(), 2u);
+  // Axis 3's timer still fired, but without a new command it runs no step and sends no
+  // feedback (fig. 4-16).
+  EXPECT_TRUE(r.heard_id(0x502, 15 * kMs, 35 * kMs).empty());
+  EXPECT_EQ(r.net->slave(2).stats().stale_samples, 2u);
   EXPECT_EQ(r.net->slave(2).stats().commands + 2, r.net->slave(0).stats().commands);
   // After the end it hears again.
   EXPECT_GT(r.net->slave(2).stats().frames_received, snap[1].received[2]);
@@ -616,9 +619,9 @@ TEST(OmniCanNetwork, DriftFaultChangesThePeriodFromItsStartAndBack) {
   f.drift = 0.01;
   r.schedule_fault(f);
   r.tick(0, {nmt_start_all()});
-  for (SimTime t = 10 * kMs; t < 90 * kMs; t += kPeriod) r.tick(t);
-  const SimTime e = r.net->master_start_ns();
-  // Due firings keep their time (30.05 ms at the begin, 60.35 ms at the end); the periods
+  for (SimTime t = 10 * kMs; t < 90 * kMs; t += kPeriod) r.tick(t, {speed_command({0, 0, 0, 0})});
+  const SimTime e = r.net->master_start_ns() + kTPost;  // the timer starts when the interrupt ends
+  // Due firings keep their time (30.16 ms at the begin, 60.46 ms at the end); the periods
   // after each edge run on the new oscillator.
   const std::vector<SimTime> want{e + 10 * kMs,          e + 20 * kMs,          e + 30 * kMs,
                                   e + 40 * kMs + 100'000, e + 50 * kMs + 200'000, e + 60 * kMs + 300'000,
@@ -719,7 +722,9 @@ TEST(OmniCanNetwork, BadFramesFromTheTransportAreCountedNeverActedOn) {
 // 6. Metrics JSON
 
 TEST(OmniCanNetwork, MetricsJsonHasTheDocumentedKeysWithConsistentValues) {
-  Rig r(can_scenario(unique_bus(), {0.0, 3.62e-3, 0.0, 0.01}), {1000, 1000, 1000, 1000});
+  // Axis 4's oscillator runs 5 % fast: its interrupts overtake the commands (dropouts, and
+  // interrupts that find no new command and so run no step).
+  Rig r(can_scenario(unique_bus(), {0.0, 3.62e-3, 0.0, -0.05}), {1000, 1000, 1000, 1000});
   r.tick(0, {nmt_start_all(), detection_request()});
   for (SimTime t = 10 * kMs; t < 100 * kMs; t += kPeriod) r.tick(t, {speed_command({10, 10, 10, 10})});
   const SimTime now = r.sched.now();
@@ -760,14 +765,15 @@ TEST(OmniCanNetwork, MetricsJsonHasTheDocumentedKeysWithConsistentValues) {
       EXPECT_TRUE(j.contains(key)) << key;
     EXPECT_EQ(j["node"].get<int>(), omni::slave_of_axis(i + 1));
     EXPECT_EQ(j["state"], "running");
-    EXPECT_EQ(j["samples"].get<std::uint64_t>(), r.samples[static_cast<std::size_t>(i)].size());
+    EXPECT_EQ(st.steps(), r.samples[static_cast<std::size_t>(i)].size());  // one axis sample per step
     EXPECT_EQ(j["samples"].get<std::uint64_t>(), st.samples);
+    EXPECT_EQ(j["stale_samples"].get<std::uint64_t>(), st.stale_samples);
     EXPECT_EQ(j["dropouts"].get<std::uint64_t>(), st.dropouts);
     EXPECT_DOUBLE_EQ(j["dropout_percent"].get<double>(), st.dropout_percent());
     EXPECT_EQ(j["first_dropout_sample"].get<std::int64_t>(), st.first_dropout_sample);
     EXPECT_EQ(j["commands"].get<std::uint64_t>(), 9u);
     EXPECT_EQ(j["frames_sent"].get<std::uint64_t>(), st.frames_sent);
-    EXPECT_EQ(j["frames_sent"].get<std::uint64_t>(), st.samples + 1);  // feedback + one answer
+    EXPECT_EQ(j["frames_sent"].get<std::uint64_t>(), st.steps() + 1);  // feedback + one answer
     EXPECT_EQ(j["frames_received"].get<std::uint64_t>(), st.frames_received);
     EXPECT_EQ(j["can_state"], "error_active");
     EXPECT_EQ(j["tec"].get<int>(), 0);
@@ -775,7 +781,9 @@ TEST(OmniCanNetwork, MetricsJsonHasTheDocumentedKeysWithConsistentValues) {
     samples += st.samples;
   }
   EXPECT_EQ(bm["dropouts"].get<std::uint64_t>(), dropouts);
-  EXPECT_GT(dropouts, 0u);  // the drifting axes lose the phase of the commands
+  EXPECT_GT(dropouts, 0u);  // the fast axis loses the phase of the commands
+  EXPECT_GT(r.net->slave(3).stats().stale_samples, 0u);
+  EXPECT_EQ(r.net->slave(0).stats().stale_samples, 0u);
   EXPECT_DOUBLE_EQ(bm["dropout_rate"].get<double>(), static_cast<double>(dropouts) / static_cast<double>(samples));
 }
 
