@@ -240,6 +240,12 @@ double PlatformSim::wheel_angle(int wheel0) const {
   return valid_wheel(wheel0) ? data_->qpos[wheel_qpos_[wheel0]] : kNaN;
 }
 
+double PlatformSim::wheel_angle_at(int wheel0, double t) const {
+  const double gap = t - time();
+  if (std::abs(gap) > timestep() * (1.0 + 1e-9)) return wheel_angle(wheel0);  // not between two steps
+  return wheel_angle(wheel0) + wheel_speed(wheel0) * gap;
+}
+
 double PlatformSim::wheel_speed(int wheel0) const {
   return valid_wheel(wheel0) ? data_->qvel[wheel_dof_[wheel0]] : kNaN;
 }

@@ -82,6 +82,10 @@ class PlatformSim {
   double wheel_angle(int wheel0) const;
   double wheel_speed(int wheel0) const;
   double wheel_torque(int wheel0) const;
+  // Wheel hinge angle [rad] at time t [s] within one step of time(): the state's angle moved
+  // on linearly with the wheel's speed (so an event between two steps reads its own instant);
+  // farther away, the state's angle as it stands. NaN for a bad wheel index. Real-time safe.
+  double wheel_angle_at(int wheel0, double t) const;
 
   // Wheel-slip fault: that wheel's floor friction = nominal · scale (scale >= 0; 1 restores
   // the nominal values bit for bit). Scales the wheel's colliding geoms and any explicit

@@ -41,7 +41,10 @@ struct WheelRecord {
 
 // What a network may ask of the run: the wheels' shafts and amplifiers, statistics, the log.
 struct NetworkHooks {
-  std::function<double(int wheel)> wheel_angle;              // shaft angle of wheel 0..3 [rad]
+  // Shaft angle of wheel 0..3 [rad] at the scheduler's current time: between two physics
+  // steps it is interpolated with the wheel's speed, so that a device sampling at any instant
+  // (a drifting slave timer, a SYNC0 offset) reads its counter then, not at the last step.
+  std::function<double(int wheel)> wheel_angle;
   std::function<double(int wheel)> wheel_speed;              // shaft speed [rad/s]
   std::function<void(int wheel, double rad_s)> set_setpoint; // amplifier speed setpoint [rad/s]
   std::function<void(int wheel, double err)> axis_sample;    // velocity error, drive units

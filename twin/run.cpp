@@ -113,6 +113,7 @@ class PlatformRun {
   // The bus network (bus `can` or `ethercat`): built after the platform, whose wheels it
   // drives. Throws the transport's error for a transport that cannot be opened.
   void build_network();
+  double wheel_angle_now(int wheel) const;
   std::string master_iface() const { return net_ ? net_->master_iface() : std::string(); }
 
   RunResult execute();
@@ -200,9 +201,13 @@ class PlatformRun {
   double handshake_timeout_s_ = 10;
 };
 
+// Wheel shaft angle [rad] at the scheduler's time: MuJoCo's state is up to one physics step
+// ahead of a device event, so the event reads the angle of its own instant.
+double PlatformRun::wheel_angle_now(int wheel) const { return sim_.wheel_angle_at(wheel, ns_to_seconds(sched_.now())); }
+
 void PlatformRun::build_network() {
   BusNetwork::Hooks h;
-  h.wheel_angle = [this](int i) { return sim_.wheel_angle(i); };
+  h.wheel_angle = [this](int i) { return wheel_angle_now(i); };
   h.wheel_speed = [this](int i) { return sim_.wheel_speed(i); };
   h.set_setpoint = [this](int i, double w) {
     bus_setpoint_[static_cast<std::size_t>(i)] = w;

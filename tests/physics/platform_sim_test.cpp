@@ -152,6 +152,29 @@ TEST_F(PlatformSimTest, InstantaneousTwistMatchesInverseKinematicsOnAverage) {
   EXPECT_LT(std::abs(sum_err(2) / n), 1e-3);
 }
 
+TEST_F(PlatformSimTest, WheelAngleBetweenStepsFollowsTheWheelSpeed) {
+  // A device event between two steps reads the angle of its own instant.
+  PlatformSim s(params(ModelVariant::rollers));
+  for (int i = 0; i < 4; ++i) s.set_wheel_speed_setpoint(i, 5.0);
+  for (int k = 0; k < 300; ++k) s.step();
+  const double dt = s.timestep(), t = s.time();
+  for (int i = 0; i < 4; ++i) {
+    const double a = s.wheel_angle(i), w = s.wheel_speed(i);
+    ASSERT_GT(w, 1.0);
+    EXPECT_DOUBLE_EQ(s.wheel_angle_at(i, t), a);
+    EXPECT_DOUBLE_EQ(s.wheel_angle_at(i, t - 0.25 * dt), a - 0.25 * dt * w);
+    EXPECT_DOUBLE_EQ(s.wheel_angle_at(i, t - dt), a - dt * w);
+    // Beyond one step: no extrapolation.
+    EXPECT_DOUBLE_EQ(s.wheel_angle_at(i, t - 3 * dt), a);
+  }
+  // One step back is, to first order, the angle the previous step ended with.
+  const double before = s.wheel_angle(0);
+  const double t0 = s.time();
+  s.step();
+  EXPECT_NEAR(s.wheel_angle_at(0, t0), before, 1e-3 * dt * 5.0 + 1e-9);
+  EXPECT_TRUE(std::isnan(s.wheel_angle_at(4, t0)));
+}
+
 TEST_F(PlatformSimTest, IdenticalInputsGiveBitIdenticalState) {
   PlatformSim a(params(ModelVariant::rollers)), b(params(ModelVariant::rollers));
   for (int k = 0; k < 1500; ++k) {
