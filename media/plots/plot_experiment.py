@@ -149,22 +149,28 @@ def plot_dropout(rows, out_dir):
 
 
 def plot_platform(rows, out_dir):
-    """Tables 4-3 … 4-12: contour and axis IAE by bit rate, without/with sync, ours vs thesis."""
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    """Tables 4-3 … 4-12: contour and axis IAE by bit rate, without/with sync; one row of
+    panels per slave-clock reading of the twin, then the thesis's."""
+    clocks = list(dict.fromkeys(r["clock"] for r in rows))
     rates = sorted({r["rate_kbps"] for r in rows})
     x = range(len(rates))
+    panels = [(c, c) for c in clocks] + [(clocks[0], "thesis")]
+    fig, axes = plt.subplots(len(panels), 2, figsize=(10, 3.3 * len(panels)), squeeze=False)
     for col, (ours, thesis, unit) in enumerate((("iae_contour_cm", "thesis_iae_contour_cm", "cm"),
                                                 ("axis_iae_pulse", "thesis_axis_iae_pulse", "pulses"))):
-        for row, (key, who) in enumerate(((ours, "twin"), (thesis, "thesis"))):
+        for row, (clock, who) in enumerate(panels):
+            key = thesis if who == "thesis" else ours
             ax = axes[row][col]
             for off, sync in ((-0.2, 0), (0.2, 1)):
-                vals = [next(r[key] for r in rows if r["rate_kbps"] == k and r["sync"] == sync) for k in rates]
+                vals = [next(r[key] for r in rows if r["rate_kbps"] == k and r["sync"] == sync and r["clock"] == clock)
+                        for k in rates]
                 ax.bar([i + off for i in x], vals, width=0.4, label="sync" if sync else "no sync")
             ax.set_xticks(list(x))
             ax.set_xticklabels([f"{k} kbit/s" for k in rates])
             ax.set_ylabel(f"{'contour' if col == 0 else 'axis'} IAE [{unit}]")
-            ax.set_title(f"{who}: {'platform contour' if col == 0 else 'mean axis velocity'} IAE")
-            ax.legend()
+            title = "thesis" if who == "thesis" else f"twin, {clock} slave clocks"
+            ax.set_title(f"{title}: {'platform contour' if col == 0 else 'mean axis velocity'} IAE", fontsize=9)
+            ax.legend(fontsize=7)
             ax.grid(True, axis="y", alpha=0.3)
     save(fig, out_dir, "thesis_platform_iae.png")
 
