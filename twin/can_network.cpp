@@ -257,6 +257,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::drift: {
       const double d = begin ? f.drift : s_.bus.can.drift[n];
       sched_.set_drift(timers_[n], d);
+      slaves_[n]->set_drift(d);  // so that an NMT start or a resync asks for the same period
       hooks_.log(t, "fault", fmt::format("drift of {} now {} ({})", who, d, edge));
       return;
     }
@@ -271,8 +272,11 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
         slaves_[n]->reset_statistics();  // carried over: count them once while it is off
         hooks_.set_setpoint(f.wheel, 0.0);
       } else {
-        // Power-on reset: a fresh node, stopped, counter from zero at the shaft's angle.
+        // Power-on reset: a fresh node, stopped, counter from zero at the shaft's angle, on the
+        // oscillator it had (a drift fault still running goes on).
+        const double drift = slaves_[n]->drift();
         make_slave(f.wheel);
+        slaves_[n]->set_drift(drift);
         bus_.reattach(bus_node(f.wheel), t);
         powered_[n] = true;
         hooks_.set_setpoint(f.wheel, slaves_[n]->setpoint());

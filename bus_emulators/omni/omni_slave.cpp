@@ -101,11 +101,19 @@ const OmniSlaveConfig& checked(const OmniSlaveConfig& c) {
 
 OmniSlave::OmniSlave(const OmniSlaveConfig& config, SendFn send, double shaft_angle)
     : config_(checked(config)),
+      drift_(config.drift),
       actual_period_ns_(std::llround(static_cast<double>(config.timer_period_ns) * (1.0 + config.drift))),
       send_(std::move(send)),
       sja_(config.filter),
       params_(config.params),
       chain_(params_, shaft_angle) {}
+
+bool OmniSlave::set_drift(double drift) {
+  if (!std::isfinite(drift) || drift <= -1.0) return false;
+  drift_ = drift;
+  actual_period_ns_ = std::llround(static_cast<double>(config_.timer_period_ns) * (1.0 + drift));
+  return true;
+}
 
 // ---- inputs --------------------------------------------------------------------------------
 

@@ -231,6 +231,12 @@ class OmniSlave {
 
   // The real timer period of this node, round(timer_period_ns·(1 + drift)) [ns].
   std::int64_t actual_period_ns() const { return actual_period_ns_; }
+  // The oscillator's drift [-] in force: config().drift until set_drift() changes it.
+  double drift() const { return drift_; }
+  // The oscillator drifts differently from now on (a drift fault): later timer restarts ask
+  // for periods of timer_period_ns·(1 + drift). The caller's timer must change with it.
+  // Returns false and changes nothing unless drift is finite and > -1. Real-time safe.
+  bool set_drift(double drift);
 
  private:
   TimerAction transition(SlaveTransition t, std::int64_t now_ns, double shaft_angle_rad);
@@ -240,7 +246,8 @@ class OmniSlave {
   void rebuild_chain();
 
   OmniSlaveConfig config_;
-  std::int64_t actual_period_ns_;
+  double drift_;                  // oscillator drift in force [-]
+  std::int64_t actual_period_ns_;  // round(timer_period_ns·(1 + drift_)) [ns]
   SendFn send_;
   can::Sja1000 sja_;
   physics::PlatformParams params_;  // config's, with parameter frames applied

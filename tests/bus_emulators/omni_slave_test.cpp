@@ -112,6 +112,19 @@ TEST(OmniSlave, NmtStartStopChangesStateAndTimer) {
   EXPECT_TRUE(wire.sent.empty());
 }
 
+TEST(OmniSlave, SetDriftChangesThePeriodTheTimerIsAskedFor) {
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  OmniSlave slave(cfg);
+  EXPECT_DOUBLE_EQ(slave.drift(), cfg.drift);
+  EXPECT_TRUE(slave.set_drift(-0.01));
+  EXPECT_EQ(slave.actual_period_ns(), 9'900'000);
+  EXPECT_EQ(slave.on_frame(start_all(), 1'000),
+            (TimerAction{TimerRequest::restart, 1'000 + cfg.t_post_ns + 9'900'000}));
+  EXPECT_FALSE(slave.set_drift(-1.0));
+  EXPECT_FALSE(slave.set_drift(std::nan("")));
+  EXPECT_DOUBLE_EQ(slave.drift(), -0.01);
+}
+
 TEST(OmniSlave, StoppedNodeSendsNothingAndIgnoresCommands) {
   Wire wire;
   OmniSlave slave(make_slave_config(node::axis1, physics::PlatformParams{}), wire.fn());

@@ -636,6 +636,23 @@ TEST(OmniCanNetwork, DriftFaultChangesThePeriodFromItsStartAndBack) {
   EXPECT_TRUE(r.logged("fault", "drift of axis 1 (node 0x04) now 0 (ends)"));
 }
 
+TEST(OmniCanNetwork, NmtStartDuringADriftFaultRunsOnTheFaultsOscillatorFromTheFirstPeriod) {
+  Rig r(can_scenario(unique_bus()));
+  FaultSpec f = can_fault(FaultSpec::Kind::drift, 0, 0.0, 0.050);  // axis 1, 0 … 50 ms
+  f.drift = 0.01;
+  r.schedule_fault(f);
+  r.tick(0);  // the fault begins before the start
+  r.tick(10 * kMs, {nmt_start_all()});
+  for (SimTime t = 20 * kMs; t < 50 * kMs; t += kPeriod) r.tick(t, {speed_command({0, 0, 0, 0})});
+  const SimTime e = r.net->master_start_ns() + kTPost;
+  // Every period, the first included, is 10.1 ms.
+  ASSERT_GE(r.samples[0].size(), 2u);
+  EXPECT_EQ(r.samples[0][0].t, e + 10'100'000);
+  EXPECT_EQ(r.samples[0][1].t, e + 20'200'000);
+  EXPECT_EQ(r.net->slave(0).actual_period_ns(), 10'100'000);
+  EXPECT_EQ(r.samples[1][0].t, e + 10 * kMs);  // the others run on their own
+}
+
 // ---------------------------------------------------------------------------------------
 // 5. Bad input from the transport
 
