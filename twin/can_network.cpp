@@ -294,6 +294,8 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       return;
     case FaultSpec::Kind::wheel_slip:
       return;  // physics, not the bus
+    case FaultSpec::Kind::link_break:  // EtherCAT only; the loader refuses it on `can`
+      throw std::invalid_argument("CAN network: link_break is an EtherCAT fault");
   }
 }
 

@@ -361,6 +361,8 @@ TEST(OmniCanNetwork, AFaultNamingANodeItCannotActOnIsAProgrammerError) {
   EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::delay, FaultSpec::kAllNodes, 0.0, 0.0), true, 0),
                std::invalid_argument);
   EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::drift, 7, 0.0, 0.0), true, 0), std::invalid_argument);
+  // An EtherCAT-only fault (the scenario loader refuses it on a CAN bus).
+  EXPECT_THROW(r.net->apply_fault(can_fault(FaultSpec::Kind::link_break, 1, 0.0, 0.0), true, 0), std::invalid_argument);
 }
 
 TEST(OmniCanNetwork, PowerLossTakesTheNodeOffAndItReturnsStopped) {
