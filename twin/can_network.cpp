@@ -54,6 +54,12 @@ OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
   bus_.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
   bus_.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
   bus_.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
+  start_phase_ = s.bus.can.start_phase;
+  if (s.bus.can.start_phase_random) {
+    // Their own stream, so that the faults' random sequences do not depend on this setting.
+    std::mt19937_64 phase_rng(s.bus.can.seed ^ 0x5EED'0F'5A'1A'7E'00ULL);
+    for (double& p : start_phase_) p = std::uniform_real_distribution<double>(0.0, 1.0)(phase_rng);
+  }
   for (int i = 0; i < 4; ++i) {
     make_slave(i);
     const omni::OmniSlaveConfig& c = slaves_[static_cast<std::size_t>(i)]->config();
@@ -77,6 +83,7 @@ void OmniCanNetwork::make_slave(int i) {
   c.sync_enabled = s_.bus.can.sync;
   c.sync_interval = s_.bus.can.sync_interval;
   c.t_post_ns = std::llround(s_.bus.can.t_post_us * 1e3);
+  c.start_phase_ns = std::llround(start_phase_[static_cast<std::size_t>(i)] * static_cast<double>(c.timer_period_ns));
   auto send = [this, i](const can::Frame& f, std::int64_t at) { bus_.submit(bus_node(i), f, at + extra_delay(i)); };
   slaves_[static_cast<std::size_t>(i)] = std::make_unique<omni::OmniSlave>(c, send, hooks_.wheel_angle(i));
 }
@@ -318,6 +325,7 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
           {"resyncs", st.resyncs},
           {"commands", st.commands},
           {"stale_samples", st.stale_samples},
+          {"start_phase", start_phase_[n]},
           {"frames_received", st.frames_received},
           {"frames_sent", st.frames_sent},
           {"bad_frames", st.bad_frames},

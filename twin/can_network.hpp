@@ -140,6 +140,7 @@ class OmniCanNetwork final : public BusNetwork {
   std::array<LossState, 6> loss_{};   // by FaultSpec node: 0..3 slaves, 4 master, 5 all
   std::array<DelayState, 5> delay_{}; // by FaultSpec node: 0..3 slaves, 4 master
   std::mt19937_64 rng_;
+  std::array<double, 4> start_phase_{};  // each slave's timer phase at NMT start [fraction of a period]
   std::uint64_t to_transport_ = 0;  // frames the transport accepted
   bool batch_ = false;               // lockstep: slave frames wait in pending_ for flush_transport()
   std::vector<can::TimedFrame> pending_;

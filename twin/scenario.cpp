@@ -322,6 +322,18 @@ void read_can(const YamlField& f, CanSpec& c) {
   }
   read_bool(f, "sync", c.sync);
   read_integer(f, "sync_interval", c.sync_interval, Bounds::at_least(1));
+  if (const YamlField p = f["start_phase"]; p.exists()) {
+    // `random`, one fraction of a period for every slave, or one per axis.
+    const Bounds b{0.0, 1.0, false, true};
+    if (p.node().IsSequence()) {
+      const auto v = p.numbers(4, b);
+      std::copy(v.begin(), v.end(), c.start_phase.begin());
+    } else if (p.node().IsScalar() && p.node().Scalar() == "random") {
+      c.start_phase_random = true;
+    } else {
+      c.start_phase.fill(p.number(b));
+    }
+  }
   read_integer(f, "detect_every", c.detect_every, Bounds::non_negative());
   if (f["master"].exists()) c.master = f["master"].string();
   int seed = static_cast<int>(c.seed);
@@ -383,7 +395,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   if (!settings) return bus;
   if (bus.kind == BusKind::can) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
-                  "detect_every", "master", "seed", "handshake_timeout"});
+                  "start_phase", "detect_every", "master", "seed", "handshake_timeout"});
     read_can(f, bus.can);
   } else if (bus.kind == BusKind::ethercat) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",

@@ -90,6 +90,10 @@ struct CanSpec {
   std::array<double, 4> drift{3.62e-3, 3.62e-3, 3.62e-3, 3.62e-3};  // slave oscillators [-]
   bool sync = false;                          // synchronisation of 3-2-2
   int sync_interval = 20;                     // timer interrupts between resyncs
+  // Each slave's timer phase at NMT start, as a fraction of its period [0, 1)
+  // (OmniSlaveConfig::start_phase_ns); start_phase_random draws them from `seed` instead.
+  std::array<double, 4> start_phase{0.0, 0.0, 0.0, 0.0};
+  bool start_phase_random = false;
   int detect_every = 1;                       // master: node detection every N samples (0 off)
   std::string master;                         // master program; "" = omni-master beside omnitwin
   std::uint64_t seed = 1;                     // random faults (frame loss, jitter)

@@ -55,6 +55,7 @@ const char* to_string(SlaveConfigError e) {
     case SlaveConfigError::bad_drift: return "bad_drift";
     case SlaveConfigError::bad_sync: return "bad_sync";
     case SlaveConfigError::bad_t_post: return "bad_t_post";
+    case SlaveConfigError::bad_start_phase: return "bad_start_phase";
   }
   return "unknown";
 }
@@ -66,6 +67,7 @@ SlaveConfigError validate_slave_config(const OmniSlaveConfig& c) {
   if (!std::isfinite(c.drift) || c.drift <= -1.0) return SlaveConfigError::bad_drift;
   if (c.sync_enabled && c.sync_interval < 1) return SlaveConfigError::bad_sync;
   if (c.t_post_ns < 0) return SlaveConfigError::bad_t_post;
+  if (c.start_phase_ns < 0) return SlaveConfigError::bad_start_phase;
   return SlaveConfigError::ok;
 }
 
@@ -238,7 +240,7 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       run_samples_ = 0;
       timer_since_restart_ = 0;
       state_ = SlaveState::running;
-      return {TimerRequest::restart, now_ns + config_.t_post_ns + actual_period_ns_};
+      return {TimerRequest::restart, now_ns + config_.t_post_ns + config_.start_phase_ns + actual_period_ns_};
 
     case SlaveTransition::stop:
       if (state_ == SlaveState::stopped) break;

@@ -58,6 +58,11 @@ struct OmniSlaveConfig {
   bool sync_enabled = false;  // synchronisation of 3-2-2
   int sync_interval = 20;     // timer interrupts between forced resyncs, >= 1 when enabled
   std::int64_t t_post_ns = 88'800;  // processing delay before a frame is sent [ns], table 2-1, >= 0
+  // Where the node's timer stands when NMT start enables it [ns], >= 0: the first interrupt
+  // comes start_phase_ns later than one period after the start frame's receive interrupt.
+  // The thesis's slave handles NMT in its main loop (fig. 4-16), so each node's phase against
+  // the master's ticks is its own; 0 puts every node at the same phase.
+  std::int64_t start_phase_ns = 0;
 };
 
 // A config for slave `node_id` driving a wheel with `params`: axis from the node, the
@@ -73,6 +78,7 @@ enum class SlaveConfigError : std::uint8_t {
   bad_drift,     // drift <= -1 or not finite
   bad_sync,      // sync_enabled with sync_interval < 1
   bad_t_post,    // t_post_ns < 0
+  bad_start_phase,  // start_phase_ns < 0
 };
 const char* to_string(SlaveConfigError e);  // stable lowercase name, never nullptr
 SlaveConfigError validate_slave_config(const OmniSlaveConfig& c);
@@ -107,7 +113,7 @@ const char* to_string(SlaveState s);
 // The named transitions of the state machine (see SlaveState). One flat switch executes them.
 enum class SlaveTransition : std::uint8_t {
   start,         // stopped → running: chain reset, run indices cleared, timer restart when the
-                 // receive interrupt ends: now + T_post + period
+                 // receive interrupt ends, at its start phase: now + T_post + phase + period
   stop,          // running | awaiting_sync → stopped: timer stop, chain reset (zero setpoint)
   timer_sample,  // running → running: control step + feedback in the timer interrupt (skipped
                  // without a new command)

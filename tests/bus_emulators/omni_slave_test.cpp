@@ -125,6 +125,24 @@ TEST(OmniSlave, SetDriftChangesThePeriodTheTimerIsAskedFor) {
   EXPECT_DOUBLE_EQ(slave.drift(), -0.01);
 }
 
+TEST(OmniSlave, StartPhaseDelaysTheFirstInterruptOnlyAtStart) {
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  cfg.drift = 0.0;
+  cfg.start_phase_ns = 2'500'000;
+  cfg.sync_enabled = true;
+  cfg.sync_interval = 1;
+  OmniSlave slave(cfg);
+  EXPECT_EQ(slave.on_frame(start_all(), 1'000),
+            (TimerAction{TimerRequest::restart, 1'000 + cfg.t_post_ns + 2'500'000 + 10'000'000}));
+  // A resync restarts from the command, without the start phase.
+  slave.on_frame(command({1, 0, 0, 0}), 12'000'000);
+  EXPECT_EQ(slave.on_timer(12'588'800, 0.0).request, TimerRequest::stop);
+  EXPECT_EQ(slave.on_frame(command({1, 0, 0, 0}), 22'000'000),
+            (TimerAction{TimerRequest::restart, 22'000'000 + cfg.t_post_ns + 10'000'000}));
+  cfg.start_phase_ns = -1;
+  EXPECT_EQ(validate_slave_config(cfg), SlaveConfigError::bad_start_phase);
+}
+
 TEST(OmniSlave, StoppedNodeSendsNothingAndIgnoresCommands) {
   Wire wire;
   OmniSlave slave(make_slave_config(node::axis1, physics::PlatformParams{}), wire.fn());

@@ -21,6 +21,7 @@
 #include <numbers>
 #include <optional>
 #include <stdexcept>
+#include <set>
 #include <string>
 #include <utility>
 #include <variant>
@@ -340,6 +341,48 @@ TEST(OmniCanNetwork, DriftStretchesTheSamplePeriodOfThatAxisOnly) {
     EXPECT_EQ(r.samples[1][k].t - r.samples[0][k].t, static_cast<SimTime>(k + 1) * 100'000) << k;
   }
   EXPECT_EQ(r.net->slave(1).actual_period_ns(), 10'100'000);
+}
+
+// ---------------------------------------------------------------------------------------
+// 3b. Start phase: each node's timer phase at NMT start
+
+TEST(OmniCanNetwork, StartPhaseShiftsEachNodesFirstInterruptAndRandomDrawsOnePerNodeFromTheSeed) {
+  auto first_interrupts = [](Scenario s) {
+    Rig r(s);
+    r.tick(0, {nmt_start_all()});
+    for (SimTime t = kPeriod; t < 40 * kMs; t += kPeriod) r.tick(t, {speed_command({0, 0, 0, 0})});
+    std::array<SimTime, 4> t{};
+    for (std::size_t n = 0; n < 4; ++n) t[n] = r.samples[n].at(0).t - r.net->master_start_ns() - kTPost;
+    return std::make_pair(t, r.net->slave_metrics());
+  };
+  Scenario s = can_scenario(unique_bus());
+  s.bus.can.start_phase = {0.0, 0.25, 0.5, 0.75};
+  const auto [fixed, fixed_json] = first_interrupts(s);
+  // The first command arrives 10.1 ms after the start: a node whose first interrupt falls
+  // before it skips that one (no new command), so compare modulo the period.
+  for (std::size_t n = 0; n < 4; ++n) {
+    EXPECT_EQ(fixed[n] % kPeriod, static_cast<SimTime>(n) * kPeriod / 4) << n;
+    EXPECT_DOUBLE_EQ(fixed_json[n]["start_phase"].get<double>(), s.bus.can.start_phase[n]);
+  }
+
+  s = can_scenario(unique_bus());
+  s.bus.can.start_phase_random = true;
+  s.bus.can.seed = 7;
+  const auto a = first_interrupts(s).second;
+  const auto again = first_interrupts([&] { Scenario c = s; c.bus.can.transport = "mem:" + unique_bus(); return c; }()).second;
+  s.bus.can.seed = 8;
+  s.bus.can.transport = "mem:" + unique_bus();
+  const auto other = first_interrupts(s).second;
+  std::set<double> distinct;
+  for (std::size_t n = 0; n < 4; ++n) {
+    const double p = a[n]["start_phase"].get<double>();
+    EXPECT_GE(p, 0.0);
+    EXPECT_LT(p, 1.0);
+    distinct.insert(p);
+    EXPECT_EQ(again[n]["start_phase"].get<double>(), p);  // the same seed, the same phases
+  }
+  EXPECT_EQ(distinct.size(), 4u);
+  EXPECT_NE(other[0]["start_phase"].get<double>(), a[0]["start_phase"].get<double>());
 }
 
 // ---------------------------------------------------------------------------------------

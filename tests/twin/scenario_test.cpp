@@ -336,6 +336,20 @@ TEST(ScenarioCan, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
 }
 
+// start_phase: `random`, one fraction for all, or one per axis, each in [0, 1).
+TEST(ScenarioCan, StartPhaseIsRandomOneFractionOrOnePerAxis) {
+  const std::string m = scenario("minimal.yaml");
+  EXPECT_FALSE(load_scenario(m, {{"bus", "can"}}).bus.can.start_phase_random);
+  EXPECT_DOUBLE_EQ(load_scenario(m, {{"bus", "can"}}).bus.can.start_phase[2], 0.0);
+  EXPECT_TRUE(load_scenario(m, {{"bus", "can"}, {"bus.start_phase", "random"}}).bus.can.start_phase_random);
+  const Scenario one = load_scenario(m, {{"bus", "can"}, {"bus.start_phase", "0.25"}});
+  EXPECT_EQ(one.bus.can.start_phase, (std::array<double, 4>{0.25, 0.25, 0.25, 0.25}));
+  const Scenario four = load_scenario(m, {{"bus", "can"}, {"bus.start_phase", "[0, 0.1, 0.5, 0.9]"}});
+  EXPECT_EQ(four.bus.can.start_phase, (std::array<double, 4>{0.0, 0.1, 0.5, 0.9}));
+  EXPECT_EQ(load_error(m, {{"bus", "can"}, {"bus.start_phase", "1"}}).key(), "bus.start_phase");
+  EXPECT_EQ(load_error(m, {{"bus", "can"}, {"bus.start_phase", "later"}}).key(), "bus.start_phase");
+}
+
 // Every EtherCAT setting and fault kind is read as written (the ESI path relative to the
 // scenario); the defaults when the bus is given by name.
 TEST(ScenarioEthercat, SettingsAndFaultsAreRead) {
