@@ -150,7 +150,8 @@ def plot_dropout(rows, out_dir):
 
 def plot_platform(rows, out_dir):
     """Tables 4-3 … 4-12: contour and axis IAE by bit rate, without/with sync; one row of
-    panels per slave-clock reading of the twin, then the thesis's."""
+    panels per slave-clock reading of the twin (means, bars over the trials' min … max), then
+    the thesis's."""
     clocks = list(dict.fromkeys(r["clock"] for r in rows))
     rates = sorted({r["rate_kbps"] for r in rows})
     x = range(len(rates))
@@ -161,10 +162,17 @@ def plot_platform(rows, out_dir):
         for row, (clock, who) in enumerate(panels):
             key = thesis if who == "thesis" else ours
             ax = axes[row][col]
+            lo_key, hi_key = (None, None) if who == "thesis" else \
+                ((f"{ours[:-3]}_min_cm", f"{ours[:-3]}_max_cm") if col == 0 else ("axis_iae_min_pulse", "axis_iae_max_pulse"))
             for off, sync in ((-0.2, 0), (0.2, 1)):
-                vals = [next(r[key] for r in rows if r["rate_kbps"] == k and r["sync"] == sync and r["clock"] == clock)
-                        for k in rates]
-                ax.bar([i + off for i in x], vals, width=0.4, label="sync" if sync else "no sync")
+                sel = [next(r for r in rows if r["rate_kbps"] == k and r["sync"] == sync and r["clock"] == clock)
+                       for k in rates]
+                vals = [r[key] for r in sel]
+                # The spread over the trials (min … max) where the CSV has it.
+                err = None
+                if lo_key and lo_key in sel[0]:
+                    err = [[v - r[lo_key] for v, r in zip(vals, sel)], [r[hi_key] - v for v, r in zip(vals, sel)]]
+                ax.bar([i + off for i in x], vals, width=0.4, yerr=err, capsize=3, label="sync" if sync else "no sync")
             ax.set_xticks(list(x))
             ax.set_xticklabels([f"{k} kbit/s" for k in rates])
             ax.set_ylabel(f"{'contour' if col == 0 else 'axis'} IAE [{unit}]")
