@@ -297,7 +297,9 @@ TEST_F(PlatformSimTest, WheelTorqueStaysWithinTheMotorLimitAndSaturates) {
           const double tau = s.wheel_torque(i);
           ASSERT_LE(std::abs(tau), limit + 1e-9) << "wheel " << i << " step " << k << " sign " << sign;
           peak = std::max(peak, std::abs(tau));
-          if (k == 0) EXPECT_NEAR(tau, sign * limit, 1e-9) << "wheel " << i << " not on the rail at once";
+          if (k == 0) {
+            EXPECT_NEAR(tau, sign * limit, 1e-9) << "wheel " << i << " not on the rail at once";
+          }
           if (std::abs(tau) >= limit - 1e-9) ++saturated_steps;
         }
       }
