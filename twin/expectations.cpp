@@ -30,10 +30,10 @@ constexpr std::array<std::string_view, 16> kBusMetrics = {
 constexpr std::array<std::string_view, 13> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",    "cycles",  "wkc_errors",
     "lost_frames",  "recoveries",       "slaves_lost",  "timeouts",      "sdo_failed", "last_wkc"};
-// Per slave: CAN's first eight, EtherCAT's last three.
-constexpr std::array<std::string_view, 11> kSlaveMetrics = {
-    "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",  "bad_frames",
-    "tec",     "bus_off_events", "al_status_code",  "station_address", "error_code"};
+// Per slave: CAN's first nine, EtherCAT's last three.
+constexpr std::array<std::string_view, 12> kSlaveMetrics = {
+    "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
+    "tec",     "bus_off_events", "stale_samples",   "al_status_code",  "station_address", "error_code"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;
