@@ -154,6 +154,15 @@ HomingOutput Homing::step(const HomingParams& p, const HomingSignals& s, bool ab
     if (v < 0 && s.nl && kind_ != kNl && !(phase_ == Phase::locate && init_dir_ < 0)) return true;
     return false;
   };
+  // Search at v, or fail and stop on a limit switch the method does not use.
+  auto search_at = [&](double v) {
+    if (limit_blocks(v)) {
+      fail();
+      traj_.stop(stop_dec, dt);
+    } else {
+      run_at(v, acc, dt);
+    }
+  };
 
   switch (phase_) {
     case Phase::idle:
@@ -170,12 +179,7 @@ HomingOutput Homing::step(const HomingParams& p, const HomingSignals& s, bool ab
       }
       if (phase_ == Phase::locate) {
         const double v = init_dir_ * p.v_switch;
-        if (limit_blocks(v)) {
-          fail();
-          traj_.stop(stop_dec, dt);
-        } else {
-          run_at(v, acc, dt);
-        }
+        search_at(v);
         break;
       }
       [[fallthrough]];
@@ -207,12 +211,7 @@ HomingOutput Homing::step(const HomingParams& p, const HomingSignals& s, bool ab
         double v = dir_ * p.v_zero;
         if (region_ < before) v = p.v_switch;
         if (region_ > before) v = -p.v_switch;
-        if (limit_blocks(v)) {
-          fail();
-          traj_.stop(stop_dec, dt);
-        } else {
-          run_at(v, acc, dt);
-        }
+        search_at(v);
         break;
       }
       if (phase_ == Phase::move_home) {
@@ -232,12 +231,7 @@ HomingOutput Homing::step(const HomingParams& p, const HomingSignals& s, bool ab
         break;
       }
       const double v = dir_ * p.v_zero;
-      if (limit_blocks(v)) {
-        fail();
-        traj_.stop(stop_dec, dt);
-      } else {
-        run_at(v, acc, dt);
-      }
+      search_at(v);
       break;
     }
     case Phase::move_home:
