@@ -123,6 +123,18 @@ int ReadableWaiter::wait(int fd) noexcept {
   }
 }
 
+long ReadableWaiter::receive(int fd, msghdr& msg) noexcept {
+  for (;;) {
+    const ssize_t n = ::recvmsg(fd, &msg, MSG_DONTWAIT | MSG_TRUNC);
+    if (n >= 0) return static_cast<long>(n);
+    if (errno == EINTR) continue;
+    if (errno != EAGAIN && errno != EWOULDBLOCK) return -1;
+    const int w = wait(fd);
+    if (w == 0) return kTimedOut;
+    if (w < 0) return -1;
+  }
+}
+
 }  // namespace detail
 
 }  // namespace omnitwin::ethercat

@@ -26,6 +26,8 @@
 // describe() allocate and may throw.
 #pragma once
 
+#include <sys/socket.h>
+
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -109,6 +111,11 @@ class ReadableWaiter {
   // Waits (ppoll) until fd is readable or the deadline passes: 1 readable, 0 timed out,
   // -1 error (errno set). EINTR is retried with the time left.
   int wait(int fd) noexcept;
+  // recvmsg(MSG_DONTWAIT | MSG_TRUNC) on fd, waiting as wait() does while nothing is there and
+  // retrying EINTR: the message's real length (even when longer than msg's buffers), kTimedOut
+  // when the deadline passed first, or -1 (errno set).
+  static constexpr long kTimedOut = -2;
+  long receive(int fd, msghdr& msg) noexcept;
 
  private:
   std::chrono::nanoseconds timeout_;

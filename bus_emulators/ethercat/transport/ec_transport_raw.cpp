@@ -139,15 +139,10 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     msg.msg_namelen = sizeof from;
     msg.msg_iov = iov;
     msg.msg_iovlen = 2;
-    // MSG_TRUNC: the return value is the frame's real length even when buf is smaller.
-    const ssize_t n = ::recvmsg(fd_, &msg, MSG_DONTWAIT | MSG_TRUNC);
+    // The frame's real length even when buf is smaller.
+    const long n = waiter.receive(fd_, msg);
+    if (n == detail::ReadableWaiter::kTimedOut) return 0;
     if (n < 0) {
-      if (errno == EINTR) continue;
-      if (errno == EAGAIN || errno == EWOULDBLOCK) {
-        const int w = waiter.wait(fd_);
-        if (w > 0) continue;
-        if (w == 0) return 0;
-      }
       ++stats_.receive_errors;
       return -1;
     }

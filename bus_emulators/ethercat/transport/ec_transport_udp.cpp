@@ -93,15 +93,10 @@ int UdpTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     msg.msg_namelen = sizeof from;
     msg.msg_iov = &iov;
     msg.msg_iovlen = 1;
-    // MSG_TRUNC: the return value is the datagram's real length even when buf is smaller.
-    const ssize_t n = ::recvmsg(fd_, &msg, MSG_DONTWAIT | MSG_TRUNC);
+    // The datagram's real length even when buf is smaller.
+    const long n = waiter.receive(fd_, msg);
+    if (n == detail::ReadableWaiter::kTimedOut) return 0;
     if (n < 0) {
-      if (errno == EINTR) continue;
-      if (errno == EAGAIN || errno == EWOULDBLOCK) {
-        const int w = waiter.wait(fd_);
-        if (w > 0) continue;
-        if (w == 0) return 0;
-      }
       // ICMP port unreachable for an earlier send (nobody listening yet): not this receive's
       // failure; the next datagram may be fine.
       if (errno == ECONNREFUSED) continue;
