@@ -88,6 +88,19 @@ void SdoTransfer::fail(SdoStatus status) {
   step_ = Step::done;
 }
 
+SdoTransfer::ReplyOutcome SdoTransfer::finish() {
+  status_ = SdoStatus::done;
+  step_ = Step::done;
+  return ReplyOutcome::finished;
+}
+
+SdoTransfer::ReplyOutcome SdoTransfer::begin_segments() {
+  phase_ = Phase::segment;
+  toggle_ = false;
+  step_ = Step::send;
+  return ReplyOutcome::progress;
+}
+
 void SdoTransfer::abort_local(std::uint32_t code) {
   abort_code_ = code;
   status_ = SdoStatus::aborted;
@@ -175,33 +188,21 @@ SdoTransfer::ReplyOutcome SdoTransfer::on_reply(std::span<const std::uint8_t> mb
       if (cmd & 0x02) {  // expedited
         const std::size_t n = (cmd & 0x01) ? 4 - ((cmd >> 2) & 0x03) : 4;
         data_.assign(sdo + 4, sdo + 4 + n);
-        status_ = SdoStatus::done;
-        step_ = Step::done;
-        return ReplyOutcome::finished;
+        return finish();
       }
       total_ = get_u32(sdo + 4);
       const std::size_t here = std::min<std::size_t>(len - kCoeSdoSize, total_);
       data_.assign(sdo + 8, sdo + 8 + here);
       if (data_.size() >= total_) {
-        status_ = SdoStatus::done;
-        step_ = Step::done;
-        return ReplyOutcome::finished;
+        return finish();
       }
-      phase_ = Phase::segment;
-      toggle_ = false;
-      step_ = Step::send;
-      return ReplyOutcome::progress;
+      return begin_segments();
     }
     if (scs != 3) { abort_local(static_cast<std::uint32_t>(SdoAbort::command_unknown)); return ReplyOutcome::finished; }
     if (sent_ >= req_.data.size()) {
-      status_ = SdoStatus::done;
-      step_ = Step::done;
-      return ReplyOutcome::finished;
+      return finish();
     }
-    phase_ = Phase::segment;
-    toggle_ = false;
-    step_ = Step::send;
-    return ReplyOutcome::progress;
+    return begin_segments();
   }
   // segment phase
   const bool toggle = (cmd & 0x10) != 0;
@@ -214,9 +215,7 @@ SdoTransfer::ReplyOutcome SdoTransfer::on_reply(std::span<const std::uint8_t> mb
     data_.insert(data_.end(), sdo + 1, sdo + 1 + n);
     toggle_ = !toggle_;
     if ((cmd & 0x01) || data_.size() >= total_) {
-      status_ = SdoStatus::done;
-      step_ = Step::done;
-      return ReplyOutcome::finished;
+      return finish();
     }
     step_ = Step::send;
     return ReplyOutcome::progress;
@@ -225,9 +224,7 @@ SdoTransfer::ReplyOutcome SdoTransfer::on_reply(std::span<const std::uint8_t> mb
   if (toggle != toggle_) { abort_local(static_cast<std::uint32_t>(SdoAbort::toggle)); return ReplyOutcome::finished; }
   toggle_ = !toggle_;
   if (sent_ >= req_.data.size()) {
-    status_ = SdoStatus::done;
-    step_ = Step::done;
-    return ReplyOutcome::finished;
+    return finish();
   }
   step_ = Step::send;
   return ReplyOutcome::progress;

@@ -89,6 +89,8 @@ class SdoTransfer {
  private:
   enum class Phase : std::uint8_t { initiate, segment };
   void abort_local(std::uint32_t code);
+  ReplyOutcome finish();          // done: status done, nothing more to send
+  ReplyOutcome begin_segments();  // initiate answered: the segments follow, toggle from 0
   SdoRequest req_;
   std::size_t mbx_size_ = 0;
   Phase phase_ = Phase::initiate;
