@@ -1,5 +1,6 @@
 // bus_emulators/can — pcap writer for CAN (LINKTYPE_CAN_SOCKETCAN); see can_pcap.hpp.
 #include "bus_emulators/can/can_pcap.hpp"
+#include "bus_emulators/pcap_record.hpp"
 
 #include <pcap/pcap.h>
 
@@ -66,18 +67,7 @@ bool PcapWriter::write(const Frame& f, std::int64_t timestamp_ns, Direction dir)
   const int payload = f.kind == FrameKind::remote ? 0 : len;
   std::copy_n(f.data.begin(), payload, rec + 8);
 
-  pcap_pkthdr h{};
-  // With nanosecond precision libpcap writes tv_usec as nanoseconds.
-  std::int64_t sec = timestamp_ns / 1'000'000'000;
-  std::int64_t nsec = timestamp_ns % 1'000'000'000;
-  if (nsec < 0) {
-    nsec += 1'000'000'000;
-    --sec;
-  }
-  h.ts.tv_sec = static_cast<time_t>(sec);
-  h.ts.tv_usec = static_cast<suseconds_t>(nsec);
-  h.caplen = kRecordSize;
-  h.len = kRecordSize;
+  const pcap_pkthdr h = bus_emulators::pcap_record_header(timestamp_ns, kRecordSize);
   auto* d = static_cast<pcap_dumper_t*>(dumper_);
   pcap_dump(reinterpret_cast<u_char*>(d), &h, rec);
   if (options_.flush_each_packet && pcap_dump_flush(d) != 0) return false;

@@ -1,5 +1,6 @@
 // bus_emulators/ethercat/transport — EtherCAT pcap writer (LINKTYPE_ETHERNET); see ec_pcap.hpp.
 #include "bus_emulators/ethercat/transport/ec_pcap.hpp"
+#include "bus_emulators/pcap_record.hpp"
 
 #include <pcap/pcap.h>
 
@@ -54,18 +55,7 @@ bool PcapWriter::emit(std::size_t size, SimTime t, Direction dir) {
     std::memset(frame_.data() + size, 0, kMinEthFrame - size);
     size = kMinEthFrame;
   }
-  pcap_pkthdr h{};
-  // With nanosecond precision libpcap writes tv_usec as nanoseconds.
-  std::int64_t sec = t / 1'000'000'000;
-  std::int64_t nsec = t % 1'000'000'000;
-  if (nsec < 0) {
-    nsec += 1'000'000'000;
-    --sec;
-  }
-  h.ts.tv_sec = static_cast<time_t>(sec);
-  h.ts.tv_usec = static_cast<suseconds_t>(nsec);
-  h.caplen = static_cast<bpf_u_int32>(size);
-  h.len = static_cast<bpf_u_int32>(size);
+  const pcap_pkthdr h = bus_emulators::pcap_record_header(t, static_cast<std::uint32_t>(size));
   auto* d = static_cast<pcap_dumper_t*>(dumper_);
   pcap_dump(reinterpret_cast<u_char*>(d), &h, frame_.data());
   ++written_[static_cast<int>(dir)];
