@@ -273,13 +273,7 @@ void one_input(Bus& bus, const std::uint8_t* data, std::size_t size) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static Bus bus;
-  std::uint8_t tag = 0;
-  std::vector<std::vector<std::uint8_t>> earlier;
-  if (history().replay(tag, earlier)) {  // EC_FUZZ_REPLAY: a recorded failure's history first
-    bus.restart(tag);
-    for (const auto& in : earlier) one_input(bus, in.data(), in.size());
-    bus.inputs = earlier.size();
-  }
+  fuzz::replay_recorded(history(), bus, one_input);  // EC_FUZZ_REPLAY: a recorded failure first
   if (++bus.inputs % kEpoch == 0 || bus.sync0_storm()) {
     bus.inputs = 0;
     bus.restart(static_cast<std::uint8_t>(bus.epoch + 1));

@@ -232,6 +232,19 @@ class History {
   __builtin_trap();
 }
 
+// EC_FUZZ_REPLAY: before a target's first input, re-run a recorded failure's history on a rig
+// restarted with the recorded tag. `rig` has restart(tag) and a count `inputs`; `one_input(rig,
+// data, size)` is the target's step.
+template <class Rig, class OneInput>
+void replay_recorded(History& h, Rig& rig, OneInput one_input) {
+  std::uint8_t tag = 0;
+  std::vector<std::vector<std::uint8_t>> earlier;
+  if (!h.replay(tag, earlier)) return;
+  rig.restart(tag);
+  for (const auto& in : earlier) one_input(rig, in.data(), in.size());
+  rig.inputs = earlier.size();
+}
+
 #define EC_FUZZ_CHECK(history, cond)                                                    \
   do {                                                                                  \
     if (!(cond)) ::omnitwin::ethercat::fuzz::check_failed(history, __FILE__, __LINE__, #cond); \

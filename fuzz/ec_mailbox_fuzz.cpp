@@ -172,13 +172,7 @@ void one_input(Rig& rig, const std::uint8_t* data, std::size_t size) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static Rig rig;
-  std::uint8_t tag = 0;
-  std::vector<std::vector<std::uint8_t>> earlier;
-  if (history().replay(tag, earlier)) {  // EC_FUZZ_REPLAY: a recorded failure's history first
-    rig.restart(tag);
-    for (const auto& in : earlier) one_input(rig, in.data(), in.size());
-    rig.inputs = earlier.size();
-  }
+  fuzz::replay_recorded(history(), rig, one_input);  // EC_FUZZ_REPLAY: a recorded failure first
   if (++rig.inputs % kEpoch == 0) rig.restart(static_cast<std::uint8_t>(rig.epoch + 1));
   one_input(rig, data, size);
   return 0;
