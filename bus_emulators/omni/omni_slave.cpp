@@ -60,11 +60,16 @@ const char* to_string(SlaveConfigError e) {
   return "unknown";
 }
 
+namespace {
+// An oscillator drift a timer can run on: finite, and the period stays positive.
+bool valid_drift(double drift) { return std::isfinite(drift) && drift > -1.0; }
+}  // namespace
+
 SlaveConfigError validate_slave_config(const OmniSlaveConfig& c) {
   if (axis_of_slave(c.node_id) == 0) return SlaveConfigError::bad_node;
   if (c.axis != axis_of_slave(c.node_id)) return SlaveConfigError::axis_mismatch;
   if (c.timer_period_ns <= 0) return SlaveConfigError::bad_period;
-  if (!std::isfinite(c.drift) || c.drift <= -1.0) return SlaveConfigError::bad_drift;
+  if (!valid_drift(c.drift)) return SlaveConfigError::bad_drift;
   if (c.sync_enabled && c.sync_interval < 1) return SlaveConfigError::bad_sync;
   if (c.t_post_ns < 0) return SlaveConfigError::bad_t_post;
   if (c.start_phase_ns < 0) return SlaveConfigError::bad_start_phase;
@@ -111,7 +116,7 @@ OmniSlave::OmniSlave(const OmniSlaveConfig& config, SendFn send, double shaft_an
       chain_(params_, shaft_angle) {}
 
 bool OmniSlave::set_drift(double drift) {
-  if (!std::isfinite(drift) || drift <= -1.0) return false;
+  if (!valid_drift(drift)) return false;
   drift_ = drift;
   actual_period_ns_ = std::llround(static_cast<double>(config_.timer_period_ns) * (1.0 + drift));
   return true;
