@@ -232,18 +232,15 @@ int failed(const std::vector<Effect>& es) {
   return n;
 }
 
-// "a … b" over the effects' k-th improvement of ours [%].
-std::string span(const std::vector<Effect>& es, std::size_t k) {
+// "a … b" over the k-th improvement [%] of ours (or, with `thesis`, the thesis's), at bit rates
+// from `from_kbps` up.
+std::string span(const std::vector<Effect>& es, std::size_t k, bool thesis = false, int from_kbps = 0) {
   double lo = 1e300, hi = -1e300;
-  for (const Effect& e : es) lo = std::min(lo, e.ours[k]), hi = std::max(hi, e.ours[k]);
-  return es.empty() ? "-" : fmt::format("{:+.1f} … {:+.1f} %", lo, hi);
-}
-
-// The same over the thesis's improvements, rates at or above `from_kbps`.
-std::string thesis_span(const std::vector<Effect>& es, std::size_t k, int from_kbps = 0) {
-  double lo = 1e300, hi = -1e300;
-  for (const Effect& e : es)
-    if (e.rate_kbps >= from_kbps) lo = std::min(lo, e.thesis[k]), hi = std::max(hi, e.thesis[k]);
+  for (const Effect& e : es) {
+    if (e.rate_kbps < from_kbps) continue;
+    const double v = thesis ? e.thesis[k] : e.ours[k];
+    lo = std::min(lo, v), hi = std::max(hi, v);
+  }
   return lo > hi ? "-" : fmt::format("{:+.1f} … {:+.1f} %", lo, hi);
 }
 
@@ -340,7 +337,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "interrupt within T_post behind its command: dropouts vanish and at most {:.1f} loops per run are "
              "skipped (where a command is late, at the start or behind a feedback frame).\n",
              sign_word(fast.empty() ? 0 : fast.back().ours[3]) == "better" ? "helps" : "does not help",
-             span(fast, 3), thesis_span(fast, 3), fast_skips, fast_sync_skips)
+             span(fast, 3), span(fast, 3, true), fast_skips, fast_sync_skips)
       << fmt::format(
              "- **Axis velocity IAE, slow clocks: sync {} ({}).** A slow slave's command is almost never "
              "missing (at most {:.1f} skipped loops per run without sync); it loses one command (overwritten) per 276 "
@@ -353,7 +350,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
       << fmt::format(
              "- **Y IAE** with sync under the fast reading: {} (the thesis: {}); it sums to a few centimetres over "
              "the run in ours, to thousands in the thesis's.\n",
-             span(fast, 1), thesis_span(fast, 1))
+             span(fast, 1), span(fast, 1, true))
       << fmt::format(
              "- **X and contour IAE (fast: X {}, contour {}; slow: contour {}; the thesis: contour {} above "
              "125 kbit/s).** Our odometric X error is the following lag of the master's PI position loop without "
@@ -362,7 +359,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "X error was 3.5 – 7 cm per sample and largely the oscillation its text blames on lost commands and "
              "nodes out of step; a twin platform with no load, no floor unevenness and no driver dead band does not "
              "oscillate, so there is no such share for sync to remove.\n",
-             span(fast, 0), span(fast, 2), span(slow, 2), thesis_span(fast, 2, 250),
+             span(fast, 0), span(fast, 2), span(slow, 2), span(fast, 2, true, 250),
              fast.empty() ? 0.0 : fast.back().without->std_c)
       << "- **Dropouts.** With the thesis's definition (2-2-1: the command held does not belong to the sample) "
          "a pure drift of 0.362 % makes every sample after N_drift a dropout (fast: from the first overtaking; "
