@@ -5,7 +5,6 @@
 #include <pcap/pcap.h>
 
 #include <algorithm>
-#include <stdexcept>
 
 namespace omnitwin::can {
 
@@ -22,26 +21,15 @@ constexpr int kRecordSize = 16;  // sizeof(struct can_frame)
 
 PcapWriter::PcapWriter(const std::string& path) : PcapWriter(path, Options{}) {}
 
-PcapWriter::PcapWriter(const std::string& path, Options options) : path_(path), options_(options) {
-  pcap_t* p = pcap_open_dead_with_tstamp_precision(kLinkType, 65535, PCAP_TSTAMP_PRECISION_NANO);
-  if (!p) throw std::runtime_error("pcap: pcap_open_dead failed");
-  pcap_dumper_t* d = pcap_dump_open(p, path.c_str());
-  if (!d) {
-    const std::string msg = std::string("pcap: cannot create ") + path + ": " + pcap_geterr(p);
-    pcap_close(p);
-    throw std::runtime_error(msg);
-  }
-  pcap_ = p;
-  dumper_ = d;
-  // The file header is in stdio's buffer until the first flush: write it now, so that even
-  // an empty capture interrupted at once is a valid file.
-  pcap_dump_flush(d);
-}
+// The file header is flushed at once, so that even an empty capture interrupted at once is
+// a valid .part file.
+PcapWriter::PcapWriter(const std::string& path, Options options)
+    : path_(path), options_(options), file_(std::make_unique<bus_emulators::PcapFile>(path, kLinkType, 0)) {}
 
 PcapWriter::~PcapWriter() { close(); }
 
 bool PcapWriter::write(const Frame& f, std::int64_t timestamp_ns, Direction dir) {
-  if (!dumper_) return false;
+  if (!file_->is_open() || !file_->ok()) return false;
   if (dir == Direction::rx ? !options_.record_rx : !options_.record_tx) return true;
 
   std::uint32_t id = 0;
@@ -68,28 +56,20 @@ bool PcapWriter::write(const Frame& f, std::int64_t timestamp_ns, Direction dir)
   std::copy_n(f.data.begin(), payload, rec + 8);
 
   const pcap_pkthdr h = bus_emulators::pcap_record_header(timestamp_ns, kRecordSize);
-  auto* d = static_cast<pcap_dumper_t*>(dumper_);
-  pcap_dump(reinterpret_cast<u_char*>(d), &h, rec);
-  if (options_.flush_each_packet && pcap_dump_flush(d) != 0) return false;
+  if (!file_->dump(h, rec)) return false;
+  if (options_.flush_each_packet && !file_->flush()) return false;
   ++written_;
   ++(dir == Direction::rx ? written_rx_ : written_tx_);
   return true;
 }
 
-void PcapWriter::flush() {
-  if (dumper_) pcap_dump_flush(static_cast<pcap_dumper_t*>(dumper_));
-}
+bool PcapWriter::flush() { return file_->flush(); }
 
-void PcapWriter::close() {
-  if (dumper_) {
-    pcap_dump_flush(static_cast<pcap_dumper_t*>(dumper_));
-    pcap_dump_close(static_cast<pcap_dumper_t*>(dumper_));
-    dumper_ = nullptr;
-  }
-  if (pcap_) {
-    pcap_close(static_cast<pcap_t*>(pcap_));
-    pcap_ = nullptr;
-  }
-}
+bool PcapWriter::close() { return file_->close(); }
+
+bool PcapWriter::is_open() const { return file_->is_open(); }
+bool PcapWriter::ok() const { return file_->ok(); }
+std::string PcapWriter::error() const { return file_->error(); }
+std::string PcapWriter::part_path() const { return file_->part_path(); }
 
 }  // namespace omnitwin::can

@@ -3,9 +3,13 @@
 //
 // Written through libpcap (pcap_open_dead_with_tstamp_precision + pcap_dump_open) with
 // nanosecond timestamps (the twin's clock is integer nanoseconds; the file gets the
-// nanosecond pcap magic). Every record is flushed to the kernel as it is written
-// (pcap_dump_flush), so a run that ends by SIGINT/SIGTERM/SIGKILL leaves a valid file holding
-// every frame written so far; close() (or the destructor) just closes it.
+// nanosecond pcap magic). The capture is written as DIR/.NAME.part and renamed to DIR/NAME
+// by close() (or the destructor) only when every write succeeded (bus_emulators/pcap_record:
+// PcapFile); a stale DIR/NAME is removed at open. Every record is flushed to the kernel as it
+// is written (flush_each_packet), so a run killed by SIGKILL leaves a valid .part file holding
+// every frame written so far, and never a file under the final name. A write error (a full
+// disk) is a status, not an exception: write() returns false from then on, ok()/error() say
+// why, and close() removes the .part file, so that DIR/NAME stays absent.
 //
 // Each record is a Linux `struct can_frame` (16 bytes) as SocketCAN captures it: can_id in
 // network byte order with CAN_EFF_FLAG / CAN_RTR_FLAG / CAN_ERR_FLAG, the length byte, three
@@ -20,7 +24,12 @@
 #include "bus_emulators/can/can_frame.hpp"
 
 #include <cstdint>
+#include <memory>
 #include <string>
+
+namespace omnitwin::bus_emulators {
+class PcapFile;
+}
 
 namespace omnitwin::can {
 
@@ -34,7 +43,8 @@ class PcapWriter {
     bool flush_each_packet = true;  // keep true for recordings that must survive a kill
   };
 
-  // Creates/truncates `path`; throws std::runtime_error with libpcap's message on failure.
+  // Creates `path`'s .part file (removing a stale `path`); throws std::runtime_error naming
+  // `path` on failure.
   explicit PcapWriter(const std::string& path);
   PcapWriter(const std::string& path, Options options);
   ~PcapWriter();
@@ -44,11 +54,19 @@ class PcapWriter {
   // Appends one frame stamped `timestamp_ns` (nanoseconds since the epoch of the capture:
   // the simulated clock, or CLOCK_REALTIME in real-time mode). Frames with an invalid
   // identifier or DLC are written with their DLC clamped to 8 (a capture shows what was seen).
-  // Returns false once the writer is closed or when writing failed.
+  // Returns false once the writer is closed or when writing failed (then and from then on).
   bool write(const Frame& f, std::int64_t timestamp_ns, Direction dir = Direction::rx);
-  void flush();
-  void close();
-  bool is_open() const { return dumper_ != nullptr; }
+  // Hands buffered records to the kernel; false on a write error (kept in error()).
+  bool flush();
+  // Flushes and closes; renames the .part file to path() when every write succeeded, else
+  // removes it. Idempotent. True when path() now holds the complete capture.
+  bool close();
+  bool is_open() const;
+  // false once a write, flush, sync or the final rename failed; error() then names the file
+  // and the system's reason ("" while ok). Both stay readable after close().
+  bool ok() const;
+  std::string error() const;
+  std::string part_path() const;  // where the capture is until close()
 
   std::uint64_t written() const { return written_; }
   std::uint64_t written(Direction d) const { return d == Direction::rx ? written_rx_ : written_tx_; }
@@ -59,8 +77,7 @@ class PcapWriter {
  private:
   std::string path_;
   Options options_;
-  void* pcap_ = nullptr;    // pcap_t*, kept opaque so users need not include <pcap.h>
-  void* dumper_ = nullptr;  // pcap_dumper_t*
+  std::unique_ptr<bus_emulators::PcapFile> file_;  // opaque, so users need not include <pcap.h>
   std::uint64_t written_ = 0;
   std::uint64_t written_rx_ = 0;
   std::uint64_t written_tx_ = 0;

@@ -1,8 +1,12 @@
 // Tests bus_emulators/can/can_pcap: the file libpcap reads back (link type, nanosecond
 // timestamps, SocketCAN records), tshark's decode of standard, extended, remote and error
-// frames with no expert warnings of malformed packets, direction selection, and a writer
-// killed mid-run leaving a readable file with every frame written before the kill.
+// frames with no expert warnings of malformed packets, direction selection, a writer killed
+// mid-run leaving a readable .part file with every frame written before the kill (and nothing
+// under the final name), the final name appearing only on close, a stale capture removed at
+// open, and a full disk leaving no file under the final name and an error naming it.
 #include "bus_emulators/can/can_pcap.hpp"
+
+#include "tests/bus_emulators/small_tmpfs.hpp"
 
 #include <gtest/gtest.h>
 #include <pcap/pcap.h>
@@ -11,6 +15,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -108,7 +113,7 @@ TEST_F(CanPcap, DirectionSelectionAndCounts) {
   EXPECT_THROW(PcapWriter(file("no/such/dir/x.pcap")), std::runtime_error);
 }
 
-TEST_F(CanPcap, AKilledWriterLeavesAReadableFile) {
+TEST_F(CanPcap, AKilledWriterLeavesAReadablePartFileAndNoFinalFile) {
   const std::string path = file("killed.pcap");
   const pid_t pid = ::fork();
   ASSERT_GE(pid, 0);
@@ -121,10 +126,58 @@ TEST_F(CanPcap, AKilledWriterLeavesAReadableFile) {
   int st = 0;
   ::waitpid(pid, &st, 0);
   ASSERT_TRUE(WIFSIGNALED(st));
-  const auto recs = read_back(path);
+  EXPECT_FALSE(fs::exists(path)) << "a killed capture must not pass for a complete one";
+  const auto recs = read_back(file(".killed.pcap.part"));
   ASSERT_EQ(recs.size(), 3u);
   EXPECT_EQ(recs[2].bytes[3], 0x02);
   EXPECT_EQ(recs[2].bytes[8], 2);
+}
+
+TEST_F(CanPcap, FinalNameAppearsOnlyOnClose) {
+  const std::string path = file("bus-can.pcap");
+  PcapWriter::Options o;
+  o.flush_each_packet = false;
+  PcapWriter w(path, o);
+  EXPECT_EQ(w.part_path(), file(".bus-can.pcap.part"));
+  ASSERT_TRUE(w.write(make_data(0x181, {1, 2}), 10));
+  ASSERT_TRUE(w.flush());
+  EXPECT_FALSE(fs::exists(path));
+  EXPECT_EQ(read_back(w.part_path()).size(), 1u);  // a reader can follow the .part file
+  EXPECT_TRUE(w.close());
+  EXPECT_TRUE(w.ok());
+  EXPECT_EQ(w.error(), "");
+  EXPECT_FALSE(fs::exists(file(".bus-can.pcap.part")));
+  EXPECT_EQ(read_back(path).size(), 1u);
+  EXPECT_TRUE(w.close());  // idempotent
+}
+
+TEST_F(CanPcap, AStaleCaptureIsRemovedWhenANewOneOpens) {
+  const std::string path = file("bus-can.pcap");
+  { PcapWriter old(path); old.write(make_data(1, {1}), 1); }
+  ASSERT_TRUE(fs::exists(path));
+  PcapWriter w(path);
+  EXPECT_FALSE(fs::exists(path)) << "the previous run's capture must not pass for this run's";
+}
+
+// A 64 KiB tmpfs fills after about 2000 records: a disk that is full.
+TEST_F(CanPcap, AFullDiskLeavesNoFinalFileAndAnErrorNamingIt) {
+  omnitwin::testing::SmallTmpfs disk("64k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const std::string path = (disk / "bus-can.pcap").string();
+  PcapWriter w(path);
+  int accepted = 0;
+  while (accepted < 100'000 && w.write(make_data(0x181, {1, 2, 3, 4, 5, 6, 7, 8}), accepted)) ++accepted;
+  ASSERT_LT(accepted, 100'000) << "the full disk was never noticed";
+  EXPECT_GT(accepted, 100);
+  EXPECT_FALSE(w.ok());
+  EXPECT_FALSE(w.write(make_data(0x181, {}), 0)) << "writes stop after a failure";
+  EXPECT_FALSE(w.flush());
+  EXPECT_NE(w.error().find(path), std::string::npos) << w.error();
+  EXPECT_NE(w.error().find(std::strerror(ENOSPC)), std::string::npos) << w.error();
+  EXPECT_FALSE(w.close());
+  EXPECT_FALSE(fs::exists(path));
+  EXPECT_FALSE(fs::exists(w.part_path())) << "the partial capture is removed, freeing the disk";
+  EXPECT_FALSE(w.ok());  // the status outlives close()
 }
 
 // ---- tshark ------------------------------------------------------------------------------

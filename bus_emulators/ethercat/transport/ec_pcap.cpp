@@ -4,16 +4,12 @@
 
 #include <pcap/pcap.h>
 
-#include <cerrno>
-#include <cstdio>
 #include <cstring>
-#include <stdexcept>
 
 namespace omnitwin::ethercat {
 
 namespace {
 constexpr Mac kBroadcast = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
-constexpr int kSnapLen = 65535;
 }  // namespace
 
 const char* to_string(Direction d) {
@@ -26,27 +22,10 @@ const char* to_string(Direction d) {
 
 PcapWriter::PcapWriter(const std::string& path) : PcapWriter(path, Options{}) {}
 
-PcapWriter::PcapWriter(const std::string& path, Options options) : path_(path), options_(options) {
-  pcap_t* p = pcap_open_dead_with_tstamp_precision(kLinkType, kSnapLen, PCAP_TSTAMP_PRECISION_NANO);
-  if (!p) throw std::runtime_error("pcap: pcap_open_dead failed for " + path);
-  FILE* f = std::fopen(path.c_str(), "wb");
-  if (!f) {
-    const std::string msg = "pcap: cannot create " + path + ": " + std::strerror(errno);
-    pcap_close(p);
-    throw std::runtime_error(msg);
-  }
-  if (options_.buffer_bytes > 0) std::setvbuf(f, nullptr, _IOFBF, options_.buffer_bytes);
-  pcap_dumper_t* d = pcap_dump_fopen(p, f);
-  if (!d) {
-    const std::string msg = "pcap: cannot write " + path + ": " + pcap_geterr(p);
-    std::fclose(f);
-    pcap_close(p);
-    throw std::runtime_error(msg);
-  }
-  pcap_ = p;
-  dumper_ = d;
-  pcap_dump_flush(d);  // the file header: an empty capture is a valid file
-}
+// The file header is flushed at once: an empty capture is a valid .part file.
+PcapWriter::PcapWriter(const std::string& path, Options options)
+    : path_(path), options_(options),
+      file_(std::make_unique<bus_emulators::PcapFile>(path, kLinkType, options.buffer_bytes)) {}
 
 PcapWriter::~PcapWriter() { close(); }
 
@@ -56,14 +35,13 @@ bool PcapWriter::emit(std::size_t size, SimTime t, Direction dir) {
     size = kMinEthFrame;
   }
   const pcap_pkthdr h = bus_emulators::pcap_record_header(t, static_cast<std::uint32_t>(size));
-  auto* d = static_cast<pcap_dumper_t*>(dumper_);
-  pcap_dump(reinterpret_cast<u_char*>(d), &h, frame_.data());
+  if (!file_->dump(h, frame_.data())) return false;
   ++written_[static_cast<int>(dir)];
-  return !options_.flush_each_frame || pcap_dump_flush(d) == 0;
+  return !options_.flush_each_frame || file_->flush();
 }
 
 bool PcapWriter::write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir) {
-  if (!dumper_) return false;
+  if (!file_->is_open() || !file_->ok()) return false;
   if (pdu.size() > kMaxPdu) {
     ++refused_;
     return false;
@@ -76,7 +54,7 @@ bool PcapWriter::write(std::span<const std::uint8_t> pdu, SimTime t, Direction d
 }
 
 bool PcapWriter::write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir) {
-  if (!dumper_) return false;
+  if (!file_->is_open() || !file_->ok()) return false;
   if (frame.size() > frame_.size()) {
     ++refused_;
     return false;
@@ -85,20 +63,13 @@ bool PcapWriter::write_frame(std::span<const std::uint8_t> frame, SimTime t, Dir
   return emit(frame.size(), t, dir);
 }
 
-bool PcapWriter::flush() {
-  return dumper_ && pcap_dump_flush(static_cast<pcap_dumper_t*>(dumper_)) == 0;
-}
+bool PcapWriter::flush() { return file_->flush(); }
 
-void PcapWriter::close() {
-  if (dumper_) {
-    pcap_dump_flush(static_cast<pcap_dumper_t*>(dumper_));
-    pcap_dump_close(static_cast<pcap_dumper_t*>(dumper_));  // closes the FILE too
-    dumper_ = nullptr;
-  }
-  if (pcap_) {
-    pcap_close(static_cast<pcap_t*>(pcap_));
-    pcap_ = nullptr;
-  }
-}
+bool PcapWriter::close() { return file_->close(); }
+
+bool PcapWriter::is_open() const { return file_->is_open(); }
+bool PcapWriter::ok() const { return file_->ok(); }
+std::string PcapWriter::error() const { return file_->error(); }
+std::string PcapWriter::part_path() const { return file_->part_path(); }
 
 }  // namespace omnitwin::ethercat

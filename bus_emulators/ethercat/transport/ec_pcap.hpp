@@ -10,22 +10,32 @@
 //
 // Written through libpcap (pcap_open_dead_with_tstamp_precision + pcap_dump_fopen) with
 // nanosecond timestamps taken from SimTime (the file gets the nanosecond pcap magic), so the
-// records line up with the simulated timeline. Buffered (a 64 KiB stdio buffer by default;
-// one EtherCAT cycle is one or two records): the file is valid after every flush() and after
-// close() or destruction; the file header is flushed when it is opened, so an empty capture
-// is valid too. A run that must survive SIGKILL sets flush_each_frame; SIGINT/SIGTERM end the
-// run normally and the destructor closes the file (as bus_emulators/can/can_pcap).
+// records line up with the simulated timeline. The capture is written as DIR/.NAME.part and
+// renamed to DIR/NAME by close() (or the destructor) only when every write succeeded
+// (bus_emulators/pcap_record: PcapFile); a stale DIR/NAME is removed at open. Buffered (a
+// 64 KiB stdio buffer by default; one EtherCAT cycle is one or two records): the .part file
+// is valid after every flush(); the file header is flushed when it is opened, so an empty
+// capture is valid too. A run that must survive SIGKILL sets flush_each_frame (or flushes
+// per tick) and finds the capture in the .part file; SIGINT/SIGTERM end the run normally and
+// the destructor closes and renames it (as bus_emulators/can/can_pcap).
 //
 // write() and flush() never throw and allocate nothing (the record buffer is a member), so the
-// cyclic path may call them; a full stdio buffer costs one write(2).
+// cyclic path may call them; a full stdio buffer costs one write(2). A write error (a full
+// disk) is a status: write() and flush() return false from then on, ok()/error() say why,
+// and close() removes the .part file, so that DIR/NAME stays absent.
 #pragma once
 
 #include "bus_emulators/ethercat/ec_frame.hpp"
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
+
+namespace omnitwin::bus_emulators {
+class PcapFile;
+}
 
 namespace omnitwin::ethercat {
 
@@ -44,7 +54,8 @@ class PcapWriter {
     std::size_t buffer_bytes = 64 * 1024;
   };
 
-  // Creates/truncates `path`; throws std::runtime_error naming the path on failure.
+  // Creates `path`'s .part file (removing a stale `path`); throws std::runtime_error naming
+  // `path` on failure.
   explicit PcapWriter(const std::string& path);
   PcapWriter(const std::string& path, Options options);
   ~PcapWriter();
@@ -53,14 +64,22 @@ class PcapWriter {
 
   // Appends one PDU as an Ethernet frame stamped t [ns] (see the file comment for the
   // addresses). Returns false once closed, for a PDU over kMaxPdu bytes (counted in
-  // refused()), or when flushing (flush_each_frame) failed. RT-safe.
+  // refused()), or when writing or flushing failed (then and from then on). RT-safe.
   bool write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir);
   // Appends a whole Ethernet frame (header included) as it is, padded to 60 bytes if shorter.
   bool write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir);
-  // Hands buffered records to the kernel; the file is valid afterwards. false on an I/O error.
+  // Hands buffered records to the kernel; the .part file is valid afterwards. false on an
+  // I/O error (kept in error()).
   bool flush();
-  void close();
-  bool is_open() const { return dumper_ != nullptr; }
+  // Flushes and closes; renames the .part file to path() when every write succeeded, else
+  // removes it. Idempotent. True when path() now holds the complete capture.
+  bool close();
+  bool is_open() const;
+  // false once a write, flush, sync or the final rename failed; error() then names the file
+  // and the system's reason ("" while ok). Both stay readable after close().
+  bool ok() const;
+  std::string error() const;
+  std::string part_path() const;  // where the capture is until close()
 
   std::uint64_t written() const { return written_[0] + written_[1]; }
   std::uint64_t written(Direction d) const { return written_[static_cast<int>(d)]; }
@@ -74,8 +93,7 @@ class PcapWriter {
 
   std::string path_;
   Options options_;
-  void* pcap_ = nullptr;    // pcap_t*, opaque so users need not include <pcap.h>
-  void* dumper_ = nullptr;  // pcap_dumper_t*
+  std::unique_ptr<bus_emulators::PcapFile> file_;  // opaque, so users need not include <pcap.h>
   std::array<std::uint8_t, kEthHeaderSize + kMaxPdu> frame_{};
   std::uint64_t written_[2] = {0, 0};
   std::uint64_t refused_ = 0;

@@ -2,17 +2,21 @@
 // (link type Ethernet, nanosecond timestamps from SimTime, the out frame from the master MAC
 // to broadcast, the returned frame with the marked source, padding to 60 bytes, raw frames
 // kept as they are), the file being valid after flush() while still open and after
-// destruction, and tshark decoding a written session as EtherCAT with the right command names
-// and no malformed packets.
+// destruction, the .part file holding the capture until close() renames it, a full disk
+// leaving no file under the final name and an error naming it, and tshark decoding a written
+// session as EtherCAT with the right command names and no malformed packets.
 #include "bus_emulators/ethercat/transport/ec_pcap.hpp"
 
+#include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/support/temp_dir.hpp"
 
 #include <gtest/gtest.h>
 #include <pcap/pcap.h>
 
 #include <array>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -140,14 +144,62 @@ TEST(EcPcap, FileIsValidAfterEveryFlushWhileOpen) {
   TempDir dir("ec-pcap");
   const auto path = dir / "c.pcap";
   PcapWriter w(path.string());
-  EXPECT_TRUE(read_capture(path).empty());  // header already on disk
+  const std::string part = w.part_path();
+  EXPECT_TRUE(read_capture(part).empty());  // header already on disk
   const auto p = pdu({{Cmd::fprd, 0x1001, 0x0130, 2}});
   for (int i = 0; i < 10; ++i) w.write(p, i * 1'000'000, Direction::out);
   ASSERT_TRUE(w.flush());
-  EXPECT_EQ(read_capture(path).size(), 10u);
+  EXPECT_EQ(read_capture(part).size(), 10u);
   for (int i = 0; i < 5; ++i) w.write(p, 20'000'000 + i, Direction::back);
   ASSERT_TRUE(w.flush());
-  EXPECT_EQ(read_capture(path).size(), 15u);
+  EXPECT_EQ(read_capture(part).size(), 15u);
+}
+
+TEST(EcPcap, FinalNameAppearsOnlyOnClose) {
+  TempDir dir("ec-pcap");
+  const auto path = dir / "bus-ethercat.pcap";
+  std::filesystem::path part;
+  {
+    PcapWriter w(path.string());
+    part = w.part_path();
+    EXPECT_EQ(part, dir / ".bus-ethercat.pcap.part");
+    w.write(pdu({{Cmd::brd, 0, 0x0130, 2}}), 1, Direction::out);
+    ASSERT_TRUE(w.flush());
+    EXPECT_FALSE(std::filesystem::exists(path));
+    EXPECT_EQ(read_capture(part).size(), 1u);
+  }  // the destructor closes and renames
+  EXPECT_FALSE(std::filesystem::exists(part));
+  EXPECT_EQ(read_capture(path).size(), 1u);
+  // A new writer removes the old capture at once: it must not pass for the new run's.
+  PcapWriter again(path.string());
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_TRUE(again.close());
+  EXPECT_TRUE(again.ok());
+  EXPECT_TRUE(read_capture(path).empty());
+}
+
+// A 64 KiB tmpfs fills after about a thousand 60-byte frames: a disk that is full. The
+// writer buffers, so the failure shows at a flush; from then on nothing is written.
+TEST(EcPcap, AFullDiskLeavesNoFinalFileAndAnErrorNamingIt) {
+  omnitwin::testing::SmallTmpfs disk("64k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const auto path = disk / "bus-ethercat.pcap";
+  PcapWriter::Options o;
+  o.buffer_bytes = 4096;
+  PcapWriter w(path.string(), o);
+  const auto p = pdu({{Cmd::lrw, 0, 0, 12}});
+  int ticks = 0;
+  for (bool ok = true; ok && ticks < 100'000; ++ticks) ok = w.write(p, ticks, Direction::out) && w.flush();
+  ASSERT_LT(ticks, 100'000) << "the full disk was never noticed";
+  EXPECT_FALSE(w.ok());
+  EXPECT_FALSE(w.write(p, 0, Direction::back));
+  EXPECT_FALSE(w.flush());
+  EXPECT_NE(w.error().find(path.string()), std::string::npos) << w.error();
+  EXPECT_NE(w.error().find(std::strerror(ENOSPC)), std::string::npos) << w.error();
+  EXPECT_FALSE(w.close());
+  EXPECT_FALSE(std::filesystem::exists(path));
+  EXPECT_FALSE(std::filesystem::exists(w.part_path()));
+  EXPECT_NE(w.error(), "");
 }
 
 TEST(EcPcap, FlushEachFrameWritesThroughWithoutFlushCalls) {
@@ -157,7 +209,7 @@ TEST(EcPcap, FlushEachFrameWritesThroughWithoutFlushCalls) {
   o.flush_each_frame = true;
   PcapWriter w(path.string(), o);
   w.write(pdu({{Cmd::brd, 0, 0x0130, 2}}), 1, Direction::out);
-  EXPECT_EQ(read_capture(path).size(), 1u);
+  EXPECT_EQ(read_capture(w.part_path()).size(), 1u);
 }
 
 TEST(EcPcap, OpeningAMissingFolderThrowsNamingThePath) {
