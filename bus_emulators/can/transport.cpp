@@ -60,9 +60,11 @@ void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
     bad(spec, "'" + t.name + "' is not a numeric IPv4 or IPv6 multicast address");
   }
   t.port = kPythonCanUdpPort;
-  if (!port.empty()) {
+  if (port == "0") {
+    t.port = 0;  // a port of its own, chosen when the transport opens (spec() names it)
+  } else if (!port.empty()) {
     const auto p = bus_emulators::parse_port(port);
-    if (!p) bad(spec, "port must be 1..65535");
+    if (!p) bad(spec, "port must be 1..65535, or 0 for a free one");
     t.port = *p;
   }
 

@@ -5,7 +5,8 @@
 //   udp:GROUP[:PORT][?OPTIONS]       UDP multicast, wire-compatible with python-can's
 //   udp:[GROUP6][:PORT][?OPTIONS]      `udp_multicast` interface (msgpack, see can_msgpack.hpp)
 //                                    IPv4 group in 224.0.0.0/4, IPv6 group in ff00::/8 (in
-//                                    brackets); PORT defaults to 43113. OPTIONS, '&'-separated:
+//                                    brackets); PORT defaults to 43113 (0: a port of
+//                                    its own, chosen at open; spec() names it). OPTIONS, '&'-separated:
 //                                    ttl=N (IPv4 TTL / IPv6 hop limit, default 1 as python-can),
 //                                    iface=NAME (interface to join and send on; default: the
 //                                    kernel's choice, as python-can), own=1 (also receive the

@@ -66,7 +66,11 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
     fail(spec_, "socket");
   }
   try {
-    set_opt(rx_fd_, SOL_SOCKET, SO_REUSEADDR, 1, spec_, "SO_REUSEADDR");  // share the port (python-can does too)
+    // Share the port (python-can does too). Port 0 asks for a port nobody holds: the bind
+    // then happens without SO_REUSEADDR, so the kernel's choice cannot be a port another
+    // socket shares, and the option is set afterwards so the peer can join it.
+    const bool own_port = spec_.port == 0;
+    if (!own_port) set_opt(rx_fd_, SOL_SOCKET, SO_REUSEADDR, 1, spec_, "SO_REUSEADDR");
     if (spec_.ipv6) {
       auto& g = reinterpret_cast<sockaddr_in6&>(group_);
       g.sin6_family = AF_INET6;
@@ -78,6 +82,7 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
       const int off = 0;  // best effort: older kernels lack IPV6_MULTICAST_ALL
       ::setsockopt(rx_fd_, IPPROTO_IPV6, IPV6_MULTICAST_ALL, &off, sizeof off);
       if (::bind(rx_fd_, reinterpret_cast<sockaddr*>(&group_), group_len_) != 0) fail(spec_, "bind");
+      if (own_port) take_bound_port();
       ipv6_mreq mreq{};
       mreq.ipv6mr_multiaddr = g.sin6_addr;
       mreq.ipv6mr_interface = ifindex;
@@ -97,6 +102,7 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
       group_len_ = sizeof(sockaddr_in);
       set_opt(rx_fd_, IPPROTO_IP, IP_MULTICAST_ALL, 0, spec_, "IP_MULTICAST_ALL");
       if (::bind(rx_fd_, reinterpret_cast<sockaddr*>(&group_), group_len_) != 0) fail(spec_, "bind");
+      if (own_port) take_bound_port();
       ip_mreqn mreq{};
       mreq.imr_multiaddr = g.sin_addr;
       mreq.imr_ifindex = static_cast<int>(ifindex);
@@ -148,6 +154,22 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
 // the kernel neither queues them nor wakes us for them. A UDP socket's filter sees the packet
 // from the UDP header on (offset 0 = source port); SKF_NET_OFF reaches the IP header. Best
 // effort: without it (too many addresses for 8-bit jumps, or refused) is_own() still drops them.
+// After a bind to port 0: the port the kernel chose becomes the group's port (the one sent
+// to and named by spec()), and the receive socket is opened for sharing from now on.
+void UdpTransport::take_bound_port() {
+  sockaddr_storage bound{};
+  socklen_t len = sizeof bound;
+  if (::getsockname(rx_fd_, reinterpret_cast<sockaddr*>(&bound), &len) != 0) fail(spec_, "getsockname");
+  const std::uint16_t port = spec_.ipv6 ? reinterpret_cast<sockaddr_in6&>(bound).sin6_port
+                                        : reinterpret_cast<sockaddr_in&>(bound).sin_port;
+  spec_.port = ntohs(port);
+  if (spec_.ipv6)
+    reinterpret_cast<sockaddr_in6&>(group_).sin6_port = port;
+  else
+    reinterpret_cast<sockaddr_in&>(group_).sin_port = port;
+  set_opt(rx_fd_, SOL_SOCKET, SO_REUSEADDR, 1, spec_, "SO_REUSEADDR");
+}
+
 void UdpTransport::attach_own_filter() {
   std::vector<sock_filter> prog;
   const auto stmt = [&](std::uint16_t code, std::uint32_t k) { prog.push_back(BPF_STMT(code, k)); };

@@ -67,6 +67,7 @@ class UdpTransport final : public Transport {
                                         // python-can reads, so an oversized datagram shows as truncated
   bool refill();  // one recvmmsg into the batch; false when nothing came (or an error)
   bool is_own(const sockaddr_storage& from) const;
+  void take_bound_port();
   void attach_own_filter();
   // Waits (bounded) for send-buffer room after EAGAIN/ENOBUFS; false when the waits are spent.
   bool wait_for_room(int& waits);

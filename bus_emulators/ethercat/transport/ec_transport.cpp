@@ -30,9 +30,11 @@ void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
   if (host.empty()) bad(spec, "empty host");
   t.name = std::string(host);
   t.port = kUdpPort;
-  if (!port.empty()) {
+  if (port == "0") {
+    t.port = 0;  // the slaves' side binds a free port (UdpTransport::local_port names it)
+  } else if (!port.empty()) {
     const auto p = bus_emulators::parse_port(port);
-    if (!p) bad(spec, "port must be 1..65535");
+    if (!p) bad(spec, "port must be 1..65535, or 0 for a free one (the slaves' side)");
     t.port = *p;
   }
 }

@@ -39,6 +39,11 @@ UdpTransport::UdpTransport(const TransportSpec& spec, Role role) : spec_(spec), 
     fd_ = -1;
     throw TransportError(m);
   };
+  if (role_ == Role::master && spec_.port == 0) {
+    ::close(fd_);
+    fd_ = -1;
+    throw TransportError(fmt::format("{}: a master needs the slaves' port (0 is for the slaves' side)", name));
+  }
   if (role_ == Role::slaves) {
     if (::bind(fd_, reinterpret_cast<const sockaddr*>(&peer_), peer_len_) != 0) fail("bind");
     peer_ = {};
