@@ -66,6 +66,14 @@ class BusNetwork {
   virtual void open_pcap(const std::string& path) = 0;
   // Pushes buffered capture records to the kernel (once per tick).
   virtual void flush_pcap() = 0;
+  // Realtime supervision: whether a running master must be sending now. A master that has
+  // stopped its bus on purpose (CAN: NMT stop to all nodes) may fall silent. Real-time safe.
+  virtual bool master_must_talk() const { return true; }
+  // Ends the capture: complete, it gets its final name. Returns "" or why it is incomplete
+  // (a write failed: it is then not under its final name). Idempotent; not real-time safe.
+  virtual std::string close_pcap() = 0;
+  // "" while every capture write has succeeded, else why one failed. Real-time safe.
+  virtual std::string pcap_error() const = 0;
   // Hands frames batched for the master to the transport (lockstep: before each grant).
   virtual void flush_transport() = 0;
 

@@ -46,6 +46,12 @@ bool is_start_all(const can::Frame& f) {
          f.data[1] == 1;
 }
 
+// An NMT command to all nodes (0x000 [00 cmd]; cmd 1 start, 2 stop).
+constexpr std::uint8_t kNmtStop = 2;
+bool is_nmt_all(const can::Frame& f) {
+  return f.id == 0 && !f.extended && f.kind == can::FrameKind::data && f.dlc == 2 && f.data[0] == 0;
+}
+
 }  // namespace
 
 OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
@@ -92,6 +98,18 @@ void OmniCanNetwork::open_pcap(const std::string& path) {
   can::PcapWriter::Options o;
   o.flush_each_packet = false;  // flushed once per master tick (flush_pcap)
   pcap_ = std::make_unique<can::PcapWriter>(path, o);
+}
+
+// The capture gets its final name only if every record reached it.
+std::string OmniCanNetwork::close_pcap() {
+  if (!pcap_ || !pcap_->is_open()) return "";
+  pcap_->close();
+  return pcap_error();
+}
+
+std::string OmniCanNetwork::pcap_error() const {
+  if (!pcap_ || pcap_->ok()) return "";
+  return fmt::format("{} left incomplete: {}", pcap_->path(), pcap_->error());
 }
 
 void OmniCanNetwork::advance(SimTime t) { bus_.advance(t); }
@@ -163,6 +181,7 @@ void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const 
   if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
   if (sender == kFar) {
     if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
+    if (is_nmt_all(f)) bus_stopped_ = f.data[1] == kNmtStop;
     return;
   }
   // A slave's frame reaches the master (and anyone else on the transport) when it completes.

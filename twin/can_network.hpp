@@ -51,15 +51,19 @@ class OmniCanNetwork final : public BusNetwork {
   ~OmniCanNetwork() override;
 
   const char* name() const override { return "can"; }
-  std::string master_iface() const override { return s_.bus.can.transport; }
+  std::string master_iface() const override { return transport_->spec(); }  // as opened (a port 0 named)
 
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
   // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
-  // tick), and the file is closed with the network, so SIGINT/SIGTERM leave it complete.
+  // tick), and close_pcap() (the run's end) closes it, so SIGINT/SIGTERM leave it complete.
   void open_pcap(const std::string& path) override;
   void flush_pcap() override {
     if (pcap_) pcap_->flush();
   }
+  std::string close_pcap() override;
+  std::string pcap_error() const override;
+  // Not after an NMT stop to all nodes seen on the wire (from anyone), until an NMT start.
+  bool master_must_talk() const override { return !bus_stopped_; }
   // Hands the batched frames to the transport, all at once. In lockstep the slaves' frames
   // are batched (the master reads them only after its grant), so this must run before
   // frames_to_transport() goes into a grant (the run calls it just before); nothing is
@@ -145,6 +149,7 @@ class OmniCanNetwork final : public BusNetwork {
   bool batch_ = false;               // lockstep: slave frames wait in pending_ for flush_transport()
   std::vector<can::TimedFrame> pending_;
   std::uint64_t from_transport_ = 0;
+  bool bus_stopped_ = false;  // the last NMT command to all nodes was stop
   std::uint64_t lost_frames_ = 0;
   std::uint64_t send_failures_ = 0;
   std::uint64_t refused_from_far_ = 0;  // frames from the transport the wire's queue refused

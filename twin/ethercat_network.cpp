@@ -14,6 +14,7 @@
 #include "bus_emulators/ethercat/ec_esc.hpp"
 #include "bus_emulators/ethercat/transport/ec_pcap.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
+#include "bus_emulators/ethercat/transport/ec_transport_udp.hpp"
 #include "bus_emulators/ethercat/transport/ec_veth.hpp"
 
 namespace omnitwin::twin {
@@ -92,7 +93,10 @@ void EthercatNetwork::open_transport(const Scenario& s) {
   std::string spec = spec_.transport;
   const bool lockstep = s.clock == ClockMode::lockstep;
   batch_ = lockstep;
-  if (spec == "auto") spec = ethercat::VethPair::unavailable_reason() ? "udp:127.0.0.1:34980" : "veth";
+  // auto: a veth pair of its own (as root), else UDP on loopback; in lockstep on a free port
+  // so that concurrent runs never share a segment (realtime keeps the documented port).
+  if (spec == "auto")
+    spec = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : "udp:127.0.0.1:34980");
   if (spec == "veth") {
     veth_ = std::make_unique<ethercat::VethPair>();
     transport_spec_ = "raw:" + veth_->b();
@@ -105,9 +109,27 @@ void EthercatNetwork::open_transport(const Scenario& s) {
     master_iface_ = spec;
   }
   transport_ = ethercat::open_transport(transport_spec_, ethercat::Role::slaves);
+  // A UDP segment on port 0: the master is told the port the slaves' socket was given.
+  if (const auto* udp = dynamic_cast<const ethercat::UdpTransport*>(transport_.get()); udp) {
+    ethercat::TransportSpec t = ethercat::parse_transport_spec(transport_spec_);
+    t.port = udp->local_port();
+    master_iface_ = t.canonical();
+  }
 }
 
 void EthercatNetwork::open_pcap(const std::string& path) { pcap_ = std::make_unique<ethercat::PcapWriter>(path); }
+
+// The capture gets its final name only if every record reached it.
+std::string EthercatNetwork::close_pcap() {
+  if (!pcap_ || !pcap_->is_open()) return "";
+  pcap_->close();
+  return pcap_error();
+}
+
+std::string EthercatNetwork::pcap_error() const {
+  if (!pcap_ || pcap_->ok()) return "";
+  return fmt::format("{} left incomplete: {}", pcap_->path(), pcap_->error());
+}
 
 void EthercatNetwork::flush_pcap() {
   if (pcap_) pcap_->flush();

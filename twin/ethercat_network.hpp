@@ -62,6 +62,8 @@ class EthercatNetwork final : public BusNetwork {
 
   void open_pcap(const std::string& path) override;
   void flush_pcap() override;
+  std::string close_pcap() override;
+  std::string pcap_error() const override;
   void flush_transport() override;
 
   void advance(SimTime t) override;

@@ -25,6 +25,7 @@
 #include "twin/experiment.hpp"
 #include "twin/junit.hpp"
 #include "twin/progress.hpp"
+#include "twin/records.hpp"
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
@@ -35,14 +36,18 @@ using namespace omnitwin::twin;
 
 namespace {
 
-// The flags a signal handler may set. The first SIGINT/SIGTERM ends the run (records
-// closed); the video of the part recorded is still rendered, unless a signal comes while it
-// renders, which finalises the frames so far.
+// The flags a signal handler may set (installed before anything else in main, so no phase
+// is without them). The first SIGINT/SIGTERM ends the run (records closed); the video of the
+// part recorded is still rendered, unless a signal comes while it renders, which finalises
+// the frames so far. Whatever the phase, a signal makes the exit code 3 and metrics.json say
+// `"interrupted": true` with the phase; further signals only hurry, they never cut a write.
 std::atomic<bool> g_interrupt{false};
 std::atomic<bool> g_rendering{false};
 std::atomic<bool> g_render_stop{false};
+std::atomic<int> g_signals{0};  // how many arrived (outputs: a signal during video/report)
 
 void on_signal(int) {
+  g_signals.fetch_add(1);
   if (g_rendering.load()) g_render_stop.store(true);
   g_interrupt.store(true);
 }
@@ -93,6 +98,9 @@ bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
   if (!plan.video && !plan.report) return true;
   if (plan.video)
     std::cout << "  rendering the video (Ctrl-C stops it and keeps the frames so far)...\n" << std::flush;
+  // A signal that ended the run already asked to stop; the rendering of the part recorded
+  // still goes ahead, and a new signal stops it.
+  g_render_stop.store(false);
   g_rendering.store(true);
   const OutputsResult o = make_run_outputs(run_dir, plan, &g_render_stop);
   g_rendering.store(false);
@@ -102,6 +110,22 @@ bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
   if (!o.report.empty()) std::cout << "  " << o.report << "\n";
   for (const std::string& e : o.errors) std::cerr << "omnitwin: " << e << "\n";
   return o.errors.empty();
+}
+
+// metrics.json of a run that ended before a signal came while its video or report was
+// made: `interrupted` becomes true, with the phase, and the verdict is no longer a pass.
+void mark_interrupted_after_run(const std::string& run_dir) {
+  const fs::path file = fs::path(run_dir) / "metrics.json";
+  std::ifstream in(file);
+  nlohmann::json m = nlohmann::json::parse(in, nullptr, false);
+  if (!m.is_object()) return;
+  m["interrupted"] = true;
+  m["interrupted_phase"] = "outputs";
+  try {
+    write_json_atomic(file.string(), m);
+  } catch (const std::exception& e) {
+    std::cerr << "omnitwin: " << e.what() << "\n";
+  }
 }
 
 std::vector<Override> collect_overrides(const RunArgs& a) {
@@ -192,7 +216,15 @@ int cmd_run(const RunArgs& a) {
       std::cout << fmt::format("  DDS: {} states published, {} dropped, {} events\n", st.published, st.dropped,
                                st.events);
     }
+    const int signals_in_run = g_signals.load();
     const bool outputs_ok = make_outputs(r.out_dir, output_plan(a, s));
+    // A signal after the run's end (video, report) is an interruption too: say so in
+    // metrics.json and end with exit 3, as for one during the run.
+    if (!r.interrupted && g_signals.load() > signals_in_run) {
+      mark_interrupted_after_run(r.out_dir);
+      std::cout << "  INTERRUPTED while making the video or the report (the run itself had ended)\n";
+      return 3;
+    }
     return r.exit_code == 0 && !outputs_ok ? 3 : r.exit_code;
   } catch (const ScenarioError& e) {
     std::cerr << "omnitwin: " << e.what() << "\n";
@@ -399,6 +431,8 @@ void add_output_flags(CLI::App* cmd, RunArgs& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // First of all: a signal in any later phase (even while parsing) is one we handle.
+  install_signal_handlers();
   spdlog::set_level(spdlog::level::warn);
   mju_user_warning = mujoco_warning;
   mju_user_error = mujoco_error;
@@ -484,11 +518,11 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForAllHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    app.exit(e);
+    // One line, as every other bad input: what is wrong and where to look.
+    std::cerr << "omnitwin: " << e.what() << " (omnitwin " << (app.get_subcommands().empty() ? "" : app.get_subcommands().front()->get_name() + " ") << "--help)\n";
     return 2;
   }
   if (verbose) spdlog::set_level(spdlog::level::info);
-  install_signal_handlers();
 
   try {
     if (*run) return cmd_run(ra);

@@ -72,6 +72,7 @@ bool MasterProcess::wait(std::chrono::milliseconds timeout) {
 void MasterProcess::stop(std::chrono::milliseconds grace) {
   if (!running()) return;
   kill(pid_, SIGTERM);
+  kill(pid_, SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
   if (wait(grace)) return;
   kill(pid_, SIGKILL);
   int status = 0;

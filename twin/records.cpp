@@ -139,10 +139,16 @@ void CsvWriter::close() {
 
 void write_text_atomic(const std::string& path, std::string_view text) {
   const std::string temp = temp_path_for(path);
-  CheckedFile f(temp, "wb");
-  f.write(text);
-  f.close();
-  rename_checked(temp, path);
+  try {
+    CheckedFile f(temp, "wb");
+    f.write(text);
+    f.close();
+    rename_checked(temp, path);
+  } catch (const std::runtime_error&) {
+    // Nothing half-written is left behind, not even under the temporary name.
+    std::remove(temp.c_str());
+    throw;
+  }
 }
 
 void write_json_atomic(const std::string& path, const nlohmann::json& j) {
@@ -152,7 +158,15 @@ void write_json_atomic(const std::string& path, const nlohmann::json& j) {
 // ---------------------------------------------------------------------------------------
 // EventLog
 
-EventLog::EventLog(const std::string& path) : file_(path, "wb") {}
+EventLog::EventLog(const std::string& path) : path_(path), file_(temp_path_for(path), "wb") {}
+
+EventLog::~EventLog() {
+  try {
+    close();
+  } catch (const std::exception& e) {
+    spdlog::warn("{}", e.what());
+  }
+}
 
 bool EventLog::log(double sim_time_s, std::string_view kind, std::string_view message) {
   std::string line = fmt::format("{:12.6f}  {:<10}  {}\n", sim_time_s, kind, message);
@@ -170,6 +184,13 @@ bool EventLog::log(double sim_time_s, std::string_view kind, std::string_view me
   return true;
 }
 
-void EventLog::close() { file_.close(); }
+void EventLog::close() {
+  if (!file_.is_open()) return;
+  // A log that lost lines keeps its temporary name: it is not the run's whole log.
+  const bool lost = file_.failed();
+  file_.close();
+  if (lost) throw std::runtime_error(fmt::format("'{}' left incomplete: a write failed", file_.path()));
+  rename_checked(file_.path(), path_);
+}
 
 }  // namespace omnitwin::twin

@@ -87,23 +87,30 @@ void write_text_atomic(const std::string& path, std::string_view text);
 void write_json_atomic(const std::string& path, const nlohmann::json& j);
 
 // The run's event log (DIR/events.log): one line per event, "%12.6f  %-10s  %s" (sim time
-// [s], kind, message), flushed per line so the log survives a crash. Written in place (not
-// via a temp file): it is meant to be read while a run is going.
+// [s], kind, message), flushed per line so the log survives a crash. Like every record it is
+// written as DIR/.events.log.part (read that one while a run is going) and renamed by close().
 class EventLog {
  public:
-  // Creates (truncates) the log file at `path`, normally DIR/events.log. Throws
+  // Creates (truncates) the temp file for `path`, normally DIR/events.log. Throws
   // std::runtime_error if it cannot.
   explicit EventLog(const std::string& path);
+  // Closes (and renames) if still open; errors are logged, not thrown.
+  ~EventLog();
+  EventLog(const EventLog&) = delete;
+  EventLog& operator=(const EventLog&) = delete;
 
   // Appends one event; newlines in `message` become spaces. Returns false when the write
   // failed (error() says why): events are logged from the cyclic path.
   bool log(double sim_time_s, std::string_view kind, std::string_view message);
   const std::string& error() const { return error_; }
+  // Closes and renames the temp file to its final name. Idempotent. If a write failed the
+  // temp file keeps its name, and this throws std::runtime_error.
   void close();
 
-  const std::string& path() const { return file_.path(); }
+  const std::string& path() const { return path_; }  // the final name
 
  private:
+  std::string path_;
   CheckedFile file_;
   std::string error_;
 };

@@ -30,6 +30,7 @@
 #include "twin/metrics.hpp"
 #include "twin/progress.hpp"
 #include "twin/records.hpp"
+#include "twin/run_directory.hpp"
 #include "twin/scheduler.hpp"
 
 namespace omnitwin::twin {
@@ -146,6 +147,9 @@ class PlatformRun {
   void on_physics_bus(SimTime t);
   void note_report(const simclock::MasterReport& r, SimTime t);
   void fail(std::string why);
+  void supervise_master(SimTime t);
+  void master_lost(SimTime t, std::string why);
+  std::vector<std::string> expected_records() const;
   controller::Pose2 bus_reference(SimTime t) const;
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
   // the first reason and stop the scheduler. Real-time safe on the success path.
@@ -197,6 +201,12 @@ class PlatformRun {
   simclock::MasterReport report_{};
   std::uint64_t tick_ = 0;
   SimTime master_stop_ns_ = -1;
+  // realtime supervision of the master process we started
+  std::uint64_t heard_frames_ = 0;   // frames from the transport at the last master tick
+  bool heard_master_ = false;        // a frame of the master's has arrived
+  int silent_periods_ = 0;           // control periods without one since
+  SimTime master_lost_ns_ = -1;
+  std::string master_lost_why_;
   std::array<double, 4> bus_setpoint_{};  // what the network last asked of each wheel [rad/s]
   double handshake_timeout_s_ = 10;
 };
@@ -238,16 +248,12 @@ void PlatformRun::fail(std::string why) {
 void PlatformRun::start_master() {
   const fs::path dir(o_.out_dir);
   const std::string cfg = (dir / "master.yaml").string();
-  {
-    std::ofstream f(cfg);
-    if (s_.bus.kind == BusKind::ethercat) {
-      const std::string platform = (dir / "master-platform.yaml").string();
-      write_text_atomic(platform, ethercat_platform_yaml(s_));
-      f << ethercat_master_config_yaml(s_, platform);
-    } else {
-      f << master_config_yaml(s_);
-    }
-    if (!f) throw std::runtime_error(fmt::format("cannot write {}", cfg));
+  if (s_.bus.kind == BusKind::ethercat) {
+    const std::string platform = (dir / "master-platform.yaml").string();
+    write_text_atomic(platform, ethercat_platform_yaml(s_));
+    write_text_atomic(cfg, ethercat_master_config_yaml(s_, platform));
+  } else {
+    write_text_atomic(cfg, master_config_yaml(s_));
   }
   std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
   if (s_.bus.kind == BusKind::ethercat) args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
@@ -261,7 +267,8 @@ void PlatformRun::start_master() {
   } else {
     args.insert(args.end(), {"--clock", "wall"});
   }
-  master_ = std::make_unique<MasterProcess>(master_program_, args, (dir / "master.log").string());
+  // Its output goes to DIR/.master.log.part, renamed to master.log once it has ended.
+  master_ = std::make_unique<MasterProcess>(master_program_, args, (dir / ".master.log.part").string());
   if (lockstep) {
     // The two processes strictly take turns: on one CPU each hand-over is a plain context
     // switch instead of a cross-CPU wake-up (3× cheaper per tick on this VM).
@@ -284,8 +291,14 @@ void PlatformRun::stop_master() {
   if (!master_) return;
   if (clock_server_) clock_server_->end(sched_.now());
   // The master exits on End (lockstep); in realtime it is told by SIGTERM.
-  if (!clock_server_ || !master_->wait(std::chrono::milliseconds(3000))) master_->stop(std::chrono::milliseconds(3000));
+  // A master already found lost gets a short grace: the run's end is not kept waiting on it.
+  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 ? 300 : 3000);
+  if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
+  const fs::path dir(o_.out_dir);
+  std::error_code ec;
+  fs::rename(dir / ".master.log.part", dir / "master.log", ec);
+  if (ec && error_.empty()) error_ = fmt::format("cannot rename {}: {}", (dir / ".master.log.part").string(), ec.message());
 }
 
 // One master tick in lockstep: the bus is run to t, the master is granted t with the count
@@ -296,7 +309,8 @@ void PlatformRun::on_master_bus(SimTime t) {
   net_->advance(t);
   net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
   net_->flush_pcap();  // once per tick: a kill loses at most one tick of capture
-  if (!clock_server_) return;  // realtime: the master keeps its own time
+  if (std::string why = net_->pcap_error(); !why.empty()) return fail(why);  // a full disk
+  if (!clock_server_) return supervise_master(t);  // realtime: the master keeps its own time
   const auto timeout = std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
   simclock::Grant g;
   g.tick = tick_++;
@@ -311,6 +325,39 @@ void PlatformRun::on_master_bus(SimTime t) {
     return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
                             net_->frames_from_transport(), net_->master_iface()));
   note_report(d.report, t);
+}
+
+// Realtime: the master is watched instead of met. Its process must live, and once it has
+// been heard its frames must keep coming (the masters send every control period); before
+// its first frame it has handshake_timeout to start. Real-time safe but for waitpid().
+void PlatformRun::supervise_master(SimTime t) {
+  if (!master_ || master_lost_ns_ >= 0) return;
+  if (!master_->running()) return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
+  const std::uint64_t rx = net_->frames_from_transport();
+  if (rx != heard_frames_) {
+    heard_frames_ = rx;
+    heard_master_ = true;
+    silent_periods_ = 0;
+    return;
+  }
+  // A master that stopped its bus on purpose may be silent (it is still watched for its end).
+  if (!net_->master_must_talk()) {
+    silent_periods_ = 0;
+    return;
+  }
+  const int limit = s_.bus.supervision.silent_periods;
+  if (heard_master_ && ++silent_periods_ >= limit)
+    return master_lost(t, fmt::format("no frame from the master for {} control periods ({:.0f} ms): it stopped answering",
+                                      limit, limit * s_.controller.period * 1e3));
+  if (!heard_master_ && ns_to_seconds(t) > handshake_timeout_s_)
+    master_lost(t, fmt::format("no frame from the master within {:.1f} s of its start", handshake_timeout_s_));
+}
+
+void PlatformRun::master_lost(SimTime t, std::string why) {
+  master_lost_ns_ = t;
+  master_lost_why_ = why;
+  note(log_event(t, "master", "lost: " + why), *events_);
+  if (s_.bus.supervision.on_master_loss == SupervisionSpec::OnLoss::fail) fail("master lost: " + why);
 }
 
 void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
@@ -540,7 +587,10 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"path_origin_s", report_.path_origin_ns < 0 ? -1.0 : ns_to_seconds(report_.path_origin_ns)},
                    {"ticks", tick_},
                    {"clock", clock_server_ ? "sim" : "wall"},
-                   {"exit", master_ ? master_->describe_exit() : "not started"}};
+                   {"exit", master_ ? master_->describe_exit() : "not started"},
+                   {"lost", master_lost_ns_ >= 0},
+                   {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
+                   {"lost_reason", master_lost_why_}};
     // A master that keeps its own counters (bus ethercat) leaves them in master-stats.json.
     const fs::path stats = fs::path(o_.out_dir) / "master-stats.json";
     if (std::ifstream f(stats); f) {
@@ -566,8 +616,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
 }
 
 RunResult PlatformRun::execute() {
-  // Everything is built; only now does the run directory appear.
-  fs::create_directories(o_.out_dir);
+  // Everything is built and the directory prepared (run_scenario): the records begin.
   write_run_description();
   csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "trajectory.csv").string(), trajectory_header());
   bus_csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "bus.csv").string(), bus_header());
@@ -651,40 +700,84 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
             error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
                                          ex.failures.size())
                            : error_);
-  // The CSV is renamed only if every row reached it; otherwise the reason joins the metrics.
-  for (CsvWriter* w : {csv_.get(), bus_csv_.get()}) {
+  // A record is renamed only if everything reached it; otherwise the reason joins the metrics.
+  const auto close_record = [this](auto* w) {
     try {
-      w->close();
+      if (w) w->close();
     } catch (const std::exception& e) {
       if (error_.empty()) error_ = e.what();
     }
+  };
+  close_record(csv_.get());
+  close_record(bus_csv_.get());
+  close_record(events_.get());
+  if (on_bus()) {
+    if (std::string why = net_->close_pcap(); !why.empty() && error_.empty()) error_ = why;
   }
   if (!error_.empty()) r.metrics["error"] = error_;
+  if (interrupted) r.metrics["interrupted_phase"] = "run";
   r.metrics["expectations"] = ex.to_json();
   r.passed = ex.passed;
   r.error = error_;
-  write_json_atomic((fs::path(o_.out_dir) / "metrics.json").string(), r.metrics);
+  try {
+    write_json_atomic((fs::path(o_.out_dir) / "metrics.json").string(), r.metrics);
+  } catch (const std::exception& e) {
+    if (r.error.empty()) r.error = e.what();
+  }
+  // Whatever failed, the run says which records it could not write whole.
+  const RecordInventory inv = take_inventory(o_.out_dir, expected_records());
+  r.missing_records = inv.missing;
+  r.partial_records = inv.partial;
   if (o_.observer) o_.observer->on_end(r.metrics);
-  r.exit_code = cut_short || !error_.empty() ? 3 : (r.passed ? 0 : 1);
+  r.exit_code = cut_short || !r.error.empty() ? 3 : (r.passed ? 0 : 1);
   return r;
 }
 
-// Lockstep frames are for the master and the twin on this host (a third sender would break
-// the per-tick frame counts anyway): unless the UDP spec names a TTL they stay on the host
-// (ttl=0), which spares a network-device send per datagram (docs/benchmarks.md).
+// The records this run must leave (docs/run-directory.md), video and report aside.
+std::vector<std::string> PlatformRun::expected_records() const {
+  std::vector<std::string> names{"run.json", "platform.xml", "trajectory.csv", "bus.csv", "events.log", "metrics.json"};
+  if (on_bus()) names.push_back(fmt::format("bus-{}.pcap", net_->name()));
+  if (master_) names.push_back("master.log");
+  return names;
+}
+
+// Isolation: a lockstep run's frames are for its own master and twin only (a third sender
+// would break the per-tick frame counts, and a concurrent run would corrupt both). A UDP bus
+// in lockstep therefore gets a port of its own, chosen free when the twin opens it, and the
+// well-known python-can group is swapped for the lockstep group kLockstepGroup, so not even a
+// realtime run on the documented group and port can meet it. Unless the spec names a TTL the
+// frames stay on the host (ttl=0), which spares a network-device send per datagram
+// (docs/benchmarks.md). Realtime runs and `omnitwin twin` keep the scenario's spec.
+constexpr const char* kLockstepGroup = "239.74.164.1";
+
+std::string lockstep_can_spec(const std::string& given) {
+  const can::TransportSpec t = can::parse_transport_spec(given);
+  if (t.kind != can::TransportSpec::Kind::udp) return given;
+  const std::string group = !t.ipv6 && t.name == can::kPythonCanGroupV4 ? kLockstepGroup : t.name;
+  std::string spec = t.ipv6 ? fmt::format("udp:[{}]:0", group) : fmt::format("udp:{}:0", group);
+  const std::size_t q = given.find('?');
+  const std::string opts = q == std::string::npos ? std::string() : given.substr(q + 1);
+  spec += opts.empty() ? "?" : "?" + opts + "&";
+  if (opts.find("ttl=") == std::string::npos) return spec + "ttl=0";
+  return spec.substr(0, spec.size() - 1);
+}
+
 Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
   Scenario e = s;
-  std::string& spec = e.bus.can.transport;
   if (s.bus.kind != BusKind::can || s.clock != ClockMode::lockstep || external_master) return e;
-  if (!spec.starts_with("udp:") || spec.find("ttl=") != std::string::npos) return e;
-  spec += spec.find('?') == std::string::npos ? "?ttl=0" : "&ttl=0";
+  e.bus.can.transport = lockstep_can_spec(s.bus.can.transport);
   return e;
 }
 
 }  // namespace
 
 RunResult run_scenario(const Scenario& given, const RunOptions& options) {
-  const Scenario scenario = with_lockstep_transport(given, options.external_master);
+  Scenario scenario;
+  try {
+    scenario = with_lockstep_transport(given, options.external_master);
+  } catch (const can::TransportError& e) {
+    throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+  }
   const BusKind bus = scenario.bus.kind;
   if (bus != BusKind::direct && bus != BusKind::can && bus != BusKind::ethercat)
     throw RunSetupError(fmt::format(
@@ -713,6 +806,8 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
     }
     if (options.on_bus_ready) options.on_bus_ready(run->master_iface());
   }
+  // One run per directory: an earlier run's records are cleared, anyone else's are refused.
+  if (std::string why = prepare_run_directory(options.out_dir); !why.empty()) throw RunSetupError(why);
   return run->execute();
 }
 

@@ -57,6 +57,8 @@ struct RunResult {
   bool passed = false;        // expectations held
   bool interrupted = false;
   std::string error;          // why the run ended early (a record write failed…); "" if not
+  std::vector<std::string> missing_records;  // records absent at the end (names in the run dir)
+  std::vector<std::string> partial_records;  // records left only under ".NAME.part"
   std::string out_dir;
   nlohmann::json metrics;     // what metrics.json holds
 };

@@ -125,10 +125,23 @@ struct EthercatSpec {
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
 };
 
+// How a realtime run watches the master process it started (bus.supervision). Lockstep
+// needs none of this: there a master that stops answering misses its tick's handshake.
+struct SupervisionSpec {
+  // The master is lost when its process ends, or when no frame of its has arrived for this
+  // many control periods (counted from its first frame; before that, handshake_timeout).
+  int silent_periods = 50;
+  // fail: a lost master ends the run with exit 3. record: the run goes on to its end with
+  // the loss in events.log and metrics.json (master.lost, master.lost_at_s), so a scenario
+  // can expect the fault and judge the platform's reaction.
+  enum class OnLoss { fail, record } on_master_loss = OnLoss::fail;
+};
+
 struct BusSpec {
   BusKind kind = BusKind::direct;
   CanSpec can;
   EthercatSpec ethercat;
+  SupervisionSpec supervision;
 };
 
 // A scripted fault. wheel_slip acts on the physics; the others on the bus (bus: can or

@@ -868,6 +868,7 @@ TEST(OmniCanNetwork, PcapHoldsEveryFrameThatCompletedOnTheWire) {
   for (SimTime t = 10 * kMs; t < 60 * kMs; t += kPeriod) r.tick(t, {speed_command({5, 5, 5, 5})});
   r.finish(61 * kMs);
   r.net->flush_pcap();  // the run flushes once per master tick
+  EXPECT_EQ(r.net->close_pcap(), "");  // the run's end: the capture gets its final name
 
   const std::uint64_t frames = r.net->bus().stats().frames;
   EXPECT_GT(r.net->bus().stats().error_frames, 0u);

@@ -144,8 +144,10 @@ TEST_F(RecordsTest, JsonIsPrettyAndAtomic) {
 TEST_F(RecordsTest, EventLogLinesAndPerLineFlush) {
   EventLog log((dir_ / "events.log").string());
   log.log(1.5, "fault", "wheel 2 slips");
-  // Readable before close: every line is flushed.
-  EXPECT_EQ(read_all(dir_ / "events.log"), "    1.500000  fault       wheel 2 slips\n");
+  // Readable before close under its temporary name (every line is flushed); the final name
+  // appears only when the log is complete.
+  EXPECT_EQ(read_all(dir_ / ".events.log.part"), "    1.500000  fault       wheel 2 slips\n");
+  EXPECT_FALSE(fs::exists(dir_ / "events.log"));
   log.log(12.25, "expectation", "line one\nline two");
   log.close();
   EXPECT_EQ(read_all(dir_ / "events.log"),
@@ -178,9 +180,14 @@ TEST(RecordsFullDisk, RowAndLogReturnFalseAndTheCsvIsNeverPublished) {
     EXPECT_THROW(csv.close(), std::runtime_error);
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "t.csv"));
-  EventLog log("/dev/full");
-  EXPECT_FALSE(log.log(1.0, "start", "x"));
-  EXPECT_FALSE(log.error().empty());
+  std::filesystem::create_symlink("/dev/full", dir / ".events.log.part");
+  {
+    EventLog log((dir / "events.log").string());
+    EXPECT_FALSE(log.log(1.0, "start", "x"));
+    EXPECT_FALSE(log.error().empty());
+    EXPECT_THROW(log.close(), std::runtime_error);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "events.log"));
   std::filesystem::remove_all(dir);
 }
 
