@@ -171,6 +171,9 @@ void print_summary(const RunResult& r) {
   }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
+  for (const std::string& f : r.missing_records) std::cout << "  MISSING: " << f << " was not written\n";
+  for (const std::string& f : r.partial_records)
+    std::cout << "  PARTIAL: " << f << " is incomplete (left as ." << f << ".part)\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
   for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "bus-ethercat.pcap",

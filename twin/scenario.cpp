@@ -380,6 +380,16 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   read_number(f, "handshake_timeout", e.handshake_timeout, Bounds::positive());
 }
 
+// bus.supervision: how a realtime run watches the master it started.
+void read_supervision(const YamlField& f, SupervisionSpec& v) {
+  if (!f.exists()) return;
+  f.allow_keys({"silent_periods", "on_master_loss"});
+  read_integer(f, "silent_periods", v.silent_periods, Bounds::at_least(1));
+  if (f["on_master_loss"].exists())
+    v.on_master_loss = f["on_master_loss"].choice({"fail", "record"}) == "record" ? SupervisionSpec::OnLoss::record
+                                                                                  : SupervisionSpec::OnLoss::fail;
+}
+
 BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   BusSpec bus;
   if (!f.present()) return bus;
@@ -395,12 +405,14 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   if (!settings) return bus;
   if (bus.kind == BusKind::can) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
-                  "start_phase", "detect_every", "master", "seed", "handshake_timeout"});
+                  "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision"});
     read_can(f, bus.can);
+    read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
-                  "startup", "master", "seed", "handshake_timeout"});
+                  "startup", "master", "seed", "handshake_timeout", "supervision"});
     read_ethercat(f, bus.ethercat, scenario_file);
+    read_supervision(f["supervision"], bus.supervision);
   } else {
     f.allow_keys({"type"});
   }
