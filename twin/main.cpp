@@ -16,7 +16,9 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <mutex>
 #include <optional>
+#include <thread>
 
 #include "physics/platform_mjcf.hpp"
 #include "twin/clock.hpp"
@@ -265,6 +267,7 @@ struct CheckOptions {
   std::string out_root = "out/check";
   bool video = false;   // --video: render every run (off by default: CI time)
   bool report = true;   // each run's report.html and the index page
+  int jobs = 1;         // -j N: scenarios run at once
 };
 
 // One scenario's line of the check index (media/report/check_index.py).
@@ -279,8 +282,14 @@ nlohmann::json index_entry(const std::string& file, const std::string& run_dir, 
           {"exit_code", c.passed ? 0 : (c.error ? 2 : 1)}, {"failures", c.failures}, {"metrics", m}};
 }
 
-JunitCase check_one(const std::string& file, const CheckOptions& opt, std::map<std::string, std::string>& used,
-                    bool& bad_input, nlohmann::json& index) {
+// What the scenarios of one `check` share; guarded by `mutex` when they run in parallel.
+struct CheckShared {
+  std::mutex mutex;
+  std::map<std::string, std::string> used;  // scenario name -> its file (one run directory each)
+  bool bad_input = false;
+};
+
+JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShared& shared, nlohmann::json& entry) {
   const std::string out_root = opt.out_root;
   std::string run_dir;
   nlohmann::json metrics;
@@ -292,8 +301,11 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, std::map<s
     const Scenario s = load_scenario(file);
     c.name = s.name;
     // Each scenario gets its own run directory: two files with one name would overwrite.
-    if (const auto [it, fresh] = used.emplace(s.name, file); !fresh)
-      throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
+    {
+      const std::lock_guard lock(shared.mutex);
+      if (const auto [it, fresh] = shared.used.emplace(s.name, file); !fresh)
+        throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
+    }
     RunOptions o;
     o.out_dir = (fs::path(out_root) / s.name).string();
     o.interrupt = &g_interrupt;
@@ -311,18 +323,56 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, std::map<s
     if (r.interrupted) c.failures.push_back("interrupted");
     c.system_out = r.metrics.dump(2);
   } catch (const ScenarioError& e) {
-    c.error = true, bad_input = true;
+    c.error = true;
     c.failures.push_back(e.what());
   } catch (const RunSetupError& e) {
-    c.error = true, bad_input = true;
+    c.error = true;
     c.failures.push_back(file + ": " + e.what());
   } catch (const std::exception& e) {
     c.error = true;
     c.failures.push_back(std::string("run failed: ") + e.what());
   }
+  if (c.error && !c.failures.empty() && !c.failures.front().starts_with("run failed: ")) {
+    const std::lock_guard lock(shared.mutex);
+    shared.bad_input = true;
+  }
   c.time_s = (monotonic_ns() - t0) * 1e-9;
-  index.push_back(index_entry(file, run_dir, c, metrics));
+  entry = index_entry(file, run_dir, c, metrics);
   return c;
+}
+
+// Runs every file's scenario, `jobs` at a time (each lockstep run is isolated on its own
+// bus, so they cannot disturb each other); prints each verdict as it comes. Results keep
+// the files' order.
+std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const CheckOptions& opt, CheckShared& shared,
+                                  nlohmann::json& index) {
+  std::vector<JunitCase> cases(files.size());
+  std::vector<nlohmann::json> entries(files.size());
+  std::vector<bool> done(files.size(), false);
+  std::atomic<std::size_t> next{0};
+  std::mutex print;
+  const auto worker = [&] {
+    for (std::size_t i = next++; i < files.size() && !g_interrupt.load(); i = next++) {
+      JunitCase c = check_one(files[i], opt, shared, entries[i]);
+      const std::lock_guard lock(print);
+      std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
+      for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
+      std::cout << std::flush;
+      cases[i] = std::move(c);
+      done[i] = true;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 1; j < std::min<int>(opt.jobs, static_cast<int>(files.size())); ++j) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  std::vector<JunitCase> ran;
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    if (!done[i]) continue;  // not started: interrupted
+    ran.push_back(std::move(cases[i]));
+    index.push_back(std::move(entries[i]));
+  }
+  return ran;
 }
 
 int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
@@ -331,19 +381,12 @@ int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
     std::cerr << "omnitwin check: no scenario files under the given paths\n";
     return 2;
   }
-  std::vector<JunitCase> cases;
-  std::map<std::string, std::string> used;
-  bool bad_input = false;
-  int passed = 0, failed = 0;
+  CheckShared shared;
   nlohmann::json index = nlohmann::json::array();
-  for (const auto& f : files) {
-    if (g_interrupt.load()) break;
-    JunitCase c = check_one(f, opt, used, bad_input, index);
-    (c.passed ? passed : failed)++;
-    std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
-    for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
-    cases.push_back(std::move(c));
-  }
+  const std::vector<JunitCase> cases = run_checks(files, opt, shared, index);
+  int passed = 0, failed = 0;
+  for (const JunitCase& c : cases) (c.passed ? passed : failed)++;
+  const bool bad_input = shared.bad_input;
   // The index first: the summary stays the last line, where CI logs show it.
   std::string index_error;
   if (opt.report) {
@@ -477,6 +520,9 @@ int main(int argc, char** argv) {
   check->add_option("--out", co.out_root, "root of the run directories")->capture_default_str();
   check->add_flag("--video", co.video, "render every run's video.mp4 (off by default)");
   check->add_flag("--no-report", check_no_report, "no report.html per run and no index.html");
+  check->add_option("-j,--jobs", co.jobs, "run N scenarios at once (lockstep runs are isolated)")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
 
   std::string render_dir, render_out;
   VideoSpec rv;
