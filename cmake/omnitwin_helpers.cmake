@@ -3,7 +3,7 @@
 # omnitwin_sources(VAR DIR): the .cpp files of one source folder (not its tools/).
 function(omnitwin_sources var dir)
   file(GLOB _srcs CONFIGURE_DEPENDS "${dir}/*.cpp")
-  list(FILTER _srcs EXCLUDE REGEX ".*/main\\.cpp$")
+  list(FILTER _srcs EXCLUDE REGEX ".*/([a-z_]+_)?main\\.cpp$")  # programs, not library code
   set(${var} ${_srcs} PARENT_SCOPE)
 endfunction()
 

@@ -63,12 +63,19 @@ void mujoco_warning(const char* msg) { spdlog::warn("MuJoCo: {}", msg); }
   std::exit(3);
 }
 
+// The handlers, then the signals unblocked: the `omnitwin` launcher (launcher_main.cpp) holds them
+// blocked across exec, so one that came while the libraries loaded is delivered now.
 void install_signal_handlers() {
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  sigset_t held;
+  sigemptyset(&held);
+  sigaddset(&held, SIGINT);
+  sigaddset(&held, SIGTERM);
+  sigprocmask(SIG_UNBLOCK, &held, nullptr);
 }
 
 struct RunArgs {
@@ -100,6 +107,8 @@ bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
   if (!plan.video && !plan.report) return true;
   if (plan.video)
     std::cout << "  rendering the video (Ctrl-C stops it and keeps the frames so far)...\n" << std::flush;
+  // Say what is being made (flushed: a log piped to a file shows the phase it is in).
+  if (plan.report) std::cout << "  writing the report" << (plan.video ? " after the video" : "") << "...\n" << std::flush;
   // A signal that ended the run already asked to stop; the rendering of the part recorded
   // still goes ahead, and a new signal stops it.
   g_render_stop.store(false);
@@ -177,7 +186,7 @@ void print_summary(const RunResult& r) {
   for (const std::string& f : r.partial_records)
     std::cout << "  PARTIAL: " << f << " is incomplete (left as ." << f << ".part)\n";
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
-  std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n";
+  std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n" << std::flush;
   for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "bus-ethercat.pcap",
                         "master.log"})
     if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
