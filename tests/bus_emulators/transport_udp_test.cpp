@@ -117,7 +117,7 @@ TEST(UdpTransportSpec, ParsesGroupsPortsAndOptions) {
 }
 
 TEST(UdpTransportSpec, RejectsBadSpecsWithAReason) {
-  for (const char* bad : {"udp:10.0.0.1:43113", "udp:239.1.2.3:0", "udp:239.1.2.3:65536", "udp:239.1.2.3:x",
+  for (const char* bad : {"udp:10.0.0.1:43113", "udp:239.1.2.3:65536", "udp:239.1.2.3:x",
                           "udp:239.1.2.3:", "udp:[ff15::1", "udp:[fe80::1]:1", "udp:ff15::1:43113",
                           "udp:example.org:1", "udp:239.1.2.3:1?ttl=300", "udp:239.1.2.3:1?color=red",
                           "udp:239.1.2.3:1?ttl", "udp:[ff15::1]x"}) {
@@ -170,6 +170,24 @@ TEST(UdpTransport, OwnFramesOnlyWithOwnOption) {
   ASSERT_TRUE(r);
   EXPECT_EQ(r->frame, make_data(0x123, {9}));
   EXPECT_EQ(t->spec(), spec_v4(group_v4(2), port.port(), "?own=1"));
+}
+
+// Port 0: each transport gets a free port of its own, spec() names it, and a second
+// transport opened with that spec shares the bus (the master joins the twin's port), while
+// one opened on port 0 again does not hear it (isolation of concurrent lockstep runs).
+TEST(UdpTransport, PortZeroIsAFreePortOfItsOwnThatOthersCanJoin) {
+  auto a = open_transport(spec_v4(group_v4(3), 0));
+  auto b = open_transport(spec_v4(group_v4(3), 0));
+  const std::string named = a->spec();
+  ASSERT_TRUE(named.starts_with("udp:" + group_v4(3) + ":")) << named;
+  EXPECT_NE(named, spec_v4(group_v4(3), 0));
+  EXPECT_NE(named, b->spec());
+  auto joined = open_transport(named);
+  ASSERT_TRUE(joined->send(make_data(0x102, {7})));
+  auto r = receive_within(*a, 2s);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->frame, make_data(0x102, {7}));
+  EXPECT_FALSE(receive_within(*b, 200ms));
 }
 
 // A frame train with runs of equal-size datagrams, shorter ones closing runs, longer ones

@@ -1,0 +1,335 @@
+// Tests of the verdicts `omnitwin run` and `check` give when things go wrong around a run
+// (issue 19), each a reproducer run through the real CLI with the real master program:
+//  - isolation: concurrent lockstep CAN and EtherCAT runs all pass, with the trajectory of a
+//    run alone; `check -j 2` gives the verdicts and trajectories of `check`;
+//  - supervision: SIGKILL or SIGSTOP of the master in realtime, on each bus, ends the run with
+//    exit 3 within a second of the supervision limit; `on_master_loss: record` lets the run
+//    go on and the scenario judge it;
+//  - interruption: a signal before the run, during the video, during the report, and two
+//    signals 50 ms apart, each give exit 3, "interrupted": true and records that open;
+//  - full disk (a small tmpfs; root only) in the run, the video and the report phases:
+//    exit 3, no partial file under a final name, the run naming what is missing;
+//  - run directories: an earlier run's records are cleared, a foreign directory refused;
+//  - the smaller ones: a bad option is one line with the omnitwin: prefix.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <regex>
+
+#include "tests/bus_emulators/small_tmpfs.hpp"
+#include "tests/twin/cli_support.hpp"
+
+namespace {
+
+using namespace omnitwin::twin::cli;
+using omnitwin::testing::SmallTmpfs;
+
+nlohmann::json metrics_of(const fs::path& run_dir) { return nlohmann::json::parse(read_bytes(run_dir / "metrics.json")); }
+
+// No file of the run directory is left under a temporary name only... unless named.
+std::vector<std::string> part_files(const fs::path& dir) {
+  std::vector<std::string> parts;
+  if (!fs::exists(dir)) return parts;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.path().filename().string().ends_with(".part")) parts.push_back(e.path().filename().string());
+  return parts;
+}
+
+// ffmpeg decodes every frame of `file` without an error.
+bool video_decodes(const fs::path& file) {
+  const std::string cmd = "ffmpeg -v error -xerror -i '" + file.string() + "' -f null - >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+// tshark reads the capture to its end.
+bool capture_reads(const fs::path& file) {
+  const std::string cmd = "tshark -r '" + file.string() + "' >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+// Waits until `file` holds `text` (or the child ends / 60 s pass).
+bool wait_for_text(const fs::path& file, const std::string& text, Child& c) {
+  for (int i = 0; i < 6000; ++i) {
+    if (contains(read_bytes(file), text)) return true;
+    if (!c.running()) return contains(read_bytes(file), text);
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+// The master's pid, from the run's event log while it is written (.events.log.part).
+pid_t master_pid(const fs::path& run_dir, Child& c) {
+  const fs::path log = run_dir / ".events.log.part";
+  if (!wait_for_text(log, "started (pid ", c)) return -1;
+  std::smatch m;
+  const std::string text = read_bytes(log);
+  if (!std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)"))) return -1;
+  return static_cast<pid_t>(std::stol(m[1]));
+}
+
+class CliTrust : public CliTest {
+ protected:
+  // `n` lockstep runs of `scenario` on `bus` at once; each must pass with the trajectory of
+  // a run alone.
+  void expect_concurrent_runs_match_alone(const std::string& bus, int n);
+  // Realtime run on `bus`; `sig` to the master after 1.5 s; exit 3 within `limit_s` + 1 s.
+  void expect_master_loss_ends_run(const std::string& bus, int sig, double limit_s);
+};
+
+void CliTrust::expect_concurrent_runs_match_alone(const std::string& bus, int n) {
+  const std::string scenario = test_scenario("run_short_line.yaml");
+  const Finished alone = run({"run", scenario, "--bus", bus, "--out", (dir_ / "alone").string(), "--no-progress"});
+  ASSERT_EQ(alone.code, 0) << alone.out << alone.err;
+  const std::string expected = read_bytes(dir_ / "alone/trajectory.csv");
+  ASSERT_FALSE(expected.empty());
+  std::vector<std::unique_ptr<Child>> runs;
+  for (int i = 0; i < n; ++i) {
+    const std::string out = (dir_ / ("p" + std::to_string(i))).string();
+    runs.push_back(std::make_unique<Child>(omnitwin_binary(),
+                                           std::vector<std::string>{"run", scenario, "--bus", bus, "--out", out,
+                                                                    "--no-progress"},
+                                           work(), io(), "p" + std::to_string(i)));
+  }
+  for (int i = 0; i < n; ++i) {
+    auto& c = *runs[static_cast<std::size_t>(i)];
+    EXPECT_EQ(c.wait(300s), 0) << "run " << i << ":\n" << c.out() << c.err();
+    EXPECT_EQ(read_bytes(dir_ / ("p" + std::to_string(i)) / "trajectory.csv"), expected) << "run " << i;
+  }
+}
+
+TEST_F(CliTrust, TwoConcurrentCanLockstepRunsMatchARunAlone) { expect_concurrent_runs_match_alone("can", 2); }
+
+TEST_F(CliTrust, TwoConcurrentEthercatLockstepRunsMatchARunAlone) {
+  expect_concurrent_runs_match_alone("ethercat", 2);
+}
+
+// check -j 2 over scenarios on all three buses: the same verdicts and trajectories as -j 1.
+TEST_F(CliTrust, ParallelCheckGivesTheVerdictsAndTrajectoriesOfASerialOne) {
+  const std::vector<std::string> files{test_scenario("run_short_line.yaml"), test_scenario("good_can.yaml"),
+                                       test_scenario("good_ethercat.yaml")};
+  std::vector<std::string> serial_args{"check", "--no-report", "--out", (dir_ / "serial").string()};
+  std::vector<std::string> parallel_args{"check", "-j", "2", "--no-report", "--out", (dir_ / "par").string()};
+  serial_args.insert(serial_args.end(), files.begin(), files.end());
+  parallel_args.insert(parallel_args.end(), files.begin(), files.end());
+  const Finished serial = run(serial_args);
+  const Finished parallel = run(parallel_args);
+  ASSERT_EQ(serial.code, parallel.code) << serial.out << parallel.out;
+  EXPECT_TRUE(contains(parallel.out, "3 passed, 0 failed")) << parallel.out;
+  for (const auto& e : fs::directory_iterator(dir_ / "serial")) {
+    if (!e.is_directory()) continue;
+    const fs::path other = dir_ / "par" / e.path().filename();
+    EXPECT_EQ(read_bytes(e.path() / "trajectory.csv"), read_bytes(other / "trajectory.csv")) << e.path();
+  }
+}
+
+void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, double limit_s) {
+  const fs::path out = dir_ / "rt";
+  Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", bus, "--clock", "realtime", "--no-video",
+           "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  const pid_t pid = master_pid(out, c);
+  ASSERT_GT(pid, 0) << c.out() << c.err();
+  std::this_thread::sleep_for(1500ms);
+  ASSERT_TRUE(c.running()) << c.out() << c.err();
+  ::kill(pid, sig);
+  const auto t0 = std::chrono::steady_clock::now();
+  const int code = c.wait(std::chrono::milliseconds(static_cast<int>((limit_s + 5) * 1000)));
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (sig == SIGSTOP) ::kill(pid, SIGCONT);
+  EXPECT_EQ(code, 3) << c.out() << c.err();
+  EXPECT_LT(took, limit_s + 1.0) << c.out();
+  EXPECT_TRUE(contains(c.out(), "master lost")) << c.out();
+  const nlohmann::json m = metrics_of(out);
+  EXPECT_EQ(m.at("master").at("lost"), true);
+  EXPECT_GT(m.at("master").at("lost_at_s").get<double>(), 1.0);
+  EXPECT_TRUE(contains(read_bytes(out / "events.log"), "master      lost: ")) << read_bytes(out / "events.log");
+}
+
+// Default supervision: 50 control periods of 10 ms.
+TEST_F(CliTrust, KilledCanMasterInRealtimeEndsTheRunWithExit3) { expect_master_loss_ends_run("can", SIGKILL, 0.0); }
+TEST_F(CliTrust, StoppedCanMasterInRealtimeEndsTheRunWithExit3) { expect_master_loss_ends_run("can", SIGSTOP, 0.5); }
+TEST_F(CliTrust, KilledEthercatMasterInRealtimeEndsTheRunWithExit3) {
+  expect_master_loss_ends_run("ethercat", SIGKILL, 0.0);
+}
+TEST_F(CliTrust, StoppedEthercatMasterInRealtimeEndsTheRunWithExit3) {
+  expect_master_loss_ends_run("ethercat", SIGSTOP, 0.5);
+}
+
+// on_master_loss: record — the loss is recorded and the run goes on to its end, so the
+// scenario judges the platform (here: the wheels kept their last command, so it overshoots).
+TEST_F(CliTrust, ARecordedMasterLossLetsTheScenarioJudgeTheReaction) {
+  const fs::path out = dir_ / "rec";
+  Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "can", "--clock", "realtime",
+           "--set", "duration=4", "--set", "bus.supervision.on_master_loss=record", "--set",
+           "bus.supervision.silent_periods=20", "--no-video", "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  const pid_t pid = master_pid(out, c);
+  ASSERT_GT(pid, 0) << c.out() << c.err();
+  std::this_thread::sleep_for(1500ms);
+  ::kill(pid, SIGKILL);
+  const int code = c.wait(30s);
+  EXPECT_NE(code, 3) << c.out() << c.err();
+  const nlohmann::json m = metrics_of(out);
+  EXPECT_EQ(m.at("master").at("lost"), true);
+  EXPECT_NEAR(m.at("sim_time_s").get<double>(), 4.0, 0.02);
+  EXPECT_EQ(m.at("interrupted"), false);
+}
+
+// A signal at once (before the scenario is even read) is handled: exit 3, not death by it.
+TEST_F(CliTrust, ASignalInTheFirstMillisecondsGivesExit3) {
+  Child c({"run", test_scenario("run_short_line.yaml"), "--out", (dir_ / "early").string(), "--no-progress"}, work(),
+          io());
+  // 2 ms: the CLI's ~160 libraries are still loading (tens of ms); the launcher holds it.
+  std::this_thread::sleep_for(2ms);
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
+  EXPECT_EQ(metrics_of(dir_ / "early").at("interrupted"), true);
+}
+
+// SIGINT (once, or twice 50 ms apart) while the video renders: exit 3, metrics say
+// interrupted in the outputs phase, and the video is a finished MP4 of the frames so far.
+void expect_video_interrupt(const fs::path& io, const fs::path& out, Child& c, bool twice) {
+  ASSERT_TRUE(wait_for_text(io / "stdout", "rendering the video", c)) << c.out() << c.err();
+  std::this_thread::sleep_for(1500ms);  // frames are being encoded
+  c.signal(SIGINT);
+  if (twice) {
+    std::this_thread::sleep_for(50ms);
+    c.signal(SIGINT);
+  }
+  EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
+  const nlohmann::json m = metrics_of(out);
+  EXPECT_EQ(m.at("interrupted"), true);
+  EXPECT_EQ(m.at("interrupted_phase"), "outputs");
+  ASSERT_TRUE(fs::exists(out / "video.mp4")) << c.out() << c.err();
+  EXPECT_TRUE(video_decodes(out / "video.mp4"));
+  EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
+}
+
+TEST_F(CliTrust, SigintWhileRenderingGivesExit3AndAPlayableVideo) {
+  const fs::path out = dir_ / "vid";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--set", "duration=40", "--set", "outputs.video=true",
+           "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  expect_video_interrupt(io(), out, c, false);
+}
+
+TEST_F(CliTrust, TwoSigintsWhileRenderingStillLeaveAPlayableVideo) {
+  const fs::path out = dir_ / "vid2";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--set", "duration=40", "--set", "outputs.video=true",
+           "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  expect_video_interrupt(io(), out, c, true);
+}
+
+// SIGINT once the run has ended and the report is being made: exit 3, interrupted, and the
+// report either whole or absent (never half-written under its name).
+TEST_F(CliTrust, SigintWhileReportingGivesExit3) {
+  const fs::path out = dir_ / "rep";
+  Child c({"run", test_scenario("run_short_line.yaml"), "--set", "outputs.report=true", "--no-video", "--no-progress",
+           "--out", out.string()},
+          work(), io());
+  ASSERT_TRUE(wait_for_text(io() / "stdout", "writing the report", c)) << c.out() << c.err();
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
+  const nlohmann::json m = metrics_of(out);
+  EXPECT_EQ(m.at("interrupted"), true);
+  EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
+  if (fs::exists(out / "report.html")) EXPECT_TRUE(contains(read_bytes(out / "report.html"), "</html>"));
+}
+
+// A CAN run stopped by SIGINT: every record opens (CSV, JSON, the capture in tshark).
+TEST_F(CliTrust, SigintInACanRunLeavesRecordsThatOpen) {
+  const fs::path out = dir_ / "can";
+  Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "can", "--clock", "realtime",
+           "--no-video", "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  ASSERT_GT(master_pid(out, c), 0) << c.out() << c.err();
+  std::this_thread::sleep_for(1000ms);
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
+  EXPECT_EQ(metrics_of(out).at("interrupted"), true);
+  EXPECT_TRUE(capture_reads(out / "bus-can.pcap"));
+  EXPECT_FALSE(read_bytes(out / "trajectory.csv").empty());
+  EXPECT_TRUE(fs::exists(out / "master.log"));
+  EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
+}
+
+// A disk that fills up during the run: exit 3, nothing under a final name that is not
+// whole, and the summary names what is missing.
+TEST_F(CliTrust, FullDiskDuringTheRunGivesExit3AndNoPartialRecord) {
+  SmallTmpfs disk("128k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const fs::path out = disk / "run";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--no-progress", "--out",
+                          out.string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_FALSE(fs::exists(out / "trajectory.csv"));
+  EXPECT_TRUE(contains(f.out, "trajectory.csv")) << f.out;
+  EXPECT_TRUE(contains(f.out, "MISSING") || contains(f.out, "PARTIAL")) << f.out;
+  // Whatever is under a final name is whole: the JSON files parse.
+  for (const char* json : {"metrics.json", "run.json"})
+    if (fs::exists(out / json)) EXPECT_NO_THROW(nlohmann::json::parse(read_bytes(out / json))) << json;
+}
+
+// A disk that fills up while the video is written: exit 3, no video.mp4, the error named.
+TEST_F(CliTrust, FullDiskDuringTheVideoGivesExit3AndNoVideo) {
+  SmallTmpfs disk("32k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const fs::path out = dir_ / "v";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--video", (disk / "video.mp4").string(),
+                          "--no-report", "--no-progress", "--out", out.string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_FALSE(fs::exists(disk / "video.mp4"));
+  EXPECT_TRUE(part_files(disk / "").empty());
+  EXPECT_TRUE(contains(f.err, "video")) << f.err;
+}
+
+// A disk that fills up while the report is written: exit 3, no report.html.
+TEST_F(CliTrust, FullDiskDuringTheReportGivesExit3AndNoReport) {
+  SmallTmpfs disk("300k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const fs::path out = disk / "r";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--set", "outputs.report=true", "--no-video",
+                          "--no-progress", "--out", out.string()});
+  ASSERT_TRUE(fs::exists(out / "metrics.json")) << "the run's records should fit in 300k: " << f.out << f.err;
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_FALSE(fs::exists(out / "report.html"));
+  EXPECT_TRUE(contains(f.err, "report")) << f.err;
+}
+
+// A re-run into a used directory replaces the earlier run whole: nothing of it survives.
+TEST_F(CliTrust, ARerunClearsTheEarlierRunsRecords) {
+  const fs::path out = dir_ / "again";
+  const Finished first = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress"});
+  ASSERT_EQ(first.code, 0) << first.out << first.err;
+  // What an earlier, longer run could have left: a video, a capture.
+  std::ofstream(out / "video.mp4") << "stale";
+  std::ofstream(out / "bus-can.pcap") << "stale";
+  const Finished second = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress"});
+  ASSERT_EQ(second.code, 0) << second.out << second.err;
+  EXPECT_FALSE(fs::exists(out / "video.mp4"));
+  EXPECT_FALSE(fs::exists(out / "bus-can.pcap"));
+  EXPECT_TRUE(fs::exists(out / "metrics.json"));
+}
+
+// A non-empty directory that holds no run is not ours to clear: exit 2, files untouched.
+TEST_F(CliTrust, AForeignDirectoryIsRefused) {
+  const fs::path out = dir_ / "mine";
+  fs::create_directories(out);
+  std::ofstream(out / "notes.txt") << "keep me";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress"});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "holds no earlier run")) << f.err;
+  EXPECT_EQ(read_bytes(out / "notes.txt"), "keep me");
+  EXPECT_FALSE(fs::exists(out / "metrics.json"));
+}
+
+// A bad option: one line, with the program's prefix.
+TEST_F(CliTrust, ABadOptionIsOneLineWithThePrefix) {
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--no-such-option"});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_TRUE(f.err.starts_with("omnitwin: ")) << f.err;
+  EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
+}
+
+}  // namespace
