@@ -212,6 +212,14 @@ int cmd_run(const RunArgs& a) {
                                  iface, s.bus.can.bit_rate)
                   << std::flush;
       };
+    } else if (s.clock == ClockMode::realtime && s.bus.kind == BusKind::can) {
+      // Not isolated (lockstep runs are): say where, so a second run there is no surprise.
+      o.on_bus_ready = [](const std::string& iface) {
+        if (iface.starts_with("udp:"))
+          std::cout << fmt::format("  realtime: the bus is on {}, shared with anyone else there (lockstep runs "
+                                 "get a bus of their own)\n", iface)
+                  << std::flush;
+      };
     }
     std::unique_ptr<DdsRunObserver> dds;
     if (a.dds || s.outputs.dds.enabled) {

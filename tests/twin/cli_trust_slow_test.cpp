@@ -1,6 +1,6 @@
 // Slow tests (ctest -L slow) of run isolation (issue 19): eight lockstep runs at once on
 // each bus, every one passing with the trajectory of a run alone. The default tier runs two
-// at once (cli_trust_test.cpp); eight load two cores for about a minute per bus.
+// at once (cli_trust_test.cpp); eight take about 5 s per bus on two cores.
 #include <gtest/gtest.h>
 
 #include "tests/twin/cli_support.hpp"
