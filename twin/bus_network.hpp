@@ -113,4 +113,18 @@ class BusNetwork {
   virtual WheelRecord wheel_record(int axis0) const = 0;
 };
 
+// The capture's health and end, for either bus's pcap writer (ok(), error(), path(),
+// is_open(), close()): what pcap_error() and close_pcap() return.
+template <class Writer>
+std::string capture_error(const Writer* w) {
+  if (!w || w->ok()) return "";
+  return w->path() + " left incomplete: " + w->error();
+}
+template <class Writer>
+std::string close_capture(Writer* w) {
+  if (!w || !w->is_open()) return "";
+  w->close();  // renamed to its final name only if every record reached it
+  return capture_error(w);
+}
+
 }  // namespace omnitwin::twin

@@ -100,17 +100,8 @@ void OmniCanNetwork::open_pcap(const std::string& path) {
   pcap_ = std::make_unique<can::PcapWriter>(path, o);
 }
 
-// The capture gets its final name only if every record reached it.
-std::string OmniCanNetwork::close_pcap() {
-  if (!pcap_ || !pcap_->is_open()) return "";
-  pcap_->close();
-  return pcap_error();
-}
-
-std::string OmniCanNetwork::pcap_error() const {
-  if (!pcap_ || pcap_->ok()) return "";
-  return fmt::format("{} left incomplete: {}", pcap_->path(), pcap_->error());
-}
+std::string OmniCanNetwork::close_pcap() { return close_capture(pcap_.get()); }
+std::string OmniCanNetwork::pcap_error() const { return capture_error(pcap_.get()); }
 
 void OmniCanNetwork::advance(SimTime t) { bus_.advance(t); }
 

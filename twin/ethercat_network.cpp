@@ -119,17 +119,8 @@ void EthercatNetwork::open_transport(const Scenario& s) {
 
 void EthercatNetwork::open_pcap(const std::string& path) { pcap_ = std::make_unique<ethercat::PcapWriter>(path); }
 
-// The capture gets its final name only if every record reached it.
-std::string EthercatNetwork::close_pcap() {
-  if (!pcap_ || !pcap_->is_open()) return "";
-  pcap_->close();
-  return pcap_error();
-}
-
-std::string EthercatNetwork::pcap_error() const {
-  if (!pcap_ || pcap_->ok()) return "";
-  return fmt::format("{} left incomplete: {}", pcap_->path(), pcap_->error());
-}
+std::string EthercatNetwork::close_pcap() { return close_capture(pcap_.get()); }
+std::string EthercatNetwork::pcap_error() const { return capture_error(pcap_.get()); }
 
 void EthercatNetwork::flush_pcap() {
   if (pcap_) pcap_->flush();
