@@ -133,7 +133,7 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
   c.file = file;
   const Members top(file, root, "",
                     {"esi", "cycle", "dc", "expected_slaves", "startup", "wheels", "wheel_mode", "wheel_counts_per_rev",
-                     "platform", "user_pdo"});
+                     "platform", "user_pdo", "segment_loss_cycles"});
   const Val* esi = top.get("esi");
   if (!esi) fail(file, root, "esi", "required (the ESI files describing the slaves)");
   if (esi->node.IsScalar()) {
@@ -162,6 +162,11 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
   if (const Val* n = top.get("expected_slaves")) {
     c.expected_slaves = static_cast<int>(integer(file, *n, "expected_slaves"));
     if (c.expected_slaves < 1) fail(file, *n, "expected_slaves", "must be >= 1");
+  }
+  if (const Val* n = top.get("segment_loss_cycles")) {
+    const std::int64_t v = integer(file, *n, "segment_loss_cycles");
+    if (v < 0 || v > 100000) fail(file, *n, "segment_loss_cycles", "must be in 0..100000 (0 = off)");
+    c.segment_loss_cycles = static_cast<int>(v);
   }
   if (const Val* n = top.get("startup")) {
     if (!n->node.IsSequence()) fail(file, *n, "startup", "expected a list");
@@ -275,6 +280,7 @@ EcMasterConfig make_master_config(const EcConfig& c) {
   m.sync0_shift_ns = std::llround(c.sync0_shift_us * 1e3);
   m.startup = c.startup;
   m.expected_slaves = c.expected_slaves;
+  m.segment_loss_cycles = c.segment_loss_cycles;
   return m;
 }
 

@@ -2,7 +2,8 @@
 // controller/master_config for `omni-master --bus ethercat`.
 //
 // It names the ESI files to load, the cycle, distributed clocks (on/off, SYNC0 shift), the
-// start-up SDOs per slave (e.g. 0x6060 = 9 for CSV), which (slave, channel) drives each of the
+// segment watch (segment_loss_cycles: silent cycles before leaving OP), the start-up SDOs per
+// slave (e.g. 0x6060 = 9 for CSV), which (slave, channel) drives each of the
 // four wheels, how wheel speeds go out (CSV target velocity or CSP target position) and the
 // wheel encoder counts per revolution, and the platform loop. The file is read with yaml-cpp.
 // The platform section is kept as YAML text (re-emitted by yaml-cpp; comments are not kept) or
@@ -43,6 +44,9 @@ struct EcConfig {
   bool dc = false;
   double sync0_shift_us = 0;               // [µs]
   int expected_slaves = -1;                // -1: whatever answers
+  // Consecutive cycles without any WKC (frame lost or untouched) before the master declares
+  // the segment lost, leaves OP and stops its drives; 0 = never.
+  int segment_loss_cycles = 10;
   std::vector<StartupSdo> startup;         // position -1 = every slave
   bool has_wheels = false;                 // `wheels` given: the platform loop runs
   std::array<AxisRef, 4> wheels{};         // wheel i+1 → axis

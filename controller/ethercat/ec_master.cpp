@@ -135,7 +135,10 @@ void EcMaster::tick(SimTime t) {
     // A lost mailbox read may have emptied SM1: ask the slave to repeat its reply.
     for (auto& s : slaves_)
       if (s.mbx_read_sent && s.job) s.repeat_pending = true;
+    // A cyclic frame that never came back is a cycle without any WKC.
+    if (lrw_out_) cyclic_wkc(0, false, t);
   }
+  lrw_out_ = false;
   for (auto& s : slaves_) s.mbx_read_sent = false;
   if (phase_ == MasterPhase::failed) return;
   for (auto& s : slaves_) slave_timeouts(s, t);
@@ -177,6 +180,7 @@ void EcMaster::tick(SimTime t) {
       if (len > 0) {
         if (b.add_logical(Cmd::lrw, index_, config_.logical_base, len, image_.data()) >= 0) {
           slots_[slot_count_++] = {SlotKind::lrw};
+          lrw_out_ = true;
         }
       }
       if (config_.dc && dc_ref_ >= 0) {
@@ -288,20 +292,7 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
         std::memcpy(image_.data() + out_total_, d.data() + out_total_, in_total_);
         stats_.last_wkc = d.wkc();
         stats_.expected_wkc = expected_wkc_;
-        if (operational_once_) {
-          if (d.wkc() != expected_wkc_) {
-            ++stats_.wkc_errors;
-            if (++wkc_bad_run_ == config_.wkc_loss_cycles) {
-              emit(fmt::format("WKC {} instead of {} for {} cycles: checking the slaves", d.wkc(), expected_wkc_,
-                               wkc_bad_run_));
-            }
-            if (wkc_bad_run_ >= config_.wkc_loss_cycles) {
-              for (auto& s : slaves_) s.check = s.step == SlaveStep::op;
-            }
-          } else {
-            wkc_bad_run_ = 0;
-          }
-        }
+        cyclic_wkc(d.wkc(), true, t);
         break;
       }
       case SlotKind::frmw:
@@ -386,9 +377,51 @@ void EcMaster::after_frame(SimTime t, bool from_frame) {
         wkc_bad_run_ = 0;
         emit(fmt::format("all {} slaves in OP, expected WKC {}", slaves_.size(), expected_wkc_));
       }
+      if (segment_lost_ && operational()) {
+        segment_lost_ = false;
+        ++stats_.segment_returns;
+        emit(fmt::format("segment back: all {} slaves in OP again", slaves_.size()));
+      }
       break;
     default:
       break;
+  }
+}
+
+// Supervision of one cyclic exchange (once OP was reached): WKC errors, the search for a
+// missing slave after wkc_loss_cycles, the segment watch. `returned` false: the frame was lost.
+void EcMaster::cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t) {
+  if (!operational_once_) return;
+  if (returned && wkc == expected_wkc_) {
+    wkc_bad_run_ = 0;
+    silent_run_ = 0;
+    return;
+  }
+  ++stats_.wkc_errors;
+  silent_run_ = wkc == 0 ? silent_run_ + 1 : 0;
+  if (++wkc_bad_run_ == config_.wkc_loss_cycles) {
+    emit(fmt::format("WKC {} instead of {} for {} cycles{}: checking the slaves", wkc, expected_wkc_, wkc_bad_run_,
+                     returned ? "" : " (frame lost)"));
+  }
+  if (wkc_bad_run_ >= config_.wkc_loss_cycles) {
+    for (auto& s : slaves_) s.check = s.step == SlaveStep::op;
+  }
+  if (config_.segment_loss_cycles > 0 && silent_run_ == config_.segment_loss_cycles && !segment_lost_) lose_segment(t);
+}
+
+// The whole segment went silent: leave OP in our own view; the offline probes look for it.
+void EcMaster::lose_segment(SimTime t) {
+  segment_lost_ = true;
+  ++stats_.segment_losses;
+  stop_reason_ = fmt::format("segment lost: {} consecutive cycles without a valid WKC; leaving OP, drives stopped",
+                             silent_run_);
+  emit(stop_reason_);
+  for (auto& s : slaves_) {
+    s.check = false;
+    if (s.step == SlaveStep::offline) continue;
+    ++stats_.slaves_lost;
+    enter(s, SlaveStep::offline, t);
+    s.next_probe = t + config_.probe_every_ns;
   }
 }
 

@@ -44,6 +44,13 @@
 // slaves with inputs. After the first OP, every al_check_every_ns a BRD 0x0130 rides along:
 // a slave that is not in OP (or shows the error bit) while the WKC is still right — e.g. one
 // that fell to SAFE-OP by its watchdog — is found by the same AL status reads.
+// Once supervising, a cyclic frame that does not come back by the next tick is a cycle with
+// WKC 0: counted as a lost frame AND a WKC error. segment_loss_cycles consecutive cycles
+// without any WKC (lost, or WKC 0: no slave touched the frame) mean the segment is gone: the
+// master leaves OP in its own view (every slave → offline, operational() false,
+// segment_lost() true, stop_reason() says why, one event line), and the offline probes bring
+// the slaves back through INIT → OP if the segment returns (segment_lost() false again once
+// every slave is back in OP; stats count both).
 // Allocation: configuration and SDO requests allocate; a steady cyclic tick does not.
 #pragma once
 
@@ -106,6 +113,7 @@ struct EcMasterConfig {
   SimTime step_timeout_ns = 500'000'000;      // any other step without its WKC [ns]
   SimTime probe_every_ns = 50'000'000;        // an offline slave is probed this often [ns]
   int wkc_loss_cycles = 3;                 // consecutive WKC mismatches → find the missing slave
+  int segment_loss_cycles = 10;            // consecutive cycles without any WKC → segment lost (0 = off)
   SimTime al_check_every_ns = 100'000'000; // BRD 0x0130 with the cyclic frame this often [ns]
   std::uint32_t logical_base = 0x00010000; // logical address of the image
 };
@@ -146,6 +154,8 @@ struct EcMasterStats {
   std::uint64_t timeouts = 0;          // step / SDO timeouts
   std::uint64_t sdo_done = 0, sdo_failed = 0;
   std::uint64_t slaves_lost = 0, recoveries = 0;
+  std::uint64_t segment_losses = 0;    // times the whole segment went silent (left OP)
+  std::uint64_t segment_returns = 0;   // times every slave was back in OP after such a loss
   std::uint16_t last_wkc = 0, expected_wkc = 0;
 };
 
@@ -194,6 +204,9 @@ class EcMaster {
   bool awaiting_reply() const { return awaiting_; }  // the last PDU sent has not come back yet
   bool operational() const;            // running and every slave in OP
   bool supervising() const { return operational_once_; }
+  bool segment_lost() const { return segment_lost_; }  // left OP: the segment went silent
+  // Why the master last left OP on its own ("" = never): the segment-lost line.
+  const std::string& stop_reason() const { return stop_reason_; }
   const std::string& error() const { return error_; }
   int slave_count() const { return static_cast<int>(slaves_.size()); }
   const SlaveStatus& slave(int position) const { return slaves_.at(position); }
@@ -262,6 +275,8 @@ class EcMaster {
   void finish_pdo_read(Slave& s);
   bool mbx_ready(const Slave& s) const;
   void after_frame(SimTime t, bool from_frame);
+  void cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t);
+  void lose_segment(SimTime t);
   void layout();
   void dc_fill(omnitwin::ethercat::PduBuilder& b);
   void dc_reply(const omnitwin::ethercat::Datagram& d, int slave, int sub, SimTime t);
@@ -293,6 +308,10 @@ class EcMaster {
   bool layout_done_ = false;
   bool operational_once_ = false;
   int wkc_bad_run_ = 0;
+  int silent_run_ = 0;            // consecutive supervised cycles without any WKC
+  bool lrw_out_ = false;          // the outstanding frame carries the cyclic LRW
+  bool segment_lost_ = false;
+  std::string stop_reason_;
   SimTime next_al_check_ = 0;
   std::uint16_t expected_wkc_ = 0;
 

@@ -82,6 +82,18 @@ TEST(EcConfig, MinimalFileHasDefaults) {
   EXPECT_FALSE(c.has_wheels);
   EXPECT_EQ(c.wheel_mode, WheelMode::csv);
   EXPECT_EQ(c.expected_slaves, -1);
+  EXPECT_EQ(c.segment_loss_cycles, 10);
+}
+
+TEST(EcConfig, SegmentLossCyclesReachTheCore) {
+  const EcConfig c = parse_ec_config("esi: a.xml\nsegment_loss_cycles: 4\n", "m.yaml");
+  EXPECT_EQ(c.segment_loss_cycles, 4);
+  EXPECT_EQ(parse_ec_config("esi: a.xml\nsegment_loss_cycles: 0\n", "m.yaml").segment_loss_cycles, 0);
+  EcConfig loaded = parse_ec_config("esi: [models/ethercat/omnitwin_drive.xml]\nsegment_loss_cycles: 7\n", "m.yaml",
+                                    OMNITWIN_SOURCE_DIR);
+  EXPECT_EQ(make_master_config(loaded).segment_loss_cycles, 7);
+  EXPECT_EQ(error_of("esi: a.xml\nsegment_loss_cycles: -1\n"),
+            "t.yaml:2: segment_loss_cycles: must be in 0..100000 (0 = off)");
 }
 
 TEST(EcConfig, ErrorsNameFileLineAndKey) {

@@ -3,7 +3,8 @@
 // addresses, the PDO mapping read over CoE against the ESI, all slaves to OP, the expected
 // WKC every cycle, process data both ways, a slave powered off (WKC drop found and reported)
 // and on again (brought back to OP), SDO aborts reported, lost frames counted, an unknown
-// device refused by name, DC registers written.
+// device refused by name, DC registers written; the whole segment cut off (frames never
+// back) or powered off (WKC 0): OP left, lost frames and WKC errors counted, and back.
 #include "controller/ethercat/ec_master.hpp"
 
 #include <gtest/gtest.h>
@@ -138,6 +139,8 @@ TEST(EcMaster, PoweredOffSlaveIsFoundAndBroughtBackToOp) {
   EXPECT_TRUE(has_event(*b.master, "slave 2 (station 0x1003) lost")) << events(*b.master);
   EXPECT_EQ(b.master->slave(2).step, SlaveStep::offline);
   EXPECT_GE(b.master->stats().slaves_lost, 1u);
+  EXPECT_FALSE(b.master->segment_lost()) << "one slave missing is not the segment";
+  EXPECT_EQ(b.master->stats().segment_losses, 0u);
   b.chain.set_powered(2, true, b.t);
   ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000)) << events(*b.master);
   EXPECT_EQ(b.chain.esc(2).station_address(), 0x1003);
@@ -413,4 +416,106 @@ TEST(EcMaster, SlaveWithoutCoeIsLaidOutFromItsSiiPdoCategories) {
   EXPECT_EQ(m.read_entry(*m.find_entry(0, 0x6000, 1), false), 0x1234);
   EXPECT_EQ(m.stats().last_wkc, 6);
   EXPECT_EQ(m.sdo_upload(0, 0x1000, 0), 0u);  // no mailbox: refused
+}
+
+TEST(EcMaster, SegmentCutOffLeavesOpAfterTheConfiguredCyclesAndCountsEveryLostCycle) {
+  EcMasterConfig cfg;
+  cfg.segment_loss_cycles = 5;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int k = 0; k < 20; ++k) b.step();
+  const EcMasterStats before = b.master->stats();
+  ASSERT_EQ(before.wkc_errors, 0u);
+  b.drop_next = 1'000'000;  // the segment vanishes: no frame comes back
+  b.step();                 // this cycle's frame goes out and is lost
+  for (int k = 0; k < 4; ++k) b.step();
+  EXPECT_TRUE(b.master->operational()) << "4 lost cycles are below the limit of 5";
+  EXPECT_EQ(b.master->stats().lost_frames - before.lost_frames, 4u);
+  EXPECT_EQ(b.master->stats().wkc_errors, 4u);
+  b.step();
+  EXPECT_TRUE(b.master->segment_lost()) << events(*b.master);
+  EXPECT_FALSE(b.master->operational());
+  EXPECT_EQ(b.master->stop_reason(),
+            "segment lost: 5 consecutive cycles without a valid WKC; leaving OP, drives stopped");
+  EXPECT_TRUE(has_event(*b.master, "segment lost: 5 consecutive cycles")) << events(*b.master);
+  EXPECT_EQ(b.master->stats().segment_losses, 1u);
+  EXPECT_EQ(b.master->stats().slaves_lost, 4u);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(b.master->slave(i).step, SlaveStep::offline);
+  for (int k = 0; k < 100; ++k) b.step();
+  EXPECT_EQ(b.master->stats().lost_frames - before.lost_frames, 105u);
+  EXPECT_EQ(b.master->stats().wkc_errors, 105u) << "every cycle whose frame never returned is a WKC error";
+  EXPECT_EQ(b.master->stats().cycles, before.cycles);
+  EXPECT_EQ(b.master->stats().segment_losses, 1u) << "one loss, logged once";
+}
+
+TEST(EcMaster, LostSegmentComesBackThroughTheOfflineProbes) {
+  EcMasterConfig cfg;
+  cfg.segment_loss_cycles = 3;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.drop_next = 200;
+  for (int k = 0; k < 200; ++k) b.step();
+  ASSERT_TRUE(b.master->segment_lost()) << events(*b.master);
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000)) << events(*b.master);
+  EXPECT_FALSE(b.master->segment_lost());
+  EXPECT_EQ(b.master->stats().segment_losses, 1u);
+  EXPECT_EQ(b.master->stats().segment_returns, 1u);
+  EXPECT_GE(b.master->stats().recoveries, 4u);
+  EXPECT_TRUE(has_event(*b.master, "segment back: all 4 slaves in OP again")) << events(*b.master);
+  EXPECT_FALSE(b.master->stop_reason().empty()) << "why it left OP stays on record";
+  const auto errors = b.master->stats().wkc_errors;
+  for (int k = 0; k < 100; ++k) b.step();
+  EXPECT_EQ(b.master->stats().wkc_errors, errors);
+  EXPECT_EQ(b.master->stats().last_wkc, 12);
+}
+
+TEST(EcMaster, PoweredOffSegmentIsLostAndBackWhenPoweredOn) {
+  EcMasterConfig cfg;
+  cfg.segment_loss_cycles = 4;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int i = 0; i < 4; ++i) b.chain.set_powered(i, false, b.t);
+  ASSERT_TRUE(b.run_until([&] { return b.master->segment_lost(); }, 20)) << events(*b.master);
+  EXPECT_EQ(b.master->stats().lost_frames, 4u) << "no slave powered: nothing comes back";
+  EXPECT_EQ(b.master->stats().wkc_errors, 4u);
+  EXPECT_FALSE(b.master->operational());
+  for (int i = 0; i < 4; ++i) b.chain.set_powered(i, true, b.t);
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000)) << events(*b.master);
+  EXPECT_EQ(b.master->stats().segment_returns, 1u);
+}
+
+TEST(EcMaster, FramesComingBackUntouchedAreASilentSegmentToo) {
+  EcMasterConfig cfg;
+  cfg.segment_loss_cycles = 4;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  // A link closed right at the master's port: every frame returns as sent, WKC 0.
+  for (int k = 0; k < 4; ++k) {
+    b.t += b.cycle;
+    b.sent = false;
+    b.master->tick(b.t);
+    ASSERT_TRUE(b.sent);
+    b.master->on_frame(b.frame, b.t + 50'000);
+  }
+  EXPECT_TRUE(b.master->segment_lost()) << events(*b.master);
+  EXPECT_EQ(b.master->stats().lost_frames, 0u);
+  EXPECT_EQ(b.master->stats().last_wkc, 0);
+  EXPECT_EQ(b.master->stats().wkc_errors, 4u);
+  EXPECT_FALSE(b.master->operational());
+}
+
+TEST(EcMaster, SegmentWatchOffKeepsCountingButNeverLeavesOp) {
+  EcMasterConfig cfg;
+  cfg.segment_loss_cycles = 0;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.drop_next = 50;
+  for (int k = 0; k < 51; ++k) b.step();  // the 50th lost frame is noticed by the 51st tick
+  EXPECT_FALSE(b.master->segment_lost());
+  EXPECT_EQ(b.master->stats().segment_losses, 0u);
+  EXPECT_EQ(b.master->stats().wkc_errors, 50u);
+  EXPECT_TRUE(b.master->stop_reason().empty());
 }
