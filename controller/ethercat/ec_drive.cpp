@@ -148,6 +148,10 @@ void EcDrives::update() {
     }
     built_ = true;
   }
+  if (m_.stats().segment_losses != losses_seen_) {
+    losses_seen_ = m_.stats().segment_losses;
+    stop_axes();
+  }
   for (auto& a : axes_) {
     if (a.sw_at) a.sw = static_cast<std::uint16_t>(m_.read_entry(*a.sw_at, false));
     a.state = decode_statusword(a.sw);
@@ -180,6 +184,23 @@ void EcDrives::update() {
     }
     if (a.cw_at) m_.write_entry(*a.cw_at, cw);
   }
+}
+
+// The segment was lost: every axis's goal becomes quick stop (disable voltage where quick
+// stop is not reachable), velocity and torque set-points zero, the position set-point held at
+// the last actual position. What goes out once the segment is back.
+void EcDrives::stop_axes() {
+  for (auto& a : axes_) {
+    a.goal = PdsGoal::quick_stop_active;
+    a.reset_pending = false;
+    a.cw_user &= static_cast<std::uint16_t>(~0x0010);
+    const int p = a.slave - 1;
+    for (const std::uint16_t index : {std::uint16_t{0x60FF}, std::uint16_t{0x6071}})
+      if (const auto at = m_.find_entry(p, object(a.ch, index), 0)) m_.write_entry(*at, 0);
+    const auto target = m_.find_entry(p, object(a.ch, 0x607A), 0), actual = m_.find_entry(p, object(a.ch, 0x6064), 0);
+    if (target && actual) m_.write_entry(*target, m_.read_entry(*actual, true));
+  }
+  stopped_ = !axes_.empty();
 }
 
 std::optional<PdsState> EcDrives::state(int slave, int ch) const {
@@ -292,6 +313,7 @@ void EcDrives::set_goal(int slave, int ch, PdsGoal goal) {
   a->goal = goal;
   a->reset_pending = true;
   a->reset_phase = 0;
+  stopped_ = false;  // a new goal from the user lifts the segment-loss stop
 }
 
 std::optional<botnana::ObjectRef> EcDrives::user_pdo(int slave, int ch, botnana::UserPdo which) const {

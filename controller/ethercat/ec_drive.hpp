@@ -11,7 +11,10 @@
 // Axes are (slave, channel), both 1-based as in the Botnana word set; channel n > 1 of a
 // multi-axis slave uses the CiA 402 objects offset by 0x800 × (n − 1). Signedness and sizes
 // come from the slave's ESI object dictionary. A homed record per axis is kept (set when the
-// drive reports homing attained in HM mode). No allocation in update() once the axes exist.
+// drive reports homing attained in HM mode). When the master reports a lost segment
+// (EcMaster::segment_lost, counted in its stats), update() stops every axis: goal quick stop,
+// velocity/torque set-points 0, position set-point = position actual; stopped() holds until
+// a new goal is set. No allocation in update() once the axes exist.
 #pragma once
 
 #include <array>
@@ -51,6 +54,8 @@ class EcDrives : public botnana::DriveAccess {
   std::optional<PdsState> state(int slave, int ch) const;
   std::uint16_t statusword(int slave, int ch) const;
   bool all_enabled() const;  // every axis in operation enabled (false without axes)
+  // Every axis was stopped because the segment was lost (until a new goal is set).
+  bool stopped() const { return stopped_; }
   // Homed record per axis: set when the drive reports homing attained (mode display HM,
   // statusword bits 12 and 10 set, 13 clear), or by set_homed(); nullopt for no such axis.
   std::optional<bool> homed(int slave, int ch) const;
@@ -88,10 +93,13 @@ class EcDrives : public botnana::DriveAccess {
   static std::uint16_t object(int ch, std::uint16_t index);
   bool object_signed(int slave, std::uint16_t index, std::uint8_t sub) const;
   unsigned object_bytes(int slave, std::uint16_t index, std::uint8_t sub) const;
+  void stop_axes();
 
   EcMaster& m_;
   std::vector<Axis> axes_;
   bool built_ = false;
+  std::uint64_t losses_seen_ = 0;  // the master's segment_losses already acted upon
+  bool stopped_ = false;
   std::map<std::tuple<int, std::uint16_t, std::uint8_t>, std::int64_t> sdo_values_;
   std::map<std::tuple<int, std::uint16_t, std::uint8_t>, bool> sdo_reading_;
   std::array<std::optional<botnana::ObjectRef>, 4> user_pdos_{};

@@ -2,7 +2,8 @@
 // then the drive layer on the master against four emulated drives (EscChain + DriveSlaves):
 // goals drive the axes to operation enabled, PDO objects are written/read through the image,
 // other objects through queued SDOs (requests_pending), and the `go` bit is cleared once the
-// drive acknowledges a profile-position set-point.
+// drive acknowledges a profile-position set-point; a lost segment quick-stops every axis, and
+// they stay stopped when it returns.
 #include "controller/ethercat/ec_drive.hpp"
 
 #include <gtest/gtest.h>
@@ -132,4 +133,36 @@ TEST(EcDrive, HomingAttainedSetsTheHomedRecord) {
   EXPECT_EQ(d.homed(2, 1), false);
   d.set_homed(1, 1, false);
   EXPECT_EQ(d.homed(1, 1), false);
+}
+
+TEST(EcDrive, LostSegmentQuickStopsEveryAxisAndTheyStayStoppedWhenItReturns) {
+  EcMasterConfig cfg;
+  cfg.startup.push_back(StartupSdo{-1, 0x6060, 0, {9}});  // CSV
+  cfg.segment_loss_cycles = 3;
+  cfg.probe_every_ns = 10'000'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  for (int s = 1; s <= 4; ++s) d.set_goal(s, 1, PdsGoal::operation_enabled);
+  ASSERT_TRUE(b.run_until([&] { return d.all_enabled(); }, 2000));
+  for (int s = 1; s <= 4; ++s) ASSERT_TRUE(d.write(s, 1, 0x60FF, 0, 5000));
+  for (int k = 0; k < 100; ++k) b.step();
+  EXPECT_FALSE(d.stopped());
+  b.drop_next = 100;
+  for (int k = 0; k < 10; ++k) b.step();
+  ASSERT_TRUE(b.master->segment_lost());
+  EXPECT_TRUE(d.stopped());
+  const auto target = b.master->find_entry(1, 0x60FF, 0);
+  ASSERT_TRUE(target.has_value());
+  EXPECT_EQ(b.master->read_entry(*target, true), 0) << "the velocity set-point that goes out when it returns";
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational(); }, 20000));
+  for (int k = 0; k < 300; ++k) b.step();
+  for (int s = 0; s < 4; ++s) {
+    EXPECT_NE(d.state(s + 1, 1), PdsState::operation_enabled) << "slave " << s + 1;
+    EXPECT_EQ(b.slaves[s]->axis(0).objects().target_velocity, 0);
+    EXPECT_EQ(b.slaves[s]->axis(0).objects().velocity_actual, 0);
+  }
+  d.set_goal(1, 1, PdsGoal::operation_enabled);
+  EXPECT_FALSE(d.stopped()) << "a new goal lifts the stop";
 }
