@@ -87,7 +87,10 @@ class Runner {
         }),
         drives_(master_),
         platform_(std::move(platform)) {
-    master_.set_event_callback([](const std::string& e) { spdlog::info("{}", e); });
+    master_.set_event_callback([](const std::string& e) {
+      if (e.rfind("segment lost", 0) == 0) spdlog::warn("{}", e);
+      else spdlog::info("{}", e);
+    });
     for (int i = 0; i < 4; ++i) {
       if (ec_.user_pdos[i].first)
         drives_.set_user_pdo(static_cast<botnana::UserPdo>(i), botnana::ObjectRef{ec_.user_pdos[i].first, ec_.user_pdos[i].second});
@@ -142,6 +145,9 @@ class Runner {
     if (master_.phase() == MasterPhase::failed || failure_) {
       r.state = simclock::MasterState::stopped;
       r.reason = simclock::StopReason::startup_timeout;
+    } else if (halted_ || master_.segment_lost()) {
+      r.state = simclock::MasterState::stopped;  // the segment went silent (no node: all of them)
+      r.reason = simclock::StopReason::node_missing;
     } else if (finished_) {
       r.state = simclock::MasterState::finished;
     } else if (started_) {
@@ -167,6 +173,14 @@ class Runner {
   }
   const std::optional<std::string>& failure() const { return failure_; }
   bool finished() const { return finished_; }
+  bool halted() const { return halted_; }  // the platform loop stopped: the segment was lost
+  // The program's state for --stats: failed | stopped (segment lost) | finished | running | starting.
+  std::string state() const {
+    if (master_.phase() == MasterPhase::failed || failure_) return "failed";
+    if (halted_ || master_.segment_lost()) return "stopped";
+    if (finished_) return "finished";
+    return started_ || (!loop_ && master_.operational()) ? "running" : "starting";
+  }
 
   std::uint64_t frames_tx = 0, frames_rx = 0;
 
@@ -190,8 +204,19 @@ class Runner {
       }
     }
   }
+  // The segment was lost once the drives had goals: the wheels get zero for good.
+  void halt() {
+    halted_ = true;
+    const WheelCounts c = counts();
+    for (int i = 0; i < 4; ++i) target_[i] = c[i];
+    wheel_cps_ = {0, 0, 0, 0};
+    command(wheel_cps_);
+    spdlog::error("platform loop stopped ({}): wheel commands zero, drives to quick stop", master_.stop_reason());
+  }
   void platform(SimTime t) {
     if (!loop_ || failure_) return;
+    if (halted_) return command({0, 0, 0, 0});
+    if (goals_set_ && master_.segment_lost()) return halt();
     if (!started_) {
       if (!master_.operational()) return;
       if (!goals_set_) {
@@ -246,7 +271,7 @@ class Runner {
   std::optional<PlatformLoop> loop_;
   PlatformLoopOutput out_;
   std::int64_t every_ = 1, n_ = 0;
-  bool goals_set_ = false, started_ = false, finished_ = false;
+  bool goals_set_ = false, started_ = false, finished_ = false, halted_ = false;
   SimTime origin_ = -1;
   WheelCounts counts_{};
   std::array<double, 4> wheel_cps_{}, target_{};
@@ -433,15 +458,20 @@ int run_ethercat_program(const ProgramOptions& o) {
   }
   if (runner.failure()) code = kExitRuntime;
   const auto& s = m.stats();
-  spdlog::info("end: phase {}, {} slaves, frames tx {} rx {}, cycles {}, WKC errors {}, lost frames {}, timeouts {}, "
-               "SDO done {} failed {}, slaves lost {}, recoveries {}",
-               to_string(m.phase()), m.slave_count(), runner.frames_tx, runner.frames_rx, s.cycles, s.wkc_errors,
-               s.lost_frames, s.timeouts, s.sdo_done, s.sdo_failed, s.slaves_lost, s.recoveries);
+  spdlog::info("end: state {}, phase {}{}, {} slaves, frames tx {} rx {}, cycles {}, WKC errors {}, lost frames {}, "
+               "timeouts {}, SDO done {} failed {}, slaves lost {}, recoveries {}, segment losses {} returns {}",
+               runner.state(), to_string(m.phase()), m.operational() ? " (OP)" : " (not OP)", m.slave_count(),
+               runner.frames_tx, runner.frames_rx, s.cycles, s.wkc_errors, s.lost_frames, s.timeouts, s.sdo_done,
+               s.sdo_failed, s.slaves_lost, s.recoveries, s.segment_losses, s.segment_returns);
+  if (!m.stop_reason().empty()) spdlog::warn("stop reason: {}", m.stop_reason());
   if (!o.stats.empty()) {
     const std::string tmp = o.stats + ".tmp";
     std::ofstream f(tmp);
-    const nlohmann::json j = {{"ecat_phase", to_string(m.phase())}, {"slaves", m.slave_count()},
-                              {"operational", m.operational()}, {"frames_tx", runner.frames_tx},
+    const nlohmann::json j = {{"ecat_phase", to_string(m.phase())}, {"state", runner.state()},
+                              {"slaves", m.slave_count()}, {"operational", m.operational()},
+                              {"segment_lost", m.segment_lost()}, {"stop_reason", m.stop_reason()},
+                              {"segment_losses", s.segment_losses}, {"segment_returns", s.segment_returns},
+                              {"platform_stopped", runner.halted()}, {"frames_tx", runner.frames_tx},
                               {"frames_rx", runner.frames_rx}, {"cycles", s.cycles}, {"wkc_errors", s.wkc_errors},
                               {"expected_wkc", s.expected_wkc}, {"last_wkc", s.last_wkc},
                               {"lost_frames", s.lost_frames}, {"stray_frames", s.stray_frames},
