@@ -325,6 +325,16 @@ bool OmniMaster::detection_round_ok() {
   return true;
 }
 
+int OmniMaster::missing_slaves() const {
+  int n = 0;
+  for (std::size_t i = 0; i < 4; ++i) {
+    const bool no_answer = config_.detect_every > 0 && missed_rounds_[i] >= config_.detect_misses;
+    const bool no_feedback = config_.feedback_timeout > 0 && ticks_without_feedback_[i] >= config_.feedback_timeout;
+    n += no_answer || no_feedback ? 1 : 0;
+  }
+  return n;
+}
+
 bool OmniMaster::detection_due() const {
   return config_.detect_every > 0 && run_ticks_ % static_cast<std::uint64_t>(config_.detect_every) == 0;
 }

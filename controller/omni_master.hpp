@@ -155,6 +155,9 @@ class OmniMaster {
   std::optional<std::uint16_t> slave_setting() const { return slave_setting_; }
   // Running ticks since the last all_found (0 on the origin tick).
   std::uint64_t run_ticks() const { return run_ticks_; }
+  // Slaves that missed detect_misses rounds or feedback_timeout ticks of feedback as of the
+  // last running tick; 4 after a node_missing/feedback_missing stop: the whole bus went silent.
+  int missing_slaves() const;
 
  private:
   void transition(MasterTransition t, std::uint8_t node = 0);

@@ -127,11 +127,25 @@ class StateLog {
       spdlog::info("state {} -> {} ({}{})", simclock::to_string(last_), simclock::to_string(r.state),
                    simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
     }
+    if (r.state == MasterState::stopped) watchdog_line(m, r);
     last_ = r.state;
   }
   void reset(MasterState s) { last_ = s; }
 
  private:
+  // A watchdog stop says in words what vanished: one node, or the whole bus (the twin gone).
+  static void watchdog_line(const OmniMaster& m, const simclock::MasterReport& r) {
+    if (r.reason != controller::StopReason::node_missing && r.reason != controller::StopReason::feedback_missing) return;
+    const char* what = r.reason == controller::StopReason::node_missing ? "no answer to node detection"
+                                                                          : "no speed feedback";
+    if (m.missing_slaves() == 4) {
+      spdlog::warn("bus silent: none of the four slaves heard ({}); slaves stopped (NMT stop all), no more commands",
+                   what);
+    } else {
+      spdlog::warn("node 0x{:02X} missing ({}); slaves stopped (NMT stop all), no more commands", r.node, what);
+    }
+  }
+
   MasterState last_ = MasterState::waiting;
 };
 

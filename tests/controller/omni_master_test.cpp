@@ -546,5 +546,55 @@ TEST(OmniMaster, RejectsABadConfiguration) {
   EXPECT_THROW(OmniMaster(c, [](const Frame&) { return true; }), MasterConfigError);
 }
 
+TEST(OmniMaster, AWholeBusGoingSilentStopsAtTheNextRoundAndCountsEverySlaveMissing) {
+  Harness h(line_config());
+  h.start();
+  for (int k = 0; k < 5; ++k) {
+    h.tick();
+    ideal_slaves(h, h.take());
+  }
+  EXPECT_EQ(h.master.missing_slaves(), 0);
+  // The twin is gone: ticks keep coming (wall clock), no frame arrives any more. The first
+  // tick still has the answers to the last round; the next one finds none.
+  h.tick();
+  EXPECT_EQ(h.master.report().state, MasterState::running);
+  h.take();
+  h.tick();
+  EXPECT_EQ(h.take(), std::vector<Frame>{kStopAll});
+  EXPECT_EQ(h.master.report().state, MasterState::stopped);
+  EXPECT_EQ(h.master.report().reason, StopReason::node_missing);
+  EXPECT_EQ(h.master.report().node, node::axis1);
+  EXPECT_EQ(h.master.missing_slaves(), 4);
+  for (int k = 0; k < 20; ++k) h.tick();
+  EXPECT_TRUE(h.take().empty()) << "stopped: no more commands";
+}
+
+TEST(OmniMaster, ASilentBusWithoutDetectionStopsOnTheFeedbackTimeout) {
+  MasterConfig c = line_config();
+  c.detect_every = 0;
+  c.feedback_timeout = 3;
+  Harness h(c);
+  h.start();
+  h.tick();
+  ideal_slaves(h, h.take());
+  int ticks = 0;
+  while (h.master.state() == MasterState::running && ticks < 50) h.tick(), ++ticks;
+  EXPECT_EQ(ticks, 4);  // one tick on the last feedback, then 3 without
+  EXPECT_EQ(h.master.report().reason, StopReason::feedback_missing);
+  EXPECT_EQ(h.master.missing_slaves(), 4);
+}
+
+TEST(OmniMaster, OneMissingNodeIsNotASilentBus) {
+  Harness h(line_config());
+  h.start();
+  h.tick();
+  h.take();
+  h.feedback_all({0, 0, 0, 0});
+  h.answer({node::axis1, node::axis3, node::axis4});
+  h.tick();
+  EXPECT_EQ(h.master.report().reason, StopReason::node_missing);
+  EXPECT_EQ(h.master.missing_slaves(), 1);
+}
+
 }  // namespace
 }  // namespace omnitwin::controller
