@@ -27,9 +27,12 @@ constexpr std::array<std::string_view, 16> kBusMetrics = {
     "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s"};
 // The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
 // bus ethercat also its own counters (from the master's statistics file).
-constexpr std::array<std::string_view, 13> kMasterMetrics = {
-    "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",    "cycles",  "wkc_errors",
-    "lost_frames",  "recoveries",       "slaves_lost",  "timeouts",      "sdo_failed", "last_wkc"};
+// The twin's view (lockstep report, realtime supervision: lost_at_s) and the EtherCAT
+// master's own counters (master-stats.json: segment losses and returns among them).
+constexpr std::array<std::string_view, 16> kMasterMetrics = {
+    "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
+    "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
+    "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s"};
 // Per slave: CAN's first nine, EtherCAT's last three.
 constexpr std::array<std::string_view, 12> kSlaveMetrics = {
     "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
