@@ -144,5 +144,35 @@ TEST_F(CliEthercat, PpTestScriptReachesItsTarget) {
   EXPECT_NE(twin.wait(30s), -1);
 }
 
+// Issue 19's reproducer: the twin killed under an external master. The master must notice
+// the vanished segment (every cycle a lost frame and a WKC error), leave OP, stop its drives
+// and say so in its statistics, instead of "running", operational and 0 WKC errors.
+TEST_F(CliEthercat, ExternalMasterNoticesTheTwinVanishing) {
+  const std::string iface = "udp:127.0.0.1:47613";
+  Child twin({"twin", test_scenario("ethercat_short.yaml"), "--bus", "ethercat", "--set",
+              "bus.transport=" + iface, "--set", "duration=60", "--out", (dir_ / "twin").string(), "--no-progress"},
+             work(), io());
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "a master connects on " + iface)) << twin.out() << twin.err();
+  const fs::path stats = dir_ / "master-stats.json";
+  Child master(binary_path("controller/omni-master"),
+               {"--bus", "ethercat", "--iface", iface, "--config", source_path("tests/data/ethercat/drives_only.yaml"),
+                "--duration", "6", "--stats", stats.string()},
+               work(), io(), "master-");
+  std::this_thread::sleep_for(3s);  // the segment is in OP well before this
+  twin.signal(SIGKILL);
+  EXPECT_EQ(master.wait(30s), 0) << master.out() << master.err();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(stats));
+  EXPECT_EQ(m.at("state"), "stopped") << m.dump(2);
+  EXPECT_EQ(m.at("operational"), false);
+  EXPECT_EQ(m.at("segment_lost"), true);
+  EXPECT_GT(m.at("wkc_errors").get<int>(), 500);  // about 3 s of 1 ms cycles without an answer
+  EXPECT_GT(m.at("lost_frames").get<int>(), 500);
+  EXPECT_TRUE(contains(m.at("stop_reason").get<std::string>(), "segment lost")) << m.dump(2);
+  EXPECT_TRUE(contains(master.out() + master.err(), "segment lost")) << master.err();
+}
+
 }  // namespace
 }  // namespace omnitwin::twin::cli
