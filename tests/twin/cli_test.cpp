@@ -546,5 +546,29 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
   EXPECT_TRUE(contains(master.err(), "detecting -> running")) << master.err();
 }
 
+// Issue 19: the twin killed under an external CAN master on its wall clock. The master
+// notices the silent bus at its next node detection, stops the slaves (NMT stop) and says so.
+TEST_F(CliCan, ExternalMasterNoticesTheTwinVanishing) {
+  const fs::path out = dir_ / "gone";
+  const std::string spec = "udp:239.74.163.2:47607";
+  const fs::path cfg = dir_ / "master.yaml";
+  std::ofstream(cfg) << "path:\n  segments:\n    - line: {dx: 0.5, duration: 5}\nstartup_timeout: 3\n";
+  Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--set", "duration=30",
+              "--out", out.string(), "--no-progress"},
+             work(), io());
+  const auto ready = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
+  Child master(binary_path("controller/omni-master"),
+               {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "4"}, work(), io(), "m-");
+  std::this_thread::sleep_for(1500ms);
+  ASSERT_TRUE(contains(master.err(), "detecting -> running")) << master.err();
+  twin.signal(SIGKILL);
+  EXPECT_EQ(master.wait(20s), 0) << master.err();
+  EXPECT_TRUE(contains(master.err(), "bus silent")) << master.err();
+  EXPECT_TRUE(contains(master.err(), "end: state stopped")) << master.err();
+}
+
 }  // namespace
 }  // namespace omnitwin::twin
