@@ -262,13 +262,27 @@ GlBackend backend_of(const VideoOptions& o) {
   return o.backend.empty() ? gl_backend_from_env() : gl_backend_from_name(o.backend);
 }
 
-}  // namespace
+// Frames 0 … total-1 into the encoder until `stop` is seen; the flag is read before each
+// frame only, so once set (and however often set again) finalising is never cut short.
+VideoResult render_frames(Recording& rec, SceneRenderer& renderer, VideoEncoder& encoder, const VideoOptions& o,
+                          const std::atomic<bool>* stop) {
+  const int total = static_cast<int>(std::floor(rec.end_time() * o.fps + 1e-6)) + 1;
+  VideoResult res{encoder.path()};
+  for (int k = 0; k < total; ++k) {
+    res.stopped_early = stop && stop->load();
+    if (res.stopped_early) break;
+    encoder.add_frame(renderer.render(rec.at(k / o.fps)).data());
+    if (o.progress) o.progress(k + 1, total);
+  }
+  encoder.close();  // trailer, then the rename: the file under out_file is whole or absent
+  res.frames = encoder.frames();
+  res.duration_s = encoder.duration_s();
+  return res;
+}
 
-VideoResult render_run(const std::string& run_dir, const std::string& out_file, const VideoOptions& o,
-                       const std::atomic<bool>* stop) {
-  validate(o);
-  const GlBackend backend = backend_of(o);
-  const auto start = std::chrono::steady_clock::now();
+// The whole render; throws on any failure (the encoder has then removed its .part file).
+VideoResult render_or_throw(const std::string& run_dir, const std::string& out_file, const VideoOptions& o,
+                            GlBackend backend, const std::atomic<bool>* stop) {
   Recording rec(run_dir);
   SceneRenderer renderer(load_model(fs::path(run_dir) / "platform.xml"),
                          SceneOptions{.width = o.width, .height = o.height, .overview_inset = o.overview_inset,
@@ -276,19 +290,26 @@ VideoResult render_run(const std::string& run_dir, const std::string& out_file, 
                                       .backend = backend});
   renderer.set_reference_path(rec.reference());
   VideoEncoder encoder(out_file, EncoderOptions{.width = o.width, .height = o.height, .fps = o.fps});
-  const int total = static_cast<int>(std::floor(rec.end_time() * o.fps + 1e-6)) + 1;
-  VideoResult res{out_file};
-  for (int k = 0; k < total; ++k) {
-    if (stop && stop->load()) {
-      res.stopped_early = true;
-      break;
-    }
-    encoder.add_frame(renderer.render(rec.at(k / o.fps)).data());
-    if (o.progress) o.progress(k + 1, total);
+  return render_frames(rec, renderer, encoder, o, stop);
+}
+
+}  // namespace
+
+VideoResult render_run(const std::string& run_dir, const std::string& out_file, const VideoOptions& o,
+                       const std::atomic<bool>* stop) {
+  validate(o);
+  const GlBackend backend = backend_of(o);
+  const auto start = std::chrono::steady_clock::now();
+  // An older video must not pass for this run's, whatever fails below.
+  std::error_code ec;
+  const bool removed_old = !fs::is_directory(out_file, ec) && fs::remove(out_file, ec);
+  VideoResult res;
+  try {
+    res = render_or_throw(run_dir, out_file, o, backend, stop);
+  } catch (const std::runtime_error& e) {
+    if (!removed_old) throw;
+    throw std::runtime_error(fmt::format("{}; the older {} was removed", e.what(), out_file));
   }
-  encoder.close();
-  res.frames = encoder.frames();
-  res.duration_s = encoder.duration_s();
   res.render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   spdlog::debug("video {}: {} frames, {:.2f} s, rendered in {:.2f} s", out_file, res.frames, res.duration_s, res.render_s);
   return res;

@@ -43,11 +43,15 @@ struct VideoResult {
   double render_s = 0;       // wall time spent [s]
 };
 
-// Renders the recorded run in run_dir into out_file (created or replaced; its directory
-// must exist). `stop` (may be null) is polled before every frame: once it is true the frames
-// so far are finalised into a playable file and the result says stopped_early. Throws
+// Renders the recorded run in run_dir into out_file (its directory must exist), written as
+// DIR/.NAME.part and renamed to out_file only once the MP4 is complete (VideoEncoder), so
+// out_file is whole or absent, never cut. An older out_file is removed first: it never
+// passes for this render. `stop` (may be null) is polled before every frame: once it is true
+// the frames so far are finalised into a playable file (finalising reads no flag, so more
+// stop requests cannot cut it) and the result says stopped_early. Throws
 // std::runtime_error with a message naming the file (missing or malformed run files, unknown
-// camera, unwritable output, disk full); std::invalid_argument for bad options.
+// camera, unwritable output, disk full; "; the older FILE was removed" when one was), after
+// which nothing is under out_file; std::invalid_argument for bad options (nothing removed).
 // Not real-time safe: allocates, renders in software, writes files. Uses an off-screen GL
 // context current on the calling thread for the duration of the call.
 VideoResult render_run(const std::string& run_dir, const std::string& out_file,

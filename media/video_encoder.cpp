@@ -11,9 +11,11 @@ extern "C" {
 #include <libswscale/swscale.h>
 }
 
-#include <spdlog/spdlog.h>
-
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 
@@ -66,10 +68,26 @@ void quiet_libav_logs() {
   if (av_log_get_level() > AV_LOG_WARNING) av_log_set_level(AV_LOG_WARNING);
 }
 
+// "DIR/.NAME.part" beside DIR/NAME (one file system, so the rename is atomic).
+std::string part_path_of(const std::string& path) {
+  const std::filesystem::path p(path);
+  return (p.parent_path() / ("." + p.filename().string() + ".part")).string();
+}
+
+// Removes a regular file or link at path; true if there was one.
+bool remove_stale(const std::string& path) {
+  std::error_code ec;
+  const auto st = std::filesystem::symlink_status(path, ec);
+  if (ec || std::filesystem::is_directory(st)) return false;
+  return std::filesystem::remove(path, ec);
+}
+
 }  // namespace
 
 struct VideoEncoder::Impl {
-  std::string path;
+  std::string path;       // the final name
+  std::string part;       // DIR/.NAME.part, renamed to path by close()
+  bool removed_old = false;
   EncoderOptions opt;
   FormatPtr fmt;  // destroyed last (members go in reverse order)
   CodecPtr codec;
@@ -82,13 +100,20 @@ struct VideoEncoder::Impl {
 
   // Throws "<path>: <what>: <libav reason>" when err < 0; returns err otherwise.
   int check(int err, const char* what) const {
-    if (err < 0) throw std::runtime_error("video " + path + ": " + what + ": " + av_error_text(err));
+    if (err < 0) fail(std::string(what) + ": " + av_error_text(err));
     return err;
+  }
+  [[noreturn]] void fail(const std::string& why) const {
+    throw std::runtime_error("video " + path + ": " + why + " (written as " + part + ")" +
+                             (removed_old ? "; the older " + path + " was removed" : ""));
   }
 
   void open_codec();
   void open_file();
+  void set_up_frames();
   void drain(bool flushing);
+  void finish();
+  void discard() noexcept;
 };
 
 void VideoEncoder::Impl::open_codec() {
@@ -112,7 +137,7 @@ void VideoEncoder::Impl::open_codec() {
 
 void VideoEncoder::Impl::open_file() {
   AVFormatContext* raw = nullptr;
-  check(avformat_alloc_output_context2(&raw, nullptr, "mp4", path.c_str()), "cannot set up MP4 output");
+  check(avformat_alloc_output_context2(&raw, nullptr, "mp4", part.c_str()), "cannot set up MP4 output");
   fmt.reset(raw);
   open_codec();
   stream = avformat_new_stream(fmt.get(), nullptr);
@@ -120,7 +145,7 @@ void VideoEncoder::Impl::open_file() {
   stream->time_base = codec->time_base;
   stream->avg_frame_rate = codec->framerate;
   check(avcodec_parameters_from_context(stream->codecpar, codec.get()), "cannot copy codec parameters");
-  check(avio_open(&fmt->pb, path.c_str(), AVIO_FLAG_WRITE), "cannot open the file for writing");
+  check(avio_open(&fmt->pb, part.c_str(), AVIO_FLAG_WRITE), "cannot open the file for writing");
   AVDictionary* mux = nullptr;
   av_dict_set(&mux, "movflags", "+faststart", 0);
   const int err = avformat_write_header(fmt.get(), &mux);
@@ -141,34 +166,60 @@ void VideoEncoder::Impl::drain(bool flushing) {
   }
 }
 
+// The frame buffer and the RGB → YUV converter, once the file is open.
+void VideoEncoder::Impl::set_up_frames() {
+  frame.reset(av_frame_alloc());
+  packet.reset(av_packet_alloc());
+  if (!frame || !packet) fail("out of memory (frame)");
+  frame->format = AV_PIX_FMT_YUV420P;
+  frame->width = opt.width;
+  frame->height = opt.height;
+  check(av_frame_get_buffer(frame.get(), 0), "cannot allocate a frame");
+  sws.reset(sws_getContext(opt.width, opt.height, AV_PIX_FMT_RGB24, opt.width, opt.height, AV_PIX_FMT_YUV420P,
+                           SWS_BILINEAR, nullptr, nullptr, nullptr));
+  if (!sws) fail("cannot set up RGB to YUV conversion");
+}
+
+// Flushes the codec, writes the trailer (the faststart pass rewrites the .part file), closes
+// it, and only when every step succeeded renames it to the final name.
+void VideoEncoder::Impl::finish() {
+  check(avcodec_send_frame(codec.get(), nullptr), "encoding failed");
+  drain(true);
+  check(av_write_trailer(fmt.get()), "cannot finish the MP4 file (disk full?)");
+  check(fmt->pb->error, "cannot write to the file (disk full?)");
+  check(avio_closep(&fmt->pb), "cannot close the file (disk full?)");
+  if (std::rename(part.c_str(), path.c_str()) != 0)
+    fail(std::string("cannot rename to the final name: ") + std::strerror(errno));
+}
+
+// Closes the file without finishing it and removes it: nothing appears under the final name.
+void VideoEncoder::Impl::discard() noexcept {
+  if (fmt && fmt->pb) avio_closep(&fmt->pb);
+  std::error_code ec;
+  std::filesystem::remove(part, ec);
+}
+
 VideoEncoder::VideoEncoder(const std::string& path, const EncoderOptions& options)
     : impl_(std::make_unique<Impl>()) {
   validate(options);
   quiet_libav_logs();
   Impl& m = *impl_;
   m.path = path;
+  m.part = part_path_of(path);
   m.opt = options;
-  m.open_file();
-  m.frame.reset(av_frame_alloc());
-  m.packet.reset(av_packet_alloc());
-  if (!m.frame || !m.packet) throw std::runtime_error("video " + path + ": out of memory (frame)");
-  m.frame->format = AV_PIX_FMT_YUV420P;
-  m.frame->width = options.width;
-  m.frame->height = options.height;
-  m.check(av_frame_get_buffer(m.frame.get(), 0), "cannot allocate a frame");
-  m.sws.reset(sws_getContext(options.width, options.height, AV_PIX_FMT_RGB24, options.width,
-                             options.height, AV_PIX_FMT_YUV420P, SWS_BILINEAR, nullptr, nullptr,
-                             nullptr));
-  if (!m.sws) throw std::runtime_error("video " + path + ": cannot set up RGB to YUV conversion");
+  m.removed_old = remove_stale(path);  // an old video must not pass for this one
+  try {
+    m.open_file();
+    m.set_up_frames();
+  } catch (...) {
+    m.open = false;
+    m.discard();
+    throw;
+  }
 }
 
 VideoEncoder::~VideoEncoder() {
-  if (!impl_) return;
-  try {
-    close();
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-  }
+  if (impl_ && impl_->open) impl_->discard();
 }
 
 VideoEncoder::VideoEncoder(VideoEncoder&&) noexcept = default;
@@ -176,29 +227,39 @@ VideoEncoder& VideoEncoder::operator=(VideoEncoder&&) noexcept = default;
 
 void VideoEncoder::add_frame(const unsigned char* rgb) {
   Impl& m = *impl_;
-  if (!m.open) throw std::logic_error("video " + m.path + ": add_frame after close");
-  m.check(av_frame_make_writable(m.frame.get()), "cannot write the frame buffer");
-  const uint8_t* src[1] = {rgb};
-  const int stride[1] = {3 * m.opt.width};
-  sws_scale(m.sws.get(), src, stride, 0, m.opt.height, m.frame->data, m.frame->linesize);
-  m.frame->pts = m.frames;
-  m.check(avcodec_send_frame(m.codec.get(), m.frame.get()), "encoding failed");
-  ++m.frames;
-  m.drain(false);
+  if (!m.open) throw std::logic_error("video " + m.path + ": add_frame after close or a failure");
+  try {
+    m.check(av_frame_make_writable(m.frame.get()), "cannot write the frame buffer");
+    const uint8_t* src[1] = {rgb};
+    const int stride[1] = {3 * m.opt.width};
+    sws_scale(m.sws.get(), src, stride, 0, m.opt.height, m.frame->data, m.frame->linesize);
+    m.frame->pts = m.frames;
+    m.check(avcodec_send_frame(m.codec.get(), m.frame.get()), "encoding failed");
+    ++m.frames;
+    m.drain(false);
+  } catch (...) {
+    m.open = false;  // a failed write is never finished into a file: close() has nothing to do
+    m.discard();
+    throw;
+  }
 }
 
 void VideoEncoder::close() {
   Impl& m = *impl_;
   if (!m.open) return;
   m.open = false;  // a failure below leaves nothing to retry
-  m.check(avcodec_send_frame(m.codec.get(), nullptr), "encoding failed");
-  m.drain(true);
-  m.check(av_write_trailer(m.fmt.get()), "cannot finish the MP4 file (disk full?)");
-  m.check(avio_closep(&m.fmt->pb), "cannot close the file (disk full?)");
+  try {
+    m.finish();
+  } catch (...) {
+    m.discard();
+    throw;
+  }
 }
 
 int VideoEncoder::frames() const { return impl_->frames; }
 double VideoEncoder::duration_s() const { return impl_->frames / impl_->opt.fps; }
 const std::string& VideoEncoder::path() const { return impl_->path; }
+const std::string& VideoEncoder::part_path() const { return impl_->part; }
+bool VideoEncoder::replaced_old() const { return impl_->removed_old; }
 
 }  // namespace omnitwin::media

@@ -1,16 +1,26 @@
 // Tests media/run_video: a small run directory (run.json, platform.xml from the default
 // parameters, 2 s of trajectory.csv moving 0.3 m along x, bus.csv) becomes an MP4 with one
 // frame per 1/fps of sim time that ffprobe reads back; the picture follows the recorded
-// pose; a stop request gives a shorter playable file; missing or malformed run files and an
-// unwritable output are clear errors naming the file. Any MuJoCo warning fails a test.
+// pose; a stop request gives a shorter playable file, also when stop requests keep coming
+// while it is finalised and when they are two SIGINTs 50 ms apart; missing or malformed run
+// files, an unwritable output and a full disk are clear errors naming the file, after which
+// nothing (not even an older video) is under the final name. Any MuJoCo warning fails a test.
 #include "media/run_video.hpp"
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
+
+#include "tests/bus_emulators/small_tmpfs.hpp"
 
 #include "physics/platform_mjcf.hpp"
 #include "tests/media/media_probe.hpp"
@@ -136,6 +146,79 @@ TEST_F(RunVideo, StopRequestFinalisesAShorterPlayableFile) {
   EXPECT_NEAR(s.duration_s, 0.8, 0.01);
 }
 
+TEST_F(RunVideo, StopRequestsThatKeepComingWhileFinalisingCannotCutTheFile) {
+  std::atomic<bool> stop{false};
+  std::atomic<bool> done{false};
+  VideoOptions o = small();
+  o.progress = [&](int frames, int) {
+    if (frames == 8) stop = true;
+  };
+  // A second, third … request: set again and again until render_run has returned.
+  std::thread again([&] {
+    while (!done) {
+      if (stop) stop = true;
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+  });
+  const VideoResult r = render_run(run_dir(), out(), o, &stop);
+  done = true;
+  again.join();
+  EXPECT_TRUE(r.stopped_early);
+  EXPECT_EQ(r.frames, 8);
+  const auto s = probe(out());
+  ASSERT_EQ(s.status, 0);
+  EXPECT_EQ(s.frames, 8);
+  EXPECT_FALSE(fs::exists(dir_ / ".video.mp4.part"));
+}
+
+std::atomic<bool> g_stop{false};
+void on_sigint(int) { g_stop = true; }
+
+// The reported failure: two SIGINTs 50 ms apart while rendering. A child process renders
+// with a handler that only sets the stop flag (no SA_RESTART: system calls see EINTR) and
+// says on a pipe when its first frame is done; the parent then sends the two signals.
+TEST_F(RunVideo, TwoSigintsFiftyMillisecondsApartLeaveADecodableFile) {
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  VideoOptions o = small();
+  o.fps = 100;  // 201 frames: the signals come while it renders
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    struct sigaction sa {};
+    sa.sa_handler = on_sigint;
+    ::sigaction(SIGINT, &sa, nullptr);
+    o.progress = [&](int frames, int) {
+      if (frames == 1) (void)!::write(ready[1], "r", 1);
+    };
+    try {
+      const VideoResult r = render_run(run_dir(), out(), o, &g_stop);
+      ::_exit(r.stopped_early ? 0 : 2);
+    } catch (...) {
+      ::_exit(1);
+    }
+  }
+  ::close(ready[1]);
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  ::close(ready[0]);
+  ::kill(pid, SIGINT);
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  ::kill(pid, SIGINT);
+  int st = 0;
+  ::waitpid(pid, &st, 0);
+  ASSERT_TRUE(WIFEXITED(st)) << "the renderer died of a signal";
+  const int code = WEXITSTATUS(st);
+  EXPECT_TRUE(code == 0 || code == 2) << "render_run failed in the child (exit " << code << ")";
+  const auto s = probe(out());
+  ASSERT_EQ(s.status, 0) << "ffprobe cannot read the file";
+  EXPECT_GE(s.frames, 1);
+  if (code == 0) {
+    EXPECT_LT(s.frames, 201);
+  }
+  EXPECT_FALSE(fs::exists(dir_ / ".video.mp4.part"));
+}
+
 TEST_F(RunVideo, RunWithoutBusCsvStillRenders) {
   fs::remove(dir_ / "bus.csv");
   EXPECT_EQ(render_run(run_dir(), out(), small()).frames, 21);
@@ -169,6 +252,30 @@ TEST_F(RunVideo, MalformedTrajectoryIsAnErrorWithFileAndLine) {
   EXPECT_NE(msg.find("trajectory.csv:3"), std::string::npos) << msg;
   std::ofstream(dir_ / "trajectory.csv") << "t,x,y\n0,0,0\n";
   EXPECT_NE(error_of(run_dir(), out(), small()).find("no column \"phi\""), std::string::npos);
+}
+
+TEST_F(RunVideo, AFailedRenderRemovesAnOlderVideoAndSaysSo) {
+  std::ofstream(out()) << "the video of an earlier run";
+  fs::remove(dir_ / "trajectory.csv");
+  const std::string msg = error_of(run_dir(), out(), small());
+  EXPECT_NE(msg.find("trajectory.csv"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("the older " + out() + " was removed"), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists(out()));
+}
+
+// A 12 KiB tmpfs holds the run's MP4 header and a few frames, not 21.
+TEST_F(RunVideo, AFullDiskLeavesNothingUnderTheFinalNameAndNamesTheFile) {
+  omnitwin::testing::SmallTmpfs disk("12k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const std::string file = (disk / "video.mp4").string();
+  VideoOptions o = small();
+  o.width = 320;
+  o.height = 240;
+  const std::string msg = error_of(run_dir(), file, o);
+  ASSERT_NE(msg, "") << "no error on a full disk";
+  EXPECT_NE(msg.find(file), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists(file));
+  EXPECT_FALSE(fs::exists(disk / ".video.mp4.part"));
 }
 
 TEST_F(RunVideo, UnwritableOutputAndBadOptionsAreClearErrors) {

@@ -1,14 +1,20 @@
 // Tests media/video_encoder: synthetic RGB frames become an H.264 yuv420p MP4 that ffprobe
 // reads with the expected frame count and duration, the index at the front (faststart),
-// colours in the right channel order; unwritable paths and a full disk are clear errors;
-// an encoder destroyed without close() still leaves a playable file.
+// colours in the right channel order; unwritable paths are clear errors; the file is
+// written as .NAME.part and appears under its name only on close(); a full disk (a small
+// tmpfs, or /dev/full behind the .part name) leaves nothing under the final name and an
+// error naming it; a stale file is removed at open; an encoder destroyed without close()
+// leaves nothing.
 #include "media/video_encoder.hpp"
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+#include <random>
 #include <vector>
 
+#include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/media/media_probe.hpp"
 #include "tests/support/temp_dir.hpp"
 
@@ -59,6 +65,7 @@ TEST(VideoEncoder, PutsTheIndexBeforeTheMediaDataForBrowsers) {
   {
     VideoEncoder enc(file.string(), small());
     for (int k = 0; k < 5; ++k) enc.add_frame(synthetic_frame(160, 120, k, 0, 0, 0).data());
+    enc.close();
   }
   const std::string bytes = omnitwin::testing::read_bytes(file);
   const auto moov = bytes.find("moov"), mdat = bytes.find("mdat");
@@ -73,6 +80,7 @@ TEST(VideoEncoder, KeepsRedGreenBlueInTheirChannels) {
   {
     VideoEncoder enc(file, small());
     for (int k = 0; k < 3; ++k) enc.add_frame(synthetic_frame(160, 120, 0, 200, 40, 20).data());
+    enc.close();
   }
   const std::string rgb = decode_frame_rgb(file, 1);
   ASSERT_EQ(rgb.size(), 160u * 120u * 3u);
@@ -82,17 +90,42 @@ TEST(VideoEncoder, KeepsRedGreenBlueInTheirChannels) {
   EXPECT_NEAR(static_cast<unsigned char>(rgb[centre + 2]), 20, 12);
 }
 
-TEST(VideoEncoder, DestroyedWithoutCloseStillLeavesAPlayableFile) {
+TEST(VideoEncoder, DestroyedWithoutCloseLeavesNothingUnderTheFinalName) {
   TempDir dir("omnitwin-video");
   const std::string file = (dir / "unclosed.mp4").string();
   {
     VideoEncoder enc(file, small());
     for (int k = 0; k < 7; ++k) enc.add_frame(synthetic_frame(160, 120, k, 10, 10, 10).data());
-  }
+  }  // an exception unwinding: the recording is abandoned
+  EXPECT_FALSE(std::filesystem::exists(file));
+  EXPECT_FALSE(std::filesystem::exists(dir / ".unclosed.mp4.part"));
+}
+
+TEST(VideoEncoder, WritesAPartFileAndRenamesItOnlyOnClose) {
+  TempDir dir("omnitwin-video");
+  const std::string file = (dir / "video.mp4").string();
+  VideoEncoder enc(file, small());
+  EXPECT_EQ(enc.part_path(), (dir / ".video.mp4.part").string());
+  for (int k = 0; k < 5; ++k) enc.add_frame(synthetic_frame(160, 120, k, 10, 10, 10).data());
+  EXPECT_TRUE(std::filesystem::exists(enc.part_path()));
+  EXPECT_FALSE(std::filesystem::exists(file));
+  enc.close();
+  EXPECT_FALSE(std::filesystem::exists(enc.part_path()));
   const auto s = probe(file);
   ASSERT_EQ(s.status, 0);
-  EXPECT_EQ(s.codec, "h264");
-  EXPECT_EQ(s.frames, 7);
+  EXPECT_EQ(s.frames, 5);
+}
+
+TEST(VideoEncoder, AStaleFileIsRemovedWhenANewOneOpens) {
+  TempDir dir("omnitwin-video");
+  const std::string file = (dir / "video.mp4").string();
+  std::ofstream(file) << "an older video";
+  VideoEncoder enc(file, small());
+  EXPECT_TRUE(enc.replaced_old());
+  EXPECT_FALSE(std::filesystem::exists(file)) << "the old video must not pass for the new one";
+  enc.add_frame(synthetic_frame(160, 120, 0, 10, 10, 10).data());
+  enc.close();
+  EXPECT_EQ(probe(file).frames, 1);
 }
 
 TEST(VideoEncoder, UnwritableDirectoryIsAClearErrorNamingTheFile) {
@@ -107,17 +140,50 @@ TEST(VideoEncoder, UnwritableDirectoryIsAClearErrorNamingTheFile) {
   }
 }
 
-// /dev/full accepts open() and fails every write with ENOSPC: a disk that is full.
-TEST(VideoEncoder, FullDiskIsAClearErrorNamingTheFile) {
-  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+// Noise does not compress: about 20 KB per 160x120 frame, so a 64 KiB disk fills in a few.
+std::vector<unsigned char> noise_frame(std::mt19937& rng) {
+  std::vector<unsigned char> f(160 * 120 * 3);
+  for (auto& b : f) b = static_cast<unsigned char>(rng());
+  return f;
+}
+
+// Encodes `frames` noise frames into file and closes; the runtime_error's text ("" if none).
+std::string encode_noise(const std::string& file, int frames) {
+  std::mt19937 rng(7);
   try {
-    VideoEncoder enc("/dev/full", small());
-    for (int k = 0; k < 30; ++k) enc.add_frame(synthetic_frame(160, 120, k, 1, 2, 3).data());
+    VideoEncoder enc(file, small());
+    for (int k = 0; k < frames; ++k) enc.add_frame(noise_frame(rng).data());
     enc.close();
-    FAIL() << "no error writing to /dev/full";
   } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("/dev/full"), std::string::npos) << e.what();
+    return e.what();
   }
+  return "";
+}
+
+TEST(VideoEncoder, FullDiskLeavesNothingUnderTheFinalNameAndNamesTheFile) {
+  omnitwin::testing::SmallTmpfs disk("64k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const std::string file = (disk / "video.mp4").string();
+  std::ofstream(file) << "an older video";
+  const std::string msg = encode_noise(file, 60);
+  ASSERT_NE(msg, "") << "no error on a full disk";
+  EXPECT_NE(msg.find(file), std::string::npos) << msg;
+  EXPECT_NE(msg.find("the older " + file + " was removed"), std::string::npos) << msg;
+  EXPECT_FALSE(std::filesystem::exists(file));
+  EXPECT_FALSE(std::filesystem::exists(disk / ".video.mp4.part"));
+}
+
+// Without root: /dev/full (every write fails with ENOSPC) behind the .part name.
+TEST(VideoEncoder, DevFullBehindThePartNameIsAnErrorAndNoFile) {
+  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  TempDir dir("omnitwin-video");
+  const std::string file = (dir / "video.mp4").string();
+  std::filesystem::create_symlink("/dev/full", dir / ".video.mp4.part");
+  const std::string msg = encode_noise(file, 30);
+  ASSERT_NE(msg, "") << "no error writing to /dev/full";
+  EXPECT_NE(msg.find(file), std::string::npos) << msg;
+  EXPECT_FALSE(std::filesystem::exists(file));
+  EXPECT_FALSE(std::filesystem::is_symlink(dir / ".video.mp4.part"));
 }
 
 TEST(VideoEncoder, RejectsOddSizesAndBadFrameRates) {
