@@ -91,7 +91,7 @@ void RealtimePacer::wait_waking(std::int64_t deadline) {
 
 void RealtimePacer::tick(SimTime t) {
   const std::int64_t late = monotonic_ns() - (wall_start_ + t);
-  if (late > tick_period_) ++overruns_;
+  if (tick_overran(late, tick_period_)) ++overruns_;
   lateness_us_.push_back(static_cast<double>(std::max<std::int64_t>(late, 0)) * 1e-3);
 }
 

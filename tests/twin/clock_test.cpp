@@ -1,5 +1,6 @@
 // Tests twin/clock: the realtime pacer sleeps to absolute deadlines (never returns early)
-// and its statistics count lateness and overruns; the lockstep pacer never waits.
+// and its statistics count lateness and overruns (a tick half a period late or more, so one
+// 9.4 ms late at 10 ms counts); the lockstep pacer never waits.
 // Wall-clock figures are only bounded loosely from below (sleeping never ends early);
 // nothing here asserts how fast this machine is.
 #include "twin/clock.hpp"
@@ -34,6 +35,27 @@ TEST(Clock, RealtimePacerCountsOverruns) {
   p.tick(1'000'000);
   EXPECT_EQ(p.stats().overruns, 1u);
   EXPECT_GT(p.stats().jitter_max_us, 3000.0);
+}
+
+TEST(Clock, AnOverrunIsATickHalfAPeriodLateOrMore) {
+  constexpr SimTime period = 10'000'000;  // 10 ms
+  EXPECT_TRUE(tick_overran(9'400'000, period)) << "the reported case: 9.4 ms late at 10 ms";
+  EXPECT_TRUE(tick_overran(5'000'000, period));
+  EXPECT_TRUE(tick_overran(25'000'000, period));
+  EXPECT_FALSE(tick_overran(4'999'999, period));
+  EXPECT_FALSE(tick_overran(0, period));
+  EXPECT_FALSE(tick_overran(-1'000, period));
+}
+
+// The reported case on the wall clock: a 10 ms tick that starts about 9.4 ms late.
+TEST(Clock, RealtimePacerCountsATickNinePointFourMillisecondsLate) {
+  RealtimePacer p(10'000'000, 8);
+  p.start();
+  std::this_thread::sleep_for(std::chrono::microseconds(9'400));
+  p.wait_until(0);
+  p.tick(0);
+  EXPECT_EQ(p.stats().overruns, 1u);
+  EXPECT_GE(p.stats().jitter_max_us, 9'400.0);
 }
 
 TEST(Clock, LockstepNeverWaits) {
