@@ -52,13 +52,24 @@ long parse_index(const std::string& s) {
   return (!s.empty() && ec == std::errc() && p == s.data() + s.size() && v >= 0) ? v : -1;
 }
 
-// Parses a YAML document from a file; syntax errors name the file and line.
+// Parses the one YAML document of a file; syntax errors name the file and line. A second
+// document ('---' and anything after it) is an error, not silently ignored: yaml-cpp's
+// LoadFile reads the first document only, whatever follows.
 YAML::Node load_yaml_file(const std::string& file) {
+  std::vector<YAML::Node> docs;
   try {
-    return YAML::LoadFile(file);
+    docs = YAML::LoadAllFromFile(file);
   } catch (const YAML::Exception& e) {
     throw ScenarioError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
   }
+  if (docs.empty()) return YAML::Node();
+  if (docs.size() > 1) {
+    const YAML::Mark m = docs[1].Mark();
+    throw ScenarioError(file, m.is_null() ? 0 : m.line + 1, "",
+                        fmt::format("{} YAML documents; a file holds one (remove the '---' and what follows)",
+                                    docs.size()));
+  }
+  return docs[0];
 }
 
 // ---------------------------------------------------------------------------------------
@@ -120,8 +131,10 @@ void check_override_key(const std::string& key) {
   }
 }
 
-// Applies one override to the scenario tree (see Override in scenario.hpp).
-void apply_override(YAML::Node& root, const Override& o) {
+// Applies one override to the scenario tree (see Override in scenario.hpp); returns the
+// dotted key whose value it replaced, so only that key (and what lies below it) is blamed
+// on --set and everything else keeps its file and line.
+std::string apply_override(YAML::Node& root, const Override& o) {
   const auto parts = group_expect_key(split_key(o.key));
   YAML::Node value;
   try {
@@ -133,7 +146,7 @@ void apply_override(YAML::Node& root, const Override& o) {
   // given for a bus written by name turns the name into {type: name}.
   if (!parts.empty() && parts[0] == "bus" && root["bus"].IsMap() && parts.size() == 1 && value.IsScalar()) {
     root["bus"]["type"] = value;
-    return;
+    return "bus.type";
   }
   if (parts.size() > 1 && parts[0] == "bus" && !root["bus"].IsMap()) {
     YAML::Node bus(YAML::NodeType::Map);
@@ -149,6 +162,7 @@ void apply_override(YAML::Node& root, const Override& o) {
       throw ScenarioError(kOverrideFile, 0, o.key, fmt::format("cannot apply: {}", why));
     }
   }
+  return o.key;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -715,8 +729,7 @@ Scenario load_scenario(const std::string& path, const std::vector<Override>& ove
   std::vector<std::string> overridden;
   for (const auto& o : overrides) {
     check_override_key(o.key);
-    apply_override(root, o);
-    overridden.push_back(o.key);
+    overridden.push_back(apply_override(root, o));
   }
   const YamlDoc doc(path, overridden);
   return read_scenario(YamlField::root(doc, root), path);

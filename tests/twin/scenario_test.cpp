@@ -438,6 +438,28 @@ TEST(ScenarioErrors, DuplicateKey) {
                "controller.period");
 }
 
+// Issue 19: a repeated metric under expect: was accepted and only the first checked.
+TEST(ScenarioErrors, DuplicateExpectedMetric) {
+  const auto e = load_error(scenario("bad_duplicate_expect.yaml"));
+  expect_error(e, scenario("bad_duplicate_expect.yaml"), 7, "expect.platform.final_error_cm");
+  EXPECT_NE(std::string(e.what()).find("first given at line 6"), std::string::npos) << e.what();
+}
+
+// Issue 19: yaml-cpp read the first document only and ignored whatever followed '---'.
+TEST(ScenarioErrors, ASecondYamlDocumentIsRefused) {
+  const auto e = load_error(scenario("bad_second_document.yaml"));
+  expect_error(e, scenario("bad_second_document.yaml"), 6, "");
+  EXPECT_NE(std::string(e.what()).find("2 YAML documents"), std::string::npos) << e.what();
+  const auto g = load_error(scenario("bad_second_document_garbage.yaml"));
+  EXPECT_EQ(g.file(), scenario("bad_second_document_garbage.yaml"));
+  EXPECT_EQ(g.line(), 6) << g.what();
+}
+
+TEST(ScenarioErrors, ASecondYamlDocumentInAParameterFileIsRefused) {
+  expect_error(load_error(scenario("minimal.yaml"), {parse_override("platform.params=../params/two_documents.yaml")}),
+               params("two_documents.yaml"), 5, "");
+}
+
 TEST(ScenarioErrors, YamlSyntaxErrorNamesFileAndLine) {
   const auto e = load_error(scenario("bad_syntax.yaml"));
   EXPECT_EQ(e.file(), scenario("bad_syntax.yaml"));
@@ -563,6 +585,15 @@ TEST(ScenarioOverrides, ParamsFileFromSet) {
   expect_error(load_error(scenario("minimal.yaml"),
                           {parse_override("platform.params=../params/bad_roller_radius.yaml")}),
                params("bad_roller_radius.yaml"), 5, "rollers.radius");
+}
+
+// Issue 19: `--bus can` (the override bus=can) on a file with a bus mapping blamed every key
+// under bus.* on --set; only bus.type is replaced, so a bad key keeps its file and line.
+TEST(ScenarioOverrides, TheBusOverrideBlamesOnlyTheBusType) {
+  const std::string file = scenario("bad_bus_key.yaml");
+  expect_error(load_error(file, {{"bus", "can"}}), file, 5, "bus.bitrate");
+  expect_error(load_error(file), file, 5, "bus.bitrate");
+  expect_error(load_error(file, {{"bus", "profibus"}}), "--set", 0, "bus.type");
 }
 
 TEST(ScenarioOverrides, ErrorsOutsideOverriddenNodesStillNameTheFile) {
