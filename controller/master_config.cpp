@@ -343,7 +343,14 @@ MasterConfigError::MasterConfigError(std::string file, int line, std::string key
 MasterConfig parse_master_config(std::string_view yaml, const std::string& file) {
   YAML::Node root;
   try {
-    root = YAML::Load(std::string(yaml));
+    // All documents, so one after a '---' is refused rather than silently dropped.
+    const std::vector<YAML::Node> docs = YAML::LoadAll(std::string(yaml));
+    if (docs.size() > 1) {
+      const YAML::Mark m = docs[1].Mark();
+      throw MasterConfigError(file, m.is_null() ? 0 : m.line + 1, "",
+                              std::to_string(docs.size()) + " YAML documents; a configuration file holds one");
+    }
+    if (!docs.empty()) root = docs[0];
   } catch (const YAML::Exception& e) {
     throw MasterConfigError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
   }

@@ -121,12 +121,8 @@ void YamlField::allow_keys(std::initializer_list<std::string_view> allowed) cons
 void YamlField::allow_keys(const std::vector<std::string_view>& allowed) const {
   require_map();
   if (!present()) return;
-  std::vector<std::string> seen;
   for (const auto& m : members()) {
     const std::string& n = m.name();
-    // yaml-cpp keeps duplicate keys; only the first would be read, so refuse them.
-    if (std::find(seen.begin(), seen.end(), n) != seen.end()) m.fail("duplicate key");
-    seen.push_back(n);
     const bool known = std::find(allowed.begin(), allowed.end(), n) != allowed.end();
     if (known) continue;
     // List the accepted keys so a typo is easy to spot.
@@ -165,6 +161,14 @@ std::vector<YamlField> YamlField::members() const {
   for (auto it = node_.begin(); it != node_.end(); ++it) {
     if (!it->first.IsScalar()) {
       throw doc_->error(it->first.Mark(), key_, "mapping keys must be plain names");
+    }
+    // yaml-cpp keeps a repeated key and lookups answer with the first, so the later value
+    // (often the one meant) would be ignored without a word: refuse it, naming both lines.
+    for (const auto& earlier : out) {
+      if (earlier.name() != it->first.Scalar()) continue;
+      const int first = earlier.line();
+      throw doc_->error(it->first.Mark(), child_key(it->first.Scalar()),
+                        first > 0 ? fmt::format("duplicate key (first given at line {})", first) : "duplicate key");
     }
     out.emplace_back(*doc_, it->second, child_key(it->first.Scalar()), it->first.Scalar(),
                      it->first.Mark());

@@ -121,12 +121,19 @@ std::string resolve(const std::string& base, const std::string& p) {
 
 EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const std::string& base_dir) {
   YAML::Node doc;
+  std::vector<YAML::Node> docs;
   try {
-    doc = YAML::Load(std::string(yaml));
+    // All documents, so one after a '---' is refused rather than silently dropped.
+    docs = YAML::LoadAll(std::string(yaml));
   } catch (const YAML::Exception& e) {
     if (e.mark.is_null()) throw EcConfigError(fmt::format("{}: {}", file, e.msg));
     throw EcConfigError(fmt::format("{}:{}: {}", file, e.mark.line + 1, e.msg));
   }
+  if (docs.size() > 1) {
+    throw EcConfigError(fmt::format("{}:{}: {} YAML documents; a configuration file holds one", file,
+                                    docs[1].Mark().is_null() ? 0 : docs[1].Mark().line + 1, docs.size()));
+  }
+  if (!docs.empty()) doc = docs[0];
   if (!doc.IsDefined() || doc.IsNull()) throw EcConfigError(fmt::format("{}: empty configuration", file));
   const Val root(doc, line_of(doc, 1));
   EcConfig c;

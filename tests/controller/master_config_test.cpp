@@ -175,6 +175,8 @@ TEST(MasterConfig, FileLevelErrors) {
   EXPECT_EQ(error_of("period: 0.01\nperiod: 0.02\n" + std::string(kMinimal)), "cfg.yaml:2: period: duplicate key");
   EXPECT_EQ(error_of(""), "cfg.yaml: empty configuration file");
   EXPECT_EQ(error_of("- 1\n- 2\n"), "cfg.yaml:1: expected a mapping at the top level");
+  EXPECT_EQ(error_of(std::string(kMinimal) + "---\nperiod: 0.02\n"),
+            "cfg.yaml:5: 2 YAML documents; a configuration file holds one");
   EXPECT_EQ(error_of("period: [1, 2\n").rfind("cfg.yaml:", 0), 0u);
   const std::string missing = (dir / "nope.yaml").string();
   try {

@@ -110,6 +110,7 @@ TEST(EcConfig, ErrorsNameFileLineAndKey) {
   // yaml-cpp's own message, at the end of the input where it notices the missing ']'.
   EXPECT_EQ(error_of("esi: [a.xml\n"), "t.yaml:2: end of sequence flow not found");
   EXPECT_EQ(error_of("esi: a.xml\ncycle: 0.1\ncycle: 0.2\n"), "t.yaml:3: cycle: repeated key");
+  EXPECT_EQ(error_of("esi: a.xml\n---\ncycle: 0.2\n"), "t.yaml:3: 2 YAML documents; a configuration file holds one");
 }
 
 TEST(EcConfig, LoadsTheEsiFilesIntoTheCoreConfig) {
