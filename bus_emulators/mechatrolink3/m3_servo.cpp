@@ -1,0 +1,287 @@
+// bus_emulators/mechatrolink3 — the standard servo profile on the drive core; see m3_servo.hpp.
+#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace omnitwin::m3 {
+
+namespace {
+
+using drive::State;
+
+constexpr std::uint32_t kPosRdy = 1u << 10, kPon = 1u << 11, kMRdy = 1u << 12, kSvOn = 1u << 13;
+constexpr std::uint32_t kPauseCmp = 1u << 0, kCancelCmp = 1u << 1;
+constexpr std::uint32_t kIoDec = 1u << 0, kIoPot = 1u << 1, kIoNot = 1u << 2, kIoPset = 1u << 9,
+                        kIoZpoint = 1u << 11, kIoBrake = 1u << 12;
+
+std::uint32_t get_u32(std::span<const std::uint8_t> f, std::size_t at) { return static_cast<std::uint32_t>(get_i32(f, at)); }
+
+void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) { put_i32(f, at, static_cast<std::int32_t>(v)); }
+
+bool faulted(State s) { return s == State::fault || s == State::fault_reaction_active; }
+
+}  // namespace
+
+std::uint16_t servo_alarm_code(std::uint16_t drive_error) noexcept {
+  return drive_error == drive::kErrorFollowing ? 0x0D00 : 0x0F00;
+}
+
+ServoProfile::ServoProfile(const ServoConfig& config) : cfg_(config), drive_(config.drive) {}
+
+bool ServoProfile::servo_on() const { return drive_.state() == State::operation_enabled; }
+bool ServoProfile::device_alarm() const { return faulted(drive_.state()); }
+// CMDRDY is 0 while the drive is on its way to the state SV_ON or SV_OFF asked for.
+bool ServoProfile::ready() const { return want_on_ == servo_on() || device_alarm(); }
+
+void ServoProfile::stop(SimTime) {
+  want_on_ = false;
+  motion_ = Motion::none;
+}
+
+void ServoProfile::power_cycle() {
+  drive_.power_cycle();
+  want_on_ = sensor_on_ = paused_ = fault_reset_ = new_set_point_ = false;
+  motion_ = Motion::none;
+  user_offset_ = target_ = 0;
+  last_error_ = 0;
+}
+
+CmdAlarm ServoProfile::execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime) {
+  const std::uint32_t ctrl = get_u32(cmd, 4);
+  paused_ = (ctrl & 0x1) != 0;
+  if ((ctrl & 0x2) != 0) motion_ = Motion::none;  // CMD_CANCEL: the motion ends, the axis holds
+  const CmdAlarm a = run(c, cmd, rsp);
+  const bool own_fields = c == Command::svprm_rd || c == Command::svprm_wr || c == Command::id_rd ||
+                          c == Command::alm_rd;
+  if (!own_fields) fill_status(cmd, rsp);
+  else put_u32(rsp, 4, get_u32(cmd, 4) & 0x3);  // SVCMD_STAT only: no room for monitors
+  return a;
+}
+
+CmdAlarm ServoProfile::run(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) {
+  switch (c) {
+    case Command::smon: return CmdAlarm::normal;
+    case Command::sens_on: sensor_on_ = true; return CmdAlarm::normal;
+    case Command::sens_off:
+      if (want_on_) return CmdAlarm::condition_error;
+      sensor_on_ = false;
+      return CmdAlarm::normal;
+    case Command::sv_on:
+      if (!sensor_on_ || device_alarm()) return CmdAlarm::condition_error;
+      want_on_ = true;
+      return CmdAlarm::normal;
+    case Command::sv_off: stop(0); return CmdAlarm::normal;
+    case Command::brk_on:
+    case Command::brk_off: {
+      if (want_on_) return CmdAlarm::condition_error;
+      auto& o = drive_.objects();
+      o.digital_outputs_mask |= 1u;
+      o.digital_outputs = c == Command::brk_on ? (o.digital_outputs | 1u) : (o.digital_outputs & ~1u);
+      return CmdAlarm::normal;
+    }
+    case Command::pos_set:
+      if (!sensor_on_) return CmdAlarm::condition_error;
+      user_offset_ = get_i32(cmd, 16) - drive_.objects().position_actual;
+      return CmdAlarm::normal;
+    case Command::velctrl:
+    case Command::interpolate:
+    case Command::trqctrl: return motion(c, cmd);
+    case Command::posing: return posing(cmd, false);
+    case Command::feed: return posing(cmd, true);
+    case Command::svprm_rd:
+    case Command::svprm_wr: return parameter(c, cmd, rsp);
+    case Command::alm_rd: return alarm_read(cmd, rsp);
+    case Command::alm_clr:
+      if (cmd[12] == 1) history_.fill(0);
+      fault_reset_ = device_alarm();
+      return CmdAlarm::normal;
+    case Command::id_rd: return id_read(cmd, rsp);
+    default: return CmdAlarm::unsupported;  // ZRET, EX_POSING, MEM_RD/WR, CONFIG: not built yet
+  }
+}
+
+// VELCTRL, INTERPOLATE, TRQCTRL: cyclic set-points into the drive core's CSV, CSP, CST.
+CmdAlarm ServoProfile::motion(Command c, std::span<const std::uint8_t> cmd) {
+  if (!servo_on()) return CmdAlarm::condition_error;
+  auto& o = drive_.objects();
+  if (c == Command::velctrl) {
+    o.target_velocity = get_i32(cmd, 16);
+    const std::uint16_t tlim = get_u16(cmd, 20);
+    if (tlim != 0) o.max_torque = tlim;
+    motion_ = Motion::velctrl;
+  } else if (c == Command::interpolate) {
+    target_ = get_i32(cmd, 16);
+    o.target_position = target_ - user_offset_;
+    o.velocity_offset = get_i32(cmd, 20);
+    motion_ = Motion::interpolate;
+  } else {
+    const std::int32_t tq = get_i32(cmd, 16);
+    if (std::abs(tq) > 32767) return CmdAlarm::invalid_data;
+    o.target_torque = static_cast<std::int16_t>(tq);
+    motion_ = Motion::trqctrl;
+  }
+  return CmdAlarm::normal;
+}
+
+// POSING (to TPOS) and FEED (at TSPD, no end) through the drive core's PP and PV.
+CmdAlarm ServoProfile::posing(std::span<const std::uint8_t> cmd, bool feed) {
+  if (!servo_on()) return CmdAlarm::condition_error;
+  auto& o = drive_.objects();
+  const std::int32_t speed = get_i32(cmd, 20);
+  const std::uint32_t acc = get_u32(cmd, 24), dec = get_u32(cmd, 28);
+  if (acc != 0) o.profile_acceleration = acc;
+  if (dec != 0) o.profile_deceleration = dec;
+  if (feed) {
+    o.target_velocity = speed;
+    motion_ = Motion::feed;
+    return CmdAlarm::normal;
+  }
+  if (speed <= 0) return CmdAlarm::invalid_data;
+  o.profile_velocity = static_cast<std::uint32_t>(speed);
+  const std::int32_t tpos = get_i32(cmd, 16);
+  new_set_point_ = motion_ != Motion::posing || tpos != target_;
+  target_ = tpos;
+  o.target_position = tpos - user_offset_;
+  motion_ = Motion::posing;
+  return CmdAlarm::normal;
+}
+
+CmdAlarm ServoProfile::parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) {
+  std::copy_n(cmd.begin() + 12, 4, rsp.begin() + 12);  // NO, SIZE, MODE echoed
+  if (cmd[14] != 4) return CmdAlarm::invalid_data;
+  auto& o = drive_.objects();
+  const auto value = get_u32(cmd, 16);
+  std::uint32_t* field = nullptr;
+  switch (static_cast<ServoParam>(get_u16(cmd, 12))) {
+    case ServoParam::following_error_window: field = &o.following_error_window; break;
+    case ServoParam::acceleration: field = &o.profile_acceleration; break;
+    case ServoParam::deceleration: field = &o.profile_deceleration; break;
+    case ServoParam::quick_stop_deceleration: field = &o.quick_stop_deceleration; break;
+    case ServoParam::max_velocity: field = &o.max_profile_velocity; break;
+    case ServoParam::position_window: field = &o.position_window; break;
+    case ServoParam::max_torque:
+      if (c == Command::svprm_wr) {
+        if (value > 65535) return CmdAlarm::invalid_data;
+        o.max_torque = static_cast<std::uint16_t>(value);
+      }
+      put_u32(rsp, 16, o.max_torque);
+      return CmdAlarm::normal;
+    case ServoParam::counts_per_rev:
+      if (c == Command::svprm_wr) return CmdAlarm::invalid_data;  // read only
+      put_u32(rsp, 16, static_cast<std::uint32_t>(std::lround(cfg_.drive.counts_per_rev)));
+      return CmdAlarm::normal;
+    default: return CmdAlarm::invalid_data;
+  }
+  if (c == Command::svprm_wr) *field = value;
+  put_u32(rsp, 16, *field);
+  return CmdAlarm::normal;
+}
+
+CmdAlarm ServoProfile::alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
+  rsp[12] = cmd[12];
+  if (cmd[12] > 1) return CmdAlarm::invalid_data;
+  if (cmd[12] == 1) {
+    for (std::size_t i = 0; i < 8; ++i) put_u16(rsp, 16 + 2 * i, history_[i]);
+  } else if (device_alarm()) {
+    put_u16(rsp, 16, servo_alarm_code(drive_.objects().error_code));
+  }
+  return CmdAlarm::normal;
+}
+
+CmdAlarm ServoProfile::id_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
+  std::copy_n(cmd.begin() + 12, 3, rsp.begin() + 12);
+  const std::size_t offset = cmd[13], size = cmd[14];
+  if (cmd[12] != 0 || size > 16 || offset >= 32) return CmdAlarm::invalid_data;  // ID_CODE 0: the device name
+  for (std::size_t i = 0; i < size; ++i) {
+    const std::size_t at = offset + i;
+    rsp[16 + i] = at < cfg_.id.size() ? static_cast<std::uint8_t>(cfg_.id[at]) : 0;
+  }
+  return CmdAlarm::normal;
+}
+
+std::int32_t ServoProfile::monitor(std::uint8_t sel) const {
+  const auto& o = drive_.objects();
+  switch (sel) {
+    case 0x0: return o.position_actual + user_offset_;   // APOS
+    case 0x1: return o.position_demand + user_offset_;   // CPOS
+    case 0x2: return o.following_error_actual;           // PERR
+    case 0x5: return o.velocity_actual;                  // FSPD
+    case 0x6: return o.velocity_demand;                  // CSPD
+    case 0x7: return o.torque_actual;                    // TRQ [0.1 %]
+    case 0x8: return device_alarm() ? servo_alarm_code(o.error_code) : 0;  // ALARM
+    case 0x9: return target_;                            // MPOS: the commanded target
+    default: return 0;                                   // LPOS1 and unused codes
+  }
+}
+
+void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
+  const std::uint32_t ctrl = get_u32(cmd, 4);
+  const std::array<std::uint8_t, 3> sel = {static_cast<std::uint8_t>((ctrl >> 12) & 0xF),
+                                           static_cast<std::uint8_t>((ctrl >> 16) & 0xF),
+                                           static_cast<std::uint8_t>((ctrl >> 20) & 0xF)};
+  std::uint32_t stat = (ctrl & 0x3) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0);
+  stat |= static_cast<std::uint32_t>(sel[0]) << 16 | static_cast<std::uint32_t>(sel[1]) << 20 |
+          static_cast<std::uint32_t>(sel[2]) << 24;
+  put_u32(rsp, 4, stat);
+  const auto& o = drive_.objects();
+  // PSET: a positioning motion whose target the axis is within the position window of.
+  const std::int64_t apos = static_cast<std::int64_t>(o.position_actual) + user_offset_;
+  const bool reached = std::abs(apos - target_) <= static_cast<std::int64_t>(o.position_window);
+  std::uint32_t io = ((o.digital_inputs >> 2) & 1u ? kIoDec : 0) | ((o.digital_inputs >> 1) & 1u ? kIoPot : 0) |
+                     (o.digital_inputs & 1u ? kIoNot : 0) | ((drive_.physical_outputs() & 1u) ? kIoBrake : 0);
+  if (reached && (motion_ == Motion::posing || motion_ == Motion::interpolate)) io |= kIoPset;
+  if (drive_.homed() && std::abs(apos) <= static_cast<std::int64_t>(o.position_window))
+    io |= kIoZpoint;
+  put_u32(rsp, 8, io);
+  for (std::size_t i = 0; i < 3; ++i) put_i32(rsp, 12 + 4 * i, monitor(sel[i]));
+}
+
+// The controlword for this period: the FSA one step towards servo on or off, the mode of the
+// motion, halt for CMD_PAUSE, bit 4 pulsed for a new POSING target.
+std::uint16_t ServoProfile::controlword() {
+  const State st = drive_.state();
+  if (faulted(st)) {
+    const bool reset = fault_reset_;
+    fault_reset_ = false;
+    return reset ? drive::cw::kFaultReset : drive::cw::kDisableVoltage;
+  }
+  if (!want_on_) return drive::cw::kShutdown;
+  std::uint16_t cw = drive::cw::kShutdown;
+  if (st == State::ready_to_switch_on) cw = drive::cw::kSwitchOn;
+  if (st == State::switched_on || st == State::operation_enabled) cw = drive::cw::kEnableOperation;
+  if (st == State::quick_stop_active) cw = drive::cw::kDisableVoltage;
+  if (paused_) cw |= drive::cw::halt;
+  if (new_set_point_ && st == State::operation_enabled) {
+    cw |= drive::cw::new_set_point | drive::cw::change_immediately;
+    new_set_point_ = false;
+  }
+  return cw;
+}
+
+void ServoProfile::note_alarm(std::uint16_t code) {
+  if (code == 0 || code == last_error_) return;
+  std::rotate(history_.rbegin(), history_.rbegin() + 1, history_.rend());
+  history_[0] = servo_alarm_code(code);
+  last_error_ = code;
+}
+
+drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
+  auto& o = drive_.objects();
+  static constexpr drive::Mode kModes[] = {drive::Mode::csv, drive::Mode::csv, drive::Mode::csp,
+                                           drive::Mode::pp,  drive::Mode::pv,  drive::Mode::cst};
+  o.mode = static_cast<std::int8_t>(kModes[static_cast<int>(motion_)]);
+  if (motion_ == Motion::none) o.target_velocity = 0;  // no motion: hold at standstill
+  o.controlword = controlword();
+  const drive::Command out = drive_.step(t, fb);
+  if (device_alarm()) {
+    note_alarm(o.error_code);
+    want_on_ = false;
+    motion_ = Motion::none;
+  } else {
+    last_error_ = 0;
+  }
+  return out;
+}
+
+}  // namespace omnitwin::m3

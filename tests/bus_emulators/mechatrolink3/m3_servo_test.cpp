@@ -1,0 +1,285 @@
+// Tests bus_emulators/mechatrolink3/m3_servo: the standard servo profile on the shared drive
+// core, closed over a 1-DOF axis model (drive::AxisModel) stepped every 1 ms. SV_ON needs
+// SENS_ON and holds CMDRDY at 0 until the drive is enabled; VELCTRL, INTERPOLATE, POSING,
+// FEED and TRQCTRL move the axis as commanded and need the servo on; BRK_ON/OFF need it off;
+// POS_SET shifts the reported position; monitors, SVCMD_STAT and SVCMD_IO say what happened;
+// SVPRM_RD/WR and ID_RD work and refuse bad input; a following error is a device alarm that
+// ALM_RD reports and ALM_CLR clears; a lost link turns the servo off; and the whole servo
+// start-up sequence of seed 000 fig. 8 runs through the slave link (m3_link) in phase 3.
+#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "bus_emulators/drive/axis_model.hpp"
+
+namespace omnitwin::m3 {
+namespace {
+
+constexpr double kCpr = 10000;  // counts per revolution in these tests
+
+ServoConfig config() {
+  ServoConfig c;
+  c.drive.counts_per_rev = kCpr;
+  c.drive.max_speed_rad_s = 200;
+  c.drive.rated_torque_nm = 1.0;
+  return c;
+}
+
+// A command field of 32 bytes with the header and SEL_MON1/2/3 = APOS, FSPD, PERR.
+std::vector<std::uint8_t> cmd(Command c, std::vector<std::pair<std::size_t, std::int32_t>> i32 = {},
+                              std::uint32_t svcmd_ctrl = (0x0u << 12) | (0x5u << 16) | (0x2u << 20)) {
+  std::vector<std::uint8_t> f(32, 0);
+  write_header(f, CommandHeader{static_cast<std::uint8_t>(c), 0, 0});
+  put_i32(f, 4, static_cast<std::int32_t>(svcmd_ctrl));
+  for (auto [at, v] : i32) put_i32(f, at, v);
+  return f;
+}
+
+class M3Servo : public ::testing::Test {
+ protected:
+  ServoProfile servo{config()};
+  drive::AxisModel axis{drive::AxisModelConfig{.inertia_kg_m2 = 1e-3, .viscous_nm_s = 1e-3, .coulomb_nm = 0.005}};
+  SimTime t = 0;
+  std::vector<std::uint8_t> rsp = std::vector<std::uint8_t>(32, 0);
+
+  CmdAlarm send(const std::vector<std::uint8_t>& c) {
+    std::fill(rsp.begin(), rsp.end(), std::uint8_t{0});
+    return servo.execute(static_cast<Command>(c[0]), c, rsp, t);
+  }
+  void run(double seconds) {
+    for (int k = 0; k < std::lround(seconds * 1000); ++k) {
+      axis.step(servo.step(t, axis.feedback()), 1e-3);
+      t += 1'000'000;
+    }
+  }
+  void servo_on() {
+    ASSERT_EQ(send(cmd(Command::sens_on)), CmdAlarm::normal);
+    ASSERT_EQ(send(cmd(Command::sv_on)), CmdAlarm::normal);
+    run(0.01);
+    ASSERT_TRUE(servo.servo_on());
+  }
+  std::uint32_t svcmd_stat() const { return static_cast<std::uint32_t>(get_i32(rsp, 4)); }
+  std::uint32_t svcmd_io() const { return static_cast<std::uint32_t>(get_i32(rsp, 8)); }
+  std::int32_t monitor(int k) const { return get_i32(rsp, 12 + 4 * static_cast<std::size_t>(k)); }
+};
+
+TEST_F(M3Servo, ServoOnNeedsTheSensorAndHoldsCmdrdyUntilTheDriveIsEnabled) {
+  EXPECT_EQ(send(cmd(Command::sv_on)), CmdAlarm::condition_error) << "SENS_ON first (fig. 8)";
+  EXPECT_EQ(send(cmd(Command::sens_on)), CmdAlarm::normal);
+  EXPECT_NE(svcmd_stat() & (1u << 10), 0u) << "POS_RDY";
+  EXPECT_EQ(send(cmd(Command::sv_on)), CmdAlarm::normal);
+  EXPECT_FALSE(servo.ready()) << "CMDRDY 0 while the FSA steps";
+  run(0.01);
+  EXPECT_TRUE(servo.servo_on());
+  EXPECT_TRUE(servo.ready());
+  send(cmd(Command::smon));
+  EXPECT_NE(svcmd_stat() & (1u << 13), 0u) << "SV_ON";
+  EXPECT_EQ(svcmd_stat() & (0xFu << 16), 0x0u << 16);
+  EXPECT_EQ((svcmd_stat() >> 20) & 0xF, 0x5u) << "SEL_MON2 echoed";
+}
+
+TEST_F(M3Servo, VelctrlTurnsTheAxisAtTheCommandedSpeed) {
+  servo_on();
+  const auto vref = static_cast<std::int32_t>(kCpr);  // one revolution per second
+  EXPECT_EQ(send(cmd(Command::velctrl, {{16, vref}})), CmdAlarm::normal);
+  run(1.0);
+  EXPECT_NEAR(axis.velocity_rad_s(), 2 * M_PI, 0.05 * 2 * M_PI);
+  send(cmd(Command::velctrl, {{16, vref}}));
+  EXPECT_NEAR(monitor(1), vref, 0.05 * vref) << "FSPD";
+  EXPECT_GT(monitor(0), 0.8 * kCpr) << "APOS after about a second";
+}
+
+TEST_F(M3Servo, MotionNeedsTheServoOnAndTheBrakeNeedsItOff) {
+  EXPECT_EQ(send(cmd(Command::velctrl, {{16, 1000}})), CmdAlarm::condition_error);
+  EXPECT_EQ(send(cmd(Command::posing, {{16, 1000}, {20, 1000}})), CmdAlarm::condition_error);
+  EXPECT_EQ(send(cmd(Command::brk_off)), CmdAlarm::normal);
+  servo_on();
+  EXPECT_EQ(send(cmd(Command::brk_on)), CmdAlarm::condition_error);
+  EXPECT_EQ(send(cmd(Command::sens_off)), CmdAlarm::condition_error);
+  EXPECT_EQ(send(cmd(Command::sv_off)), CmdAlarm::normal);
+  run(0.01);
+  EXPECT_FALSE(servo.servo_on());
+  EXPECT_EQ(send(cmd(Command::brk_on)), CmdAlarm::normal);
+  run(0.002);
+  send(cmd(Command::smon));
+  EXPECT_NE(svcmd_io() & (1u << 12), 0u) << "BRK_ON in SVCMD_IO";
+}
+
+TEST_F(M3Servo, InterpolateFollowsAPositionRamp) {
+  servo_on();
+  for (int k = 1; k <= 1000; ++k) {
+    const auto tpos = static_cast<std::int32_t>(2 * k);  // 2000 counts/s
+    ASSERT_EQ(send(cmd(Command::interpolate, {{16, tpos}, {20, 2000}})), CmdAlarm::normal);
+    run(0.001);
+  }
+  send(cmd(Command::interpolate, {{16, 2000}, {20, 0}}));  // the end: no more feed-forward
+  run(0.2);
+  send(cmd(Command::interpolate, {{16, 2000}, {20, 0}}));
+  EXPECT_NEAR(monitor(0), 2000, 20) << "APOS at the last target";
+  EXPECT_LT(std::abs(monitor(2)), 20) << "PERR";
+  EXPECT_NE(svcmd_io() & (1u << 9), 0u) << "PSET";
+}
+
+TEST_F(M3Servo, PosingReachesItsTargetAndFeedRunsWithoutOne) {
+  servo_on();
+  ASSERT_EQ(send(cmd(Command::posing, {{16, 20000}, {20, 20000}, {24, 100000}, {28, 100000}})), CmdAlarm::normal);
+  run(2.0);
+  send(cmd(Command::posing, {{16, 20000}, {20, 20000}, {24, 100000}, {28, 100000}}));
+  EXPECT_NEAR(monitor(0), 20000, 15);
+  EXPECT_NE(svcmd_io() & (1u << 9), 0u) << "PSET";
+  EXPECT_EQ(send(cmd(Command::posing, {{16, 0}, {20, 0}})), CmdAlarm::invalid_data) << "TSPD 0";
+  ASSERT_EQ(send(cmd(Command::feed, {{20, -5000}, {24, 100000}})), CmdAlarm::normal);
+  run(0.5);
+  EXPECT_LT(axis.velocity_rad_s(), -0.9 * 2 * M_PI * 5000 / kCpr);
+}
+
+TEST_F(M3Servo, TrqctrlAppliesTheTorque) {
+  servo_on();
+  ASSERT_EQ(send(cmd(Command::trqctrl, {{16, 100}})), CmdAlarm::normal);  // 10 % of 1 Nm
+  run(0.2);
+  EXPECT_GT(axis.velocity_rad_s(), 1.0) << "0.1 Nm on 1e-3 kg m² accelerates";
+  EXPECT_EQ(send(cmd(Command::trqctrl, {{16, 40000}})), CmdAlarm::invalid_data);
+}
+
+TEST_F(M3Servo, PosSetShiftsTheReportedPosition) {
+  EXPECT_EQ(send(cmd(Command::pos_set, {{16, 5000}})), CmdAlarm::condition_error) << "the sensor is off";
+  servo_on();
+  ASSERT_EQ(send(cmd(Command::pos_set, {{16, 5000}})), CmdAlarm::normal);
+  send(cmd(Command::smon));
+  EXPECT_NEAR(monitor(0), 5000, 2);
+}
+
+TEST_F(M3Servo, ServoParametersReadWriteAndRefuseBadNumbers) {
+  auto prm = [&](Command c, std::uint16_t no, std::int32_t value, std::uint8_t size = 4) {
+    auto f = cmd(c, {{16, value}});
+    put_u16(f, 12, no);
+    f[14] = size;
+    return send(f);
+  };
+  EXPECT_EQ(prm(Command::svprm_wr, 0x0102, 123456), CmdAlarm::normal);
+  EXPECT_EQ(servo.drive().objects().profile_acceleration, 123456u);
+  EXPECT_EQ(prm(Command::svprm_rd, 0x0102, 0), CmdAlarm::normal);
+  EXPECT_EQ(get_i32(rsp, 16), 123456);
+  EXPECT_EQ(get_u16(rsp, 12), 0x0102) << "NO echoed";
+  EXPECT_EQ(prm(Command::svprm_rd, 0x0110, 0), CmdAlarm::normal);
+  EXPECT_EQ(get_i32(rsp, 16), 10000);
+  EXPECT_EQ(prm(Command::svprm_wr, 0x0110, 1), CmdAlarm::invalid_data) << "read only";
+  EXPECT_EQ(prm(Command::svprm_rd, 0x7777, 0), CmdAlarm::invalid_data);
+  EXPECT_EQ(prm(Command::svprm_rd, 0x0102, 0, 2), CmdAlarm::invalid_data) << "SIZE 2";
+  EXPECT_EQ(prm(Command::svprm_wr, 0x0101, 70000), CmdAlarm::invalid_data);
+}
+
+TEST_F(M3Servo, IdReadGivesTheDeviceName) {
+  auto f = cmd(Command::id_rd);
+  f[14] = 8;
+  ASSERT_EQ(send(f), CmdAlarm::normal);
+  EXPECT_EQ(std::string(rsp.begin() + 16, rsp.begin() + 24), "OMNITWIN");
+  f[12] = 5;  // an ID code we do not have
+  EXPECT_EQ(send(f), CmdAlarm::invalid_data);
+}
+
+TEST_F(M3Servo, AFollowingErrorIsADeviceAlarmThatAlmClrClears) {
+  servo_on();
+  auto prm = cmd(Command::svprm_wr, {{16, 50}});
+  put_u16(prm, 12, 0x0100);  // following error window 50 counts
+  prm[14] = 4;
+  ASSERT_EQ(send(prm), CmdAlarm::normal);
+  send(cmd(Command::interpolate, {{16, 50000}}));  // a jump the axis cannot follow
+  run(0.1);
+  EXPECT_TRUE(servo.device_alarm());
+  EXPECT_FALSE(servo.servo_on());
+  auto rd = cmd(Command::alm_rd);
+  ASSERT_EQ(send(rd), CmdAlarm::normal);
+  EXPECT_EQ(get_u16(rsp, 16), 0x0D00) << "position deviation overflow";
+  EXPECT_EQ(send(cmd(Command::sv_on)), CmdAlarm::condition_error) << "not while the alarm stands";
+  ASSERT_EQ(send(cmd(Command::alm_clr)), CmdAlarm::normal);
+  run(0.01);
+  EXPECT_FALSE(servo.device_alarm());
+  rd[12] = 1;  // history
+  send(rd);
+  EXPECT_EQ(get_u16(rsp, 16), 0x0D00);
+}
+
+TEST_F(M3Servo, ALostLinkTurnsTheServoOffAndUnbuiltCommandsSaySo) {
+  servo_on();
+  send(cmd(Command::velctrl, {{16, 10000}}));
+  run(0.2);
+  servo.stop(t);
+  run(0.01);
+  EXPECT_FALSE(servo.servo_on());
+  EXPECT_EQ(send(cmd(Command::zret)), CmdAlarm::unsupported);
+  EXPECT_EQ(send(cmd(Command::ex_posing)), CmdAlarm::unsupported);
+}
+
+// Seed 000 fig. 8 through the slave link: DISCONNECT, CONNECT, ID_RD, SVPRM_WR, SENS_ON,
+// SV_ON, a motion command, SV_OFF, DISCONNECT; every response normal, phase 3 in between.
+TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
+  ServoProfile servo(config());
+  drive::AxisModel axis;
+  std::vector<std::vector<std::uint8_t>> sent;
+  SlaveLink link(LinkConfig{.address = 0x03}, servo,
+                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
+  SimTime t = 0;
+  std::uint8_t wdt = 0;
+  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
+    std::vector<std::uint8_t> b(kMaxFrame);
+    b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
+    link.on_frame(b, t);
+  };
+  // One communication cycle: sync, the command, 1 ms of drive periods; returns CMD_STAT.
+  auto exchange = [&](std::vector<std::uint8_t> c) {
+    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+    wdt = static_cast<std::uint8_t>(wdt + 0x10);
+    c[1] = wdt;
+    frame(FrameType::cyclic_command, c, 0x03);
+    axis.step(servo.step(t, axis.feedback()), 1e-3);
+    t += 1'000'000;
+    link.advance(t);
+    FrameView v;
+    EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
+    EXPECT_EQ(v.data[0], c[0]) << "RCMD";
+    return unpack_stat(get_u16(v.data, 2));
+  };
+  link.power_on(0);
+  std::vector<std::uint8_t> notify(16, 0);
+  put_i32(notify, 0, 1'000'000);
+  frame(FrameType::cycle_notify, notify, kBroadcast);
+  frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);
+  EXPECT_EQ(exchange(cmd(Command::disconnect)).cmd_alm, CmdAlarm::normal);
+  frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);  // after DISCONNECT
+  auto con = cmd(Command::connect);
+  con[4] = kServoProfileVersion;
+  con[5] = kComModSync;
+  con[6] = 1;
+  con[7] = 0x10;
+  con[8] = con[9] = con[10] = con[11] = 0;
+  EXPECT_EQ(exchange(con).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(exchange(cmd(Command::sync_set)).cmd_alm, CmdAlarm::normal);
+  ASSERT_EQ(link.phase(), Phase::p3);
+  auto id = cmd(Command::id_rd);
+  id[14] = 4;
+  EXPECT_EQ(exchange(id).cmd_alm, CmdAlarm::normal);
+  auto prm = cmd(Command::svprm_wr, {{16, 500000}});
+  put_u16(prm, 12, 0x0102);
+  prm[14] = 4;
+  EXPECT_EQ(exchange(prm).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(exchange(cmd(Command::sens_on)).cmd_alm, CmdAlarm::normal);
+  CmdStat st = exchange(cmd(Command::sv_on));
+  EXPECT_FALSE(st.cmdrdy) << "SV_ON in progress";
+  for (int k = 0; k < 10 && !st.cmdrdy; ++k) st = exchange(cmd(Command::nop));
+  EXPECT_TRUE(st.cmdrdy);
+  EXPECT_TRUE(servo.servo_on());
+  for (int k = 0; k < 300; ++k) ASSERT_EQ(exchange(cmd(Command::velctrl, {{16, 5000}})).cmd_alm, CmdAlarm::normal);
+  EXPECT_GT(axis.velocity_rad_s(), 2.5);
+  EXPECT_EQ(exchange(cmd(Command::sv_off)).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(exchange(cmd(Command::disconnect)).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(link.phase(), Phase::p1);
+  EXPECT_FALSE(servo.servo_on());
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::normal) << "no missed command or sync on the way";
+}
+
+}  // namespace
+}  // namespace omnitwin::m3
