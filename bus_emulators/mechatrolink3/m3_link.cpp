@@ -46,7 +46,6 @@ void SlaveLink::transition(Transition tr, SimTime t) {
       if (s_.phase == Phase::p5) return;
       if (s_.phase != Phase::p1) profile_.stop(t);
       s_.phase = Phase::p1;
-      s_.started = false;
       return;
     case Transition::comm_alarm:
       profile_.stop(t);

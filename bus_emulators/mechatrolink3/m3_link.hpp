@@ -16,7 +16,8 @@
 // Phases and what is legal in each (one flat switch over named transitions, transition()):
 //   P5 powered off   -> power_on                    -> P1
 //   P1 no connection -> CONNECT accepted             -> P2 (any mode)
-//   P2 asynchronous  -> SYNC_SET (synchronous mode)  -> P3 ; DISCONNECT -> P1
+//   P2 asynchronous  -> SYNC_SET (synchronous mode)  -> P3 ; DISCONNECT -> P1 (communication
+//                       goes on: the slave waits for CONNECT again)
 //   P3 synchronous   -> communication alarm          -> P2 ; DISCONNECT -> P1
 //   any              -> power_off                    -> P5
 // In P1 only NOP, CONNECT and DISCONNECT execute; INTERPOLATE needs P3 (allowed_in()).
@@ -29,6 +30,7 @@
 
 #include "bus_emulators/mechatrolink3/m3_command.hpp"
 #include "bus_emulators/mechatrolink3/m3_frame.hpp"
+#include "bus_emulators/mechatrolink3/m3_wire.hpp"
 
 namespace omnitwin::m3 {
 
@@ -42,8 +44,6 @@ struct Connection {
 };
 inline constexpr std::uint8_t kServoProfileVersion = 0x30;
 inline constexpr std::uint8_t kComModSync = 0x02, kComModSubcommand = 0x80;
-// DLY_REQ to DLY_RPL turnaround of every slave's ASIC (ours; fixed, so the master subtracts it).
-inline constexpr SimTime kDelayEchoNs = 1'000;
 
 // The profile above the link (a servo, an I/O station). Called from the cyclic path: must
 // not block or allocate.

@@ -67,17 +67,25 @@ SimTime t_rsp_ns(const CycleInputs& in, int k) {
   return tr_dly_ns(in.topology, k) + 2 * frame_time_ns(s.data_bytes) + s.response_ns + in.margin_ns;
 }
 
-CyclePlan plan_cycle(const CycleInputs& in) {
+CyclePlan plan_cycle(const std::vector<SimTime>& tr_dly, const std::vector<StationTiming>& stations,
+                     int retry_slots, SimTime margin_ns, SimTime software_ns) {
   CyclePlan p;
   p.exchange_ns = frame_slot_ns(8);  // the sync frame
-  for (int k = 0; k < in.topology.slaves(); ++k) {
-    p.t_rsp_ns.push_back(t_rsp_ns(in, k));
+  for (std::size_t k = 0; k < stations.size(); ++k) {
+    const StationTiming& s = stations[k];
+    p.t_rsp_ns.push_back(tr_dly[k] + 2 * frame_time_ns(s.data_bytes) + s.response_ns + margin_ns);
     p.exchange_ns += p.t_rsp_ns.back() + kGapNs;
   }
-  p.retry_ns = in.retry_slots * slowest_exchange_ns(p.t_rsp_ns);
+  p.retry_ns = retry_slots * slowest_exchange_ns(p.t_rsp_ns);
   p.int_offset_ns = p.exchange_ns + p.retry_ns;
-  p.min_cycle_ns = p.int_offset_ns + in.software_ns;
+  p.min_cycle_ns = p.int_offset_ns + software_ns;
   return p;
+}
+
+CyclePlan plan_cycle(const CycleInputs& in) {
+  std::vector<SimTime> tr_dly;
+  for (int k = 0; k < in.topology.slaves(); ++k) tr_dly.push_back(tr_dly_ns(in.topology, k));
+  return plan_cycle(tr_dly, in.stations, in.retry_slots, in.margin_ns, in.software_ns);
 }
 
 std::string check_inputs(const CycleInputs& in) {

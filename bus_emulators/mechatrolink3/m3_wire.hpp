@@ -29,6 +29,9 @@ namespace omnitwin::m3 {
 
 inline constexpr SimTime kByteNs = 80;              // 100 Mbit/s
 inline constexpr std::size_t kPreambleSfd = 8, kInterFrameGap = 12;
+// DLY_REQ to DLY_RPL turnaround of every slave's ASIC (ours; fixed and known, so the C1
+// master subtracts it from the round trip it measures).
+inline constexpr SimTime kDelayEchoNs = 1'000;
 
 // Time the frame with an information field of n bytes occupies a link, first preamble bit
 // to last FCS bit [ns].
@@ -98,6 +101,10 @@ struct CyclePlan {
 SimTime t_rsp_ns(const CycleInputs& in, int k);
 // Plans one transmission cycle. The inputs must be consistent (check_inputs() == "").
 CyclePlan plan_cycle(const CycleInputs& in);
+// The same from TR_DLY values the master measured (one per station) instead of a topology:
+// what the C1 master computes at seed 000 fig. 10. Sizes must match.
+CyclePlan plan_cycle(const std::vector<SimTime>& tr_dly, const std::vector<StationTiming>& stations,
+                     int retry_slots, SimTime margin_ns, SimTime software_ns);
 // "" if plan_cycle() may be called: a valid topology, one StationTiming per slave with a
 // cyclic data length and a response time ≥ 0, 0 … 7 retry slots, margins ≥ 0. Not real-time safe.
 std::string check_inputs(const CycleInputs& in);

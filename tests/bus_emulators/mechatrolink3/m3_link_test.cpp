@@ -296,8 +296,11 @@ TEST_F(M3Link, DisconnectReturnsToPhase1AndStopsTheProfile) {
   command(Command::disconnect);
   EXPECT_EQ(link.phase(), Phase::p1);
   EXPECT_EQ(profile.stops, 1);
-  command(Command::nop);
-  EXPECT_EQ(link.stats().bad_frames, 1u) << "after DISCONNECT the master starts communication again";
+  command(Command::velctrl);
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::phase_error) << "phase 1 again";
+  connect();
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::normal) << "communication goes on: CONNECT again at once";
+  EXPECT_EQ(link.phase(), Phase::p2);
 }
 
 TEST_F(M3Link, PowerOffSilencesAndPowerOnForgets) {

@@ -249,7 +249,6 @@ TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
   frame(FrameType::cycle_notify, notify, kBroadcast);
   frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);
   EXPECT_EQ(exchange(cmd(Command::disconnect)).cmd_alm, CmdAlarm::normal);
-  frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);  // after DISCONNECT
   auto con = cmd(Command::connect);
   con[4] = kServoProfileVersion;
   con[5] = kComModSync;

@@ -1,0 +1,136 @@
+// controller/mechatrolink3 — one servo axis seen by the master application; see m3_servo_axis.hpp.
+#include "controller/mechatrolink3/m3_servo_axis.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+namespace omnitwin::m3 {
+
+namespace {
+
+// SVCMD_CTRL with the monitors the axis reads: SEL_MON1 APOS (0), SEL_MON2 FSPD (5).
+constexpr std::uint32_t kSelMon = (0x0u << 12) | (0x5u << 16);
+
+Command command_of(AxisStep s, bool position_mode) {
+  switch (s) {
+    case AxisStep::disconnect:
+    case AxisStep::release: return Command::disconnect;
+    case AxisStep::connect: return Command::connect;
+    case AxisStep::sync_set: return Command::sync_set;
+    case AxisStep::id_rd: return Command::id_rd;
+    case AxisStep::params: return Command::svprm_wr;
+    case AxisStep::sens_on: return Command::sens_on;
+    case AxisStep::sv_on: return Command::sv_on;
+    case AxisStep::running: return position_mode ? Command::interpolate : Command::velctrl;
+    case AxisStep::sv_off: return Command::sv_off;
+    default: return Command::nop;
+  }
+}
+
+}  // namespace
+
+const char* to_string(AxisStep s) {
+  switch (s) {
+    case AxisStep::disconnect: return "DISCONNECT";
+    case AxisStep::connect: return "CONNECT";
+    case AxisStep::sync_set: return "SYNC_SET";
+    case AxisStep::id_rd: return "ID_RD";
+    case AxisStep::params: return "SVPRM_WR";
+    case AxisStep::sens_on: return "SENS_ON";
+    case AxisStep::sv_on: return "SV_ON";
+    case AxisStep::running: return "running";
+    case AxisStep::sv_off: return "SV_OFF";
+    case AxisStep::release: return "DISCONNECT (release)";
+    case AxisStep::released: return "released";
+    case AxisStep::failed: return "failed";
+  }
+  return "?";
+}
+
+ServoAxis::ServoAxis(std::string name, ServoAxisConfig config, Log log)
+    : name_(std::move(name)), cfg_(std::move(config)), log_(std::move(log)) {}
+
+void ServoAxis::go(AxisStep next, SimTime t) {
+  step_ = next;
+  if (log_) log_(t, fmt::format("{}: {}", name_, next == AxisStep::failed ? "failed: " + why_ : to_string(next)));
+}
+
+// Whether the response answers command c as accepted; a CMD_ALM alarm in start-up fails the axis.
+bool ServoAxis::accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t) {
+  if (rsp[0] != static_cast<std::uint8_t>(c)) return false;  // not yet the answer to this command
+  if (!is_alarm(stat_.cmd_alm)) return true;
+  why_ = fmt::format("{} answered with CMD_ALM {:X}h ({})", to_string(c), static_cast<int>(stat_.cmd_alm),
+                     to_string(stat_.cmd_alm));
+  go(AxisStep::failed, t);
+  return false;
+}
+
+void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std::span<std::uint8_t> cmd, SimTime t) {
+  if (fresh) {
+    stat_ = unpack_stat(get_u16(rsp, 2));
+    apos_ = get_i32(rsp, 12);
+    fspd_ = get_i32(rsp, 16);
+    const Command c = command_of(step_, cfg_.position_mode);
+    const bool ok = step_ != AxisStep::released && step_ != AxisStep::failed && accepted(c, rsp, t);
+    switch (ok ? step_ : AxisStep::failed) {
+      case AxisStep::disconnect: go(AxisStep::connect, t); break;
+      case AxisStep::connect: go(AxisStep::sync_set, t); break;
+      case AxisStep::sync_set: go(AxisStep::id_rd, t); break;
+      case AxisStep::id_rd:
+        device_.assign(rsp.begin() + 16, std::find(rsp.begin() + 16, rsp.begin() + 32, std::uint8_t{0}));
+        if (log_) log_(t, fmt::format("{}: device \"{}\"", name_, device_));
+        go(AxisStep::params, t);
+        break;
+      case AxisStep::params:
+        if (++param_ >= cfg_.params.size()) go(AxisStep::sens_on, t);
+        break;
+      case AxisStep::sens_on: go(AxisStep::sv_on, t); break;
+      case AxisStep::sv_on:
+        if (stat_.cmdrdy && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) != 0) go(AxisStep::running, t);
+        break;
+      case AxisStep::running:
+        if (stopping_) go(AxisStep::sv_off, t);
+        break;
+      case AxisStep::sv_off: go(AxisStep::release, t); break;
+      case AxisStep::release: go(AxisStep::released, t); break;
+      default: break;
+    }
+    if (step_ == AxisStep::params && cfg_.params.empty()) go(AxisStep::sens_on, t);
+  }
+  write(cmd);
+}
+
+void ServoAxis::write(std::span<std::uint8_t> cmd) const {
+  std::fill(cmd.begin(), cmd.end(), std::uint8_t{0});
+  const Command c = command_of(step_, cfg_.position_mode);
+  write_header(cmd, CommandHeader{static_cast<std::uint8_t>(c), 0, 0});
+  switch (step_) {
+    case AxisStep::connect:
+      cmd[4] = 0x30;  // VER: standard servo profile
+      cmd[5] = 0x02;  // COM_MOD: synchronous, single transfer, no subcommands
+      cmd[6] = cfg_.com_tim;
+      cmd[7] = 0x10;  // PROFILE_TYPE: standard servo
+      return;
+    case AxisStep::id_rd:
+      cmd[14] = 16;  // SIZE: the first 16 characters of the device name
+      return;
+    case AxisStep::params:
+      if (param_ >= cfg_.params.size()) return;
+      put_u16(cmd, 12, cfg_.params[param_].first);
+      cmd[14] = 4;
+      put_i32(cmd, 16, cfg_.params[param_].second);
+      return;
+    case AxisStep::running:
+      put_i32(cmd, 4, static_cast<std::int32_t>(kSelMon));
+      put_i32(cmd, 16, cfg_.position_mode ? position_ : velocity_);
+      if (cfg_.position_mode) put_i32(cmd, 20, vff_);
+      return;
+    case AxisStep::sens_on:
+    case AxisStep::sv_on:
+    case AxisStep::sv_off: put_i32(cmd, 4, static_cast<std::int32_t>(kSelMon)); return;
+    default: return;
+  }
+}
+
+}  // namespace omnitwin::m3

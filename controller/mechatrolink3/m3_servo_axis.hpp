@@ -1,0 +1,81 @@
+// controller/mechatrolink3 — one M-III servo axis as the master application sees it: the
+// servo start-up sequence of seed 000 fig. 8, then a motion command every cycle, then the
+// shut-down. It runs at the C1 master's cyclic interrupt: it reads the slave's last response
+// (C1Master::response) and writes the next command (C1Master::command).
+//
+// Sequence (one flat switch over named steps, on_interrupt()):
+//   disconnect  DISCONNECT: the slave's state is unknown after power-up        → connect
+//   connect     CONNECT (VER 30h, synchronous, COM_TIM, profile 10h)           → sync_set
+//   sync_set    SYNC_SET: phase 3                                              → id_rd
+//   id_rd       ID_RD: the device name (logged)                                → params
+//   params      SVPRM_WR of each configured parameter, one per step            → sens_on
+//   sens_on     SENS_ON: the encoder position                                  → sv_on
+//   sv_on       SV_ON until the response says SV_ON with CMDRDY                → running
+//   running     VELCTRL (velocity set-point) or INTERPOLATE (position)         → sv_off
+//   sv_off      SV_OFF (shutdown() asked for it)                               → release
+//   release     DISCONNECT                                                     → released
+//   failed      a command answered with a CMD_ALM alarm during start-up: why() says
+// A step moves on when the response echoes its command with CMD_ALM normal (and, for SV_ON,
+// CMDRDY and SVCMD_STAT.SV_ON); a response that is not fresh leaves the step where it is.
+// Real-time safe after construction, except the log callback it is given.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "bus_emulators/mechatrolink3/m3_command.hpp"
+#include "bus_emulators/mechatrolink3/m3_frame.hpp"
+
+namespace omnitwin::m3 {
+
+enum class AxisStep : std::uint8_t {
+  disconnect, connect, sync_set, id_rd, params, sens_on, sv_on, running, sv_off, release, released, failed
+};
+const char* to_string(AxisStep);
+
+struct ServoAxisConfig {
+  std::uint8_t com_tim = 1;
+  bool position_mode = false;  // INTERPOLATE instead of VELCTRL
+  std::vector<std::pair<std::uint16_t, std::int32_t>> params;  // SVPRM_WR (number, value)
+};
+
+class ServoAxis {
+ public:
+  using Log = std::function<void(SimTime, const std::string&)>;
+  ServoAxis(std::string name, ServoAxisConfig config, Log log = {});
+
+  // At the cyclic interrupt: `rsp` is the last response (fresh: it came this cycle), `cmd`
+  // is where the next command goes. Real-time safe (except logging on a step change).
+  void on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std::span<std::uint8_t> cmd, SimTime t);
+  void set_velocity(std::int32_t ref_per_s) { velocity_ = ref_per_s; }
+  void set_position(std::int32_t ref, std::int32_t vff_ref_per_s) { position_ = ref; vff_ = vff_ref_per_s; }
+  void shutdown() { stopping_ = true; }
+
+  AxisStep step() const { return step_; }
+  const std::string& why() const { return why_; }
+  const std::string& device() const { return device_; }
+  std::int32_t position() const { return apos_; }      // APOS of the last response [ref]
+  std::int32_t velocity() const { return fspd_; }      // FSPD [ref/s]
+  CmdStat status() const { return stat_; }
+
+ private:
+  void write(std::span<std::uint8_t> cmd) const;
+  bool accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t);
+  void go(AxisStep next, SimTime t);
+
+  std::string name_;
+  ServoAxisConfig cfg_;
+  Log log_;
+  AxisStep step_ = AxisStep::disconnect;
+  std::size_t param_ = 0;
+  bool stopping_ = false;
+  std::int32_t velocity_ = 0, position_ = 0, vff_ = 0, apos_ = 0, fspd_ = 0;
+  CmdStat stat_;
+  std::string why_, device_;
+};
+
+}  // namespace omnitwin::m3

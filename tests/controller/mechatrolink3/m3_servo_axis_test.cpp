@@ -1,0 +1,95 @@
+// Tests controller/mechatrolink3/m3_servo_axis on responses written by hand: each start-up
+// step of seed 000 fig. 8 writes its command and moves on only when the response echoes it
+// with CMD_ALM normal, a stale (not fresh) response moves nothing, SVPRM_WR goes through
+// every configured parameter, SV_ON waits for CMDRDY and SV_ON, a CMD_ALM alarm fails the
+// axis naming the command, and the running axis writes its set-point.
+#include "controller/mechatrolink3/m3_servo_axis.hpp"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace omnitwin::m3 {
+namespace {
+
+// The response a slave gives to `cmd` (RCMD echoed) with this CMD_STAT and SVCMD_STAT.
+std::array<std::uint8_t, 32> answer(std::span<const std::uint8_t> cmd, CmdStat st = {}, std::uint32_t svstat = 0) {
+  std::array<std::uint8_t, 32> r{};
+  write_header(r, CommandHeader{cmd[0], 0, pack(st)});
+  put_i32(r, 4, static_cast<std::int32_t>(svstat));
+  return r;
+}
+
+TEST(M3ServoAxis, WalksFigure8AndRunsTheSetPoint) {
+  std::vector<std::string> log;
+  ServoAxis axis("axis 1", ServoAxisConfig{.params = {{0x0102, 5000}, {0x0103, 6000}}},
+                 [&](SimTime, const std::string& s) { log.push_back(s); });
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  EXPECT_EQ(cmd[0], static_cast<std::uint8_t>(Command::disconnect));
+  auto next = [&](CmdStat st = {}, std::uint32_t svstat = 0) {
+    rsp = answer(cmd, st, svstat);
+    axis.on_interrupt(rsp, true, cmd, 0);
+    return static_cast<Command>(cmd[0]);
+  };
+  EXPECT_EQ(next(), Command::connect);
+  EXPECT_EQ(cmd[4], 0x30);
+  EXPECT_EQ(cmd[7], 0x10);
+  axis.on_interrupt(rsp, false, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::connect) << "a stale response moves nothing";
+  EXPECT_EQ(next(), Command::sync_set);
+  EXPECT_EQ(next(), Command::id_rd);
+  EXPECT_EQ(next(), Command::svprm_wr);
+  EXPECT_EQ(get_u16(cmd, 12), 0x0102);
+  EXPECT_EQ(next(), Command::svprm_wr);
+  EXPECT_EQ(get_u16(cmd, 12), 0x0103);
+  EXPECT_EQ(get_i32(cmd, 16), 6000);
+  EXPECT_EQ(next(), Command::sens_on);
+  EXPECT_EQ(next(), Command::sv_on);
+  EXPECT_EQ(next(CmdStat{.cmdrdy = false}), Command::sv_on) << "CMDRDY 0: still switching on";
+  EXPECT_EQ(next(CmdStat{}, 0), Command::sv_on) << "SV_ON not yet in SVCMD_STAT";
+  axis.set_velocity(1234);
+  EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::velctrl);
+  EXPECT_EQ(axis.step(), AxisStep::running);
+  EXPECT_EQ(get_i32(cmd, 16), 1234);
+  axis.shutdown();
+  EXPECT_EQ(next(), Command::sv_off);
+  EXPECT_EQ(next(), Command::disconnect);
+  next();
+  EXPECT_EQ(axis.step(), AxisStep::released);
+  EXPECT_NE(std::find(log.begin(), log.end(), "axis 1: SENS_ON"), log.end());
+}
+
+TEST(M3ServoAxis, ACommandAlarmDuringStartUpFailsTheAxis) {
+  ServoAxis axis("axis 3", ServoAxisConfig{});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);  // DISCONNECT accepted → CONNECT
+  rsp = answer(cmd, CmdStat{.cmd_alm = CmdAlarm::invalid_data});
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(axis.step(), AxisStep::failed);
+  EXPECT_NE(axis.why().find("CONNECT"), std::string::npos) << axis.why();
+  EXPECT_NE(axis.why().find("invalid data"), std::string::npos) << axis.why();
+}
+
+TEST(M3ServoAxis, PositionModeSendsInterpolate) {
+  ServoAxis axis("axis 1", ServoAxisConfig{.com_tim = 1, .position_mode = true, .params = {}});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  for (int i = 0; i < 6; ++i) {
+    rsp = answer(cmd, CmdStat{}, 1u << 13);
+    axis.on_interrupt(rsp, true, cmd, 0);
+  }
+  axis.set_position(777, 11);
+  rsp = answer(cmd, CmdStat{}, 1u << 13);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::interpolate);
+  EXPECT_EQ(get_i32(cmd, 16), 777);
+  EXPECT_EQ(get_i32(cmd, 20), 11);
+}
+
+}  // namespace
+}  // namespace omnitwin::m3
