@@ -54,6 +54,19 @@ bool is_subcommand(Command c) noexcept {
   }
 }
 
+bool combines(Command main, Command sub) noexcept {
+  if (sub == Command::nop) return true;
+  if (!is_subcommand(sub)) return false;
+  const auto code = static_cast<std::uint8_t>(main);
+  return main == Command::nop || main == Command::id_rd || code >= 0x20;
+}
+
+std::uint32_t pack_sub_stat(bool ready, CmdAlarm alarm) noexcept {
+  return (ready ? 0x4u : 0u) | ((static_cast<std::uint32_t>(alarm) & 0xF) << 8);
+}
+
+CmdAlarm sub_alarm(std::uint32_t sub_stat) noexcept { return static_cast<CmdAlarm>((sub_stat >> 8) & 0xF); }
+
 const char* to_string(CmdAlarm a) {
   switch (a) {
     case CmdAlarm::normal: return "normal";

@@ -34,6 +34,11 @@ const char* to_string(Command);  // "NOP", "VELCTRL", …; "?" for codes the pro
 bool is_known(Command) noexcept;
 // Subcommands the 48-byte mode allows (NOP, ALM_RD, ALM_CLR, MEM_RD, MEM_WR, SMON, SVPRM_RD/WR).
 bool is_subcommand(Command) noexcept;
+// Whether subcommand `sub` may go with main command `main` (profile: the common commands
+// other than NOP and ID_RD take only the NOP subcommand; NOP, ID_RD and the servo commands
+// take every subcommand). Real-time safe.
+bool combines(Command main, Command sub) noexcept;
+
 
 // CMD_STAT.CMD_ALM: how the slave judged the command (profile codes).
 enum class CmdAlarm : std::uint8_t {
@@ -56,6 +61,11 @@ const char* to_string(CmdAlarm);
 const char* to_string(CommAlarm);
 bool is_alarm(CmdAlarm) noexcept;   // 8h-Fh: not a warning
 bool is_alarm(CommAlarm) noexcept;
+
+// SUB_STAT (response bytes 33-35, 24 bits; ours after CMD_STAT): bit 2 SBCMDRDY, bits 8-11
+// SUBCMD_ALM (CmdAlarm codes).
+std::uint32_t pack_sub_stat(bool ready, CmdAlarm alarm) noexcept;
+CmdAlarm sub_alarm(std::uint32_t sub_stat) noexcept;
 
 struct CmdCtrl {
   bool alm_clr = false;

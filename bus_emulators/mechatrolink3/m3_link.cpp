@@ -115,6 +115,8 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   std::fill(rsp.begin(), rsp.end(), std::uint8_t{0});
   write_header(rsp, CommandHeader{h.code, static_cast<std::uint8_t>((h.wdt & 0xF0) | (s_.own_count++ & 0x0F)), 0});
   s_.cmd_alm = run_link_command(static_cast<Command>(h.code), f.data, rsp, t);
+  if (s_.conn.subcommand && f.data.size() == 48 && s_.phase != Phase::p1)
+    run_subcommand(static_cast<Command>(h.code), f.data, rsp);
   if (s_.cmd_alm == CmdAlarm::phase_error) ++s_.stats.phase_errors;
   if (s_.cmd_alm == CmdAlarm::unsupported) ++s_.stats.unsupported;
   CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(), ctrl.alm_clr,
@@ -138,12 +140,23 @@ CmdAlarm SlaveLink::run_link_command(Command c, std::span<const std::uint8_t> cm
       return CmdAlarm::normal;
     default: break;
   }
-  // Subcommand region of the 48-byte mode: only the allowed subcommands.
-  if (s_.conn.subcommand && cmd.size() > kSubcommandOffset) {
-    const auto sub = static_cast<Command>(cmd[kSubcommandOffset]);
-    if (!is_subcommand(sub)) return CmdAlarm::subcommand_combination;
-  }
   return profile_.execute(c, cmd, rsp, t);
+}
+
+// The subcommand region of the 48-byte mode, after the main command: SUB_RCMD, SUB_STAT and
+// the profile's answer; a subcommand that cannot go with the main command is SUBCMD_ALM Bh
+// (the main command is executed all the same).
+void SlaveLink::run_subcommand(Command main, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) {
+  const auto sub_cmd = cmd.subspan(kSubcommandOffset, 16);
+  const auto sub_rsp = rsp.subspan(kSubcommandOffset, 16);
+  const auto sub = static_cast<Command>(sub_cmd[0]);
+  sub_rsp[0] = sub_cmd[0];
+  CmdAlarm a = CmdAlarm::normal;
+  if (!is_known(sub) || !is_subcommand(sub)) a = CmdAlarm::unsupported;
+  else if (!combines(main, sub)) a = CmdAlarm::subcommand_combination;
+  else if (sub != Command::nop) a = profile_.execute_sub(sub, sub_cmd, sub_rsp);
+  const std::uint32_t st = pack_sub_stat(true, a);
+  for (std::size_t i = 0; i < 3; ++i) sub_rsp[1 + i] = static_cast<std::uint8_t>(st >> (8 * i));
 }
 
 CmdAlarm SlaveLink::connect(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t) {

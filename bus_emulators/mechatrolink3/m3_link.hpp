@@ -57,6 +57,11 @@ class Profile {
   // with its header written and the rest zero; `t` is when the command arrived [ns].
   virtual CmdAlarm execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp,
                            SimTime t) = 0;
+  // A subcommand of the 48-byte mode (allowed with this main command): sub and rsp are the
+  // 16-byte regions (byte 0 SUB_CMD / SUB_RCMD, 1-3 SUB_CTRL / SUB_STAT written by the link).
+  virtual CmdAlarm execute_sub(Command, std::span<const std::uint8_t>, std::span<std::uint8_t>) {
+    return CmdAlarm::unsupported;
+  }
   // The connection ended or a communication alarm stopped cyclic operation: servo off.
   virtual void stop(SimTime t) = 0;
   virtual bool device_alarm() const { return false; }    // CMD_STAT.D_ALM
@@ -106,6 +111,7 @@ class SlaveLink {
   void on_link_service(const FrameView& f, SimTime t);
   void on_command(const FrameView& f, SimTime t);
   CmdAlarm run_link_command(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t);
+  void run_subcommand(Command main, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp);
   CmdAlarm connect(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t);
   void check_watchdog(std::uint8_t wdt, SimTime t);
   void raise(CommAlarm a, SimTime t);

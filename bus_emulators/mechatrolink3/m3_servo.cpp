@@ -90,14 +90,15 @@ CmdAlarm ServoProfile::run(Command c, std::span<const std::uint8_t> cmd, std::sp
     case Command::posing: return posing(cmd, false);
     case Command::feed: return posing(cmd, true);
     case Command::svprm_rd:
-    case Command::svprm_wr: return parameter(c, cmd, rsp);
-    case Command::alm_rd: return alarm_read(cmd, rsp);
+    case Command::svprm_wr: return parameter(c, cmd, rsp, 12);
+    case Command::alm_rd: return alarm_read(cmd, rsp, 12, 16, 8);
     case Command::alm_clr:
       if (cmd[12] == 1) history_.fill(0);
       fault_reset_ = device_alarm();
       return CmdAlarm::normal;
     case Command::id_rd: return id_read(cmd, rsp);
-    default: return CmdAlarm::unsupported;  // ZRET, EX_POSING, MEM_RD/WR, CONFIG: not built yet
+    case Command::zret: return zero_return(cmd);
+    default: return CmdAlarm::unsupported;  // EX_POSING, MEM_RD/WR, CONFIG: not built yet
   }
 }
 
@@ -147,13 +148,40 @@ CmdAlarm ServoProfile::posing(std::span<const std::uint8_t> cmd, bool feed) {
   return CmdAlarm::normal;
 }
 
-CmdAlarm ServoProfile::parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) {
-  std::copy_n(cmd.begin() + 12, 4, rsp.begin() + 12);  // NO, SIZE, MODE echoed
-  if (cmd[14] != 4) return CmdAlarm::invalid_data;
+// With NO at `at`, SIZE at+2, MODE at+3, PARAMETER at+4 (main command: 12;
+// subcommand region: 4).
+// ZRET: the drive core's homing (HM), started by controlword bit 4 once the drive is in HM.
+CmdAlarm ServoProfile::zero_return(std::span<const std::uint8_t> cmd) {
+  if (!servo_on()) return CmdAlarm::condition_error;
   auto& o = drive_.objects();
-  const auto value = get_u32(cmd, 16);
+  const auto method = static_cast<std::int8_t>(cmd[12]);
+  const std::int32_t speed = get_i32(cmd, 20);
+  const std::uint32_t acc = get_u32(cmd, 24);
+  if (speed < 0) return CmdAlarm::invalid_data;
+  if (method != 0) o.homing_method = method;
+  if (speed > 0) {
+    o.homing_speed_switch = static_cast<std::uint32_t>(speed);
+    o.homing_speed_zero = std::max<std::uint32_t>(1, static_cast<std::uint32_t>(speed) / 10);
+  }
+  if (acc != 0) o.homing_acceleration = acc;
+  if (motion_ != Motion::zret) {
+    user_offset_ = 0;  // the home position becomes the origin
+    target_ = 0;
+  }
+  motion_ = Motion::zret;
+  return CmdAlarm::normal;
+}
+
+// SVPRM_RD/WR with NO at `at`, SIZE at+2, MODE at+3, PARAMETER at+4 (main command: 12;
+// subcommand region: 4).
+CmdAlarm ServoProfile::parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp,
+                                 std::size_t at) {
+  std::copy_n(cmd.begin() + static_cast<std::ptrdiff_t>(at), 4, rsp.begin() + static_cast<std::ptrdiff_t>(at));
+  if (cmd[at + 2] != 4) return CmdAlarm::invalid_data;
+  auto& o = drive_.objects();
+  const auto value = get_u32(cmd, at + 4);
   std::uint32_t* field = nullptr;
-  switch (static_cast<ServoParam>(get_u16(cmd, 12))) {
+  switch (static_cast<ServoParam>(get_u16(cmd, at))) {
     case ServoParam::following_error_window: field = &o.following_error_window; break;
     case ServoParam::acceleration: field = &o.profile_acceleration; break;
     case ServoParam::deceleration: field = &o.profile_deceleration; break;
@@ -165,28 +193,49 @@ CmdAlarm ServoProfile::parameter(Command c, std::span<const std::uint8_t> cmd, s
         if (value > 65535) return CmdAlarm::invalid_data;
         o.max_torque = static_cast<std::uint16_t>(value);
       }
-      put_u32(rsp, 16, o.max_torque);
+      put_u32(rsp, at + 4, o.max_torque);
       return CmdAlarm::normal;
     case ServoParam::counts_per_rev:
       if (c == Command::svprm_wr) return CmdAlarm::invalid_data;  // read only
-      put_u32(rsp, 16, static_cast<std::uint32_t>(std::lround(cfg_.drive.counts_per_rev)));
+      put_u32(rsp, at + 4, static_cast<std::uint32_t>(std::lround(cfg_.drive.counts_per_rev)));
       return CmdAlarm::normal;
     default: return CmdAlarm::invalid_data;
   }
   if (c == Command::svprm_wr) *field = value;
-  put_u32(rsp, 16, *field);
+  put_u32(rsp, at + 4, *field);
   return CmdAlarm::normal;
 }
 
-CmdAlarm ServoProfile::alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
-  rsp[12] = cmd[12];
-  if (cmd[12] > 1) return CmdAlarm::invalid_data;
-  if (cmd[12] == 1) {
-    for (std::size_t i = 0; i < 8; ++i) put_u16(rsp, 16 + 2 * i, history_[i]);
+// ALM_RD with ALM_RD_MOD at `at` and `count` codes from `codes` on (main: 12, 16, 8;
+// subcommand region: 4, 8, 4).
+CmdAlarm ServoProfile::alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at,
+                                  std::size_t codes, std::size_t count) const {
+  rsp[at] = cmd[at];
+  if (cmd[at] > 1) return CmdAlarm::invalid_data;
+  if (cmd[at] == 1) {
+    for (std::size_t i = 0; i < count; ++i) put_u16(rsp, codes + 2 * i, history_[i]);
   } else if (device_alarm()) {
-    put_u16(rsp, 16, servo_alarm_code(drive_.objects().error_code));
+    put_u16(rsp, codes, servo_alarm_code(drive_.objects().error_code));
   }
   return CmdAlarm::normal;
+}
+
+CmdAlarm ServoProfile::execute_sub(Command c, std::span<const std::uint8_t> sub, std::span<std::uint8_t> rsp) {
+  const std::uint32_t ctrl = static_cast<std::uint32_t>(sub[1] | (sub[2] << 8) | (sub[3] << 16));
+  switch (c) {
+    case Command::smon:
+      for (std::size_t i = 0; i < 3; ++i)
+        put_i32(rsp, 4 + 4 * i, monitor(static_cast<std::uint8_t>((ctrl >> (12 + 4 * i)) & 0xF)));
+      return CmdAlarm::normal;
+    case Command::svprm_rd:
+    case Command::svprm_wr: return parameter(c, sub, rsp, 4);
+    case Command::alm_rd: return alarm_read(sub, rsp, 4, 8, 4);
+    case Command::alm_clr:
+      if (sub[4] == 1) history_.fill(0);
+      fault_reset_ = device_alarm();
+      return CmdAlarm::normal;
+    default: return CmdAlarm::unsupported;  // MEM_RD, MEM_WR: no virtual memory modelled
+  }
 }
 
 CmdAlarm ServoProfile::id_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
@@ -252,6 +301,10 @@ std::uint16_t ServoProfile::controlword() {
   if (st == State::switched_on || st == State::operation_enabled) cw = drive::cw::kEnableOperation;
   if (st == State::quick_stop_active) cw = drive::cw::kDisableVoltage;
   if (paused_) cw |= drive::cw::halt;
+  // ZRET: bit 4 rises once the drive is in HM and is held (homing is not restarted by it).
+  if (motion_ == Motion::zret && st == State::operation_enabled &&
+      drive_.mode() == drive::Mode::hm)
+    cw |= drive::cw::start_homing;
   if (new_set_point_ && st == State::operation_enabled) {
     cw |= drive::cw::new_set_point | drive::cw::change_immediately;
     new_set_point_ = false;
@@ -268,8 +321,8 @@ void ServoProfile::note_alarm(std::uint16_t code) {
 
 drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
   auto& o = drive_.objects();
-  static constexpr drive::Mode kModes[] = {drive::Mode::csv, drive::Mode::csv, drive::Mode::csp,
-                                           drive::Mode::pp,  drive::Mode::pv,  drive::Mode::cst};
+  static constexpr drive::Mode kModes[] = {drive::Mode::csv, drive::Mode::csv, drive::Mode::csp, drive::Mode::pp,
+                                           drive::Mode::pv,  drive::Mode::cst, drive::Mode::hm};
   o.mode = static_cast<std::int8_t>(kModes[static_cast<int>(motion_)]);
   if (motion_ == Motion::none) o.target_velocity = 0;  // no motion: hold at standstill
   o.controlword = controlword();

@@ -25,8 +25,12 @@
 // Rules: SV_ON needs SENS_ON first and CMDRDY stays 0 until the drive is enabled (one FSA
 // step per drive period); motion commands need the servo on, BRK_ON/BRK_OFF and SENS_OFF
 // need it off (else CMD_ALM condition error); a drive fault is D_ALM and servo off until
-// ALM_CLR; a lost connection (stop()) is servo off at once. Not built yet: ZRET, EX_POSING,
-// MEM_RD/MEM_WR, CONFIG and executing subcommands (they answer "unsupported").
+// ALM_CLR; a lost connection (stop()) is servo off at once. Subcommands (48-byte mode, region
+// bytes 32-47: 0 SUB_CMD, 1-3 SUB_CTRL with SEL_MON4/5/6 in bits 12-15/16-19/20-23): SMON →
+// monitors at 4/8/12; SVPRM_RD/WR → NO 4, SIZE 6, MODE 7, PARAMETER 8; ALM_RD → MOD 4, four
+// codes from 8; ALM_CLR → MOD 4. ZRET 12 homing method (CiA 402 number; 0: the parameter)
+// 20 TSPD 24 ACCR runs the drive core's homing; ZPOINT says it is done. Not built yet:
+// EX_POSING, MEM_RD/MEM_WR, CONFIG (they answer "unsupported").
 #pragma once
 
 #include <array>
@@ -62,6 +66,7 @@ class ServoProfile final : public Profile {
   std::uint8_t profile_type() const override { return 0x10; }
   bool accepts_length(std::size_t n) const override { return n == 32 || n == 48; }
   CmdAlarm execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t) override;
+  CmdAlarm execute_sub(Command c, std::span<const std::uint8_t> sub, std::span<std::uint8_t> rsp) override;
   void stop(SimTime t) override;
   bool device_alarm() const override;
   bool device_warning() const override { return false; }
@@ -81,12 +86,14 @@ class ServoProfile final : public Profile {
   std::int32_t monitor(std::uint8_t sel) const;
 
  private:
-  enum class Motion : std::uint8_t { none, velctrl, interpolate, posing, feed, trqctrl };
+  enum class Motion : std::uint8_t { none, velctrl, interpolate, posing, feed, trqctrl, zret };
   CmdAlarm run(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp);
   CmdAlarm motion(Command c, std::span<const std::uint8_t> cmd);
   CmdAlarm posing(std::span<const std::uint8_t> cmd, bool feed);
-  CmdAlarm parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp);
-  CmdAlarm alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
+  CmdAlarm zero_return(std::span<const std::uint8_t> cmd);
+  CmdAlarm parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at);
+  CmdAlarm alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at,
+                      std::size_t codes, std::size_t count) const;
   CmdAlarm id_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   void fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   std::uint16_t controlword();

@@ -327,13 +327,24 @@ TEST_F(M3Link, OthersFramesAndASecondMasterAreCountedNotServed) {
   EXPECT_EQ(link.stats().bad_frames, 2u);
 }
 
-TEST_F(M3Link, OnlySubcommandsGoInTheSubcommandRegion) {
+TEST_F(M3Link, TheSubcommandRegionIsAnsweredWithItsOwnStatus) {
   start();
   connect(true, 48, 0x30, 1, 0x10, true);
+  auto sub_stat = [&] {
+    const FrameView v = sent.back().view();
+    return std::pair{v.data[32], static_cast<std::uint32_t>(v.data[33] | (v.data[34] << 8) | (v.data[35] << 16))};
+  };
   command(Command::velctrl, 48, 0, true, false, {{32, 0x31}});  // SV_ON is no subcommand
-  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::subcommand_combination);
-  command(Command::velctrl, 48, 0, true, false, {{32, 0x30}});  // SMON is
-  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::normal) << "the main command runs all the same";
+  EXPECT_EQ(sub_alarm(sub_stat().second), CmdAlarm::unsupported);
+  EXPECT_EQ(sub_stat().first, 0x31) << "SUB_RCMD";
+  command(Command::alm_rd, 48, 0, true, false, {{32, 0x40}});  // a common command takes only NOP
+  EXPECT_EQ(sub_alarm(sub_stat().second), CmdAlarm::subcommand_combination);
+  command(Command::velctrl, 48, 0, true, false, {{32, 0x30}});  // SMON with a servo command
+  EXPECT_EQ(sub_alarm(sub_stat().second), CmdAlarm::unsupported) << "this test's profile runs no subcommands";
+  command(Command::velctrl, 48, 0, true, false, {{32, 0x00}});
+  EXPECT_EQ(sub_alarm(sub_stat().second), CmdAlarm::normal);
+  EXPECT_NE(sub_stat().second & 0x4, 0u) << "SBCMDRDY";
 }
 
 }  // namespace

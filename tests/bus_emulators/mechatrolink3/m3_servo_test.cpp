@@ -210,8 +210,55 @@ TEST_F(M3Servo, ALostLinkTurnsTheServoOffAndUnbuiltCommandsSaySo) {
   servo.stop(t);
   run(0.01);
   EXPECT_FALSE(servo.servo_on());
-  EXPECT_EQ(send(cmd(Command::zret)), CmdAlarm::unsupported);
   EXPECT_EQ(send(cmd(Command::ex_posing)), CmdAlarm::unsupported);
+  EXPECT_EQ(send(cmd(Command::mem_rd)), CmdAlarm::unsupported);
+}
+
+TEST_F(M3Servo, ZeroReturnHomesTheAxisAndSetsZpoint) {
+  EXPECT_EQ(send(cmd(Command::zret)), CmdAlarm::condition_error) << "servo off";
+  servo_on();
+  send(cmd(Command::velctrl, {{16, 5000}}));
+  run(0.5);  // somewhere away from zero
+  auto z = cmd(Command::zret, {{20, 2000}});
+  z[12] = 37;  // CiA 402 method 37: the current position is home
+  ASSERT_EQ(send(z), CmdAlarm::normal);
+  run(0.2);
+  EXPECT_TRUE(servo.drive().homed());
+  send(z);
+  EXPECT_NE(svcmd_io() & (1u << 11), 0u) << "ZPOINT";
+  EXPECT_LT(std::abs(monitor(0)), 20) << "APOS at the new origin";
+  EXPECT_EQ(send(cmd(Command::zret, {{20, -1}})), CmdAlarm::invalid_data);
+}
+
+TEST_F(M3Servo, SubcommandsReadMonitorsParametersAndAlarms) {
+  std::array<std::uint8_t, 16> sub{}, out{};
+  sub[0] = static_cast<std::uint8_t>(Command::svprm_wr);
+  put_u16(sub, 4, 0x0103);
+  sub[6] = 4;
+  put_i32(sub, 8, 77777);
+  EXPECT_EQ(servo.execute_sub(Command::svprm_wr, sub, out), CmdAlarm::normal);
+  EXPECT_EQ(servo.drive().objects().profile_deceleration, 77777u);
+  out.fill(0);
+  sub[0] = static_cast<std::uint8_t>(Command::svprm_rd);
+  EXPECT_EQ(servo.execute_sub(Command::svprm_rd, sub, out), CmdAlarm::normal);
+  EXPECT_EQ(get_i32(out, 8), 77777);
+  servo_on();
+  send(cmd(Command::velctrl, {{16, 5000}}));
+  run(0.3);
+  const std::int32_t fspd = servo.monitor(5);
+  std::array<std::uint8_t, 16> smon{};
+  smon[0] = static_cast<std::uint8_t>(Command::smon);
+  smon[3] = 0x05;  // SUB_CTRL (bytes 1-3): bits 12-15 SEL_MON4 = 0 (APOS), bits 16-19 SEL_MON5 = 5 (FSPD)
+  out.fill(0);
+  EXPECT_EQ(servo.execute_sub(Command::smon, smon, out), CmdAlarm::normal);
+  EXPECT_GT(get_i32(out, 4), 0) << "APOS";
+  EXPECT_EQ(get_i32(out, 8), fspd) << "FSPD";
+  EXPECT_GT(fspd, 1000);
+  std::array<std::uint8_t, 16> alm{};
+  out.fill(0);
+  EXPECT_EQ(servo.execute_sub(Command::alm_rd, alm, out), CmdAlarm::normal);
+  EXPECT_EQ(get_u16(out, 8), 0) << "no alarm";
+  EXPECT_EQ(servo.execute_sub(Command::mem_rd, alm, out), CmdAlarm::unsupported);
 }
 
 // Seed 000 fig. 8 through the slave link: DISCONNECT, CONNECT, ID_RD, SVPRM_WR, SENS_ON,
