@@ -83,6 +83,9 @@ void SlaveLink::on_link_service(const FrameView& f, SimTime t) {
   switch (f.type) {
     case FrameType::sync:
       if (s_.phase == Phase::p3) s_.sync_misses = 0;
+      // A slave that was not told the cycle (it came back after the notification) takes it
+      // from the interval of two sync frames, as its ASIC locks onto them.
+      if (s_.cycle_ns <= 0 && s_.last_sync >= 0 && t > s_.last_sync) s_.cycle_ns = t - s_.last_sync;
       s_.last_sync = t;
       return;
     case FrameType::detect: {
@@ -102,7 +105,6 @@ void SlaveLink::on_link_service(const FrameView& f, SimTime t) {
 
 void SlaveLink::on_command(const FrameView& f, SimTime t) {
   ++s_.stats.commands;
-  if (!s_.started) return void(++s_.stats.bad_frames);  // no communication before COMM_START
   s_.fcs_in_row = 0;
   CommandHeader h;
   read_header(f.data, h);  // every command length is at least 8 bytes

@@ -8,6 +8,10 @@
 // first time, an alarm the second time in a row, a WDT error at once; an alarm drops phase 3
 // to phase 2 and tells the application to stop (servo off).
 //
+// A powered slave answers every command frame addressed to it: CYC_NOTIFY and COMM_START are
+// taken note of, and a slave that comes back after them (power returned) learns the
+// transmission cycle from the interval of two SYNC frames, so the master can reconnect it.
+//
 // Shaped like the other protocol cores: frames and simulated time in, response frames out
 // through a callback, no sockets, no clock, no allocation on the cyclic path. Fixed
 // configuration (LinkConfig) apart from changing state. The profile is an interface the
@@ -102,6 +106,7 @@ class SlaveLink {
   CommAlarm comm_alarm() const { return s_.comm_alm; }
   CmdAlarm cmd_alarm() const { return s_.cmd_alm; }
   SimTime transmission_cycle_ns() const { return s_.cycle_ns; }
+  bool communication_started() const { return s_.started; }
   const LinkStats& stats() const { return s_.stats; }  // since the last power-on
   std::uint8_t address() const { return cfg_.address; }
 
@@ -126,7 +131,7 @@ class SlaveLink {
     Phase phase = Phase::p5;
     Connection conn;
     SimTime cycle_ns = 0;             // transmission cycle (CYC_NOTIFY), 0: not told
-    bool started = false;             // COMM_START seen
+    bool started = false;             // COMM_START seen (noted; commands are answered anyway)
     CommAlarm comm_alm = CommAlarm::normal;
     CmdAlarm cmd_alm = CmdAlarm::normal;
     SimTime last_sync = -1, last_command = -1, next_check = -1;

@@ -24,6 +24,7 @@ Command command_of(AxisStep s, bool position_mode) {
     case AxisStep::sv_on: return Command::sv_on;
     case AxisStep::running: return position_mode ? Command::interpolate : Command::velctrl;
     case AxisStep::sv_off: return Command::sv_off;
+    case AxisStep::alm_clr: return Command::alm_clr;
     default: return Command::nop;
   }
 }
@@ -44,6 +45,7 @@ const char* to_string(AxisStep s) {
     case AxisStep::release: return "DISCONNECT (release)";
     case AxisStep::released: return "released";
     case AxisStep::failed: return "failed";
+    case AxisStep::alm_clr: return "ALM_CLR";
   }
   return "?";
 }
@@ -71,12 +73,14 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
     stat_ = unpack_stat(get_u16(rsp, 2));
     apos_ = get_i32(rsp, 12);
     fspd_ = get_i32(rsp, 16);
+    if (recover(rsp, t)) return write(cmd);
     const Command c = command_of(step_, cfg_.position_mode);
     const bool ok = step_ != AxisStep::released && step_ != AxisStep::failed && accepted(c, rsp, t);
     switch (ok ? step_ : AxisStep::failed) {
       case AxisStep::disconnect: go(AxisStep::connect, t); break;
       case AxisStep::connect: go(AxisStep::sync_set, t); break;
-      case AxisStep::sync_set: go(AxisStep::id_rd, t); break;
+      case AxisStep::sync_set: go(recovering_ ? AxisStep::sens_on : AxisStep::id_rd, t); break;
+      case AxisStep::alm_clr: go(AxisStep::sync_set, t); break;
       case AxisStep::id_rd:
         device_.assign(rsp.begin() + 16, std::find(rsp.begin() + 16, rsp.begin() + 32, std::uint8_t{0}));
         if (log_) log_(t, fmt::format("{}: device \"{}\"", name_, device_));
@@ -87,7 +91,10 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
         break;
       case AxisStep::sens_on: go(AxisStep::sv_on, t); break;
       case AxisStep::sv_on:
-        if (stat_.cmdrdy && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) != 0) go(AxisStep::running, t);
+        if (stat_.cmdrdy && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) != 0) {
+          recovering_ = false;
+          go(AxisStep::running, t);
+        }
         break;
       case AxisStep::running:
         if (stopping_) go(AxisStep::sv_off, t);
@@ -99,6 +106,27 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
     if (step_ == AxisStep::params && cfg_.params.empty()) go(AxisStep::sens_on, t);
   }
   write(cmd);
+}
+
+// While running: a slave back in phase 1 is connected again; a servo that went off is
+// cleared and switched on again. True when a recovery began (the response is not used).
+bool ServoAxis::recover(std::span<const std::uint8_t> rsp, SimTime t) {
+  const bool started = step_ >= AxisStep::sync_set && step_ <= AxisStep::running;
+  if (!started || stopping_) return false;
+  if (stat_.cmd_alm == CmdAlarm::phase_error) {
+    why_ = fmt::format("{} answered with a phase error: the slave lost power, its connection or phase 3",
+                       to_string(static_cast<Command>(rsp[0])));
+  } else if (step_ == AxisStep::running && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) == 0) {
+    why_ = fmt::format("the servo went off (COMM_ALM {:X}h, D_ALM {})", static_cast<int>(stat_.comm_alm), stat_.d_alm);
+  } else {
+    return false;
+  }
+  ++recoveries_;
+  recovering_ = true;
+  if (log_) log_(t, fmt::format("{}: {}; recovering", name_, why_));
+  // DISCONNECT works in every phase, so the start-up begins again from wherever the slave is.
+  go(stat_.cmd_alm == CmdAlarm::phase_error ? AxisStep::disconnect : AxisStep::alm_clr, t);
+  return true;
 }
 
 void ServoAxis::write(std::span<std::uint8_t> cmd) const {
@@ -125,6 +153,9 @@ void ServoAxis::write(std::span<std::uint8_t> cmd) const {
       put_i32(cmd, 4, static_cast<std::int32_t>(kSelMon));
       put_i32(cmd, 16, cfg_.position_mode ? position_ : velocity_);
       if (cfg_.position_mode) put_i32(cmd, 20, vff_);
+      return;
+    case AxisStep::alm_clr:
+      put_u16(cmd, 2, pack(CmdCtrl{.alm_clr = true, .cmd_id = 0}));  // the communication alarm too
       return;
     case AxisStep::sens_on:
     case AxisStep::sv_on:

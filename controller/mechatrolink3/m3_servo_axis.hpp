@@ -15,6 +15,11 @@
 //   sv_off      SV_OFF (shutdown() asked for it)                               → release
 //   release     DISCONNECT                                                     → released
 //   failed      a command answered with a CMD_ALM alarm during start-up: why() says
+//   alm_clr     ALM_CLR (and CMD_CTRL.ALM_CLR) after the servo went off while running → sync_set
+// Recovery after start-up began: a CMD_ALM phase error (the slave lost power, its connection
+// or phase 3) goes back to disconnect (it works in every phase); a servo that went off (a communication or device
+// alarm: SVCMD_STAT.SV_ON clear) goes to alm_clr; both then skip ID_RD and the parameters
+// and count in recoveries().
 // A step moves on when the response echoes its command with CMD_ALM normal (and, for SV_ON,
 // CMDRDY and SVCMD_STAT.SV_ON); a response that is not fresh leaves the step where it is.
 // Real-time safe after construction, except the log callback it is given.
@@ -33,7 +38,7 @@
 namespace omnitwin::m3 {
 
 enum class AxisStep : std::uint8_t {
-  disconnect, connect, sync_set, id_rd, params, sens_on, sv_on, running, sv_off, release, released, failed
+  disconnect, connect, sync_set, id_rd, params, sens_on, sv_on, running, sv_off, release, released, failed, alm_clr
 };
 const char* to_string(AxisStep);
 
@@ -61,10 +66,12 @@ class ServoAxis {
   std::int32_t position() const { return apos_; }      // APOS of the last response [ref]
   std::int32_t velocity() const { return fspd_; }      // FSPD [ref/s]
   CmdStat status() const { return stat_; }
+  int recoveries() const { return recoveries_; }
 
  private:
   void write(std::span<std::uint8_t> cmd) const;
   bool accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t);
+  bool recover(std::span<const std::uint8_t> rsp, SimTime t);
   void go(AxisStep next, SimTime t);
 
   std::string name_;
@@ -72,7 +79,8 @@ class ServoAxis {
   Log log_;
   AxisStep step_ = AxisStep::disconnect;
   std::size_t param_ = 0;
-  bool stopping_ = false;
+  bool stopping_ = false, recovering_ = false;
+  int recoveries_ = 0;
   std::int32_t velocity_ = 0, position_ = 0, vff_ = 0, apos_ = 0, fspd_ = 0;
   CmdStat stat_;
   std::string why_, device_;

@@ -124,12 +124,19 @@ TEST_F(M3Link, PoweredOffItIsSilentPoweredOnItAnswersDetectionAndTheDelayEcho) {
   EXPECT_EQ(sent[1].t, 5'000 + kDelayEchoNs);
 }
 
-TEST_F(M3Link, CommandsBeforeCommunicationStartsAreNotAnswered) {
+TEST_F(M3Link, ASlaveThatMissedTheNotificationLearnsTheCycleFromSyncFrames) {
   link.power_on(0);
   connect();
-  EXPECT_TRUE(sent.empty());
-  EXPECT_EQ(link.phase(), Phase::p1);
-  EXPECT_EQ(link.stats().bad_frames, 1u);
+  EXPECT_EQ(link.phase(), Phase::p2) << "commands are answered without COMM_START";
+  EXPECT_FALSE(link.communication_started());
+  command(Command::sync_set);
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::condition_error) << "no cycle known yet";
+  frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+  now += kCycle;
+  frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+  EXPECT_EQ(link.transmission_cycle_ns(), kCycle);
+  command(Command::sync_set);
+  EXPECT_EQ(link.phase(), Phase::p3);
 }
 
 TEST_F(M3Link, ConnectMovesToPhase2AndEchoesItsParameters) {
@@ -192,6 +199,7 @@ TEST_F(M3Link, AnUnknownCommandIsUnsupportedAndEchoed) {
 TEST_F(M3Link, SyncSetNeedsSynchronousModeAndACycle) {
   link.power_on(0);
   frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);
+  EXPECT_TRUE(link.communication_started());
   connect();
   command(Command::sync_set);
   EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::condition_error) << "no cycle notified yet";

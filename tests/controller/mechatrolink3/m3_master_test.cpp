@@ -6,7 +6,9 @@
 // the shortest that fits); the servo start-up of fig. 8 brings four servos on and they turn
 // at the commanded speed; lost commands and corrupted responses are retried inside the same
 // cycle and never reach the slaves as missed commands; a slave off the line is counted
-// missed without disturbing the others; a master that stops trips every slave's watchdog.
+// missed without disturbing the others; a slave that loses power and returns, and a servo
+// stopped by a communication alarm, are brought back by the application; a master that stops
+// trips every slave's watchdog.
 #include "controller/mechatrolink3/m3_master.hpp"
 
 #include <gtest/gtest.h>
@@ -229,6 +231,55 @@ TEST(M3Master, ASlaveOffTheLineIsMissedWithoutDisturbingTheOthers) {
   EXPECT_GE(rig.master->counters(1).missed - before, 19u);
   EXPECT_GE(rig.master->counters(1).retries, 19u) << "each cycle's retry slot went to it";
   for (int k : {0, 2, 3}) EXPECT_EQ(rig.master->counters(k).missed, 0u) << k;
+}
+
+// Item 6: a slave that loses power and comes back is connected again by the master.
+TEST(M3Master, ASlaveThatLosesPowerAndReturnsIsConnectedAgain) {
+  Rig rig(4);
+  for (auto& a : rig.apps) a.set_velocity(static_cast<std::int32_t>(kCpr));
+  rig.master->start(0);
+  rig.run_until(400 * kMs);
+  ASSERT_EQ(rig.apps[2].step(), AxisStep::running);
+  rig.line.set_reachable(2, false);
+  rig.links[2]->power_off(rig.now);
+  rig.servos[2]->power_cycle();
+  rig.run_until(450 * kMs);
+  EXPECT_GE(rig.master->counters(2).missed, 45u);
+  rig.links[2]->power_on(rig.now);
+  rig.line.set_reachable(2, true);
+  rig.run_until(900 * kMs);
+  EXPECT_EQ(rig.apps[2].step(), AxisStep::running) << rig.apps[2].why();
+  EXPECT_EQ(rig.apps[2].recoveries(), 1);
+  EXPECT_TRUE(rig.servos[2]->servo_on());
+  EXPECT_EQ(rig.links[2]->phase(), Phase::p3);
+  EXPECT_NEAR(rig.axes[2].velocity_rad_s(), 2 * M_PI, 0.2);
+  EXPECT_LT(rig.find("axis 3: ", 0), rig.log.size());
+  EXPECT_LT(rig.find("recovering"), rig.log.size());
+  for (int k : {0, 1, 3}) EXPECT_EQ(rig.apps[static_cast<std::size_t>(k)].recoveries(), 0) << k;
+}
+
+// A communication alarm (commands lost two cycles in a row, retries included) stops a servo;
+// the master clears the alarm and switches it on again.
+TEST(M3Master, AServoStoppedByACommunicationAlarmIsClearedAndSwitchedOnAgain) {
+  Rig rig(2);
+  for (auto& a : rig.apps) a.set_velocity(5000);
+  rig.master->start(0);
+  rig.run_until(300 * kMs);
+  ASSERT_TRUE(rig.servos[1]->servo_on());
+  bool cut = true;
+  rig.line.set_fault_hook([&](bool from_master, int k, std::span<const std::uint8_t> f) {
+    const bool command = from_master && f[3] == static_cast<std::uint8_t>(FrameType::cyclic_command);
+    return cut && command && k == 1 ? Fate::drop : Fate::deliver;
+  });
+  rig.run_until(305 * kMs);
+  EXPECT_EQ(rig.links[1]->comm_alarm(), CommAlarm::no_command);
+  cut = false;
+  rig.run_until(400 * kMs);
+  EXPECT_EQ(rig.apps[1].step(), AxisStep::running) << rig.apps[1].why();
+  EXPECT_EQ(rig.apps[1].recoveries(), 1);
+  EXPECT_TRUE(rig.servos[1]->servo_on());
+  EXPECT_EQ(rig.links[1]->comm_alarm(), CommAlarm::normal);
+  EXPECT_LT(rig.find("ALM_CLR"), rig.log.size());
 }
 
 TEST(M3Master, AMasterThatStopsTripsEverySlavesWatchdogAndTheServosGoOff) {
