@@ -166,7 +166,9 @@ CmdAlarm SlaveLink::connect(std::span<const std::uint8_t> cmd, std::span<std::ui
   std::copy_n(cmd.begin() + 4, 4, rsp.begin() + 4);  // the response echoes the parameters
   const bool sub = (mod & kComModSubcommand) != 0;
   if (ver != kServoProfileVersion || com_tim == 0 || profile != profile_.profile_type()) return CmdAlarm::invalid_data;
-  if (!profile_.accepts_length(cmd.size()) || (sub && cmd.size() != 48)) return CmdAlarm::invalid_data;
+  // Event-driven data is 64 bytes whatever the profile (seed 000); cyclic lengths are the profile's.
+  const bool event = cmd.size() == kMaxData && (mod & kComModSync) == 0;
+  if (!(event || profile_.accepts_length(cmd.size())) || (sub && cmd.size() != 48)) return CmdAlarm::invalid_data;
   s_.conn = Connection{(mod & kComModSync) != 0, sub, com_tim, profile, cmd.size()};
   transition(Transition::connect, t);
   return CmdAlarm::normal;

@@ -27,6 +27,7 @@ const char* to_string(DriverState s) {
     case DriverState::notify: return "transmission-cycle notification";
     case DriverState::start: return "communication start";
     case DriverState::cyclic: return "cyclic communication";
+    case DriverState::event: return "event-driven communication";
     case DriverState::failed: return "failed";
   }
   return "?";
@@ -36,6 +37,8 @@ C1Master::C1Master(MasterConfig config, Emit emit, Interrupt interrupt, Log log)
     : cfg_(std::move(config)), emit_(std::move(emit)), interrupt_(std::move(interrupt)), log_(std::move(log)),
       slave_(cfg_.slaves.size()) {
   retry_.reserve(cfg_.slaves.size());
+  queue_.assign(4 * cfg_.slaves.size() + 1, -1);
+  requested_at_.assign(cfg_.slaves.size(), 0);
 }
 
 std::span<std::uint8_t> C1Master::command(int k) {
@@ -94,6 +97,18 @@ void C1Master::next_station(SimTime t) {
     return next_station(t);
   }
   state_ = DriverState::params;
+  if (cfg_.event_driven) {
+    for (const MasterSlave& c : cfg_.slaves)
+      if (c.data_bytes != kMaxData) return fail(t, fmt::format("event-driven data is 64 bytes, slave {:02X}h has {}", c.address, c.data_bytes));
+    log(t, "communication parameters: event-driven (no transmission cycle, response limit " +
+               std::to_string(cfg_.event_timeout_ns / 1'000'000) + " ms)");
+    state_ = DriverState::start;
+    send(FrameType::comm_start, kBroadcast, std::array<std::uint8_t, 8>{2}, t);
+    log(t, "communication start: event-driven");
+    state_ = DriverState::event;
+    wake_ = -1;
+    return;
+  }
   if (!compute_params(t)) return;
   state_ = DriverState::notify;
   std::array<std::uint8_t, 16> n{};
@@ -199,26 +214,76 @@ void C1Master::close_exchange(SimTime t, bool good) {
   poll_next(t + kGapNs);
 }
 
+bool C1Master::request(int k, SimTime t) {
+  if (state_ != DriverState::event || k < 0 || k >= slaves() || queue_count_ == queue_.size()) return false;
+  queue_[(queue_head_ + queue_count_++) % queue_.size()] = k;
+  requested_at_[static_cast<std::size_t>(k)] = t;
+  if (pending_.k < 0) event_next(t);
+  return true;
+}
+
+// Event-driven: the next queued request goes out, one exchange on the line at a time.
+void C1Master::event_next(SimTime t) {
+  if (queue_count_ == 0) {
+    wake_ = -1;
+    return;
+  }
+  const int k = queue_[queue_head_];
+  queue_head_ = (queue_head_ + 1) % queue_.size();
+  --queue_count_;
+  attempts_ = 0;
+  sequence_ = static_cast<std::uint8_t>((sequence_ + 1) & 0xF);
+  event_send(k, t, false);
+}
+
+void C1Master::event_send(int k, SimTime t, bool retry) {
+  Slave& s = slave_[static_cast<std::size_t>(k)];
+  s.fresh = false;
+  send(FrameType::event_command, cfg_.slaves[static_cast<std::size_t>(k)].address, command(k), t, retry);
+  if (retry) ++s.counters.retries;
+  else ++s.counters.exchanges;
+  pending_ = Pending{k, FrameType::event_response, t, t + cfg_.event_timeout_ns};
+  pending_retry_ = retry;
+  wake_ = pending_.deadline;
+}
+
+// Event-driven: the exchange in progress ended (a response, or its time limit with no retry left).
+void C1Master::event_end(SimTime t, bool ok) {
+  const int k = pending_.k;
+  Slave& s = slave_[static_cast<std::size_t>(k)];
+  if (!ok && attempts_ < cfg_.event_retries) {
+    ++attempts_;
+    return event_send(k, t + kGapNs, true);
+  }
+  if (ok && pending_retry_) ++s.counters.retry_recovered;
+  if (!ok) ++s.counters.missed;
+  pending_ = Pending{};
+  if (event_done_) event_done_(k, ok, t - requested_at_[static_cast<std::size_t>(k)]);
+  if (pending_.k < 0) event_next(t + kGapNs);
+}
+
 void C1Master::on_frame(std::span<const std::uint8_t> bytes, SimTime t) {
   FrameView v;
   const FrameStatus st = decode(bytes, v);
   const bool waiting = pending_.k >= 0 && t <= pending_.deadline;
   if (st != FrameStatus::ok) {
     // A corrupted frame while a response is awaited is that response, bad: retry it.
-    if (waiting && state_ == DriverState::cyclic) {
+    if (waiting && (state_ == DriverState::cyclic || state_ == DriverState::event)) {
       ++slave_[static_cast<std::size_t>(pending_.k)].counters.bad;
-      close_exchange(t, false);
+      if (state_ == DriverState::event) event_end(t, false);
+      else close_exchange(t, false);
     }
     return;
   }
   if (v.dst != kC1Master) return;
   const bool expected = waiting && v.type == pending_.expect &&
                         v.src == cfg_.slaves[static_cast<std::size_t>(pending_.k)].address &&
-                        (state_ != DriverState::cyclic || v.sequence() == sequence_);
+                        (state_ == DriverState::detect || state_ == DriverState::delay || v.sequence() == sequence_);
   if (!expected) {
     // A response after its T_RSP (or to an earlier cycle) is late: counted, not used.
     for (int k = 0; k < slaves(); ++k)
-      if (v.type == FrameType::cyclic_response && cfg_.slaves[static_cast<std::size_t>(k)].address == v.src)
+      if ((v.type == FrameType::cyclic_response || v.type == FrameType::event_response) &&
+          cfg_.slaves[static_cast<std::size_t>(k)].address == v.src)
         ++slave_[static_cast<std::size_t>(k)].counters.late;
     return;
   }
@@ -227,6 +292,7 @@ void C1Master::on_frame(std::span<const std::uint8_t> bytes, SimTime t) {
   if (state_ == DriverState::detect || state_ == DriverState::delay) return finish_setup_exchange(t, true);
   std::copy(v.data.begin(), v.data.end(), s.rsp.begin());
   s.fresh = true;
+  if (state_ == DriverState::event) return event_end(t, true);
   close_exchange(t, true);
 }
 
@@ -247,6 +313,10 @@ void C1Master::step(SimTime t) {
         return;
       }
       return begin_cycle(t);  // wake_ was the next cycle's start
+    case DriverState::event:
+      if (pending_.k >= 0) return event_end(t, false);  // its time limit passed
+      wake_ = -1;
+      return;
     default: wake_ = -1; return;
   }
 }

@@ -16,8 +16,12 @@
 //               buffer, each waiting at most T_RSP(k) for its response; slaves whose response
 //               was missing or bad are retried in the same cycle (retry slots); at INT_OFFSET
 //               the interrupt hands the response buffer to the application
+//   event       event-driven communication (config.event_driven; no SYNC, no cycle): the
+//               application requests an exchange with one slave (request()); the master
+//               sends EVT_CMD (64 bytes) and waits up to event_timeout (seed 000: 50 ms) for
+//               EVT_RSP, retrying event_retries times (retries are the driver's job here),
+//               one exchange on the line at a time, requests queued in order
 //   failed      a detected slave missing, a configuration that does not fit: why() says
-// Event-driven communication is not built yet (config.mode must be cyclic).
 //
 // Protocol core: frames and simulated time in, frames out through a callback, no sockets, no
 // clock. The owner calls advance(t) at next_wakeup() and hands received frames to on_frame().
@@ -50,9 +54,12 @@ struct MasterConfig {
   SimTime margin_ns = 1'000;       // added to every T_RSP
   SimTime software_ns = 100'000;   // the application's time after INT_OFFSET
   SimTime detect_timeout_ns = 100'000;  // per station, detection and delay measurement
+  bool event_driven = false;            // event-driven instead of cyclic (data_bytes must be 64)
+  SimTime event_timeout_ns = 50'000'000;  // seed 000: a slave answers within 50 ms
+  int event_retries = 2;
 };
 
-enum class DriverState : std::uint8_t { idle, init, detect, delay, params, notify, start, cyclic, failed };
+enum class DriverState : std::uint8_t { idle, init, detect, delay, params, notify, start, cyclic, event, failed };
 const char* to_string(DriverState);
 
 // Per-slave counters (the master's statistics and the twin's metrics).
@@ -68,10 +75,17 @@ class C1Master {
   using Interrupt = std::function<void(std::uint64_t cycle, SimTime t)>;
   // A line of the driver's log (the sequence of figs. 9-11). Not on the cyclic path.
   using Log = std::function<void(SimTime t, const std::string&)>;
+  // Event-driven: the exchange requested for slave k ended (ok: a response is in response(k);
+  // latency: from the request to the response's last bit, or to giving up) [ns].
+  using EventDone = std::function<void(int k, bool ok, SimTime latency_ns)>;
 
   C1Master(MasterConfig config, Emit emit, Interrupt interrupt, Log log = {});
 
   void start(SimTime t);  // begins the driver sequence at t
+  void on_event(EventDone done) { event_done_ = std::move(done); }
+  // Event-driven: asks for one exchange with slave k (its command buffer) at t. False when
+  // the master is not in event-driven communication or the queue (4 per slave) is full.
+  bool request(int k, SimTime t);
   void on_frame(std::span<const std::uint8_t> bytes, SimTime t);  // a frame fully received at t
   void advance(SimTime t);             // runs everything due at or before t
   SimTime next_wakeup() const { return wake_; }  // -1: nothing scheduled
@@ -114,12 +128,20 @@ class C1Master {
   void poll_next(SimTime t);
   void close_exchange(SimTime t, bool good);
   void fail(SimTime t, std::string why);
+  void event_next(SimTime t);
+  void event_send(int k, SimTime t, bool retry);
+  void event_end(SimTime t, bool ok);
   void log(SimTime t, const std::string& line) const;
 
   MasterConfig cfg_;
   Emit emit_;
   Interrupt interrupt_;
   Log log_;
+  EventDone event_done_;
+  std::vector<int> queue_;             // event-driven requests, a ring
+  std::vector<SimTime> requested_at_;  // per slave: when its request was made
+  std::size_t queue_head_ = 0, queue_count_ = 0;
+  int attempts_ = 0;
   std::vector<Slave> slave_;
   DriverState state_ = DriverState::idle;
   std::string why_;

@@ -78,9 +78,9 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
     const bool ok = step_ != AxisStep::released && step_ != AxisStep::failed && accepted(c, rsp, t);
     switch (ok ? step_ : AxisStep::failed) {
       case AxisStep::disconnect: go(AxisStep::connect, t); break;
-      case AxisStep::connect: go(AxisStep::sync_set, t); break;
+      case AxisStep::connect: go(cfg_.synchronous ? AxisStep::sync_set : recovering_ ? AxisStep::sens_on : AxisStep::id_rd, t); break;
       case AxisStep::sync_set: go(recovering_ ? AxisStep::sens_on : AxisStep::id_rd, t); break;
-      case AxisStep::alm_clr: go(AxisStep::sync_set, t); break;
+      case AxisStep::alm_clr: go(cfg_.synchronous ? AxisStep::sync_set : AxisStep::sens_on, t); break;
       case AxisStep::id_rd:
         device_.assign(rsp.begin() + 16, std::find(rsp.begin() + 16, rsp.begin() + 32, std::uint8_t{0}));
         if (log_) log_(t, fmt::format("{}: device \"{}\"", name_, device_));
@@ -136,7 +136,7 @@ void ServoAxis::write(std::span<std::uint8_t> cmd) const {
   switch (step_) {
     case AxisStep::connect:
       cmd[4] = 0x30;  // VER: standard servo profile
-      cmd[5] = 0x02;  // COM_MOD: synchronous, single transfer, no subcommands
+      cmd[5] = cfg_.synchronous ? 0x02 : 0x00;  // COM_MOD: (a)synchronous, single transfer, no subcommands
       cmd[6] = cfg_.com_tim;
       cmd[7] = 0x10;  // PROFILE_TYPE: standard servo
       return;

@@ -44,6 +44,7 @@ const char* to_string(AxisStep);
 
 struct ServoAxisConfig {
   std::uint8_t com_tim = 1;
+  bool synchronous = true;     // false: event-driven (no SYNC_SET: phase 2 throughout)
   bool position_mode = false;  // INTERPOLATE instead of VELCTRL
   std::vector<std::pair<std::uint16_t, std::int32_t>> params;  // SVPRM_WR (number, value)
 };

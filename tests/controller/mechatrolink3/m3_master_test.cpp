@@ -52,8 +52,10 @@ struct Rig {
 
   explicit Rig(int n, MasterConfig cfg = {}, int attached = -1)
       : topology(Topology::cascade_of(n, 10.0)), line(topology) {
+    const std::size_t bytes = cfg.event_driven ? 64 : 32;
     if (cfg.slaves.empty())
-      for (int k = 0; k < n; ++k) cfg.slaves.push_back(MasterSlave{.address = static_cast<std::uint8_t>(kFirstSlave + k)});
+      for (int k = 0; k < n; ++k)
+        cfg.slaves.push_back(MasterSlave{.address = static_cast<std::uint8_t>(kFirstSlave + k), .data_bytes = bytes});
     for (int k = 0; k < n; ++k) {
       servos.push_back(std::make_unique<ServoProfile>(servo_config()));
       links.push_back(std::make_unique<SlaveLink>(
@@ -61,7 +63,8 @@ struct Rig {
           [this, k](std::span<const std::uint8_t> f, SimTime t) { line.from_slave(k, f, t); }));
       line.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime t) { links[static_cast<std::size_t>(k)]->on_frame(f, t); });
       axes.emplace_back();
-      apps.emplace_back(fmt_name(k), ServoAxisConfig{}, [this](SimTime, const std::string& s) { log.push_back(s); });
+      apps.emplace_back(fmt_name(k), ServoAxisConfig{.com_tim = 1, .synchronous = !cfg.event_driven, .position_mode = false, .params = {}},
+                        [this](SimTime, const std::string& s) { log.push_back(s); });
       if (attached < 0 || k < attached) links.back()->power_on(0);
       else line.set_reachable(k, false);
     }
@@ -280,6 +283,48 @@ TEST(M3Master, AServoStoppedByACommunicationAlarmIsClearedAndSwitchedOnAgain) {
   EXPECT_TRUE(rig.servos[1]->servo_on());
   EXPECT_EQ(rig.links[1]->comm_alarm(), CommAlarm::normal);
   EXPECT_LT(rig.find("ALM_CLR"), rig.log.size());
+}
+
+// Event-driven communication: no SYNC, one exchange at a time on request, 64-byte data,
+// the 50 ms limit with the driver's retries.
+TEST(M3Master, EventDrivenExchangesAnswerOnRequestWithinTheirOwnResponseTime) {
+  MasterConfig cfg;
+  cfg.event_driven = true;
+  Rig rig(3, cfg);
+  std::vector<SimTime> latency(3, -1);
+  std::vector<int> failures(3, 0);
+  rig.master->on_event([&](int k, bool ok, SimTime lat) {
+    latency[static_cast<std::size_t>(k)] = lat;
+    failures[static_cast<std::size_t>(k)] += ok ? 0 : 1;
+    auto& app = rig.apps[static_cast<std::size_t>(k)];
+    app.on_interrupt(rig.master->response(k), ok, rig.master->command(k), rig.now);
+    rig.master->request(k, rig.now);  // the next exchange at once
+  });
+  for (auto& a : rig.apps) a.set_velocity(5000);
+  rig.master->start(0);
+  rig.run_until(1 * kMs);
+  ASSERT_EQ(rig.master->state(), DriverState::event) << rig.master->why();
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(rig.master->request(k, rig.now));
+  rig.run_until(300 * kMs);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(rig.apps[static_cast<std::size_t>(k)].step(), AxisStep::running) << rig.apps[static_cast<std::size_t>(k)].why();
+    EXPECT_EQ(rig.links[static_cast<std::size_t>(k)]->phase(), Phase::p2) << "event-driven never enters phase 3";
+    EXPECT_TRUE(rig.servos[static_cast<std::size_t>(k)]->servo_on());
+  }
+  EXPECT_GT(rig.axes[0].velocity_rad_s(), 2.5);
+  // With the others queued ahead, a request waits for them; the exchange itself is TR_DLY +
+  // two 64-byte frames + the slave's 2 µs response time, exactly.
+  const SimTime own = tr_dly_ns(rig.topology, 2) + 2 * frame_time_ns(64) + 2'000;
+  EXPECT_GE(latency[2], own);
+  EXPECT_LE(latency[2], 3 * (own + 2 * 960) + 3 * tr_dly_ns(rig.topology, 2));
+  EXPECT_EQ(failures, (std::vector<int>{0, 0, 0}));
+  // A slave that stops answering: the 50 ms limit, the driver's two retries, then a failure.
+  rig.line.set_reachable(1, false);
+  rig.run_until(600 * kMs);
+  EXPECT_GE(failures[1], 1);
+  EXPECT_GE(latency[1], 3 * cfg.event_timeout_ns);
+  EXPECT_GE(rig.master->counters(1).retries, 2u);
+  EXPECT_EQ(failures[0], 0) << "the others still answer (one exchange at a time: more slowly)";
 }
 
 TEST(M3Master, AMasterThatStopsTripsEverySlavesWatchdogAndTheServosGoOff) {
