@@ -74,6 +74,15 @@ void Line::advance(SimTime t) {
   }
 }
 
+void Line::cut_cable(int after) {
+  for (int k = after + 1; k < topology_.slaves(); ++k) {
+    reachable_[static_cast<std::size_t>(k)] = false;
+    if (topology_.kind == TopologyKind::star) break;  // a star cable feeds one slave
+  }
+}
+
+void Line::mend_cable() { std::fill(reachable_.begin(), reachable_.end(), true); }
+
 SimTime Line::next_due() const { return heap_.empty() ? -1 : heap_.front().due; }
 
 }  // namespace omnitwin::m3

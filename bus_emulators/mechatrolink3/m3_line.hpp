@@ -39,6 +39,11 @@ class Line {
   void set_fault_hook(FaultHook h) { fault_ = std::move(h); }
   // A slave off the line (power lost, cable cut): frames to it and from it vanish. Real-time safe.
   void set_reachable(int k, bool reachable) { reachable_.at(static_cast<std::size_t>(k)) = reachable; }
+  // Cascade: the cable after slave `after` (0-based; -1: between the master and slave 0) is
+  // cut, so every slave behind it is off the line; mend_cable() puts them back. Star: only
+  // that slave's own cable. Real-time safe.
+  void cut_cable(int after);
+  void mend_cable();
 
   // Frames entering the line at t_start [ns] (first bit). Real-time safe.
   void from_master(std::span<const std::uint8_t> frame, SimTime t_start);

@@ -80,6 +80,25 @@ TEST_F(M3Line, UnreachableSlavesAndTheFaultHookDropOrCorrupt) {
   EXPECT_EQ(line.dropped(), 3u);
 }
 
+TEST_F(M3Line, ACutCableDropsEveryStationBehindIt) {
+  line.cut_cable(0);  // between slave 0 and slave 1
+  line.from_master(frame(kBroadcast, FrameType::sync), 0);
+  line.advance(1'000'000);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].who, 0);
+  line.mend_cable();
+  line.from_master(frame(kBroadcast, FrameType::sync), 2'000'000);
+  line.advance(3'000'000);
+  EXPECT_EQ(got.size(), 4u);
+  Line star(Topology::star_of(3));
+  star.cut_cable(0);  // the hub's cable to slave 1 only
+  int reached = 0;
+  for (int k = 0; k < 3; ++k) star.attach_slave(k, [&](std::span<const std::uint8_t>, SimTime) { ++reached; });
+  star.from_master(frame(kBroadcast, FrameType::sync), 0);
+  star.advance(1'000'000);
+  EXPECT_EQ(reached, 2);
+}
+
 TEST_F(M3Line, AFullQueueCountsAnOverflow) {
   Line small(Topology::cascade_of(1), 2);
   for (int i = 0; i < 3; ++i) small.from_master(frame(0x03), i);

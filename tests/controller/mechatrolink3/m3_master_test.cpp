@@ -327,6 +327,46 @@ TEST(M3Master, EventDrivenExchangesAnswerOnRequestWithinTheirOwnResponseTime) {
   EXPECT_EQ(failures[0], 0) << "the others still answer (one exchange at a time: more slowly)";
 }
 
+TEST(M3Master, ACutCableDropsEveryStationBehindItAndTheOthersRunOn) {
+  Rig rig(4);
+  for (auto& a : rig.apps) a.set_velocity(5000);
+  rig.master->start(0);
+  rig.run_until(300 * kMs);
+  rig.line.cut_cable(1);  // behind the second station
+  rig.run_until(320 * kMs);
+  for (int k : {2, 3}) {
+    EXPECT_GE(rig.master->counters(k).missed, 19u) << k;
+    EXPECT_EQ(rig.links[static_cast<std::size_t>(k)]->comm_alarm(), CommAlarm::no_sync) << k;
+    EXPECT_FALSE(rig.servos[static_cast<std::size_t>(k)]->servo_on()) << k;
+  }
+  for (int k : {0, 1}) {
+    EXPECT_EQ(rig.master->counters(k).missed, 0u) << k;
+    EXPECT_TRUE(rig.servos[static_cast<std::size_t>(k)]->servo_on()) << k;
+  }
+  rig.line.mend_cable();
+  rig.run_until(500 * kMs);
+  for (int k : {2, 3}) {
+    EXPECT_EQ(rig.apps[static_cast<std::size_t>(k)].step(), AxisStep::running) << rig.apps[static_cast<std::size_t>(k)].why();
+    EXPECT_TRUE(rig.servos[static_cast<std::size_t>(k)]->servo_on()) << "alarm cleared, switched on again";
+  }
+}
+
+// A slave slower than the master allows for answers after T_RSP: late, retried, missed.
+TEST(M3Master, ResponsesLaterThanTrspAreLateAndMissed) {
+  Rig rig(2);
+  rig.master->start(0);
+  rig.run_until(50 * kMs);
+  ASSERT_EQ(rig.master->state(), DriverState::cyclic);
+  auto& link = rig.links[1];
+  link = std::make_unique<SlaveLink>(LinkConfig{.address = 0x04, .response_ns = 30'000}, *rig.servos[1],
+                                     [&rig](std::span<const std::uint8_t> f, SimTime t) { rig.line.from_slave(1, f, t); });
+  link->power_on(rig.now);
+  rig.run_until(80 * kMs);
+  EXPECT_GE(rig.master->counters(1).late, 20u);
+  EXPECT_GE(rig.master->counters(1).missed, 20u);
+  EXPECT_EQ(rig.master->counters(0).missed, 0u);
+}
+
 TEST(M3Master, AMasterThatStopsTripsEverySlavesWatchdogAndTheServosGoOff) {
   Rig rig(4);
   for (auto& a : rig.apps) a.set_velocity(static_cast<std::int32_t>(kCpr));
