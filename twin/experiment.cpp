@@ -24,8 +24,11 @@ struct Registered {
 };
 
 // The registry: one row per `omnitwin experiment NAME`.
-std::array<Registered, 3> registry() {
-  return {{{"can-timing", run_can_timing}, {"can-dropout", run_can_dropout}, {"thesis-platform", run_thesis_platform}}};
+std::array<Registered, 4> registry() {
+  return {{{"can-timing", run_can_timing},
+           {"can-dropout", run_can_dropout},
+           {"thesis-platform", run_thesis_platform},
+           {"m3-cycle", run_m3_cycle}}};
 }
 
 // `text` as one single-quoted shell word.

@@ -1,12 +1,13 @@
 // twin layer — `omnitwin experiment NAME`: seed 002's own measurements re-run on the twin
-// (DESIGN §10), each writing CSV + markdown (ours beside the thesis's) + PNG plots.
+// (DESIGN §10), and seed 000's M-III cycle study (m3-cycle), each writing CSV + markdown
+// (ours beside the source's where it has numbers) + PNG plots.
 //
 // Shaped as a small name → function registry so the CLI (twin/main.cpp) stays a thin
 // dispatcher and each experiment lives in its own file (experiment_can_timing.cpp,
-// experiment_can_dropout.cpp, experiment_thesis_platform.cpp). The dropout model is declared
-// here too, because the tests drive single trials of it directly; everything else an
-// experiment needs (output folder, text files, the matplotlib script) is in
-// namespace experiment below and shared by all of them.
+// experiment_can_dropout.cpp, experiment_thesis_platform.cpp, experiment_m3_cycle.cpp). The
+// dropout model and the M-III cycle trial are declared here too, because the tests drive
+// single trials of them directly; everything else an experiment needs (output folder, text
+// files, the matplotlib script) is in namespace experiment below and shared by all of them.
 #pragma once
 
 #include <cstdint>
@@ -34,10 +35,48 @@ int run_experiment(const std::string& name, const ExperimentOptions& options);
 // The registered names, in the order `omnitwin experiment` lists them.
 std::vector<std::string> experiment_names();
 
-// The experiments themselves (registered under "can-timing", "can-dropout", "thesis-platform").
+// The experiments themselves (registered under "can-timing", "can-dropout", "thesis-platform",
+// "m3-cycle").
 int run_can_timing(const ExperimentOptions& options);
 int run_can_dropout(const ExperimentOptions& options);
 int run_thesis_platform(const ExperimentOptions& options);
+int run_m3_cycle(const ExperimentOptions& options);
+
+// ---- the m3-cycle verification: one configuration run on the in-process M-III rig ----
+
+// One configuration of the cycle study, run at its planned shortest cycle (whole µs) and
+// 1 µs below it (see experiment_m3_cycle.cpp). The last two fields are faults for the tests:
+// they make a check fail on purpose.
+struct M3CycleTrial {
+  bool star = false;                  // cascade (false) or star, 10 m cables
+  int slaves = 4;                     // 1 … 62
+  int data_bytes = 32;                // 32: servo start-up to phase 3; other lengths: NOP in phase 1
+  int retry_slots = 1;
+  int cycles = 200;                   // cycles checked after start-up
+  std::int64_t slave_slower_ns = 0;   // fault: every slave answers this much later than planned
+  int corrupt_every = 0;              // fault: every n-th response corrupted on the line (0: none)
+};
+
+struct M3CycleVerified {
+  M3CycleTrial trial;
+  std::int64_t min_cycle_ns = 0, cycle_ns = 0;  // planned shortest; the cycle run (whole µs)
+  std::int64_t int_offset_ns = 0, retry_ns = 0;
+  std::int64_t expected_last_ns = 0;            // cycle start → last response, from the plan
+  std::int64_t measured_min_ns = 0, measured_max_ns = 0;  // the same on the line, over the cycles
+  std::int64_t interrupt_min_ns = 0, interrupt_max_ns = 0;  // cycle start → cyclic interrupt
+  std::uint64_t cycles = 0, missed = 0, retries = 0, late = 0, bad = 0, comm_alarms = 0;
+  int phase = 0;                 // the lowest phase any slave ended in
+  bool shorter_refused = false;  // 1 µs less: failed, naming the shortest cycle
+  std::string why;               // "" when every check passed, else the first that failed
+  bool ok() const { return why.empty(); }
+};
+
+// Runs one trial (both cycles) and judges it. Deterministic. Throws std::invalid_argument
+// for a configuration m3::check_inputs refuses.
+M3CycleVerified run_m3_cycle_trial(const M3CycleTrial& trial);
+// run_m3_cycle with the faults of `faults` (slave_slower_ns, corrupt_every) applied to every
+// run: how the tests see a failing check give kExperimentCheckFailed.
+int run_m3_cycle(const ExperimentOptions& options, const M3CycleTrial& faults);
 
 // ---- the can-dropout model: one trial of the thesis's chapter-2 test (see the .cpp) ----
 

@@ -566,8 +566,8 @@ int main(int argc, char** argv) {
 
   std::string exp_name, exp_out;
   bool exp_quick = false;
-  CLI::App* experiment = app.add_subcommand("experiment", "run one of seed 002's experiments (docs/experiments.md)");
-  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform")->required();
+  CLI::App* experiment = app.add_subcommand("experiment", "run one of the seeds' experiments (docs/experiments.md)");
+  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform | m3-cycle")->required();
   experiment->add_option("--out", exp_out, "output folder (default out/<name>/)");
   experiment->add_flag("--quick", exp_quick, "fewer configurations (a smoke run; the same checks)");
 

@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""media layer — plots of the `omnitwin experiment` outputs (can-timing, can-dropout, thesis-platform).
+"""media layer — plots of the `omnitwin experiment` outputs (can-timing, can-dropout, thesis-platform,
+m3-cycle).
 
 Called by twin/experiment.cpp as `plot_experiment.py KIND CSV OUT_DIR`; reads the CSV the
 experiment wrote and draws PNGs beside it. Kept in Python so the C++ side needs no plotting
@@ -183,10 +184,38 @@ def plot_platform(rows, out_dir):
     save(fig, out_dir, "thesis_platform_iae.png")
 
 
+def plot_m3_cycle(rows, out_dir):
+    """M-III shortest transmission cycle over slave count: one panel per topology, one colour
+    per data length; 1 retry slot solid, 0 and 2 retry slots the band around it; the
+    0.125/0.25/0.5/1 ms cycles as dashed lines."""
+    topologies = ["cascade", "star"]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
+    for ax, topo in zip(axes, topologies):
+        for n_bytes in sorted({r["data_bytes"] for r in rows}):
+            curve = {}
+            for retry in (0, 1, 2):
+                sel = sorted((r for r in rows if r["topology"] == topo and r["data_bytes"] == n_bytes
+                              and r["retry_slots"] == retry), key=lambda r: r["slaves"])
+                curve[retry] = ([r["slaves"] for r in sel], [r["min_cycle_ns"] / 1e6 for r in sel])
+            line, = ax.plot(*curve[1], "-", label=f"{n_bytes} B")
+            ax.fill_between(curve[0][0], curve[0][1], curve[2][1], color=line.get_color(), alpha=0.15)
+        for budget in (0.125, 0.25, 0.5, 1.0):
+            ax.axhline(budget, color="grey", linestyle="--", linewidth=0.8)
+            ax.text(1, budget, f" {budget} ms", va="bottom", fontsize=7, color="grey")
+        ax.set_yscale("log")
+        ax.set_xlabel("slaves")
+        ax.set_title(f"{topo}, 10 m cables (band: 0 … 2 retry slots)", fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("shortest transmission cycle [ms]")
+    save(fig, out_dir, "m3_cycle.png")
+
+
 def main(argv):
-    kinds = {"can-timing": plot_timing, "can-dropout": plot_dropout, "thesis-platform": plot_platform}
+    kinds = {"can-timing": plot_timing, "can-dropout": plot_dropout, "thesis-platform": plot_platform,
+             "m3-cycle": plot_m3_cycle}
     if len(argv) != 4 or argv[1] not in kinds:
-        sys.stderr.write("usage: plot_experiment.py can-timing|can-dropout|thesis-platform CSV OUT_DIR\n")
+        sys.stderr.write("usage: plot_experiment.py can-timing|can-dropout|thesis-platform|m3-cycle CSV OUT_DIR\n")
         return 2
     kinds[argv[1]](read_rows(argv[2]), argv[3])
     return 0
