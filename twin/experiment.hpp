@@ -78,6 +78,23 @@ M3CycleVerified run_m3_cycle_trial(const M3CycleTrial& trial);
 // run: how the tests see a failing check give kExperimentCheckFailed.
 int run_m3_cycle(const ExperimentOptions& options, const M3CycleTrial& faults);
 
+// ---- the m3-cycle latency part (experiment_m3_latency.cpp) ----
+
+// Event-driven latency on one line, measured and expected from the wire model [ns], beside
+// the cyclic mode's shortest cycle at 64 bytes.
+struct M3LatencyRow {
+  bool star = false;
+  int slaves = 0;
+  std::int64_t idle_ns = -1, idle_expected_ns = 0;  // one request, farthest slave, idle line
+  std::int64_t all_ns = -1, all_expected_ns = 0;    // every slave at once: until the last answers
+  std::int64_t cyclic_ns = 0;                       // shortest cycle, 64 bytes, 1 retry slot
+  std::string why;                                  // "" when the measurements match the model
+  bool ok() const { return why.empty(); }
+};
+M3LatencyRow m3_event_latency(bool star, int slaves);
+std::string m3_latency_csv(const std::vector<M3LatencyRow>& rows);
+std::string m3_latency_section(const std::vector<M3LatencyRow>& rows);
+
 // ---- the can-dropout model: one trial of the thesis's chapter-2 test (see the .cpp) ----
 
 // How the slave's timer period departs from the master's nominal period P.

@@ -1,6 +1,6 @@
 // twin layer — experiment "m3-cycle": seed 000's statement that "data length and slave count
-// bound the cycle" made into numbers on our MECHATROLINK-III emulation, cyclic mode only
-// (event-driven latency is not part of this study).
+// bound the cycle" made into numbers on our MECHATROLINK-III emulation (event-driven latency
+// against the cyclic mode's is experiment_m3_latency.cpp, written into the same README).
 //
 // Two halves, kept apart so the second can check the first:
 //   1. computed: m3::plan_cycle for 1 … 62 slaves × 16/32/48/64 bytes × cascade/star (10 m
@@ -506,9 +506,9 @@ std::string readme(const std::vector<ShortestRow>& rows, const std::vector<M3Cyc
                    bool quick) {
   const int most = slave_counts(quick).back();
   return std::string("# m3-cycle: the shortest MECHATROLINK-III transmission cycle on our emulation\n\n") +
-         "`omnitwin experiment m3-cycle` (twin/experiment_m3_cycle.cpp; docs/experiments.md). Cyclic mode only: "
-         "**event-driven latency is not studied here** (the seed's 50 ms limit; this study does not run the "
-         "master's event-driven exchanges)." +
+         "`omnitwin experiment m3-cycle` (twin/experiment_m3_cycle.cpp, twin/experiment_m3_latency.cpp; "
+         "docs/experiments.md): the shortest cyclic transmission cycle, verified by running it, and at the end "
+         "event-driven against cyclic response latency." +
          (quick ? " This is a `--quick` run (a handful of slave counts)." : "") + "\n\n" + seed_section() +
          emulation_section(rows, most) + verified_section(verified, ok);
 }
@@ -545,12 +545,20 @@ int run_m3_cycle(const ExperimentOptions& options, const M3CycleTrial& faults) {
     t.corrupt_every = faults.corrupt_every;
     verified.push_back(run_m3_cycle_trial(t));
   }
-  const bool ok = std::all_of(verified.begin(), verified.end(), [](const M3CycleVerified& v) { return v.ok(); });
+  std::vector<M3LatencyRow> latency;
+  for (const bool star : {false, true})
+    for (const int n : options.quick ? std::vector<int>{1, 16} : std::vector<int>{1, 4, 16, 62})
+      latency.push_back(m3_event_latency(star, n));
+  const bool ok = std::all_of(verified.begin(), verified.end(), [](const M3CycleVerified& v) { return v.ok(); }) &&
+                  std::all_of(latency.begin(), latency.end(), [](const M3LatencyRow& r) { return r.ok(); });
   const std::filesystem::path dir = experiment::output_dir("m3-cycle", options);
   experiment::write_text(dir / "shortest_cycle.csv", shortest_csv(rows));
   experiment::write_text(dir / "verified.csv", verified_csv(verified));
-  experiment::write_text(dir / "README.md", readme(rows, verified, ok, options.quick));
+  experiment::write_text(dir / "latency.csv", m3_latency_csv(latency));
+  experiment::write_text(dir / "README.md", readme(rows, verified, ok, options.quick) + m3_latency_section(latency));
   experiment::plot("m3-cycle", dir / "shortest_cycle.csv", dir);
+  for (const M3LatencyRow& r : latency)
+    if (!r.ok()) std::cerr << fmt::format("m3-cycle: event-driven, {} {} slaves: {}\n", r.star ? "star" : "cascade", r.slaves, r.why);
   for (const M3CycleVerified& v : verified)
     if (!v.ok())
       std::cerr << fmt::format("m3-cycle: {} {} slaves {} B: {}\n", topology_name(v.trial.star), v.trial.slaves,

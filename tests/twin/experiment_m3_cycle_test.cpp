@@ -78,7 +78,8 @@ TEST(M3CycleExperiment, QuickRunPlansGrowingCyclesAndVerifiesThemToTheNanosecond
     EXPECT_LT(num(r, "cycle_ns") - num(r, "min_cycle_ns"), 1000);
   }
   const std::string readme = omnitwin::testing::read_bytes(dir / "README.md");
-  EXPECT_NE(readme.find("event-driven latency is not studied here"), std::string::npos);
+  EXPECT_NE(readme.find("## Event-driven against cyclic latency"), std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(dir / "latency.csv"));
   EXPECT_NE(readme.find("Modelled, not measured"), std::string::npos);
 }
 
