@@ -11,7 +11,7 @@ namespace {
 using drive::State;
 
 constexpr std::uint32_t kPosRdy = 1u << 10, kPon = 1u << 11, kMRdy = 1u << 12, kSvOn = 1u << 13;
-constexpr std::uint32_t kPauseCmp = 1u << 0, kCancelCmp = 1u << 1;
+constexpr std::uint32_t kPauseCmp = 1u << 0, kCancelCmp = 1u << 1, kLCmp1 = 1u << 8;
 constexpr std::uint32_t kIoDec = 1u << 0, kIoPot = 1u << 1, kIoNot = 1u << 2, kIoPset = 1u << 9,
                         kIoZpoint = 1u << 11, kIoBrake = 1u << 12;
 
@@ -98,7 +98,20 @@ CmdAlarm ServoProfile::run(Command c, std::span<const std::uint8_t> cmd, std::sp
       return CmdAlarm::normal;
     case Command::id_rd: return id_read(cmd, rsp);
     case Command::zret: return zero_return(cmd);
-    default: return CmdAlarm::unsupported;  // EX_POSING, MEM_RD/WR, CONFIG: not built yet
+    case Command::ex_posing: {
+      // The same EX_POSING repeated every cycle goes on; a new one (another TPOS) starts over.
+      const bool again = motion_ == Motion::ex_posing && (latched_ || get_i32(cmd, 16) == tpos_requested_);
+      if (again) return servo_on() ? CmdAlarm::normal : CmdAlarm::condition_error;
+      const CmdAlarm a = posing(cmd, false);
+      if (a != CmdAlarm::normal) return a;
+      motion_ = Motion::ex_posing;
+      tpos_requested_ = get_i32(cmd, 16);
+      latched_ = false;
+      prev_dec_ = (drive_.objects().digital_inputs & 4u) != 0;  // an input already high is no edge
+      return a;
+    }
+    case Command::config: return CmdAlarm::normal;  // parameters take effect when written
+    default: return CmdAlarm::unsupported;  // MEM_RD/WR: no virtual memory modelled
   }
 }
 
@@ -188,6 +201,10 @@ CmdAlarm ServoProfile::parameter(Command c, std::span<const std::uint8_t> cmd, s
     case ServoParam::quick_stop_deceleration: field = &o.quick_stop_deceleration; break;
     case ServoParam::max_velocity: field = &o.max_profile_velocity; break;
     case ServoParam::position_window: field = &o.position_window; break;
+    case ServoParam::ex_posing_distance:
+      if (c == Command::svprm_wr) ex_distance_ = static_cast<std::int32_t>(value);
+      put_i32(rsp, at + 4, ex_distance_);
+      return CmdAlarm::normal;
     case ServoParam::max_torque:
       if (c == Command::svprm_wr) {
         if (value > 65535) return CmdAlarm::invalid_data;
@@ -255,12 +272,13 @@ std::int32_t ServoProfile::monitor(std::uint8_t sel) const {
     case 0x0: return o.position_actual + user_offset_;   // APOS
     case 0x1: return o.position_demand + user_offset_;   // CPOS
     case 0x2: return o.following_error_actual;           // PERR
+    case 0x3: return latch_pos_;                         // LPOS1
     case 0x5: return o.velocity_actual;                  // FSPD
     case 0x6: return o.velocity_demand;                  // CSPD
     case 0x7: return o.torque_actual;                    // TRQ [0.1 %]
     case 0x8: return device_alarm() ? servo_alarm_code(o.error_code) : 0;  // ALARM
     case 0x9: return target_;                            // MPOS: the commanded target
-    default: return 0;                                   // LPOS1 and unused codes
+    default: return 0;                                   // unused codes
   }
 }
 
@@ -269,7 +287,8 @@ void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std:
   const std::array<std::uint8_t, 3> sel = {static_cast<std::uint8_t>((ctrl >> 12) & 0xF),
                                            static_cast<std::uint8_t>((ctrl >> 16) & 0xF),
                                            static_cast<std::uint8_t>((ctrl >> 20) & 0xF)};
-  std::uint32_t stat = (ctrl & 0x3) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0);
+  std::uint32_t stat = (ctrl & 0x3) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0) |
+                       (latched_ ? kLCmp1 : 0);
   stat |= static_cast<std::uint32_t>(sel[0]) << 16 | static_cast<std::uint32_t>(sel[1]) << 20 |
           static_cast<std::uint32_t>(sel[2]) << 24;
   put_u32(rsp, 4, stat);
@@ -279,7 +298,9 @@ void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std:
   const bool reached = std::abs(apos - target_) <= static_cast<std::int64_t>(o.position_window);
   std::uint32_t io = ((o.digital_inputs >> 2) & 1u ? kIoDec : 0) | ((o.digital_inputs >> 1) & 1u ? kIoPot : 0) |
                      (o.digital_inputs & 1u ? kIoNot : 0) | ((drive_.physical_outputs() & 1u) ? kIoBrake : 0);
-  if (reached && (motion_ == Motion::posing || motion_ == Motion::interpolate)) io |= kIoPset;
+  const bool positioning = motion_ == Motion::posing || motion_ == Motion::interpolate ||
+                           (motion_ == Motion::ex_posing && latched_);
+  if (reached && positioning) io |= kIoPset;
   if (drive_.homed() && std::abs(apos) <= static_cast<std::int64_t>(o.position_window))
     io |= kIoZpoint;
   put_u32(rsp, 8, io);
@@ -312,6 +333,20 @@ std::uint16_t ServoProfile::controlword() {
   return cw;
 }
 
+// EX_POSING: the first rising edge of the latch input (DEC) fixes LPOS1 and the final target.
+void ServoProfile::watch_latch() {
+  const auto& o = drive_.objects();
+  const bool dec = (o.digital_inputs & 4u) != 0;
+  if (motion_ == Motion::ex_posing && !latched_ && dec && !prev_dec_) {
+    latched_ = true;
+    latch_pos_ = o.position_actual + user_offset_;
+    target_ = latch_pos_ + ex_distance_;
+    drive_.objects().target_position = target_ - user_offset_;
+    new_set_point_ = true;
+  }
+  prev_dec_ = dec;
+}
+
 void ServoProfile::note_alarm(std::uint16_t code) {
   if (code == 0 || code == last_error_) return;
   std::rotate(history_.rbegin(), history_.rbegin() + 1, history_.rend());
@@ -322,11 +357,12 @@ void ServoProfile::note_alarm(std::uint16_t code) {
 drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
   auto& o = drive_.objects();
   static constexpr drive::Mode kModes[] = {drive::Mode::csv, drive::Mode::csv, drive::Mode::csp, drive::Mode::pp,
-                                           drive::Mode::pv,  drive::Mode::cst, drive::Mode::hm};
+                                           drive::Mode::pv,  drive::Mode::cst, drive::Mode::hm, drive::Mode::pp};
   o.mode = static_cast<std::int8_t>(kModes[static_cast<int>(motion_)]);
   if (motion_ == Motion::none) o.target_velocity = 0;  // no motion: hold at standstill
   o.controlword = controlword();
   const drive::Command out = drive_.step(t, fb);
+  watch_latch();
   if (device_alarm()) {
     note_alarm(o.error_code);
     want_on_ = false;

@@ -29,8 +29,12 @@
 // bytes 32-47: 0 SUB_CMD, 1-3 SUB_CTRL with SEL_MON4/5/6 in bits 12-15/16-19/20-23): SMON →
 // monitors at 4/8/12; SVPRM_RD/WR → NO 4, SIZE 6, MODE 7, PARAMETER 8; ALM_RD → MOD 4, four
 // codes from 8; ALM_CLR → MOD 4. ZRET 12 homing method (CiA 402 number; 0: the parameter)
-// 20 TSPD 24 ACCR runs the drive core's homing; ZPOINT says it is done. Not built yet:
-// EX_POSING, MEM_RD/MEM_WR, CONFIG (they answer "unsupported").
+// 20 TSPD 24 ACCR runs the drive core's homing; ZPOINT says it is done. EX_POSING (16 TPOS,
+// 20 TSPD, 24 ACCR, 28 DECR) positions towards TPOS until the latch input (the DEC input: the
+// drive core's home switch or scenario bit 2) rises, then stops at the latched position +
+// parameter 0107h; LPOS1 (monitor 3) is the latched position and SVCMD_STAT bit 8 L_CMP1 says
+// it latched (within one drive period). CONFIG answers normal (our parameters take effect
+// when written). Not built: MEM_RD/MEM_WR (virtual memory; "unsupported").
 #pragma once
 
 #include <array>
@@ -56,6 +60,7 @@ enum class ServoParam : std::uint16_t {
   quick_stop_deceleration = 0x0104, // [ref/s²]
   max_velocity = 0x0105,            // [ref/s]
   position_window = 0x0106,         // [ref]
+  ex_posing_distance = 0x0107,      // EX_POSING: travel after the latch [ref] (signed)
   counts_per_rev = 0x0110,          // read only
 };
 
@@ -86,11 +91,12 @@ class ServoProfile final : public Profile {
   std::int32_t monitor(std::uint8_t sel) const;
 
  private:
-  enum class Motion : std::uint8_t { none, velctrl, interpolate, posing, feed, trqctrl, zret };
+  enum class Motion : std::uint8_t { none, velctrl, interpolate, posing, feed, trqctrl, zret, ex_posing };
   CmdAlarm run(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp);
   CmdAlarm motion(Command c, std::span<const std::uint8_t> cmd);
   CmdAlarm posing(std::span<const std::uint8_t> cmd, bool feed);
   CmdAlarm zero_return(std::span<const std::uint8_t> cmd);
+  void watch_latch();
   CmdAlarm parameter(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at);
   CmdAlarm alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at,
                       std::size_t codes, std::size_t count) const;
@@ -108,6 +114,10 @@ class ServoProfile final : public Profile {
   std::int32_t target_ = 0;        // the last TPOS [ref], for CPOS/PERR
   std::array<std::uint16_t, 8> history_{};  // alarm history, newest first
   std::uint16_t last_error_ = 0;
+  std::int32_t ex_distance_ = 0;   // parameter 0107h [ref]
+  std::int32_t latch_pos_ = 0;     // LPOS1: where the latch input rose [ref]
+  std::int32_t tpos_requested_ = 0;  // the TPOS of the EX_POSING in progress [ref]
+  bool latched_ = false, prev_dec_ = false;
 };
 
 // The M-III alarm code the servo reports for a drive core error code (ours: following error

@@ -210,8 +210,8 @@ TEST_F(M3Servo, ALostLinkTurnsTheServoOffAndUnbuiltCommandsSaySo) {
   servo.stop(t);
   run(0.01);
   EXPECT_FALSE(servo.servo_on());
-  EXPECT_EQ(send(cmd(Command::ex_posing)), CmdAlarm::unsupported);
-  EXPECT_EQ(send(cmd(Command::mem_rd)), CmdAlarm::unsupported);
+  EXPECT_EQ(send(cmd(Command::mem_rd)), CmdAlarm::unsupported) << "no virtual memory modelled";
+  EXPECT_EQ(send(cmd(Command::config)), CmdAlarm::normal) << "parameters take effect when written";
 }
 
 TEST_F(M3Servo, ZeroReturnHomesTheAxisAndSetsZpoint) {
@@ -228,6 +228,41 @@ TEST_F(M3Servo, ZeroReturnHomesTheAxisAndSetsZpoint) {
   EXPECT_NE(svcmd_io() & (1u << 11), 0u) << "ZPOINT";
   EXPECT_LT(std::abs(monitor(0)), 20) << "APOS at the new origin";
   EXPECT_EQ(send(cmd(Command::zret, {{20, -1}})), CmdAlarm::invalid_data);
+}
+
+// EX_POSING: towards TPOS until the latch input (here the drive core's modelled home switch
+// at 1 rad) rises, then to the latched position + parameter 0107h.
+TEST(M3ServoLatch, ExternalPositioningStopsAtTheLatchPlusTheDistance) {
+  ServoConfig c = config();
+  c.drive.switches.home = 1.0;  // rad on the load shaft: 1591.5 counts at 10000 counts/rev
+  ServoProfile servo(c);
+  drive::AxisModel axis;
+  SimTime t = 0;
+  std::vector<std::uint8_t> rsp(32, 0);
+  auto send = [&](const std::vector<std::uint8_t>& f) { return servo.execute(static_cast<Command>(f[0]), f, rsp, t); };
+  auto run = [&](double s) {
+    for (int k = 0; k < std::lround(s * 1000); ++k, t += 1'000'000) axis.step(servo.step(t, axis.feedback()), 1e-3);
+  };
+  auto prm = cmd(Command::svprm_wr, {{16, 500}});
+  put_u16(prm, 12, 0x0107);
+  prm[14] = 4;
+  ASSERT_EQ(send(prm), CmdAlarm::normal);
+  send(cmd(Command::sens_on));
+  send(cmd(Command::sv_on));
+  run(0.01);
+  const auto ex = cmd(Command::ex_posing, {{16, 20000}, {20, 5000}, {24, 50000}, {28, 50000}},
+                      (0x3u << 12) | (0x0u << 16));  // MONITOR1 LPOS1, MONITOR2 APOS
+  ASSERT_EQ(send(ex), CmdAlarm::normal);
+  for (int k = 0; k < 3000; ++k) {  // the master repeats it every cycle
+    send(ex);
+    run(0.001);
+  }
+  send(ex);
+  const std::int32_t lpos = get_i32(rsp, 12), apos = get_i32(rsp, 16);
+  EXPECT_NE(static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 8), 0u) << "L_CMP1";
+  EXPECT_NEAR(lpos, 10000 / (2 * M_PI), 10) << "latched where the switch is (within a drive period)";
+  EXPECT_NEAR(apos, lpos + 500, 12) << "stopped at the latch + 0107h, not at TPOS";
+  EXPECT_NE(static_cast<std::uint32_t>(get_i32(rsp, 8)) & (1u << 9), 0u) << "PSET";
 }
 
 TEST_F(M3Servo, SubcommandsReadMonitorsParametersAndAlarms) {
