@@ -104,39 +104,4 @@ PduCheck check_pdu(const std::uint8_t* data, std::size_t n, std::size_t& size) n
   return PduCheck::ok;
 }
 
-namespace detail {
-
-int ReadableWaiter::wait(int fd) noexcept {
-  if (timeout_.count() <= 0) return 0;
-  const auto now = std::chrono::steady_clock::now();
-  if (!started_) {
-    started_ = true;
-    deadline_ = now + timeout_;
-  }
-  for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline_ - std::chrono::steady_clock::now());
-    if (left.count() <= 0) return 0;
-    timespec ts{static_cast<time_t>(left.count() / 1'000'000'000), static_cast<long>(left.count() % 1'000'000'000)};
-    pollfd p{fd, POLLIN, 0};
-    const int r = ::ppoll(&p, 1, &ts, nullptr);
-    if (r > 0) return 1;
-    if (r == 0) return 0;
-    if (errno != EINTR) return -1;
-  }
-}
-
-long ReadableWaiter::receive(int fd, msghdr& msg) noexcept {
-  for (;;) {
-    const ssize_t n = ::recvmsg(fd, &msg, MSG_DONTWAIT | MSG_TRUNC);
-    if (n >= 0) return static_cast<long>(n);
-    if (errno == EINTR) continue;
-    if (errno != EAGAIN && errno != EWOULDBLOCK) return -1;
-    const int w = wait(fd);
-    if (w == 0) return kTimedOut;
-    if (w < 0) return -1;
-  }
-}
-
-}  // namespace detail
-
 }  // namespace omnitwin::ethercat

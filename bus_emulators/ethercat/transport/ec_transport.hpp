@@ -28,6 +28,8 @@
 
 #include <sys/socket.h>
 
+#include "bus_emulators/readable_waiter.hpp"
+
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -103,25 +105,8 @@ enum class PduCheck : std::uint8_t { ok, foreign, malformed };
 PduCheck check_pdu(const std::uint8_t* data, std::size_t n, std::size_t& size) noexcept;
 
 namespace detail {
-// The waiting part of receive(), shared by the transports: the deadline is taken when the
-// first wait begins (a receive that finds a PDU at once never reads the clock). RT-safe.
-class ReadableWaiter {
- public:
-  explicit ReadableWaiter(std::chrono::nanoseconds timeout) : timeout_(timeout) {}
-  // Waits (ppoll) until fd is readable or the deadline passes: 1 readable, 0 timed out,
-  // -1 error (errno set). EINTR is retried with the time left.
-  int wait(int fd) noexcept;
-  // recvmsg(MSG_DONTWAIT | MSG_TRUNC) on fd, waiting as wait() does while nothing is there and
-  // retrying EINTR: the message's real length (even when longer than msg's buffers), kTimedOut
-  // when the deadline passed first, or -1 (errno set).
-  static constexpr long kTimedOut = -2;
-  long receive(int fd, msghdr& msg) noexcept;
-
- private:
-  std::chrono::nanoseconds timeout_;
-  std::chrono::steady_clock::time_point deadline_{};
-  bool started_ = false;
-};
+// The waiting part of receive(), shared by every bus's transports (bus_emulators/readable_waiter.hpp).
+using ReadableWaiter = bus_emulators::ReadableWaiter;
 }  // namespace detail
 
 }  // namespace omnitwin::ethercat
