@@ -275,6 +275,10 @@ void C1Master::on_frame(std::span<const std::uint8_t> bytes, SimTime t) {
     }
     return;
   }
+  if (v.src == kC1Master) {  // we never hear our own frames: another C1 master sent this
+    if (foreign_master_++ == 0) log(t, "another C1 master is on the line (a frame from address 01h): counted, ignored");
+    return;
+  }
   if (v.dst != kC1Master) return;
   const bool expected = waiting && v.type == pending_.expect &&
                         v.src == cfg_.slaves[static_cast<std::size_t>(pending_.k)].address &&

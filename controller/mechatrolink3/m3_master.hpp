@@ -103,6 +103,9 @@ class C1Master {
   SimTime int_offset_ns() const { return int_offset_; }
   SimTime min_cycle_ns() const { return min_cycle_; }
   std::uint64_t cycles() const { return cycle_; }
+  // Frames on the line that another C1 master sent (source address 01h, not ours): a second
+  // C1 master on one line is a configuration error; counted, logged once, never acted on.
+  std::uint64_t foreign_master_frames() const { return foreign_master_; }
   const SlaveCounters& counters(int k) const { return slave_[static_cast<std::size_t>(k)].counters; }
   int slaves() const { return static_cast<int>(cfg_.slaves.size()); }
 
@@ -146,7 +149,7 @@ class C1Master {
   DriverState state_ = DriverState::idle;
   std::string why_;
   SimTime wake_ = -1, cycle_start_ = 0, int_offset_ = 0, min_cycle_ = 0;
-  std::uint64_t cycle_ = 0;
+  std::uint64_t cycle_ = 0, foreign_master_ = 0;
   int station_ = 0;                 // setup: the station being detected or measured
   Pending pending_;
   bool pending_retry_ = false;      // the exchange in progress is a retry

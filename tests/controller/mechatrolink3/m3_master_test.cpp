@@ -13,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -365,6 +366,29 @@ TEST(M3Master, ResponsesLaterThanTrspAreLateAndMissed) {
   EXPECT_GE(rig.master->counters(1).late, 20u);
   EXPECT_GE(rig.master->counters(1).missed, 20u);
   EXPECT_EQ(rig.master->counters(0).missed, 0u);
+}
+
+// Malformed input on the master's side and a second C1 master: counted, never acted on.
+TEST(M3Master, GarbageAndASecondC1MasterAreCountedAndIgnored) {
+  Rig rig(2);
+  rig.master->start(0);
+  rig.run_until(20 * kMs);
+  ASSERT_EQ(rig.master->state(), DriverState::cyclic);
+  const std::uint64_t cycles = rig.master->cycles();
+  std::vector<std::uint8_t> other(kMaxFrame);
+  other.resize(encode(FrameSpec{.dst = kBroadcast, .src = kC1Master, .type = FrameType::sync,
+                                .data = std::vector<std::uint8_t>(8, 0)}, other));
+  for (int i = 0; i < 5; ++i) rig.master->on_frame(other, rig.now);
+  rig.master->on_frame(std::vector<std::uint8_t>{1, 2, 3}, rig.now);
+  rig.master->on_frame(std::vector<std::uint8_t>(200, 0xFF), rig.now);
+  rig.run_until(40 * kMs);
+  EXPECT_EQ(rig.master->foreign_master_frames(), 5u);
+  EXPECT_EQ(std::count_if(rig.log.begin(), rig.log.end(),
+                          [](const std::string& l) { return l.find("another C1 master") != std::string::npos; }),
+            1) << "logged once";
+  EXPECT_EQ(rig.master->state(), DriverState::cyclic);
+  EXPECT_GE(rig.master->cycles(), cycles + 19);
+  for (int k = 0; k < 2; ++k) EXPECT_EQ(rig.master->counters(k).missed, 0u);
 }
 
 TEST(M3Master, AMasterThatStopsTripsEverySlavesWatchdogAndTheServosGoOff) {
