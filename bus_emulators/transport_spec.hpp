@@ -2,6 +2,7 @@
 // "raw:IFACE", "udp:HOST[:PORT]", "udp:[HOST6][:PORT]"): interface names and the host/port
 // split with IPv6 in brackets. Each bus checks its own meaning (multicast group or unicast
 // host, its default port, its options) and words its own errors around these answers.
+// FrameTransportSpec is the whole spec of the frame buses (EtherCAT, MECHATROLINK-III).
 // Pure string work, header-only; set-up code.
 #pragma once
 
@@ -54,6 +55,60 @@ inline std::optional<std::uint16_t> parse_port(std::string_view text) {
   const auto [p, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
   if (ec != std::errc{} || p != text.data() + text.size() || v < 1 || v > 65535) return std::nullopt;
   return static_cast<std::uint16_t>(v);
+}
+
+// The spec of a frame transport, as EtherCAT and MECHATROLINK-III spell it: raw:IFACE (an
+// Ethernet interface), udp:HOST[:PORT] or udp:[HOST6][:PORT] (port 0: a free one, chosen by
+// the side that binds), mem:NAME (an in-process pair).
+struct FrameTransportSpec {
+  enum class Kind : std::uint8_t { raw, udp, mem };
+  Kind kind = Kind::mem;
+  std::string name;         // raw: interface; udp: host (no brackets); mem: pair name
+  std::uint16_t port = 0;   // udp only
+  // "raw:eth1", "udp:127.0.0.1:34980", "udp:[::1]:34980", "mem:x"
+  std::string canonical() const {
+    switch (kind) {
+      case Kind::raw: return "raw:" + name;
+      case Kind::udp:
+        return (name.find(':') != std::string::npos ? "udp:[" + name + "]:" : "udp:" + name + ":") + std::to_string(port);
+      case Kind::mem: return "mem:" + name;
+    }
+    return "?";
+  }
+};
+
+// Parses a frame transport spec into `out` (UDP's port defaulting to `default_port`): "" when
+// it is good, else why not; each bus words its own error around the answer.
+inline std::string parse_frame_transport_spec(std::string_view spec, std::uint16_t default_port,
+                                              FrameTransportSpec& out) {
+  const auto colon = spec.find(':');
+  if (colon == std::string_view::npos) return "missing ':' after the transport kind";
+  const std::string_view kind = spec.substr(0, colon), rest = spec.substr(colon + 1);
+  if (kind == "raw") {
+    out.kind = FrameTransportSpec::Kind::raw;
+    out.name = std::string(rest);
+    return interface_name_problem(rest);
+  }
+  if (kind == "mem") {
+    out.kind = FrameTransportSpec::Kind::mem;
+    out.name = std::string(rest);
+    return rest.empty() ? "missing pair name" : "";
+  }
+  if (kind != "udp") return "unknown transport '" + std::string(kind) + "'";
+  out.kind = FrameTransportSpec::Kind::udp;
+  std::string_view host, port;
+  const std::string example = "udp:[::1]:" + std::to_string(default_port);
+  if (std::string why = split_host_port(rest, host, port, "address", example); !why.empty()) return why;
+  if (host.empty()) return "empty host";
+  out.name = std::string(host);
+  out.port = default_port;
+  if (port == "0") out.port = 0;  // the side that binds takes a free port
+  else if (!port.empty()) {
+    const auto p = parse_port(port);
+    if (!p) return "port must be 1..65535, or 0 for a free one (the slaves' side)";
+    out.port = *p;
+  }
+  return "";
 }
 
 }  // namespace omnitwin::bus_emulators

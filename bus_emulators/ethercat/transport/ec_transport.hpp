@@ -29,6 +29,7 @@
 #include <sys/socket.h>
 
 #include "bus_emulators/readable_waiter.hpp"
+#include "bus_emulators/transport_spec.hpp"
 
 #include <chrono>
 #include <cstdint>
@@ -86,14 +87,8 @@ class TransportError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Parsed form of a spec, exposed for tests and argument checking.
-struct TransportSpec {
-  enum class Kind : std::uint8_t { raw, udp, mem };
-  Kind kind = Kind::mem;
-  std::string name;         // raw: interface; udp: host (no brackets); mem: pair name
-  std::uint16_t port = 0;   // udp only
-  std::string canonical() const;  // "raw:eth1", "udp:127.0.0.1:34980", "udp:[::1]:34980", "mem:x"
-};
+// Parsed form of a spec, exposed for tests and argument checking (shared by the frame buses).
+using TransportSpec = bus_emulators::FrameTransportSpec;
 TransportSpec parse_transport_spec(std::string_view spec);  // throws TransportError
 
 // "raw:IFACE", "udp:HOST[:PORT]", "mem:NAME"; throws TransportError naming the spec.

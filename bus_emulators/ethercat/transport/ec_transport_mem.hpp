@@ -1,60 +1,33 @@
 // bus_emulators/ethercat/transport — in-process EtherCAT transport (`mem:NAME`), for tests and
-// for running the master and the emulated chain inside one process.
-//
-// The two transports opened with the same NAME, one per role, form a pair: a PDU the master
-// sends is queued for the slaves end and the reply for the master, like the two ends of a
-// cable. A second transport of a role already open under NAME is refused (TransportError); a
-// PDU sent while the other end is not open is lost like a frame on an unplugged cable (send()
-// still succeeds). Each end has a bounded queue of `capacity` PDUs in memory allocated when
-// it is opened (send() and receive() allocate nothing); a PDU arriving at a full queue is
-// dropped and counted in the receiver's dropped_overflow, as a NIC drops frames its ring has
-// no room for. Each end has an eventfd, readable while its queue is not empty.
-//
-// Thread-safe: the two ends may run on different threads (a master thread, a slaves thread).
+// for running the master and the emulated chain inside one process: the frame buses' shared
+// in-process pair (bus_emulators/mem_pair_transport.hpp, which says how it behaves) with
+// EtherCAT's PDUs: up to kMaxPdu bytes, checked by check_pdu() on receipt (other EtherCAT
+// frame types are dropped_foreign, what cannot be a PDU dropped_malformed).
 #pragma once
 
+#include "bus_emulators/ethercat/ec_frame.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
-
-#include <cstddef>
-#include <memory>
-#include <mutex>
-#include <vector>
+#include "bus_emulators/mem_pair_transport.hpp"
 
 namespace omnitwin::ethercat {
 
-class MemTransport final : public EcTransport {
- public:
-  static constexpr std::size_t kDefaultCapacity = 64;
-  // Throws TransportError when NAME is empty, the role is already open under NAME, or
-  // capacity is 0.
-  MemTransport(std::string name, Role role, std::size_t capacity = kDefaultCapacity);
-  ~MemTransport() override;
-
-  bool send(std::span<const std::uint8_t> pdu) override;
-  int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) override;
-  int fd() const override { return event_fd_; }
-  std::string describe() const override;
-  Stats stats() const override;
-
-  std::size_t pending() const;  // PDUs waiting in this end's queue
-  std::size_t capacity() const { return capacity_; }
-
-  struct Pair;  // implementation detail: the two ends of one NAME
-
- private:
-  void deliver(std::span<const std::uint8_t> pdu);  // called by the other end, pair lock held
-
-  std::string name_;
-  Role role_;
-  std::size_t capacity_;
-  int event_fd_ = -1;
-  std::shared_ptr<Pair> pair_;
-  mutable std::mutex mu_;              // guards the queue and stats_
-  std::vector<std::uint8_t> slots_;    // capacity_ slots of kMaxPdu bytes
-  std::vector<std::uint16_t> sizes_;   // bytes used per slot
-  std::size_t head_ = 0;               // oldest queued slot
-  std::size_t count_ = 0;              // queued PDUs
-  Stats stats_;
+struct EcMemTraits {
+  using Base = EcTransport;
+  using Role = ethercat::Role;
+  using Error = TransportError;
+  static constexpr std::size_t kMaxFrame = kMaxPdu, kMinFrame = 0, kDefaultCapacity = 64;
+  static const char* role_name(Role r) { return to_string(r); }
+  static std::size_t end_of(Role r) { return r == Role::master ? 0 : 1; }
+  static bus_emulators::FrameVerdict check(const std::uint8_t* data, std::size_t n, std::size_t& size) noexcept {
+    switch (check_pdu(data, n, size)) {
+      case PduCheck::ok: return bus_emulators::FrameVerdict::ok;
+      case PduCheck::foreign: return bus_emulators::FrameVerdict::foreign;
+      case PduCheck::malformed: break;
+    }
+    return bus_emulators::FrameVerdict::malformed;
+  }
 };
+
+using MemTransport = bus_emulators::MemPairTransport<EcMemTraits>;
 
 }  // namespace omnitwin::ethercat

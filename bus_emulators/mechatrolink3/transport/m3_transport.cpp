@@ -20,23 +20,6 @@ namespace {
                        " (expected raw:IFACE, udp:HOST[:PORT], udp:[HOST6][:PORT] or mem:NAME)");
 }
 
-void parse_udp(std::string_view spec, std::string_view rest, TransportSpec& t) {
-  std::string_view host, port;
-  if (const std::string why = bus_emulators::split_host_port(rest, host, port, "address", "udp:[::1]:34997");
-      !why.empty())
-    bad(spec, why);
-  if (host.empty()) bad(spec, "empty host");
-  t.name = std::string(host);
-  t.port = kUdpPort;
-  if (port == "0") {
-    t.port = 0;  // the slaves' side binds a free port (spec() and local_port() name it)
-  } else if (!port.empty()) {
-    const auto p = bus_emulators::parse_port(port);
-    if (!p) bad(spec, "port must be 1..65535, or 0 for a free one (the slaves' side)");
-    t.port = *p;
-  }
-}
-
 }  // namespace
 
 const char* to_string(Role r) {
@@ -47,36 +30,9 @@ const char* to_string(Role r) {
   return "?";
 }
 
-std::string TransportSpec::canonical() const {
-  switch (kind) {
-    case Kind::raw: return "raw:" + name;
-    case Kind::udp:
-      return (name.find(':') != std::string::npos ? "udp:[" + name + "]:" : "udp:" + name + ":") + std::to_string(port);
-    case Kind::mem: return "mem:" + name;
-  }
-  return "?";
-}
-
 TransportSpec parse_transport_spec(std::string_view spec) {
-  const auto colon = spec.find(':');
-  if (colon == std::string_view::npos) bad(spec, "missing ':' after the transport kind");
-  const std::string_view kind = spec.substr(0, colon);
-  const std::string_view rest = spec.substr(colon + 1);
   TransportSpec t;
-  if (kind == "raw") {
-    t.kind = TransportSpec::Kind::raw;
-    if (const std::string why = bus_emulators::interface_name_problem(rest); !why.empty()) bad(spec, why);
-    t.name = std::string(rest);
-  } else if (kind == "udp") {
-    t.kind = TransportSpec::Kind::udp;
-    parse_udp(spec, rest, t);
-  } else if (kind == "mem") {
-    t.kind = TransportSpec::Kind::mem;
-    if (rest.empty()) bad(spec, "missing pair name");
-    t.name = std::string(rest);
-  } else {
-    bad(spec, "unknown transport '" + std::string(kind) + "'");
-  }
+  if (const std::string why = bus_emulators::parse_frame_transport_spec(spec, kUdpPort, t); !why.empty()) bad(spec, why);
   return t;
 }
 

@@ -38,6 +38,7 @@
 #include <sys/socket.h>
 
 #include "bus_emulators/readable_waiter.hpp"
+#include "bus_emulators/transport_spec.hpp"
 
 #include <chrono>
 #include <cstdint>
@@ -102,14 +103,8 @@ class TransportError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Parsed form of a spec, exposed for tests and argument checking.
-struct TransportSpec {
-  enum class Kind : std::uint8_t { raw, udp, mem };
-  Kind kind = Kind::mem;
-  std::string name;         // raw: interface; udp: host (no brackets); mem: pair name
-  std::uint16_t port = 0;   // udp only (0: a free port, slaves only)
-  std::string canonical() const;  // "raw:eth1", "udp:127.0.0.1:34997", "udp:[::1]:34997", "mem:x"
-};
+// Parsed form of a spec, exposed for tests and argument checking (shared by the frame buses).
+using TransportSpec = bus_emulators::FrameTransportSpec;
 TransportSpec parse_transport_spec(std::string_view spec);  // throws TransportError
 
 // "raw:IFACE", "udp:HOST[:PORT]", "mem:NAME"; throws TransportError naming the spec.
