@@ -11,7 +11,8 @@
 
 namespace omnitwin::ethercat {
 
-struct EcMemTraits {
+// EtherCAT for the frame buses' shared transports (in-process pair, UDP).
+struct EcFrameTraits {
   using Base = EcTransport;
   using Role = ethercat::Role;
   using Error = TransportError;
@@ -28,6 +29,6 @@ struct EcMemTraits {
   }
 };
 
-using MemTransport = bus_emulators::MemPairTransport<EcMemTraits>;
+using MemTransport = bus_emulators::MemPairTransport<EcFrameTraits>;
 
 }  // namespace omnitwin::ethercat

@@ -13,37 +13,13 @@
 // counted in dropped_malformed; other EtherCAT frame types in dropped_foreign.
 #pragma once
 
-#include "bus_emulators/ethercat/transport/ec_transport.hpp"
-
-#include <sys/socket.h>
-
-#include <string>
+// The frame buses' shared UDP transport (bus_emulators/udp_pair_transport.hpp) with EtherCAT's
+// PDUs and check_pdu() (EtherCAT's traits: ec_transport_mem.hpp).
+#include "bus_emulators/ethercat/transport/ec_transport_mem.hpp"
+#include "bus_emulators/udp_pair_transport.hpp"
 
 namespace omnitwin::ethercat {
 
-class UdpTransport final : public EcTransport {
- public:
-  // Throws TransportError naming the spec (unknown host, port in use, …).
-  UdpTransport(const TransportSpec& spec, Role role);
-  ~UdpTransport() override;
-
-  bool send(std::span<const std::uint8_t> pdu) override;
-  int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) override;
-  int fd() const override { return fd_; }
-  std::string describe() const override;
-  Stats stats() const override { return stats_; }
-
-  std::uint16_t local_port() const { return local_port_; }  // the port this socket is bound to
-
- private:
-  TransportSpec spec_;
-  Role role_;
-  int fd_ = -1;
-  sockaddr_storage peer_{};  // master: HOST:PORT; slaves: the last sender
-  socklen_t peer_len_ = 0;
-  bool have_peer_ = false;
-  std::uint16_t local_port_ = 0;
-  Stats stats_;
-};
+using UdpTransport = bus_emulators::UdpPairTransport<EcFrameTraits>;
 
 }  // namespace omnitwin::ethercat

@@ -11,7 +11,8 @@
 
 namespace omnitwin::m3 {
 
-struct M3MemTraits {
+// M-III for the frame buses' shared transports (in-process pair, UDP).
+struct M3FrameTraits {
   using Base = M3Transport;
   using Role = m3::Role;
   using Error = TransportError;
@@ -25,6 +26,6 @@ struct M3MemTraits {
   }
 };
 
-using MemTransport = bus_emulators::MemPairTransport<M3MemTraits>;
+using MemTransport = bus_emulators::MemPairTransport<M3FrameTraits>;
 
 }  // namespace omnitwin::m3

@@ -16,42 +16,13 @@
 // trimmed; a bad FCS is the receiving station's business and passes.
 #pragma once
 
-#include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
-
-#include <sys/socket.h>
-
-#include <string>
+// The frame buses' shared UDP transport (bus_emulators/udp_pair_transport.hpp) with M-III
+// frames and check_frame() (M-III's traits: m3_transport_mem.hpp).
+#include "bus_emulators/mechatrolink3/transport/m3_transport_mem.hpp"
+#include "bus_emulators/udp_pair_transport.hpp"
 
 namespace omnitwin::m3 {
 
-class UdpTransport final : public M3Transport {
- public:
-  // Throws TransportError naming the spec (unknown host, port in use, a master to port 0, …).
-  UdpTransport(const TransportSpec& spec, Role role);
-  ~UdpTransport() override;
-
-  bool send(std::span<const std::uint8_t> frame) override;
-  int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) override;
-  int fd() const override { return fd_; }
-  std::string spec() const override;  // slaves: the bound port; master: the slaves' port
-  std::string describe() const override;
-  Stats stats() const override { return stats_; }
-
-  std::uint16_t local_port() const { return local_port_; }  // the port this socket is bound to
-
- private:
-  int resolve();                 // fills peer_ from spec_; returns the address family
-  void bind_socket(int family);  // slaves: HOST:PORT; master: an ephemeral port
-  [[noreturn]] void fail(const std::string& what);  // closes fd_, throws naming the spec
-
-  TransportSpec spec_;
-  Role role_;
-  int fd_ = -1;
-  sockaddr_storage peer_{};  // master: HOST:PORT; slaves: the last sender
-  socklen_t peer_len_ = 0;
-  bool have_peer_ = false;
-  std::uint16_t local_port_ = 0;
-  Stats stats_;
-};
+using UdpTransport = bus_emulators::UdpPairTransport<M3FrameTraits>;
 
 }  // namespace omnitwin::m3
