@@ -65,18 +65,21 @@ const char* to_string(WaitStatus s) {
 
 // ---------------------------------------------------------------------------------------------
 // Codec. Layout (byte offsets, little-endian; docs/protocols/sim-clock.md has the table):
-//   0 u32 magic, 4 u16 version, 6 u8 type (1 Hello, 2 Grant, 3 Done, 4 End), 7 u8 reserved = 0
+//   0 u32 magic, 4 u16 version, 6 u8 type (1 Hello, 2 Grant, 3 Done, 4 End, 5 Sent,
+//   6 Horizon), 7 u8 reserved = 0
 //   Hello  8 u32 pid
 //   Grant  8 u64 tick, 16 i64 t_ns, 24 4×u64 frames
 //   Done   8 u64 tick, 16 4×u64 frames, 48 u8 state, 49 u8 reason, 50 u8 node, 51 u8 pad = 0,
 //          52 i64 path_origin_ns, 60 3×f32 reference, 72 3×f32 odometry
 //   End    8 i64 t_ns
+//   Sent   8 u64 tick, 16 i64 t_ns, 24 4×u64 frames
+//   Horizon 8 u64 tick, 16 i64 arrival_ns, 24 4×u64 frames, 56 i64 quiet_until_ns
 // Every byte after a type's last field is zero. The poses travel as f32 (doubles would make
 // Done 108 bytes); NaN travels as the one canonical quiet NaN so that decode∘encode is exact.
 
 namespace {
 
-enum class Type : std::uint8_t { hello = 1, grant = 2, done = 3, end = 4 };
+enum class Type : std::uint8_t { hello = 1, grant = 2, done = 3, end = 4, sent = 5, horizon = 6 };
 constexpr std::size_t kHeaderSize = 8;
 constexpr std::uint32_t kCanonicalNan = 0x7fc00000u;  // the f32 bits every NaN is sent as
 
@@ -177,6 +180,21 @@ void write_body(Writer& w, const End& e) {
   w.i64(e.t_ns);
 }
 
+void write_body(Writer& w, const Sent& s) {
+  write_header(w, Type::sent);
+  w.u64(s.tick);
+  w.i64(s.t_ns);
+  for (std::uint64_t f : s.frames) w.u64(f);
+}
+
+void write_body(Writer& w, const Horizon& h) {
+  write_header(w, Type::horizon);
+  w.u64(h.tick);
+  w.i64(h.arrival_ns);
+  for (std::uint64_t f : h.frames) w.u64(f);
+  w.i64(h.quiet_until_ns);
+}
+
 using Decoded = std::variant<Message, DecodeError>;
 
 // The fields of a Done after its header; bad_value for out-of-range enums, pad or NaNs.
@@ -212,6 +230,21 @@ Decoded read_body(Reader& r, std::uint8_t type) {
     }
     case Type::done: return read_done(r);
     case Type::end: return Message{End{r.i64()}};
+    case Type::sent: {
+      Sent m;
+      m.tick = r.u64();
+      m.t_ns = r.i64();
+      for (std::uint64_t& f : m.frames) f = r.u64();
+      return Message{m};
+    }
+    case Type::horizon: {
+      Horizon h;
+      h.tick = r.u64();
+      h.arrival_ns = r.i64();
+      for (std::uint64_t& f : h.frames) f = r.u64();
+      h.quiet_until_ns = r.i64();
+      return Message{h};
+    }
   }
   return DecodeError::unknown_type;
 }
@@ -226,6 +259,8 @@ std::array<std::uint8_t, kMessageSize> encode(const Message& m) noexcept {
   else if (const auto* g = std::get_if<Grant>(&m)) write_body(w, *g);
   else if (const auto* d = std::get_if<Done>(&m)) write_body(w, *d);
   else if (const auto* e = std::get_if<End>(&m)) write_body(w, *e);
+  else if (const auto* st = std::get_if<Sent>(&m)) write_body(w, *st);
+  else if (const auto* hz = std::get_if<Horizon>(&m)) write_body(w, *hz);
   return out;
 }
 
@@ -236,7 +271,7 @@ std::variant<Message, DecodeError> decode(const std::uint8_t* data, std::size_t 
   if (r.u32() != kMagic) return DecodeError::bad_magic;
   if (r.u16() != kVersion) return DecodeError::bad_version;
   const std::uint8_t type = r.u8();
-  if (type < static_cast<std::uint8_t>(Type::hello) || type > static_cast<std::uint8_t>(Type::end))
+  if (type < static_cast<std::uint8_t>(Type::hello) || type > static_cast<std::uint8_t>(Type::horizon))
     return DecodeError::unknown_type;
   if (r.u8() != 0) return DecodeError::bad_value;  // reserved
   // The body, then every unused byte must be zero (so re-encoding gives the same bytes).
@@ -470,6 +505,28 @@ WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds t
   return WaitStatus::ok;
 }
 
+WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds timeout, OnSent on_sent,
+                         void* context) {
+  // Send the grant; answer every SENT of this tick until the Done of this very tick.
+  if (conn_fd_ < 0) return WaitStatus::closed;
+  const Clock::time_point deadline = deadline_after(timeout);
+  if (!send_message(conn_fd_, g)) return WaitStatus::closed;
+  for (;;) {
+    Message m;
+    const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_);
+    if (w != WaitStatus::ok) return w;
+    if (const Sent* s = std::get_if<Sent>(&m)) {
+      if (s->tick != g.tick || on_sent == nullptr) return WaitStatus::protocol;
+      if (!send_message(conn_fd_, on_sent(context, *s))) return WaitStatus::closed;
+      continue;
+    }
+    const Done* d = std::get_if<Done>(&m);
+    if (d == nullptr || d->tick != g.tick) return WaitStatus::protocol;
+    done = *d;
+    return WaitStatus::ok;
+  }
+}
+
 void Server::end(std::int64_t t_ns) {
   // Best effort: a master that is already gone needs no End.
   if (conn_fd_ >= 0) send_message(conn_fd_, End{t_ns});
@@ -511,5 +568,18 @@ WaitStatus Client::next(Grant& grant, std::chrono::milliseconds timeout, End* en
 }
 
 bool Client::done(const Done& d) { return fd_ >= 0 && send_message(fd_, d); }
+
+WaitStatus Client::exchange(const Sent& sent, Horizon& horizon, std::chrono::milliseconds timeout) {
+  // Report the frames sent, then wait for the twin's horizon of this tick.
+  if (fd_ < 0 || !send_message(fd_, sent)) return WaitStatus::closed;
+  Message m;
+  const WaitStatus w = receive_message(fd_, deadline_after(timeout), m);
+  if (w != WaitStatus::ok) return w;
+  if (const auto* h = std::get_if<Horizon>(&m); h != nullptr && h->tick == sent.tick) {
+    horizon = *h;
+    return WaitStatus::ok;
+  }
+  return std::holds_alternative<End>(m) ? WaitStatus::closed : WaitStatus::protocol;
+}
 
 }  // namespace omnitwin::simclock

@@ -8,6 +8,9 @@
 // its frames, and answers DONE with the number of frames it has sent per bus since the run began
 // (so the twin waits for exactly those frames before it simulates [t_k, t_k+1)). END ends the
 // run. Frames still travel over the real transport; only time and counts use this channel.
+// A master on a polling bus (M-III) also exchanges SENT/HORIZON inside a tick: each frame it
+// sends is reported with its simulated send time, and the twin answers what reached the
+// master and when, so the master's response timeouts pass in simulated time.
 //
 // Wire: a Unix-domain SOCK_SEQPACKET connection (message boundaries, ordered, and the peer's
 // death is seen as end of stream), address "unix:PATH". The twin listens, the master connects.
@@ -22,6 +25,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -88,7 +92,24 @@ struct End {  // twin → master: the run is over; exit
   std::int64_t t_ns = 0;
   bool operator==(const End&) const = default;
 };
-using Message = std::variant<Hello, Grant, Done, End>;
+// Exchange-level lockstep, for a master that needs answers inside a tick (a polling bus such
+// as MECHATROLINK-III): within tick `tick` the master reports each frame it sends (SENT) and
+// the twin answers with HORIZON before the master reads its clock again.
+inline constexpr std::int64_t kQuietForever = std::numeric_limits<std::int64_t>::max();
+struct Sent {  // master → twin: frames sent so far (cumulative per bus), the last starting at t_ns
+  std::uint64_t tick = 0;
+  std::int64_t t_ns = 0;
+  std::array<std::uint64_t, kMaxBuses> frames{};
+  bool operator==(const Sent&) const = default;
+};
+struct Horizon {  // twin → master: what reached the master, and how long nothing else will
+  std::uint64_t tick = 0;
+  std::int64_t arrival_ns = -1;  // when the last frame counted in `frames` reached the master; -1: none new
+  std::array<std::uint64_t, kMaxBuses> frames{};  // frames the twin has sent per bus, cumulative
+  std::int64_t quiet_until_ns = kQuietForever;    // no other frame reaches the master before this
+  bool operator==(const Horizon&) const = default;
+};
+using Message = std::variant<Hello, Grant, Done, End, Sent, Horizon>;
 
 enum class DecodeError : std::uint8_t { wrong_size, bad_magic, bad_version, unknown_type, bad_value };
 const char* to_string(DecodeError e);
@@ -132,6 +153,11 @@ class Server {
   // One tick: sends the grant and waits for the matching Done (a Done for another tick is a
   // protocol error). Real-time safe apart from the system calls.
   WaitStatus grant(const Grant& g, Done& done, std::chrono::milliseconds timeout);
+  // The same for a master in exchange-level lockstep: every SENT of this tick is answered with
+  // the HORIZON `on_sent` returns before the Done is awaited again (a SENT for another tick is
+  // a protocol error). The handler runs on the calling thread; real-time safe if it is.
+  using OnSent = Horizon (*)(void* context, const Sent& sent);
+  WaitStatus grant(const Grant& g, Done& done, std::chrono::milliseconds timeout, OnSent on_sent, void* context);
   // Tells the master the run is over (best effort; a closed peer is fine).
   void end(std::int64_t t_ns);
   const std::string& address() const { return address_; }
@@ -158,6 +184,9 @@ class Client {
   // Waits for the next Grant (ok) or End (closed, with *end set when given).
   WaitStatus next(Grant& grant, std::chrono::milliseconds timeout, End* end = nullptr);
   bool done(const Done& d);  // false when the twin is gone
+  // Exchange-level lockstep: reports frames sent inside the current tick and waits for the
+  // twin's HORIZON (ok), End or the twin's death (closed), or anything else (protocol).
+  WaitStatus exchange(const Sent& sent, Horizon& horizon, std::chrono::milliseconds timeout);
   int fd() const { return fd_; }
 
  private:

@@ -21,6 +21,7 @@
 #include <future>
 #include <limits>
 #include <thread>
+#include <vector>
 
 #include "tests/support/temp_dir.hpp"
 
@@ -61,7 +62,9 @@ TEST(SimClockCodec, EveryMessageRoundTrips) {
   const Grant g{42, -1'000, {1, 2, 3, std::numeric_limits<std::uint64_t>::max()}};
   const std::vector<Message> all = {
       Hello{4'000'000'000u}, g, Grant{}, full_done(), Done{},
-      End{std::numeric_limits<std::int64_t>::min()}, End{20'000'000'000}};
+      End{std::numeric_limits<std::int64_t>::min()}, End{20'000'000'000},
+      Sent{3, 1'234, {5, 0, 0, 1}}, Sent{},
+      Horizon{3, 9'999, {6, 0, 0, 0}, 20'000}, Horizon{}};
   for (const Message& m : all) EXPECT_EQ(round_trip(m), m) << "message index " << m.index();
 }
 
@@ -91,6 +94,29 @@ TEST(SimClockCodec, GrantGoldenBytes) {
   };
   std::memcpy(want.data(), head, sizeof head);
   EXPECT_EQ(encode(g), want);
+}
+
+TEST(SimClockCodec, SentAndHorizonGoldenBytes) {
+  // Sent: type 5, tick 2, t_ns 1000 (0x3e8), frames {3, 0, 0, 0}.
+  Bytes want{};
+  const std::uint8_t sent[32] = {
+      0x4f, 0x54, 0x53, 0x43, 0x01, 0x00, 0x05, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
+      0xe8, 0x03, 0, 0, 0, 0, 0, 0, 0x03, 0, 0, 0, 0, 0, 0, 0};
+  std::memcpy(want.data(), sent, sizeof sent);
+  EXPECT_EQ(encode(Sent{2, 1'000, {3, 0, 0, 0}}), want);
+  // Horizon: type 6, tick 2, arrival −1, frames {4, 0, 0, 0}, quiet_until at byte 56.
+  want = {};
+  const std::uint8_t horizon[32] = {
+      0x4f, 0x54, 0x53, 0x43, 0x01, 0x00, 0x06, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
+      0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x04, 0, 0, 0, 0, 0, 0, 0};
+  std::memcpy(want.data(), horizon, sizeof horizon);
+  for (int i = 0; i < 7; ++i) want[56 + static_cast<std::size_t>(i)] = 0xff;
+  want[63] = 0x7f;  // kQuietForever = INT64_MAX
+  EXPECT_EQ(encode(Horizon{2, -1, {4, 0, 0, 0}, kQuietForever}), want);
+  // A nonzero byte after the last field does not decode.
+  Bytes b = encode(Horizon{});
+  b[64] = 1;
+  EXPECT_EQ(error_of(b), DecodeError::bad_value);
 }
 
 TEST(SimClockCodec, DoneFieldOffsets) {
@@ -168,7 +194,7 @@ TEST(SimClockCodec, BadMagicAndVersion) {
 }
 
 TEST(SimClockCodec, UnknownType) {
-  for (std::uint8_t t : {0, 5, 128, 255}) {
+  for (std::uint8_t t : {0, 7, 128, 255}) {
     Bytes b = encode(Hello{});
     b[6] = t;
     EXPECT_EQ(error_of(b), DecodeError::unknown_type) << int(t);
@@ -314,6 +340,70 @@ TEST(SimClockChannel, TicksCarryCountsAndEndClosesTheMaster) {
   EXPECT_EQ(log.ticks, 5);
   EXPECT_EQ(log.last, WaitStatus::closed);
   EXPECT_EQ(log.end.t_ns, 50'000'000);
+}
+
+// Exchange-level lockstep: inside a tick the master reports each frame it sends (Sent) and
+// gets the twin's Horizon before it goes on; the Done then closes the tick as before.
+TEST(SimClockChannel, SentIsAnsweredWithAHorizonInsideTheTick) {
+  Fixture f;
+  Server server(f.address);
+  std::vector<Horizon> seen;
+  WaitStatus last = WaitStatus::ok;
+  MasterThread master(f.address, [&](Client& c) {
+    Grant g;
+    while ((last = c.next(g, 2s)) == WaitStatus::ok) {
+      for (std::uint64_t n = 1; n <= 3; ++n) {
+        Horizon h;
+        if (c.exchange(Sent{g.tick, g.t_ns + static_cast<std::int64_t>(n) * 1'000, {3 * g.tick + n, 0, 0, 0}}, h, 2s) !=
+            WaitStatus::ok)
+          return;
+        seen.push_back(h);
+      }
+      Done d;
+      d.tick = g.tick;
+      d.frames = {3 * g.tick + 3, 0, 0, 0};
+      if (!c.done(d)) return;
+    }
+  });
+  ASSERT_EQ(server.accept(2s), WaitStatus::ok);
+  // The twin's answer: the frame came back 500 ns after it left; quiet after that.
+  const Server::OnSent answer = [](void* ctx, const Sent& s) {
+    ++*static_cast<int*>(ctx);
+    return Horizon{s.tick, s.t_ns + 500, s.frames, kQuietForever};
+  };
+  int calls = 0;
+  for (std::uint64_t k = 0; k < 2; ++k) {
+    Done d;
+    ASSERT_EQ(server.grant(Grant{k, static_cast<std::int64_t>(k) * 1'000'000, {}}, d, 2s, answer, &calls), WaitStatus::ok);
+    EXPECT_EQ(d.frames[0], 3 * k + 3);
+  }
+  server.end(2'000'000);
+  master.join();
+  EXPECT_EQ(master.error(), "");
+  EXPECT_EQ(calls, 6);
+  ASSERT_EQ(seen.size(), 6u);
+  EXPECT_EQ(seen[4].arrival_ns, 1'000'000 + 2'000 + 500);
+  EXPECT_EQ(seen[4].frames[0], 5u);
+  EXPECT_EQ(last, WaitStatus::closed);
+}
+
+TEST(SimClockChannel, SentWithoutAHandlerOrForAnotherTickIsAProtocolError) {
+  for (const bool other_tick : {false, true}) {
+    Fixture f;
+    Server server(f.address);
+    MasterThread master(f.address, [other_tick](Client& c) {
+      Grant g;
+      if (c.next(g, 2s) != WaitStatus::ok) return;
+      Horizon h;
+      c.exchange(Sent{g.tick + (other_tick ? 1 : 0), 0, {}}, h, 500ms);
+    });
+    ASSERT_EQ(server.accept(2s), WaitStatus::ok);
+    Done d;
+    const Server::OnSent answer = [](void*, const Sent& s) { return Horizon{s.tick, -1, {}, kQuietForever}; };
+    if (other_tick) EXPECT_EQ(server.grant(Grant{4, 0, {}}, d, 2s, answer, nullptr), WaitStatus::protocol);
+    else EXPECT_EQ(server.grant(Grant{4, 0, {}}, d, 2s), WaitStatus::protocol) << "a master that polls needs the handler";
+    server.end(0);
+  }
 }
 
 TEST(SimClockChannel, DoneForAnotherTickIsAProtocolError) {
