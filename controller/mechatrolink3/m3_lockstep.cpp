@@ -1,0 +1,72 @@
+// controller/mechatrolink3 — our C1 master in exchange-level lockstep; see m3_lockstep.hpp.
+#include "controller/mechatrolink3/m3_lockstep.hpp"
+
+#include <algorithm>
+#include <chrono>
+
+namespace omnitwin::m3 {
+
+namespace {
+
+constexpr auto kWait = std::chrono::milliseconds(10'000);  // the twin answers each exchange within
+
+}  // namespace
+
+MasterLockstep::MasterLockstep(M3Transport& transport, simclock::Client& clock, std::size_t bus)
+    : transport_(transport), clock_(clock), bus_(bus) {
+  inbox_.reserve(8);
+}
+
+void MasterLockstep::emit(std::span<const std::uint8_t> frame, SimTime t) {
+  if (status_ != simclock::WaitStatus::ok) return;  // the twin is gone: nothing more to say
+  if (transport_.send(frame)) ++sent_;
+  simclock::Sent s;
+  s.tick = tick_;
+  s.t_ns = t;
+  s.frames[bus_] = sent_;
+  simclock::Horizon h;
+  status_ = clock_.exchange(s, h, kWait);
+  if (status_ == simclock::WaitStatus::ok) status_ = drain_to(h.frames[bus_], h.arrival_ns);
+}
+
+// Receives from the transport until `count` frames have arrived since the start, each put in
+// the inbox at `arrival` (our master polls: one frame per exchange at most).
+simclock::WaitStatus MasterLockstep::drain_to(std::uint64_t count, SimTime arrival) {
+  while (received_ < count) {
+    const int n = transport_.receive(rx_, std::chrono::duration_cast<std::chrono::nanoseconds>(kWait));
+    if (n <= 0) return simclock::WaitStatus::timeout;
+    ++received_;
+    Arrived a;
+    a.at = arrival;
+    a.size = static_cast<std::uint8_t>(std::min<int>(n, static_cast<int>(kMaxFrame)));
+    std::copy_n(rx_.begin(), a.size, a.bytes.begin());
+    inbox_.push_back(a);
+  }
+  return simclock::WaitStatus::ok;
+}
+
+// Hands the inbox to the master in order, its clock first run to each frame's arrival.
+void MasterLockstep::deliver_inbox(C1Master& master) {
+  while (!inbox_.empty()) {
+    const Arrived a = inbox_.front();
+    inbox_.erase(inbox_.begin());
+    master.advance(a.at);  // a deadline at or before the arrival comes first
+    master.on_frame(std::span<const std::uint8_t>(a.bytes.data(), a.size), a.at);
+  }
+}
+
+simclock::WaitStatus MasterLockstep::run_tick(C1Master& master, const simclock::Grant& g, SimTime period) {
+  tick_ = g.tick;
+  const SimTime end = g.t_ns + period;
+  master.advance(g.t_ns);
+  for (;;) {
+    deliver_inbox(master);
+    if (status_ != simclock::WaitStatus::ok) return status_;
+    if (!inbox_.empty()) continue;  // delivering made the master send again
+    const SimTime next = master.next_wakeup();
+    if (next < 0 || next >= end) return status_;
+    master.advance(next);  // a deadline or the next frame to send, in simulated time
+  }
+}
+
+}  // namespace omnitwin::m3
