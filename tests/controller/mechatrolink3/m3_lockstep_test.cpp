@@ -1,9 +1,8 @@
 // Tests controller/mechatrolink3/m3_lockstep: our C1 master in exchange-level lockstep with a
 // twin-like counterpart in another thread — frames over a real M-III transport (in-process
-// pair), time and counts over a real sim-clock socket. The twin side here is the test's: it
-// answers each Sent by letting the frame into the line model at its simulated send time,
-// running the line until nothing is in flight, putting the master-bound frames on the
-// transport and answering the Horizon; between ticks it runs the slaves' drives.
+// pair), time and counts over a real sim-clock socket. The twin side is the segment
+// (bus_emulators/mechatrolink3/transport/m3_segment) answering each Sent, with the test
+// turning its answer into the Horizon and running the slaves' timers and drives between ticks.
 // Checks: the driver sequence measures TR_DLY exactly as in process, four servos start and
 // turn, every cycle exchanges with every slave and nothing is missed or late, the frame counts
 // of both ends agree, and two runs give the same log.
@@ -18,9 +17,7 @@
 #include <vector>
 
 #include "bus_emulators/drive/axis_model.hpp"
-#include "bus_emulators/mechatrolink3/m3_line.hpp"
-#include "bus_emulators/mechatrolink3/m3_link.hpp"
-#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 #include "bus_emulators/mechatrolink3/transport/m3_transport_mem.hpp"
 #include "controller/mechatrolink3/m3_servo_axis.hpp"
 #include "tests/support/temp_dir.hpp"
@@ -32,53 +29,33 @@ using namespace std::chrono_literals;
 constexpr SimTime kPeriod = 1'000'000;
 constexpr int kSlaves = 4;
 
-// The twin's side: the line and four servo slaves behind the slaves end of the transport.
+// The twin's side: the segment (line and four servo slaves behind the slaves end of the
+// transport) and, between ticks, the slaves' timers and drives.
 struct TwinSide {
-  Line line{Topology::cascade_of(kSlaves, 10.0)};
-  std::vector<std::unique_ptr<ServoProfile>> servos;
-  std::vector<std::unique_ptr<SlaveLink>> links;
-  std::vector<drive::AxisModel> axes;
   MemTransport transport;
-  std::uint64_t from_master = 0, to_master = 0;
-  SimTime last_arrival = -1;
-  std::array<std::uint8_t, 2 * kMaxFrame> rx{};
+  M3Segment segment;
+  std::vector<drive::AxisModel> axes = std::vector<drive::AxisModel>(kSlaves);
 
-  explicit TwinSide(const std::string& name) : transport(name, Role::slaves) {
-    for (int k = 0; k < kSlaves; ++k) {
-      ServoConfig c;
-      c.drive.counts_per_rev = 10000;
-      servos.push_back(std::make_unique<ServoProfile>(c));
-      links.push_back(std::make_unique<SlaveLink>(LinkConfig{.address = static_cast<std::uint8_t>(kFirstSlave + k)}, *servos.back(),
-                                                  [this, k](std::span<const std::uint8_t> f, SimTime t) { line.from_slave(k, f, t); }));
-      line.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime t) { links[static_cast<std::size_t>(k)]->on_frame(f, t); });
-      links.back()->power_on(0);
-      axes.emplace_back();
-    }
-    line.attach_master([this](std::span<const std::uint8_t> f, SimTime t) {
-      if (transport.send(f)) ++to_master;
-      last_arrival = t;
-    });
+  static SegmentConfig config() {
+    SegmentConfig c;
+    c.topology = Topology::cascade_of(kSlaves, 10.0);
+    c.servo.drive.counts_per_rev = 10000;
+    return c;
   }
-  // Sent → Horizon: the master's frames enter the line at their send time; the line runs dry.
+  explicit TwinSide(const std::string& name) : transport(name, Role::slaves), segment(config(), transport) {}
+  std::uint64_t to_master() const { return segment.to_master(); }
   simclock::Horizon answer(const simclock::Sent& s) {
-    while (from_master < s.frames[0]) {
-      const int n = transport.receive(rx, 5s);
-      if (n <= 0) break;
-      ++from_master;
-      line.from_master(std::span<const std::uint8_t>(rx.data(), static_cast<std::size_t>(n)), s.t_ns);
-    }
-    last_arrival = -1;
-    for (SimTime due = line.next_due(); due >= 0; due = line.next_due()) line.advance(due);
+    const SegmentAnswer a = segment.take_sent(s.frames[0], s.t_ns, 5s);
     simclock::Horizon h;
     h.tick = s.tick;
-    h.arrival_ns = last_arrival;
-    h.frames[0] = to_master;
+    h.arrival_ns = a.arrival_ns;
+    h.frames[0] = a.to_master;
     return h;
   }
-  // After each tick: the slaves' timers and drives run over it.
   void after_tick(SimTime end) {
-    for (auto& l : links) l->advance(end);
-    for (std::size_t k = 0; k < axes.size(); ++k) axes[k].step(servos[k]->step(end, axes[k].feedback()), 1e-3);
+    segment.advance(end);
+    for (std::size_t k = 0; k < axes.size(); ++k)
+      axes[k].step(segment.step_drive(static_cast<int>(k), end, axes[k].feedback()), 1e-3);
   }
 };
 
@@ -148,15 +125,15 @@ RunResult run_lockstep(const std::string& tag, int ticks) {
     simclock::Grant g;
     g.tick = static_cast<std::uint64_t>(k);
     g.t_ns = k * kPeriod;
-    g.frames[0] = twin.to_master;
+    g.frames[0] = twin.to_master();
     simclock::Done d;
     if (server.grant(g, d, 5s, on_sent, &twin) != simclock::WaitStatus::ok) r.error = "grant failed at tick " + std::to_string(k);
     twin.after_tick((k + 1) * kPeriod);
   }
   server.end(ticks * kPeriod);
   master_thread.join();
-  r.twin_from_master = twin.from_master;
-  r.twin_to_master = twin.to_master;
+  r.twin_from_master = twin.segment.from_master();
+  r.twin_to_master = twin.segment.to_master();
   r.wheel0_rad_s = twin.axes[0].velocity_rad_s();
   return r;
 }

@@ -1,0 +1,89 @@
+// bus_emulators/mechatrolink3/transport — the twin's side of an M-III line in exchange-level
+// lockstep (docs/protocols/sim-clock.md, "Inside a tick"): the line model and its slave
+// stations (link + servo profile on the shared drive core) behind a real transport, with the
+// capture of both directions. The twin's bus network wraps it; the sim-clock channel stays
+// outside (the caller turns take_sent()'s answer into a Horizon), so this layer depends on no
+// controller code.
+//
+// take_sent(): the master reported `count` frames sent, the last starting at t_send. Each new
+// frame is taken from the transport and enters the line at t_send; the line then runs until
+// nothing is in flight (a slave only answers what it receives), and every frame that reaches
+// the master goes onto the transport and into the capture. The answer says how many frames
+// the twin has sent in all and when the last of them reached the master. Between the
+// master's exchanges the twin runs the slaves' timers (advance()) and their drives
+// (step_drive()) on its own schedule.
+//
+// Real-time: take_sent() waits on the transport (bounded by its argument) and otherwise
+// allocates nothing; set-up allocates and may throw.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bus_emulators/drive/cia402_drive.hpp"
+#include "bus_emulators/mechatrolink3/m3_line.hpp"
+#include "bus_emulators/mechatrolink3/m3_link.hpp"
+#include "bus_emulators/mechatrolink3/m3_pcap.hpp"
+#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
+
+namespace omnitwin::m3 {
+
+struct SegmentConfig {
+  Topology topology = Topology::cascade_of(4, 10.0);
+  ServoConfig servo;              // every slave's servo (one per cable in the topology)
+  SimTime response_ns = 2'000;    // every slave's response time
+};
+
+// What take_sent() answers: the twin's cumulative frames to the master, and when the last
+// one delivered by this exchange reached the master (-1: none).
+struct SegmentAnswer {
+  bool ok = false;                // false: the master's frames did not all arrive in time
+  std::uint64_t to_master = 0;
+  SimTime arrival_ns = -1;
+};
+
+class M3Segment {
+ public:
+  // Builds the line and the slaves (powered on at t = 0). `transport` is the slaves' end and
+  // must outlive the segment.
+  M3Segment(const SegmentConfig& config, M3Transport& transport);
+  ~M3Segment();
+  M3Segment(const M3Segment&) = delete;
+  M3Segment& operator=(const M3Segment&) = delete;
+
+  // Starts the capture (both directions); throws std::runtime_error naming the file.
+  void open_pcap(const std::string& path);
+  PcapWriter* pcap() { return pcap_.get(); }
+
+  SegmentAnswer take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait);
+  // The slaves' communication timers up to t (missing sync or commands). Real-time safe.
+  void advance(SimTime t);
+  // One drive period of slave k at t (its servo profile and drive core). Real-time safe.
+  drive::Command step_drive(int k, SimTime t, const drive::Feedback& fb);
+
+  int slaves() const { return static_cast<int>(links_.size()); }
+  Line& line() { return line_; }
+  SlaveLink& link(int k) { return *links_[static_cast<std::size_t>(k)]; }
+  ServoProfile& servo(int k) { return *servos_[static_cast<std::size_t>(k)]; }
+  std::uint64_t from_master() const { return from_master_; }
+  std::uint64_t to_master() const { return to_master_; }
+  std::uint64_t send_failures() const { return send_failures_; }
+
+ private:
+  void to_master_frame(std::span<const std::uint8_t> frame, SimTime t);
+
+  Line line_;
+  M3Transport& transport_;
+  std::vector<std::unique_ptr<ServoProfile>> servos_;
+  std::vector<std::unique_ptr<SlaveLink>> links_;
+  std::unique_ptr<PcapWriter> pcap_;
+  std::uint64_t from_master_ = 0, to_master_ = 0, send_failures_ = 0;
+  SimTime last_arrival_ = -1;
+  std::array<std::uint8_t, 2 * kMaxFrame> rx_{};
+};
+
+}  // namespace omnitwin::m3
