@@ -3,6 +3,8 @@
 // pair), time and counts over a real sim-clock socket. The twin side is the segment
 // (bus_emulators/mechatrolink3/transport/m3_segment) answering each Sent, with the test
 // turning its answer into the Horizon and running the slaves' timers and drives between ticks.
+// The transport is the in-process pair, UDP on loopback and raw Ethernet on a veth pair (the
+// run must not change).
 // Checks: the driver sequence measures TR_DLY exactly as in process, four servos start and
 // turn, every cycle exchanges with every slave and nothing is missed or late, the frame counts
 // of both ends agree, and two runs give the same log.
@@ -18,9 +20,10 @@
 
 #include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
-#include "bus_emulators/mechatrolink3/transport/m3_transport_mem.hpp"
+#include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
 #include "controller/mechatrolink3/m3_servo_axis.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "tests/support/veth.hpp"
 
 namespace omnitwin::m3 {
 namespace {
@@ -32,7 +35,7 @@ constexpr int kSlaves = 4;
 // The twin's side: the segment (line and four servo slaves behind the slaves end of the
 // transport) and, between ticks, the slaves' timers and drives.
 struct TwinSide {
-  MemTransport transport;
+  std::unique_ptr<M3Transport> transport;
   M3Segment segment;
   std::vector<drive::AxisModel> axes = std::vector<drive::AxisModel>(kSlaves);
 
@@ -42,7 +45,11 @@ struct TwinSide {
     c.servo.drive.counts_per_rev = 10000;
     return c;
   }
-  explicit TwinSide(const std::string& name) : transport(name, Role::slaves), segment(config(), transport) {}
+  // spec: the slaves' end ("mem:NAME", "udp:127.0.0.1:0", "raw:IFACE").
+  explicit TwinSide(const std::string& spec)
+      : transport(open_transport(spec, Role::slaves)), segment(config(), *transport) {}
+  // What the master opens: the same pair, or the port the slaves' UDP socket was given.
+  std::string master_spec() const { return transport->spec(); }
   std::uint64_t to_master() const { return segment.to_master(); }
   simclock::Horizon answer(const simclock::Sent& s) {
     const SegmentAnswer a = segment.take_sent(s.frames[0], s.t_ns, 5s);
@@ -69,18 +76,20 @@ struct RunResult {
   std::string error;
 };
 
-RunResult run_lockstep(const std::string& tag, int ticks) {
+// One lockstep run of `ticks` 1 ms ticks; `spec` is the slaves' end of the transport and
+// `master` the master's ("": what the slaves' end names: the same pair, the bound UDP port).
+RunResult run_lockstep(const std::string& spec, int ticks, const std::string& master = "") {
   omnitwin::testing::TempDir dir("omnitwin-m3-lockstep");
   const std::string address = "unix:" + (dir / "clock").string();
-  const std::string pair = "m3-lockstep-" + tag;
   RunResult r;
-  TwinSide twin(pair);
+  TwinSide twin(spec);
+  const std::string master_spec = master.empty() ? twin.master_spec() : master;
   simclock::Server server(address);
   std::thread master_thread([&] {
     try {
       simclock::Client clock(address, 2s);
-      MemTransport transport(pair, Role::master);
-      MasterLockstep lockstep(transport, clock);
+      std::unique_ptr<M3Transport> transport = open_transport(master_spec, Role::master);
+      MasterLockstep lockstep(*transport, clock);
       MasterConfig cfg;
       for (int k = 0; k < kSlaves; ++k) cfg.slaves.push_back(MasterSlave{.address = static_cast<std::uint8_t>(kFirstSlave + k)});
       std::vector<ServoAxis> apps;
@@ -139,7 +148,7 @@ RunResult run_lockstep(const std::string& tag, int ticks) {
 }
 
 TEST(M3Lockstep, TheMasterRunsAgainstTheTwinOverATransportAndTheSimClock) {
-  const RunResult r = run_lockstep("a", 600);
+  const RunResult r = run_lockstep("mem:m3-lockstep-a", 600);
   ASSERT_EQ(r.error, "");
   const Topology topo = Topology::cascade_of(kSlaves, 10.0);
   for (int k = 0; k < kSlaves; ++k) {
@@ -155,11 +164,33 @@ TEST(M3Lockstep, TheMasterRunsAgainstTheTwinOverATransportAndTheSimClock) {
 }
 
 TEST(M3Lockstep, TwoRunsGiveTheSameLog) {
-  const RunResult a = run_lockstep("b", 300), b = run_lockstep("c", 300);
+  const RunResult a = run_lockstep("mem:m3-lockstep-b", 300), b = run_lockstep("mem:m3-lockstep-c", 300);
   ASSERT_EQ(a.error, "");
   ASSERT_EQ(b.error, "");
   EXPECT_EQ(a.log, b.log);
   EXPECT_EQ(a.master_sent, b.master_sent);
+}
+
+// The same over a real transport between the two ends: UDP on loopback, a free port.
+TEST(M3Lockstep, OverUdpTheRunIsTheSameAsInProcess) {
+  const RunResult udp = run_lockstep("udp:127.0.0.1:0", 300), mem = run_lockstep("mem:m3-lockstep-d", 300);
+  ASSERT_EQ(udp.error, "");
+  ASSERT_EQ(mem.error, "");
+  EXPECT_EQ(udp.log, mem.log);
+  EXPECT_EQ(udp.master_sent, mem.master_sent);
+  EXPECT_EQ(udp.master_received, udp.twin_to_master);
+  for (int k = 0; k < kSlaves; ++k) EXPECT_EQ(udp.steps[static_cast<std::size_t>(k)], AxisStep::running) << k;
+}
+
+// And over raw Ethernet (EtherType 0x88B5) on a veth pair of the test's own, as root.
+TEST(M3Lockstep, OverAVethPairTheRunIsTheSameAsInProcess) {
+  if (const auto why = omnitwin::testing::VethPair::unavailable_reason()) GTEST_SKIP() << *why;
+  omnitwin::testing::VethPair veth;  // deleted when the test ends, whatever its outcome
+  const RunResult raw = run_lockstep("raw:" + veth.b(), 300, "raw:" + veth.a());
+  const RunResult mem = run_lockstep("mem:m3-lockstep-e", 300);
+  ASSERT_EQ(raw.error, "");
+  EXPECT_EQ(raw.log, mem.log);
+  EXPECT_EQ(raw.master_received, raw.twin_to_master);
 }
 
 }  // namespace
