@@ -44,7 +44,7 @@ using m3::SimTime;
 
 constexpr double kCableM = 10.0;
 constexpr SimTime kUsNs = 1'000, kMsNs = 1'000'000;
-constexpr SimTime kGapNs = static_cast<SimTime>(m3::kInterFrameGap) * m3::kByteNs;
+constexpr SimTime kGapNs = m3::kInterFrameGapNs;
 constexpr std::array<int, 4> kDataBytes{16, 32, 48, 64};
 constexpr std::array<int, 3> kRetrySlots{0, 1, 2};
 constexpr std::array<SimTime, 4> kBudgetsNs{125'000, 250'000, 500'000, 1'000'000};

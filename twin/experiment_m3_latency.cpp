@@ -34,7 +34,7 @@ using m3::SimTime;
 
 constexpr double kCableM = 10.0;
 constexpr SimTime kResponseNs = 2'000;  // the slaves' response time (m3_link default)
-constexpr SimTime kGapNs = static_cast<SimTime>(m3::kInterFrameGap) * m3::kByteNs;
+constexpr SimTime kGapNs = m3::kInterFrameGapNs;
 
 // The master in event-driven mode, the line and n slaves; records each exchange's latency.
 struct EventRig {

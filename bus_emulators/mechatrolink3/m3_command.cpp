@@ -135,6 +135,14 @@ std::int32_t get_i32(std::span<const std::uint8_t> f, std::size_t at) noexcept {
   return static_cast<std::int32_t>(v);
 }
 
+std::uint32_t get_u32(std::span<const std::uint8_t> f, std::size_t at) noexcept {
+  return static_cast<std::uint32_t>(get_i32(f, at));
+}
+
+void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) noexcept {
+  put_i32(f, at, static_cast<std::int32_t>(v));
+}
+
 void put_u16(std::span<std::uint8_t> f, std::size_t at, std::uint16_t v) noexcept {
   f[at] = static_cast<std::uint8_t>(v);
   f[at + 1] = static_cast<std::uint8_t>(v >> 8);

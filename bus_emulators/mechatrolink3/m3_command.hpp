@@ -97,8 +97,10 @@ bool write_header(std::span<std::uint8_t> field, const CommandHeader& h) noexcep
 // Little-endian field access inside an information field (callers check the size).
 std::uint16_t get_u16(std::span<const std::uint8_t> f, std::size_t at) noexcept;
 std::int32_t get_i32(std::span<const std::uint8_t> f, std::size_t at) noexcept;
+std::uint32_t get_u32(std::span<const std::uint8_t> f, std::size_t at) noexcept;
 void put_u16(std::span<std::uint8_t> f, std::size_t at, std::uint16_t v) noexcept;
 void put_i32(std::span<std::uint8_t> f, std::size_t at, std::int32_t v) noexcept;
+void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) noexcept;
 
 // Communication phases of a slave (seed 000 fig. 7): 1 waiting for CONNECT, 2 asynchronous
 // commands only, 3 synchronous (all commands; cyclic mode only), 5 powered off.

@@ -7,14 +7,6 @@ namespace omnitwin::m3 {
 
 namespace {
 
-void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) {
-  for (std::size_t i = 0; i < 4; ++i) f[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-
-std::uint32_t get_u32(std::span<const std::uint8_t> f, std::size_t at) {
-  return static_cast<std::uint32_t>(get_i32(f, at));
-}
-
 // 0 normal, 1 a warning, 2 an alarm.
 int severity(CommAlarm a) { return a == CommAlarm::normal ? 0 : is_alarm(a) ? 2 : 1; }
 

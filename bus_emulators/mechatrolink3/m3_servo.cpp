@@ -15,10 +15,6 @@ constexpr std::uint32_t kPauseCmp = 1u << 0, kCancelCmp = 1u << 1, kLCmp1 = 1u <
 constexpr std::uint32_t kIoDec = 1u << 0, kIoPot = 1u << 1, kIoNot = 1u << 2, kIoPset = 1u << 9,
                         kIoZpoint = 1u << 11, kIoBrake = 1u << 12;
 
-std::uint32_t get_u32(std::span<const std::uint8_t> f, std::size_t at) { return static_cast<std::uint32_t>(get_i32(f, at)); }
-
-void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) { put_i32(f, at, static_cast<std::int32_t>(v)); }
-
 bool faulted(State s) { return s == State::fault || s == State::fault_reaction_active; }
 
 }  // namespace
@@ -55,7 +51,7 @@ CmdAlarm ServoProfile::execute(Command c, std::span<const std::uint8_t> cmd, std
   const bool own_fields = c == Command::svprm_rd || c == Command::svprm_wr || c == Command::id_rd ||
                           c == Command::alm_rd;
   if (!own_fields) fill_status(cmd, rsp);
-  else put_u32(rsp, 4, get_u32(cmd, 4) & 0x3);  // SVCMD_STAT only: no room for monitors
+  else put_u32(rsp, 4, get_u32(cmd, 4) & (kPauseCmp | kCancelCmp));  // SVCMD_STAT only: no room for monitors
   return a;
 }
 
@@ -287,7 +283,7 @@ void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std:
   const std::array<std::uint8_t, 3> sel = {static_cast<std::uint8_t>((ctrl >> 12) & 0xF),
                                            static_cast<std::uint8_t>((ctrl >> 16) & 0xF),
                                            static_cast<std::uint8_t>((ctrl >> 20) & 0xF)};
-  std::uint32_t stat = (ctrl & 0x3) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0) |
+  std::uint32_t stat = (ctrl & (kPauseCmp | kCancelCmp)) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0) |
                        (latched_ ? kLCmp1 : 0);
   stat |= static_cast<std::uint32_t>(sel[0]) << 16 | static_cast<std::uint32_t>(sel[1]) << 20 |
           static_cast<std::uint32_t>(sel[2]) << 24;

@@ -13,7 +13,7 @@ namespace {
 // Seed 000 table 1: 100 m between stations; its 6300 m in all is 63 links of 100 m, so it
 // follows from the per-link limit and needs no check of its own.
 constexpr double kMaxCableM = 100.0;
-constexpr SimTime kGapNs = static_cast<SimTime>(kInterFrameGap) * kByteNs;
+constexpr SimTime kGapNs = kInterFrameGapNs;
 
 SimTime cable_ns(const Topology& t, double metres) { return std::llround(metres * t.cable_ns_per_m); }
 

@@ -29,6 +29,7 @@ namespace omnitwin::m3 {
 
 inline constexpr SimTime kByteNs = 80;              // 100 Mbit/s
 inline constexpr std::size_t kPreambleSfd = 8, kInterFrameGap = 12;
+inline constexpr SimTime kInterFrameGapNs = static_cast<SimTime>(kInterFrameGap) * kByteNs;  // 960 ns
 // DLY_REQ to DLY_RPL turnaround of every slave's ASIC (ours; fixed and known, so the C1
 // master subtracts it from the round trip it measures).
 inline constexpr SimTime kDelayEchoNs = 1'000;

@@ -9,11 +9,7 @@ namespace omnitwin::m3 {
 
 namespace {
 
-constexpr SimTime kGapNs = static_cast<SimTime>(kInterFrameGap) * kByteNs;
-
-void put_u32(std::span<std::uint8_t> f, std::size_t at, std::uint32_t v) {
-  for (std::size_t i = 0; i < 4; ++i) f[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
+constexpr SimTime kGapNs = kInterFrameGapNs;
 
 }  // namespace
 
