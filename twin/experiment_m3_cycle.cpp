@@ -28,9 +28,7 @@
 #include <fmt/format.h>
 
 #include "bus_emulators/drive/axis_model.hpp"
-#include "bus_emulators/mechatrolink3/m3_line.hpp"
-#include "bus_emulators/mechatrolink3/m3_link.hpp"
-#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/m3_stations.hpp"
 #include "bus_emulators/mechatrolink3/m3_wire.hpp"
 #include "controller/mechatrolink3/m3_master.hpp"
 #include "controller/mechatrolink3/m3_servo_axis.hpp"
@@ -159,8 +157,7 @@ class M3Rig {
   std::string axis_problem() const;
 
   m3::C1Master& master() { return *master_; }
-  const m3::Line& line() const { return line_; }
-  const std::vector<std::unique_ptr<m3::SlaveLink>>& links() const { return links_; }
+  const m3::M3Stations& stations() const { return stations_; }
   SimTime now() const { return now_; }
   // Cycle start → last response and → cyclic interrupt, min and max over every cycle [ns].
   SimTime last_min = std::numeric_limits<SimTime>::max(), last_max = -1;
@@ -172,9 +169,8 @@ class M3Rig {
   void step_drives(SimTime t);
 
   M3CycleTrial trial_;
-  m3::Line line_;
-  std::vector<std::unique_ptr<m3::ServoProfile>> servos_;
-  std::vector<std::unique_ptr<m3::SlaveLink>> links_;
+  m3::M3Stations stations_;
+  m3::Line& line_ = stations_.line();
   std::vector<drive::AxisModel> axes_;
   std::vector<m3::ServoAxis> apps_;
   std::unique_ptr<m3::C1Master> master_;
@@ -186,7 +182,17 @@ m3::Topology trial_topology(const M3CycleTrial& t) {
   return t.star ? m3::Topology::star_of(t.slaves, kCableM) : m3::Topology::cascade_of(t.slaves, kCableM);
 }
 
-M3Rig::M3Rig(const M3CycleTrial& trial, SimTime cycle_ns) : trial_(trial), line_(trial_topology(trial)) {
+// The stations of a trial: its topology, servos with 10000 counts/rev, its slaves' response time.
+m3::StationsConfig trial_stations(const M3CycleTrial& t) {
+  m3::StationsConfig c;
+  c.topology = trial_topology(t);
+  c.servo.drive.counts_per_rev = kCountsPerRev;
+  c.servo.drive.max_speed_rad_s = 200;
+  c.response_ns = 2'000 + t.slave_slower_ns;
+  return c;
+}
+
+M3Rig::M3Rig(const M3CycleTrial& trial, SimTime cycle_ns) : trial_(trial), stations_(trial_stations(trial)) {
   m3::MasterConfig cfg;
   cfg.cycle_ns = cycle_ns;
   cfg.retry_slots = trial.retry_slots;
@@ -219,19 +225,9 @@ M3Rig::M3Rig(const M3CycleTrial& trial, SimTime cycle_ns) : trial_(trial), line_
     });
 }
 
+// The master's side of slave k: its axis model and, when the servo takes the data length, its
+// servo-axis application (the stations themselves are built with the rig).
 void M3Rig::add_slave(int k, bool with_app) {
-  m3::ServoConfig sc;
-  sc.drive.counts_per_rev = kCountsPerRev;
-  sc.drive.max_speed_rad_s = 200;
-  servos_.push_back(std::make_unique<m3::ServoProfile>(sc));
-  const m3::LinkConfig lc{.address = static_cast<std::uint8_t>(m3::kFirstSlave + k),
-                          .response_ns = 2'000 + trial_.slave_slower_ns};
-  links_.push_back(std::make_unique<m3::SlaveLink>(
-      lc, *servos_.back(), [this, k](std::span<const std::uint8_t> f, SimTime t) { line_.from_slave(k, f, t); }));
-  line_.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime t) {
-    links_[static_cast<std::size_t>(k)]->on_frame(f, t);
-  });
-  links_.back()->power_on(0);
   axes_.emplace_back();
   if (!with_app) return;
   apps_.emplace_back(fmt::format("axis {}", k + 1), m3::ServoAxisConfig{});
@@ -251,7 +247,10 @@ void M3Rig::on_interrupt(SimTime t) {
 }
 
 void M3Rig::step_drives(SimTime t) {
-  for (std::size_t k = 0; k < axes_.size(); ++k) axes_[k].step(servos_[k]->step(t, axes_[k].feedback()), 1e-3);
+  for (std::size_t k = 0; k < axes_.size(); ++k) {
+    m3::ServoProfile& servo = stations_.servo(static_cast<int>(k));
+    axes_[k].step(servo.step(t, axes_[k].feedback()), 1e-3);
+  }
   next_drive_ += kMsNs;
 }
 
@@ -264,7 +263,7 @@ void M3Rig::run(SimTime end, const std::function<bool()>& done) {
     now_ = t;
     line_.advance(t);
     master_->advance(t);
-    for (auto& l : links_) l->advance(t);
+    stations_.advance(t);
     if (t == next_drive_) step_drives(t);
   }
 }
@@ -307,9 +306,10 @@ void collect(M3Rig& rig, M3CycleVerified& v) {
     v.bad += c.bad;
   }
   v.phase = 9;
-  for (const auto& l : rig.links()) {
-    v.comm_alarms += l->stats().comm_alarms + (l->comm_alarm() != m3::CommAlarm::normal ? 1 : 0);
-    v.phase = std::min(v.phase, static_cast<int>(l->phase()));
+  for (int k = 0; k < rig.stations().size(); ++k) {
+    const m3::SlaveLink& l = rig.stations().link(k);
+    v.comm_alarms += l.stats().comm_alarms + (l.comm_alarm() != m3::CommAlarm::normal ? 1 : 0);
+    v.phase = std::min(v.phase, static_cast<int>(l.phase()));
   }
   v.measured_min_ns = rig.last_max < 0 ? -1 : rig.last_min;
   v.measured_max_ns = rig.last_max;
@@ -328,7 +328,7 @@ std::string judge_fitting(M3Rig& rig, const m3::CyclePlan& plan, M3CycleVerified
   if (v.comm_alarms != 0) return fmt::format("{} slave COMM_ALM", v.comm_alarms);
   if (const int want = rig.servo_apps() ? 3 : 1; v.phase != want)
     return fmt::format("a slave ended in phase {}, not {}", v.phase, want);
-  if (rig.line().overflow() != 0) return "the line's queue overflowed";
+  if (rig.stations().line().overflow() != 0) return "the line's queue overflowed";
   if (v.measured_min_ns != v.expected_last_ns || v.measured_max_ns != v.expected_last_ns)
     return fmt::format("last response {} … {} ns after the cycle start, the plan says {} ns", v.measured_min_ns,
                        v.measured_max_ns, v.expected_last_ns);

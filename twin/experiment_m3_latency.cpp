@@ -19,9 +19,7 @@
 
 #include <fmt/format.h>
 
-#include "bus_emulators/mechatrolink3/m3_line.hpp"
-#include "bus_emulators/mechatrolink3/m3_link.hpp"
-#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/m3_stations.hpp"
 #include "bus_emulators/mechatrolink3/m3_wire.hpp"
 #include "controller/mechatrolink3/m3_master.hpp"
 #include "twin/experiment.hpp"
@@ -38,26 +36,22 @@ constexpr SimTime kGapNs = m3::kInterFrameGapNs;
 
 // The master in event-driven mode, the line and n slaves; records each exchange's latency.
 struct EventRig {
-  m3::Line line;
-  std::vector<std::unique_ptr<m3::ServoProfile>> servos;
-  std::vector<std::unique_ptr<m3::SlaveLink>> links;
+  m3::M3Stations stations;
+  m3::Line& line = stations.line();
   std::unique_ptr<m3::C1Master> master;
   std::vector<SimTime> latency;
   std::vector<int> failed;
   SimTime now = 0;
 
-  EventRig(const m3::Topology& t, int n) : line(t), latency(static_cast<std::size_t>(n), -1), failed(static_cast<std::size_t>(n), 0) {
+  EventRig(const m3::Topology& t, int n)
+      : stations(m3::StationsConfig{.topology = t, .servo = m3::ServoConfig{}, .response_ns = kResponseNs}),
+        latency(static_cast<std::size_t>(n), -1),
+        failed(static_cast<std::size_t>(n), 0) {
     m3::MasterConfig cfg;
     cfg.event_driven = true;
     for (int k = 0; k < n; ++k) {
       const auto address = static_cast<std::uint8_t>(m3::kFirstSlave + k);
       cfg.slaves.push_back(m3::MasterSlave{.address = address, .data_bytes = m3::kMaxData, .response_ns = kResponseNs});
-      servos.push_back(std::make_unique<m3::ServoProfile>(m3::ServoConfig{}));
-      links.push_back(std::make_unique<m3::SlaveLink>(
-          m3::LinkConfig{.address = address, .response_ns = kResponseNs}, *servos.back(),
-          [this, k](std::span<const std::uint8_t> f, SimTime at) { line.from_slave(k, f, at); }));
-      line.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime at) { links[static_cast<std::size_t>(k)]->on_frame(f, at); });
-      links.back()->power_on(0);
     }
     master = std::make_unique<m3::C1Master>(
         cfg, [this](std::span<const std::uint8_t> f, SimTime at) { line.from_master(f, at); }, nullptr);

@@ -19,9 +19,7 @@
 #include <vector>
 
 #include "bus_emulators/drive/axis_model.hpp"
-#include "bus_emulators/mechatrolink3/m3_line.hpp"
-#include "bus_emulators/mechatrolink3/m3_link.hpp"
-#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/m3_stations.hpp"
 #include "controller/mechatrolink3/m3_master.hpp"
 #include "controller/mechatrolink3/m3_servo_axis.hpp"
 
@@ -49,51 +47,48 @@ ServoConfig servo_config() {
 
 // The segment: a C1 master, the line and n slaves with axes, on one simulated timeline.
 struct Segment {
-  Line line;
-  std::vector<std::unique_ptr<ServoProfile>> servos;
-  std::vector<std::unique_ptr<SlaveLink>> links;
+  M3Stations stations;
   std::vector<drive::AxisModel> axes;
   std::vector<ServoAxis> apps;
   std::unique_ptr<C1Master> master;
   SimTime next_drive = 0;
   SimTime cycle;
 
-  explicit Segment(int n) : line(Topology::cascade_of(n, 10.0)), cycle(cycle_for(n)) {
+  explicit Segment(int n)
+      : stations(StationsConfig{.topology = Topology::cascade_of(n, 10.0), .servo = servo_config(), .response_ns = 2'000}),
+        cycle(cycle_for(n)) {
     MasterConfig cfg;
     cfg.cycle_ns = cycle;
     for (int k = 0; k < n; ++k) {
       cfg.slaves.push_back(MasterSlave{.address = static_cast<std::uint8_t>(kFirstSlave + k)});
-      servos.push_back(std::make_unique<ServoProfile>(servo_config()));
-      links.push_back(std::make_unique<SlaveLink>(LinkConfig{.address = static_cast<std::uint8_t>(kFirstSlave + k)},
-                                                  *servos.back(),
-                                                  [this, k](std::span<const std::uint8_t> f, SimTime t) { line.from_slave(k, f, t); }));
-      line.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime t) { links[static_cast<std::size_t>(k)]->on_frame(f, t); });
-      links.back()->power_on(0);
       axes.emplace_back();
       apps.emplace_back("axis", ServoAxisConfig{});
       apps.back().set_velocity(5000);
     }
     master = std::make_unique<C1Master>(
-        cfg, [this](std::span<const std::uint8_t> f, SimTime t) { line.from_master(f, t); },
+        cfg, [this](std::span<const std::uint8_t> f, SimTime t) { stations.line().from_master(f, t); },
         [this](std::uint64_t, SimTime t) {
           for (int k = 0; k < master->slaves(); ++k)
             apps[static_cast<std::size_t>(k)].on_interrupt(master->response(k), master->fresh(k), master->command(k), t);
         });
-    line.attach_master([this](std::span<const std::uint8_t> f, SimTime t) { master->on_frame(f, t); });
+    stations.line().attach_master([this](std::span<const std::uint8_t> f, SimTime t) { master->on_frame(f, t); });
     master->start(0);
   }
   // Runs the timeline to `end`: line deliveries, master wake-ups, drive periods in time order.
   void run_until(SimTime end) {
     for (;;) {
       SimTime t = end + 1;
-      for (SimTime c : {master->next_wakeup(), line.next_due(), next_drive})
+      for (SimTime c : {master->next_wakeup(), stations.line().next_due(), next_drive})
         if (c >= 0 && c < t) t = c;
       if (t > end) return;
-      line.advance(t);
+      stations.line().advance(t);
       master->advance(t);
-      for (auto& l : links) l->advance(t);
+      stations.advance(t);
       if (t == next_drive) {
-        for (std::size_t k = 0; k < axes.size(); ++k) axes[k].step(servos[k]->step(t, axes[k].feedback()), cycle * 1e-9);
+        for (std::size_t k = 0; k < axes.size(); ++k) {
+          const int i = static_cast<int>(k);
+          axes[k].step(stations.servo(i).step(t, axes[k].feedback()), cycle * 1e-9);
+        }
         next_drive += cycle;
       }
     }

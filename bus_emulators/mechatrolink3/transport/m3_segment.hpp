@@ -24,19 +24,13 @@
 #include <vector>
 
 #include "bus_emulators/drive/cia402_drive.hpp"
-#include "bus_emulators/mechatrolink3/m3_line.hpp"
-#include "bus_emulators/mechatrolink3/m3_link.hpp"
 #include "bus_emulators/mechatrolink3/m3_pcap.hpp"
-#include "bus_emulators/mechatrolink3/m3_servo.hpp"
+#include "bus_emulators/mechatrolink3/m3_stations.hpp"
 #include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
 
 namespace omnitwin::m3 {
 
-struct SegmentConfig {
-  Topology topology = Topology::cascade_of(4, 10.0);
-  ServoConfig servo;              // every slave's servo (one per cable in the topology)
-  SimTime response_ns = 2'000;    // every slave's response time
-};
+using SegmentConfig = StationsConfig;
 
 // What take_sent() answers: the twin's cumulative frames to the master, and when the last
 // one delivered by this exchange reached the master (-1: none).
@@ -65,10 +59,10 @@ class M3Segment {
   // One drive period of slave k at t (its servo profile and drive core). Real-time safe.
   drive::Command step_drive(int k, SimTime t, const drive::Feedback& fb);
 
-  int slaves() const { return static_cast<int>(links_.size()); }
-  Line& line() { return line_; }
-  SlaveLink& link(int k) { return *links_[static_cast<std::size_t>(k)]; }
-  ServoProfile& servo(int k) { return *servos_[static_cast<std::size_t>(k)]; }
+  int slaves() const { return stations_.size(); }
+  Line& line() { return stations_.line(); }
+  SlaveLink& link(int k) { return stations_.link(k); }
+  ServoProfile& servo(int k) { return stations_.servo(k); }
   std::uint64_t from_master() const { return from_master_; }
   std::uint64_t to_master() const { return to_master_; }
   std::uint64_t send_failures() const { return send_failures_; }
@@ -76,10 +70,8 @@ class M3Segment {
  private:
   void to_master_frame(std::span<const std::uint8_t> frame, SimTime t);
 
-  Line line_;
+  M3Stations stations_;
   M3Transport& transport_;
-  std::vector<std::unique_ptr<ServoProfile>> servos_;
-  std::vector<std::unique_ptr<SlaveLink>> links_;
   std::unique_ptr<PcapWriter> pcap_;
   std::uint64_t from_master_ = 0, to_master_ = 0, send_failures_ = 0;
   SimTime last_arrival_ = -1;
