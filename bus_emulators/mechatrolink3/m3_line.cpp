@@ -10,6 +10,7 @@ Line::Line(const Topology& topology, std::size_t queue_capacity)
     : topology_(topology),
       slaves_(topology.cable_m.size()),
       reachable_(topology.cable_m.size(), true),
+      extra_(topology.cable_m.size(), 0),
       capacity_(queue_capacity != 0 ? queue_capacity : 4 * topology.cable_m.size() + 16) {
   if (const std::string why = check(topology); !why.empty()) throw std::invalid_argument("M-III line: " + why);
   for (int k = 0; k < topology.slaves(); ++k) one_way_.push_back(one_way_delay_ns(topology, k));
@@ -60,7 +61,8 @@ void Line::from_slave(int k, std::span<const std::uint8_t> frame, SimTime t_star
   if (frame.size() < kHeaderSize + kFcsSize) return void(++dropped_);
   const SimTime length = frame_time_ns(frame.size() - kHeaderSize - kFcsSize);
   const Fate fate = fault_ ? fault_(false, k, frame) : Fate::deliver;
-  put(-1, frame, t_start + one_way_[static_cast<std::size_t>(k)] + length, fate);
+  const auto i = static_cast<std::size_t>(k);
+  put(-1, frame, t_start + one_way_[i] + extra_[i] + length, fate);
 }
 
 void Line::advance(SimTime t) {

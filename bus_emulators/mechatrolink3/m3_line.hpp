@@ -44,6 +44,9 @@ class Line {
   // that slave's own cable. Real-time safe.
   void cut_cable(int after);
   void mend_cable();
+  // Fault injection: frames from slave k reach the master `extra_ns` later (a slow station or
+  // repeater: a response later than T_RSP). 0 restores the wire's own delay. Real-time safe.
+  void set_extra_delay(int k, SimTime extra_ns) { extra_.at(static_cast<std::size_t>(k)) = extra_ns; }
 
   // Frames entering the line at t_start [ns] (first bit). Real-time safe.
   void from_master(std::span<const std::uint8_t> frame, SimTime t_start);
@@ -74,6 +77,7 @@ class Line {
   Receive master_;
   std::vector<Receive> slaves_;
   std::vector<bool> reachable_;
+  std::vector<SimTime> extra_;  // per slave, fault injection (set_extra_delay)
   FaultHook fault_;
   std::vector<InFlight> heap_;
   std::size_t capacity_;

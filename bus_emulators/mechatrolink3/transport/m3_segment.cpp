@@ -19,25 +19,44 @@ void M3Segment::to_master_frame(std::span<const std::uint8_t> frame, SimTime t) 
   last_arrival_ = t;
 }
 
+// A frame of n bytes (in rx_) from the master enters the line when it started leaving it.
+void M3Segment::enter(int n, SimTime t) {
+  ++from_master_;
+  const std::span<const std::uint8_t> frame(rx_.data(), static_cast<std::size_t>(n));
+  if (pcap_) pcap_->write_frame(frame, t, Direction::out);
+  stations_.line().from_master(frame, t);
+}
+
+// Everything in flight is delivered: a slave only answers what it receives.
+void M3Segment::run_dry() {
+  Line& line = stations_.line();
+  for (SimTime due = line.next_due(); due >= 0; due = line.next_due()) line.advance(due);
+}
+
 SegmentAnswer M3Segment::take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait) {
   SegmentAnswer a;
-  // The master's new frames enter the line when they started leaving it.
   while (from_master_ < master_frames) {
     const int n = transport_.receive(rx_, wait);
     if (n <= 0) return a;
-    ++from_master_;
-    const std::span<const std::uint8_t> frame(rx_.data(), static_cast<std::size_t>(n));
-    if (pcap_) pcap_->write_frame(frame, t_send, Direction::out);
-    stations_.line().from_master(frame, t_send);
+    enter(n, t_send);
   }
-  // The line runs dry: every answer reaches the master now.
   last_arrival_ = -1;
-  Line& line = stations_.line();
-  for (SimTime due = line.next_due(); due >= 0; due = line.next_due()) line.advance(due);
+  run_dry();
   a.ok = true;
   a.to_master = to_master_;
   a.arrival_ns = last_arrival_;
   return a;
+}
+
+int M3Segment::poll(SimTime t) {
+  int taken = 0;
+  for (int n = transport_.receive(rx_, std::chrono::nanoseconds(0)); n > 0;
+       n = transport_.receive(rx_, std::chrono::nanoseconds(0))) {
+    enter(n, t);
+    ++taken;
+  }
+  if (taken > 0) run_dry();
+  return taken;
 }
 
 void M3Segment::advance(SimTime t) { stations_.advance(t); }

@@ -54,6 +54,9 @@ class M3Segment {
   PcapWriter* pcap() { return pcap_.get(); }
 
   SegmentAnswer take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait);
+  // Realtime: every frame the transport holds now enters the line at t, and the line runs dry
+  // (the answers go out at once). Returns the number of frames taken. Real-time safe.
+  int poll(SimTime t);
   // The slaves' communication timers up to t (missing sync or commands). Real-time safe.
   void advance(SimTime t);
   // One drive period of slave k at t (its servo profile and drive core). Real-time safe.
@@ -61,6 +64,8 @@ class M3Segment {
 
   int slaves() const { return stations_.size(); }
   Line& line() { return stations_.line(); }
+  const Line& line() const { return stations_.line(); }
+  const SlaveLink& link(int k) const { return stations_.link(k); }
   SlaveLink& link(int k) { return stations_.link(k); }
   ServoProfile& servo(int k) { return stations_.servo(k); }
   std::uint64_t from_master() const { return from_master_; }
@@ -69,6 +74,8 @@ class M3Segment {
 
  private:
   void to_master_frame(std::span<const std::uint8_t> frame, SimTime t);
+  void enter(int n, SimTime t);
+  void run_dry();
 
   M3Stations stations_;
   M3Transport& transport_;

@@ -1,6 +1,6 @@
 // Tests bus_emulators/mechatrolink3/m3_line: frames reach their station when their last bit
 // arrives (one-way delay of m3_wire + frame time), broadcast reaches every slave and unicast
-// only its own, slaves' frames reach the master, deliveries come in time order, an
+// only its own, slaves' frames reach the master (later by a fault's extra delay), deliveries come in time order, an
 // unreachable slave and the fault hook drop or corrupt frames (the FCS then fails), and a
 // full queue counts an overflow instead of allocating.
 #include "bus_emulators/mechatrolink3/m3_line.hpp"
@@ -45,6 +45,22 @@ TEST_F(M3Line, UnicastReachesItsSlaveWhenTheLastBitArrives) {
   EXPECT_EQ(got[0].who, 2);
   EXPECT_EQ(got[0].t, 1'000 + 1'150 + frame_time_ns(0));
   EXPECT_EQ(line.next_due(), -1);
+}
+
+TEST_F(M3Line, AnExtraDelayMakesOneSlavesFramesLateUntilItIsCleared) {
+  line.set_extra_delay(1, 50'000);
+  line.from_slave(1, frame(kC1Master, FrameType::detect_reply, 0x04), 0);
+  line.from_slave(0, frame(kC1Master, FrameType::detect_reply, 0x03), 0);
+  line.advance(1'000'000);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0].bytes[1], 0x03) << "the undelayed slave's frame comes first";
+  EXPECT_EQ(got[1].t, 600 + frame_time_ns(8) + 50'000);
+  got.clear();
+  line.set_extra_delay(1, 0);
+  line.from_slave(1, frame(kC1Master, FrameType::detect_reply, 0x04), 2'000'000);
+  line.advance(3'000'000);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].t, 2'000'000 + 600 + frame_time_ns(8));
 }
 
 TEST_F(M3Line, BroadcastReachesEverySlaveNearestFirst) {

@@ -3,7 +3,8 @@
 // master frame enters the line at its send time and its answer reaches the master exactly
 // when the wire model says (TR_DLY + both frame times + the slave's response time); a frame
 // no slave answers gives no arrival; frames that never come make take_sent() fail instead of
-// waiting for ever; the capture holds both directions with their simulated times.
+// waiting for ever; the capture holds both directions with their simulated times; in realtime
+// poll() takes whatever has arrived and answers it at once, and nothing when nothing came.
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 
 #include <gtest/gtest.h>
@@ -54,6 +55,20 @@ TEST(M3Segment, NoAnswerNoArrivalAndMissingFramesFail) {
   EXPECT_EQ(a.arrival_ns, -1);
   EXPECT_EQ(a.to_master, 0u);
   EXPECT_FALSE(seg.take_sent(2, 0, 50ms).ok) << "a frame the master counted but never sent";
+}
+
+TEST(M3Segment, PollTakesWhatHasArrivedAndAnswersAtOnce) {
+  MemTransport master("m3-segment-poll", Role::master), slaves("m3-segment-poll", Role::slaves);
+  M3Segment seg(SegmentConfig{}, slaves);
+  EXPECT_EQ(seg.poll(0), 0) << "nothing sent, nothing taken, no waiting";
+  ASSERT_TRUE(master.send(frame(0x03, FrameType::detect)));
+  ASSERT_TRUE(master.send(frame(0x04, FrameType::detect)));
+  EXPECT_EQ(seg.poll(2'000'000), 2);
+  EXPECT_EQ(seg.to_master(), 2u);
+  std::array<std::uint8_t, kMaxFrame> buf{};
+  EXPECT_GT(master.receive(buf, 0s), 0);
+  EXPECT_GT(master.receive(buf, 0s), 0);
+  EXPECT_EQ(seg.line().next_due(), -1) << "the line ran dry";
 }
 
 TEST(M3Segment, TheCaptureHoldsBothDirections) {
