@@ -22,6 +22,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "controller/sim_clock.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
@@ -76,6 +77,17 @@ class BusNetwork {
   virtual std::string pcap_error() const = 0;
   // Hands frames batched for the master to the transport (lockstep: before each grant).
   virtual void flush_transport() = 0;
+  // Lockstep on a polling bus (M-III): the master reports each frame it sends inside the tick
+  // (Sent) and waits for the answer (Horizon) — docs/protocols/sim-clock.md, "Inside a tick".
+  virtual bool answers_inside_tick() const { return false; }
+  // The frames counted in `s` enter the bus at s.t_ns; answers what reached the master, and
+  // when. If the master's frames did not all arrive within `timeout`, arrival_ns is -2 (the
+  // run then fails the tick). Real-time safe apart from the wait.
+  virtual simclock::Horizon on_sent(const simclock::Sent& s, std::chrono::milliseconds /*timeout*/) {
+    simclock::Horizon h;
+    h.tick = s.tick;
+    return h;
+  }
 
   // Runs the network to t [ns]. Real-time safe.
   virtual void advance(SimTime t) = 0;

@@ -311,7 +311,8 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       return;
     case FaultSpec::Kind::wheel_slip:
       return;  // physics, not the bus
-    case FaultSpec::Kind::link_break:  // EtherCAT only; the loader refuses it on `can`
+    case FaultSpec::Kind::link_break:  // line faults; the loader refuses them on `can`
+    case FaultSpec::Kind::corruption:
       throw std::invalid_argument("CAN network: link_break is an EtherCAT fault");
   }
 }

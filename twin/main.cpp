@@ -172,6 +172,20 @@ void print_summary(const RunResult& r) {
                              ms.value("cycles", 0), ms.value("wkc_errors", 0), ms.value("lost_frames", 0),
                              ms.value("recoveries", 0), b.value("frames_rx", 0), b.value("frames_tx", 0),
                              b.value("dropouts", 0));
+  } else if (m.contains("master") && m["bus"].value("name", "") == "m3") {
+    const auto& ms = m["master"];
+    const auto& b = m["bus"];
+    std::uint64_t retries = 0, missed = 0, late = 0;
+    for (const auto& sl : ms.value("slaves", nlohmann::json::array())) {
+      retries += sl.value("retries", std::uint64_t{0});
+      missed += sl.value("missed", std::uint64_t{0});
+      late += sl.value("late", std::uint64_t{0});
+    }
+    std::cout << fmt::format("  master {} ({}), {}; {} cycles, retries {}, missed {}, late {}; "
+                             "line {} frames in, {} answered, {} lost, {} corrupted\n",
+                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             ms.value("cycles", 0), retries, missed, late, b.value("frames_rx", 0), b.value("frames_tx", 0),
+                             b.value("lost_frames", 0), b.value("corrupted_frames", 0));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];

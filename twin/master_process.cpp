@@ -179,4 +179,25 @@ std::string ethercat_master_config_yaml(const Scenario& s, const std::string& pl
   return out;
 }
 
+std::string m3_platform_yaml(const Scenario& s) {
+  controller::MasterConfig m = master_config(s);
+  // The platform loop's odometry counts what the servos report: APOS in reference units.
+  m.loop.counts_per_rev = s.bus.m3.counts_per_rev;
+  return fmt::format("# platform loop of omni-master --bus m3, written by omnitwin for scenario {}\n", s.name) +
+         controller::dump_master_config(m);
+}
+
+std::string m3_master_config_yaml(const Scenario& s, const std::string& platform_file) {
+  const M3Spec& m = s.bus.m3;
+  std::string out = fmt::format("# omni-master --bus m3 configuration written by omnitwin for scenario {}\n", s.name);
+  out += fmt::format("cycle: {}\nretry_slots: {}\ndata_bytes: {}\n", m.cycle, m.retry_slots, m.data_bytes);
+  out += "wheels: [0x03, 0x04, 0x05, 0x06]\n";
+  out += fmt::format("response_us: {}\nmargin_us: {}\n", m.response_us, m.margin(s.clock == ClockMode::realtime));
+  // The servos must be on before the path starts (and a realtime master may start before the twin).
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
+  out += fmt::format("wheel_command: {}\nwheel_counts_per_rev: {}\n", m.mode, m.counts_per_rev);
+  out += fmt::format("platform: {}\n", platform_file);
+  return out;
+}
+
 }  // namespace omnitwin::twin

@@ -61,5 +61,8 @@ std::string master_config_yaml(const Scenario& s);
 // position units) and the master's own file naming it (controller/ethercat/ec_config.hpp).
 std::string ethercat_platform_yaml(const Scenario& s);
 std::string ethercat_master_config_yaml(const Scenario& s, const std::string& platform_file);
+// The same for `omni-master --bus m3` (controller/mechatrolink3/m3_config's vocabulary).
+std::string m3_platform_yaml(const Scenario& s);
+std::string m3_master_config_yaml(const Scenario& s, const std::string& platform_file);
 
 }  // namespace omnitwin::twin

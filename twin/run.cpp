@@ -24,6 +24,7 @@
 #include "physics/platform_sim.hpp"
 #include "twin/can_network.hpp"
 #include "twin/ethercat_network.hpp"
+#include "twin/m3_network.hpp"
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
 #include "twin/master_process.hpp"
@@ -144,6 +145,12 @@ class PlatformRun {
   void start_master();
   void stop_master();
   void on_master_bus(SimTime t);
+  static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
+  // How often the master is met: its bus cycle on M-III (a polling master exchanges with
+  // every slave each cycle), else the control period.
+  SimTime master_period_ns() const {
+    return seconds_to_ns(s_.bus.kind == BusKind::m3 ? s_.bus.m3.cycle : s_.controller.period);
+  }
   void on_physics_bus(SimTime t);
   void note_report(const simclock::MasterReport& r, SimTime t);
   void fail(std::string why);
@@ -231,6 +238,10 @@ void PlatformRun::build_network() {
     master_program_ = find_master_program(s_.bus.ethercat.master);
     handshake_timeout_s_ = s_.bus.ethercat.handshake_timeout;
     net_ = std::make_unique<EthercatNetwork>(s_, sched_, std::move(h));
+  } else if (s_.bus.kind == BusKind::m3) {
+    master_program_ = find_master_program(s_.bus.m3.master);
+    handshake_timeout_s_ = s_.bus.m3.handshake_timeout;
+    net_ = std::make_unique<M3Network>(s_, sched_, std::move(h));
   } else {
     master_program_ = find_master_program(s_.bus.can.master);
     handshake_timeout_s_ = s_.bus.can.handshake_timeout;
@@ -252,11 +263,16 @@ void PlatformRun::start_master() {
     const std::string platform = (dir / "master-platform.yaml").string();
     write_text_atomic(platform, ethercat_platform_yaml(s_));
     write_text_atomic(cfg, ethercat_master_config_yaml(s_, platform));
+  } else if (s_.bus.kind == BusKind::m3) {
+    const std::string platform = (dir / "master-platform.yaml").string();
+    write_text_atomic(platform, m3_platform_yaml(s_));
+    write_text_atomic(cfg, m3_master_config_yaml(s_, platform));
   } else {
     write_text_atomic(cfg, master_config_yaml(s_));
   }
   std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
-  if (s_.bus.kind == BusKind::ethercat) args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
+  if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3)
+    args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
   const bool lockstep = s_.clock == ClockMode::lockstep;
   if (lockstep) {
     // A short socket path (sun_path holds 108 bytes; run directories can be longer).
@@ -317,7 +333,10 @@ void PlatformRun::on_master_bus(SimTime t) {
   g.t_ns = t;
   g.frames[0] = net_->frames_to_transport();
   simclock::Done d;
-  const simclock::WaitStatus st = clock_server_->grant(g, d, timeout);
+  // A polling bus (M-III) meets each of the master's frames inside the tick.
+  const simclock::WaitStatus st = net_->answers_inside_tick()
+                                      ? clock_server_->grant(g, d, timeout, &PlatformRun::answer_sent, this)
+                                      : clock_server_->grant(g, d, timeout);
   if (st != simclock::WaitStatus::ok)
     return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),
                             master_->running() ? "still running" : master_->describe_exit()));
@@ -325,6 +344,14 @@ void PlatformRun::on_master_bus(SimTime t) {
     return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
                             net_->frames_from_transport(), net_->master_iface()));
   note_report(d.report, t);
+}
+
+// The Sent handler of a polling bus: the network answers; a transport that did not deliver
+// the master's frames in time fails the run after the grant (its Done never matches).
+simclock::Horizon PlatformRun::answer_sent(void* self, const simclock::Sent& sent) {
+  auto* run = static_cast<PlatformRun*>(self);
+  const auto timeout = std::chrono::milliseconds(std::llround(run->handshake_timeout_s_ * 1e3));
+  return run->net_->on_sent(sent, timeout);
 }
 
 // Realtime: the master is watched instead of met. Its process must live, and once it has
@@ -347,8 +374,8 @@ void PlatformRun::supervise_master(SimTime t) {
   }
   const int limit = s_.bus.supervision.silent_periods;
   if (heard_master_ && ++silent_periods_ >= limit)
-    return master_lost(t, fmt::format("no frame from the master for {} control periods ({:.0f} ms): it stopped answering",
-                                      limit, limit * s_.controller.period * 1e3));
+    return master_lost(t, fmt::format("no frame from the master for {} master periods ({:.0f} ms): it stopped answering",
+                                      limit, limit * ns_to_seconds(master_period_ns()) * 1e3));
   if (!heard_master_ && ns_to_seconds(t) > handshake_timeout_s_)
     master_lost(t, fmt::format("no frame from the master within {:.1f} s of its start", handshake_timeout_s_));
 }
@@ -392,8 +419,9 @@ void PlatformRun::schedule() {
   const SimTime tm = seconds_to_ns(s_.controller.period);
   const SimTime ts = seconds_to_ns(s_.platform.velocity_loop.period);
   if (on_bus()) {
-    // The slaves' timers belong to the network (CAN: they start with NMT start).
-    sched_.add_periodic("master", Phase::master, 0, tm, [this](SimTime t) { on_master_bus(t); });
+    // The slaves' timers belong to the network (CAN: they start with NMT start). The master
+    // is met every master period (its bus cycle on M-III), the records every control period.
+    sched_.add_periodic("master", Phase::master, 0, master_period_ns(), [this](SimTime t) { on_master_bus(t); });
     sched_.add_periodic("record", Phase::record, 0, tm, [this](SimTime t) { on_record(t); });
     sched_.add_periodic("physics", Phase::physics, 0, dt, [this](SimTime t) { on_physics_bus(t); });
   } else {
@@ -641,7 +669,7 @@ RunResult PlatformRun::execute() {
   LockstepPacer lockstep;
   std::unique_ptr<RealtimePacer> realtime;
   if (s_.clock == ClockMode::realtime) {
-    const SimTime tm = seconds_to_ns(s_.controller.period);
+    const SimTime tm = on_bus() ? master_period_ns() : seconds_to_ns(s_.controller.period);
     realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(end_ / tm) + 2);
     pacer_ = realtime.get();
     // A master on its own wall clock waits for its frames: answer them as they arrive.
@@ -779,9 +807,10 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
     throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
   }
   const BusKind bus = scenario.bus.kind;
-  if (bus != BusKind::direct && bus != BusKind::can && bus != BusKind::ethercat)
+  if (bus != BusKind::direct && bus != BusKind::can && bus != BusKind::ethercat && bus != BusKind::m3)
     throw RunSetupError(fmt::format(
-        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can' and 'ethercat' are", to_string(bus)));
+        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can', 'ethercat' and 'm3' are",
+        to_string(bus)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
   std::unique_ptr<PlatformRun> run;

@@ -394,6 +394,34 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   read_number(f, "handshake_timeout", e.handshake_timeout, Bounds::positive());
 }
 
+// The `m3` bus's settings (bus: {type: m3, …}).
+void read_m3(const YamlField& f, M3Spec& m) {
+  if (const YamlField t = f["transport"]; t.exists()) {
+    m.transport = t.string();
+    const bool ok = m.transport == "auto" || m.transport == "veth" || m.transport.starts_with("raw:") ||
+                    m.transport.starts_with("udp:") || m.transport.starts_with("mem:");
+    if (!ok) t.fail("expected auto, veth, raw:IFACE, udp:HOST:PORT or mem:NAME");
+  }
+  if (f["master_iface"].exists()) m.master_iface = f["master_iface"].string();
+  if (m.transport.starts_with("raw:") && m.master_iface.empty())
+    f["transport"].fail("raw:IFACE needs master_iface: the interface the master sends on");
+  read_number(f, "cycle", m.cycle, Bounds::closed(31.25e-6, 0.064));
+  read_integer(f, "retry_slots", m.retry_slots, Bounds::closed(0, 4));
+  if (f["data_bytes"].exists()) m.data_bytes = std::stoi(f["data_bytes"].choice({"32", "48"}));
+  if (f["mode"].exists()) m.mode = f["mode"].choice({"velctrl", "interpolate"});
+  if (f["topology"].exists()) m.topology = f["topology"].choice({"cascade", "star"});
+  read_number(f, "cable_m", m.cable_m, Bounds::closed(0, 100));
+  read_number(f, "response_us", m.response_us, Bounds::closed(0, 1000));
+  read_number(f, "margin_us", m.margin_us, Bounds::closed(0, 10'000));
+  read_number(f, "drive_period", m.drive_period, Bounds::closed(50e-6, 0.01));
+  read_integer(f, "counts_per_rev", m.counts_per_rev, Bounds::closed(4, 1 << 24));
+  read_number(f, "startup", m.startup, Bounds::non_negative());
+  if (f["master"].exists()) m.master = f["master"].string();
+  int seed = static_cast<int>(m.seed);
+  if (read_integer(f, "seed", seed, Bounds::non_negative())) m.seed = static_cast<std::uint64_t>(seed);
+  read_number(f, "handshake_timeout", m.handshake_timeout, Bounds::positive());
+}
+
 // bus.supervision: how a realtime run watches the master it started.
 void read_supervision(const YamlField& f, SupervisionSpec& v) {
   if (!f.exists()) return;
@@ -426,6 +454,12 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
                   "startup", "master", "seed", "handshake_timeout", "supervision"});
     read_ethercat(f, bus.ethercat, scenario_file);
+    read_supervision(f["supervision"], bus.supervision);
+  } else if (bus.kind == BusKind::m3) {
+    f.allow_keys({"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "mode", "topology",
+                  "cable_m", "response_us", "margin_us", "drive_period", "counts_per_rev", "startup", "master",
+                  "seed", "handshake_timeout", "supervision"});
+    read_m3(f, bus.m3);
     read_supervision(f["supervision"], bus.supervision);
   } else {
     f.allow_keys({"type"});
@@ -520,8 +554,8 @@ double path_duration(const PathSpec& path) {
 // Faults and expectations
 
 // The fault kinds a scenario may name.
-const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",     "drift",
-                                                   "power_loss", "bus_off",    "link_break"};
+const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",      "drift",
+                                                   "power_loss", "bus_off",    "link_break", "corruption"};
 
 // `node:` of a CAN fault: 1..4 (a slave), or `master` / `all` where the kind allows them.
 int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
@@ -540,10 +574,12 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   FaultSpec f;
   f.line = v.line();
   const std::string& kind = v.name();
-  const bool can = bus.kind == BusKind::can, ethercat = bus.kind == BusKind::ethercat;
-  if (kind != "wheel_slip" && !can && !ethercat) v.fail("a bus fault needs bus: can or ethercat");
+  const bool can = bus.kind == BusKind::can, ethercat = bus.kind == BusKind::ethercat, m3 = bus.kind == BusKind::m3;
+  if (kind != "wheel_slip" && !can && !ethercat && !m3) v.fail("a bus fault needs bus: can, ethercat or m3");
   if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can)");
-  if (kind == "link_break" && !ethercat) v.fail("link_break is an EtherCAT fault (bus: ethercat)");
+  if (kind == "link_break" && !ethercat && !m3) v.fail("link_break is a fault of a line (bus: ethercat or m3)");
+  if (kind == "corruption" && !m3) v.fail("corruption is an M-III fault (bus: m3)");
+  if (kind == "drift" && m3) v.fail("drift has no meaning on M-III: the slaves follow the master's SYNC");
   if (kind == "wheel_slip") {
     v.allow_keys({"wheel", "at", "duration", "friction_scale"});
     f.kind = K::wheel_slip;
@@ -570,6 +606,11 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
     v.allow_keys({"after", "at", "duration"});
     f.kind = K::link_break;
     f.wheel = v.required("after").integer(Bounds::closed(0, 3));  // slaves 1..after stay reachable
+  } else if (kind == "corruption") {
+    v.allow_keys({"node", "at", "duration", "rate"});
+    f.kind = K::corruption;
+    f.wheel = read_fault_node(v, true, true);
+    f.rate = v.required("rate").number(Bounds::closed(0, 1));
   } else {  // power_loss, bus_off
     v.allow_keys({"node", "at", "duration"});
     f.kind = kind == "power_loss" ? K::power_loss : K::bus_off;
@@ -690,6 +731,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   read_number(root, "settle", s.settle, Bounds::non_negative());
   s.duration = path_duration(s.path) + s.settle;
   if (s.bus.kind == BusKind::ethercat) s.duration += s.bus.ethercat.startup;
+  if (s.bus.kind == BusKind::m3) s.duration += s.bus.m3.startup;
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   for (const auto& item : root["faults"].elements()) {
@@ -756,6 +798,7 @@ const char* to_string(FaultSpec::Kind k) {
     case FaultSpec::Kind::power_loss: return "power_loss";
     case FaultSpec::Kind::bus_off: return "bus_off";
     case FaultSpec::Kind::link_break: return "link_break";
+    case FaultSpec::Kind::corruption: return "corruption";
   }
   return "?";
 }

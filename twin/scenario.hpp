@@ -125,6 +125,33 @@ struct EthercatSpec {
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
 };
 
+// Settings of the `m3` bus: four MECHATROLINK-III standard servos (profile 10h), one per
+// wheel, on one line, driven by our C1 master with VELCTRL or INTERPOLATE
+// (docs/protocols/mechatrolink3.md).
+struct M3Spec {
+  // Where the master process and the twin meet: auto (a veth pair as root, else UDP on
+  // loopback), veth, raw:IFACE (+ master_iface), udp:HOST:PORT or mem:NAME.
+  std::string transport = "auto";
+  std::string master_iface;
+  double cycle = 0.001;                     // transmission cycle [s]; the master's tick
+  int retry_slots = 1;                      // retries inside one cycle
+  int data_bytes = 32;                      // 32 or 48 (subcommands)
+  std::string mode = "velctrl";             // velctrl | interpolate: how the wheels are commanded
+  std::string topology = "cascade";         // cascade | star
+  double cable_m = 1.0;                     // every cable's length [m]
+  double response_us = 2.0;                 // each slave's response time [µs]
+  // Added to every T_RSP by the master [µs]; < 0: 1 µs in lockstep, 200 µs in realtime (the
+  // transport's latency across processes, which no real M-III line has).
+  double margin_us = -1;
+  double drive_period = 0.001;              // the servos' own update period [s]
+  int counts_per_rev = 131072;              // the servos' reference units per wheel revolution
+  double startup = 0.5;                     // [s] added to the default duration for the start-up
+  std::string master;                       // master program; "" = omni-master beside omnitwin
+  std::uint64_t seed = 1;                   // random faults (frame loss, corruption)
+  double handshake_timeout = 10.0;          // [s] the master must answer a tick within
+  double margin(bool realtime) const { return margin_us >= 0 ? margin_us : realtime ? 200.0 : 1.0; }
+};
+
 // How a realtime run watches the master process it started (bus.supervision). Lockstep
 // needs none of this: there a master that stops answering misses its tick's handshake.
 struct SupervisionSpec {
@@ -141,6 +168,7 @@ struct BusSpec {
   BusKind kind = BusKind::direct;
   CanSpec can;
   EthercatSpec ethercat;
+  M3Spec m3;
   SupervisionSpec supervision;
 };
 
@@ -155,8 +183,10 @@ struct FaultSpec {
     power_loss,  // the slave loses power (off the bus, drive off) and returns at the end
     bus_off,     // the slave's transmissions are corrupted until it is bus-off; it asks for
                  // recovery at the end (duration 0: never)
-    link_break,  // EtherCAT: the cable after slave `wheel` (0 = between master and slave 1) is
-                 // cut; frames return from the last slave still reached (none for 0)
+    link_break,  // EtherCAT, M-III: the cable after slave `wheel` (0 = between master and slave
+                 // 1) is cut; EtherCAT frames return from the last slave still reached (none
+                 // for 0), M-III stations behind the cut drop off the line
+    corruption,  // M-III: frames to and from `node` get a bad FCS with probability `rate`
   };
   Kind kind = Kind::wheel_slip;
   double at = 0;              // start [s]

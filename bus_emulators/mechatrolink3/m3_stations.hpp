@@ -35,6 +35,7 @@ class M3Stations {
   SlaveLink& link(int k) { return *links_[static_cast<std::size_t>(k)]; }
   const SlaveLink& link(int k) const { return *links_[static_cast<std::size_t>(k)]; }
   ServoProfile& servo(int k) { return *servos_[static_cast<std::size_t>(k)]; }
+  const ServoProfile& servo(int k) const { return *servos_[static_cast<std::size_t>(k)]; }
   // Every slave's communication timers up to t (missing sync or commands). Real-time safe.
   void advance(SimTime t);
 

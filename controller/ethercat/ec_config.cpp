@@ -16,125 +16,10 @@
 
 namespace omnitwin::controller::ethercat {
 
-namespace {
-
-// A YAML value with the 1-based line its errors name. Not assignable: assigning a
-// YAML::Node that refers into a tree overwrites the node it refers to.
-struct Val {
-  YAML::Node node;
-  int line = 0;
-  Val(YAML::Node n, int l) : node(std::move(n)), line(l) {}
-  Val(const Val&) = default;
-  Val& operator=(const Val&) = delete;
-};
-
-// The line of `n`; values without a position of their own (an empty value) take `fallback`.
-int line_of(const YAML::Node& n, int fallback) {
-  if (n.IsNull() || n.Mark().is_null()) return fallback;
-  return n.Mark().line + 1;
-}
-
-[[noreturn]] void fail(const std::string& file, int line, const std::string& key, const std::string& msg) {
-  throw EcConfigError(fmt::format("{}:{}: {}{}", file, line, key.empty() ? "" : key + ": ", msg));
-}
-[[noreturn]] void fail(const std::string& file, const Val& v, const std::string& key, const std::string& msg) {
-  fail(file, v.line, key, msg);
-}
-
-// An integer written in C style (decimal, 0x hex, 0 octal), as std::stoll with base 0 reads it.
-std::int64_t integer_text(const std::string& file, int line, const std::string& key, const std::string& s) {
-  try {
-    std::size_t used = 0;
-    const long long v = std::stoll(s, &used, 0);
-    if (used != s.size()) throw std::invalid_argument(s);
-    return v;
-  } catch (const std::exception&) {
-    fail(file, line, key, fmt::format("'{}' is not an integer", s));
-  }
-}
-
-std::int64_t integer(const std::string& file, const Val& v, const std::string& key) {
-  if (!v.node.IsScalar()) fail(file, v, key, "expected an integer");
-  return integer_text(file, v.line, key, v.node.Scalar());
-}
-
-double number(const std::string& file, const Val& v, const std::string& key) {
-  if (!v.node.IsScalar()) fail(file, v, key, "expected a number");
-  double d = 0;
-  if (!YAML::convert<double>::decode(v.node, d) || !std::isfinite(d))
-    fail(file, v, key, fmt::format("'{}' is not a number", v.node.Scalar()));
-  return d;
-}
-
-bool boolean(const std::string& file, const Val& v, const std::string& key) {
-  bool b = false;
-  if (!v.node.IsScalar() || !YAML::convert<bool>::decode(v.node, b)) fail(file, v, key, "expected true or false");
-  return b;
-}
-
-// The members of a mapping, in file order; anything but a mapping, an unknown key or a
-// repeated key is an error.
-class Members {
- public:
-  Members(const std::string& file, const Val& map, const std::string& where, const std::set<std::string>& keys) {
-    if (!map.node.IsMap()) fail(file, map, where, "expected a mapping");
-    for (auto it = map.node.begin(); it != map.node.end(); ++it) {
-      const int key_line = it->first.Mark().is_null() ? map.line : it->first.Mark().line + 1;
-      if (!it->first.IsScalar()) fail(file, key_line, where, "mapping keys must be plain names");
-      const std::string name = it->first.Scalar();
-      const std::string dotted = where.empty() ? name : where + "." + name;
-      if (!keys.count(name)) {
-        std::string names;
-        for (const auto& n : keys) names += (names.empty() ? "" : ", ") + n;
-        fail(file, key_line, dotted, fmt::format("unknown key (expected one of: {})", names));
-      }
-      if (get(name)) fail(file, key_line, dotted, "repeated key");
-      items_.emplace_back(name, Val(it->second, line_of(it->second, key_line)));
-    }
-  }
-  const Val* get(const std::string& name) const {
-    for (const auto& kv : items_)
-      if (kv.first == name) return &kv.second;
-    return nullptr;
-  }
-
- private:
-  std::vector<std::pair<std::string, Val>> items_;
-};
-
-// The elements of a sequence.
-std::vector<Val> elements(const Val& seq) {
-  std::vector<Val> out;
-  for (std::size_t i = 0; i < seq.node.size(); ++i) {
-    const YAML::Node e = seq.node[i];
-    out.emplace_back(e, line_of(e, seq.line));
-  }
-  return out;
-}
-
-std::string resolve(const std::string& base, const std::string& p) {
-  if (base.empty() || std::filesystem::path(p).is_absolute()) return p;
-  return (std::filesystem::path(base) / p).lexically_normal().string();
-}
-
-}  // namespace
+using namespace config;
 
 EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const std::string& base_dir) {
-  YAML::Node doc;
-  std::vector<YAML::Node> docs;
-  try {
-    // All documents, so one after a '---' is refused rather than silently dropped.
-    docs = YAML::LoadAll(std::string(yaml));
-  } catch (const YAML::Exception& e) {
-    if (e.mark.is_null()) throw EcConfigError(fmt::format("{}: {}", file, e.msg));
-    throw EcConfigError(fmt::format("{}:{}: {}", file, e.mark.line + 1, e.msg));
-  }
-  if (docs.size() > 1) {
-    throw EcConfigError(fmt::format("{}:{}: {} YAML documents; a configuration file holds one", file,
-                                    docs[1].Mark().is_null() ? 0 : docs[1].Mark().line + 1, docs.size()));
-  }
-  if (!docs.empty()) doc = docs[0];
-  if (!doc.IsDefined() || doc.IsNull()) throw EcConfigError(fmt::format("{}: empty configuration", file));
+  const YAML::Node doc = load_document(yaml, file);
   const Val root(doc, line_of(doc, 1));
   EcConfig c;
   c.file = file;
@@ -249,27 +134,14 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
       c.user_pdos[i] = {static_cast<std::uint16_t>(index), static_cast<std::uint8_t>(sub)};
     }
   }
-  if (const Val* n = top.get("platform")) {
-    if (n->node.IsScalar()) {
-      c.platform_file = resolve(base_dir, n->node.Scalar());
-    } else if (n->node.IsMap() && n->node.Style() != YAML::EmitterStyle::Flow) {
-      c.platform_yaml = YAML::Dump(n->node);
-      if (c.platform_yaml.empty() || c.platform_yaml.back() != '\n') c.platform_yaml += '\n';
-    } else {
-      fail(file, *n, "platform", "expected a block mapping (master configuration keys) or a file name");
-    }
-  }
+  if (const Val* n = top.get("platform")) read_platform(file, *n, base_dir, c.platform_yaml, c.platform_file);
   if (c.has_wheels && c.platform_yaml.empty() && c.platform_file.empty())
     fail(file, *top.get("wheels"), "platform", "required with wheels (the platform loop and its path)");
   return c;
 }
 
 EcConfig load_ec_config(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw EcConfigError(fmt::format("{}: cannot read the file", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parse_ec_config(ss.str(), path, std::filesystem::path(path).parent_path().string());
+  return parse_ec_config(read_file(path), path, std::filesystem::path(path).parent_path().string());
 }
 
 EcMasterConfig make_master_config(const EcConfig& c) {

@@ -21,14 +21,12 @@
 #include <utility>
 #include <vector>
 
+#include "controller/config_reader.hpp"
 #include "controller/ethercat/ec_master.hpp"
 
 namespace omnitwin::controller::ethercat {
 
-class EcConfigError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+using EcConfigError = config::ConfigFileError;
 
 struct AxisRef {
   int slave = 1;    // 1-based, as in the Botnana word set

@@ -36,6 +36,7 @@ class MasterLockstep {
   // hands it every frame the twin delivered. ok, or why the twin stopped answering.
   simclock::WaitStatus run_tick(C1Master& master, const simclock::Grant& g, SimTime period);
 
+  simclock::Client& clock() { return clock_; }
   std::uint64_t frames_sent() const { return sent_; }
   std::uint64_t frames_received() const { return received_; }
 

@@ -36,6 +36,7 @@
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/ethercat/ec_program.hpp"
+#include "controller/mechatrolink3/m3_program.hpp"
 #include "controller/master_config.hpp"
 #include "controller/omni_master.hpp"
 #include "controller/program_support.hpp"
@@ -286,12 +287,12 @@ int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& 
 // main
 
 void add_options(CLI::App& app, Options& o) {
-  app.add_option("--bus", o.bus, "bus kind: can or ethercat")->capture_default_str();
+  app.add_option("--bus", o.bus, "bus kind: can, ethercat or m3")->capture_default_str();
   app.add_option("--iface", o.iface, "transport: udp:GROUP[:PORT], socketcan:IFACE (or IFACE), mem:NAME")
       ->capture_default_str();
   app.add_option("--config", o.config, "the master's configuration file (YAML)");
   app.add_option("--script", o.script, "ethercat: run this Botnana script, exit when its tasks end");
-  app.add_option("--stats", o.stats, "ethercat: write the master's counters to this JSON file at exit");
+  app.add_option("--stats", o.stats, "ethercat, m3: write the master's counters to this JSON file at exit");
   app.add_option("--clock", o.clock, "sim: lockstep with the twin; wall: real time")
       ->check(CLI::IsMember({"sim", "wall"}))
       ->capture_default_str();
@@ -307,7 +308,13 @@ void add_options(CLI::App& app, Options& o) {
 // Option combinations CLI11 cannot check; the message of the first problem, or "".
 std::string usage_problem(const Options& o) {
   if (o.config.empty()) return "--config is required";
-  if (o.bus != "can" && o.bus != "ethercat") return fmt::format("--bus {}: not supported (can or ethercat)", o.bus);
+  if (o.bus != "can" && o.bus != "ethercat" && o.bus != "m3")
+    return fmt::format("--bus {}: not supported (can, ethercat or m3)", o.bus);
+  if (o.bus == "m3") {
+    if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
+    if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
+    return "";
+  }
   if (o.bus == "ethercat") {
     if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
     if (o.shell && o.clock == "sim") return "shell runs on the wall clock";
@@ -412,9 +419,14 @@ int main(int argc, char** argv) {
   if (!o.script.empty()) o.bus = "ethercat";  // Botnana scripts drive the EtherCAT master
   setup_logging(o.log_level);
   if (o.bus == "ethercat" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34980";
+  if (o.bus == "m3" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34990";
   if (const std::string p = usage_problem(o); !p.empty()) {
     spdlog::error("{}", p);
     return kExitUsage;
+  }
+  if (o.bus == "m3") {
+    m3::ProgramOptions mo{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};
+    return m3::run_m3_program(mo);
   }
   if (o.bus == "ethercat") {
     controller::ethercat::ProgramOptions eo{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.shell, o.script,

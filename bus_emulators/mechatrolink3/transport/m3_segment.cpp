@@ -3,6 +3,15 @@
 
 namespace omnitwin::m3 {
 
+namespace {
+
+// A frame of `size` bytes (header and FCS included) on the wire, with its gap [ns].
+std::int64_t wire_ns(std::size_t size) {
+  return size >= kHeaderSize + kFcsSize ? frame_slot_ns(size - kHeaderSize - kFcsSize) : 0;
+}
+
+}  // namespace
+
 M3Segment::M3Segment(const SegmentConfig& config, M3Transport& transport) : stations_(config), transport_(transport) {
   stations_.line().attach_master([this](std::span<const std::uint8_t> f, SimTime t) { to_master_frame(f, t); });
 }
@@ -13,6 +22,7 @@ void M3Segment::open_pcap(const std::string& path) { pcap_ = std::make_unique<Pc
 
 // A frame whose last bit reached the master at t: onto the transport and into the capture.
 void M3Segment::to_master_frame(std::span<const std::uint8_t> frame, SimTime t) {
+  busy_ns_ += wire_ns(frame.size());
   if (transport_.send(frame)) ++to_master_;
   else ++send_failures_;
   if (pcap_) pcap_->write_frame(frame, t, Direction::back);
@@ -22,6 +32,7 @@ void M3Segment::to_master_frame(std::span<const std::uint8_t> frame, SimTime t) 
 // A frame of n bytes (in rx_) from the master enters the line when it started leaving it.
 void M3Segment::enter(int n, SimTime t) {
   ++from_master_;
+  busy_ns_ += wire_ns(static_cast<std::size_t>(n));
   const std::span<const std::uint8_t> frame(rx_.data(), static_cast<std::size_t>(n));
   if (pcap_) pcap_->write_frame(frame, t, Direction::out);
   stations_.line().from_master(frame, t);

@@ -52,6 +52,7 @@ class M3Segment {
   // Starts the capture (both directions); throws std::runtime_error naming the file.
   void open_pcap(const std::string& path);
   PcapWriter* pcap() { return pcap_.get(); }
+  const PcapWriter* pcap() const { return pcap_.get(); }
 
   SegmentAnswer take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait);
   // Realtime: every frame the transport holds now enters the line at t, and the line runs dry
@@ -68,9 +69,12 @@ class M3Segment {
   const SlaveLink& link(int k) const { return stations_.link(k); }
   SlaveLink& link(int k) { return stations_.link(k); }
   ServoProfile& servo(int k) { return stations_.servo(k); }
+  const ServoProfile& servo(int k) const { return stations_.servo(k); }
   std::uint64_t from_master() const { return from_master_; }
   std::uint64_t to_master() const { return to_master_; }
   std::uint64_t send_failures() const { return send_failures_; }
+  // Time the wire has carried frames (each with its inter-frame gap) since the start [ns].
+  std::int64_t busy_ns() const { return busy_ns_; }
 
  private:
   void to_master_frame(std::span<const std::uint8_t> frame, SimTime t);
@@ -82,6 +86,7 @@ class M3Segment {
   std::unique_ptr<PcapWriter> pcap_;
   std::uint64_t from_master_ = 0, to_master_ = 0, send_failures_ = 0;
   SimTime last_arrival_ = -1;
+  std::int64_t busy_ns_ = 0;
   std::array<std::uint8_t, 2 * kMaxFrame> rx_{};
 };
 

@@ -1,0 +1,384 @@
+// controller/mechatrolink3 — the `--bus m3` program path (see m3_program.hpp).
+#include "controller/mechatrolink3/m3_program.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <poll.h>
+#include <spdlog/spdlog.h>
+
+#include <unistd.h>
+
+#include <chrono>
+#include <functional>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <vector>
+
+#include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
+#include "controller/master_config.hpp"
+#include "controller/mechatrolink3/m3_config.hpp"
+#include "controller/mechatrolink3/m3_lockstep.hpp"
+#include "controller/mechatrolink3/m3_servo_axis.hpp"
+#include "controller/platform_loop.hpp"
+#include "controller/program_support.hpp"
+#include "controller/sim_clock.hpp"
+
+namespace omnitwin::m3 {
+
+namespace {
+
+using controller::PlatformLoop;
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
+constexpr auto kConnectTimeout = std::chrono::seconds(10);
+constexpr int kGrantTimeoutMs = 60'000;
+constexpr int kRtPriority = 40;
+
+struct RuntimeFailure {
+  std::string message;
+};
+
+std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t) * 1e-6); }
+
+// The C1 master core, the four wheel axes and the platform loop, at the cyclic interrupt.
+class Runner {
+ public:
+  Runner(const M3ProgramConfig& pc, std::optional<controller::MasterConfig> platform, C1Master::Emit emit)
+      : pc_(pc), platform_(std::move(platform)) {
+    ServoAxisConfig ac;
+    ac.position_mode = pc.command == WheelCommand::interpolate;
+    ac.com_tim = 1;
+    ac.params = pc.params;
+    for (int i = 0; i < 4; ++i)
+      axes_.emplace_back(fmt::format("axis {} ({:02X}h)", i + 1, pc.wheels[static_cast<std::size_t>(i)]), ac,
+                         [](SimTime t, const std::string& s) { spdlog::info("{} {}", stamp(t), s); });
+    master_ = std::make_unique<C1Master>(
+        make_master_config(pc), std::move(emit), [this](std::uint64_t n, SimTime t) { on_interrupt(n, t); },
+        [](SimTime t, const std::string& s) { spdlog::info("{} driver: {}", stamp(t), s); });
+    if (platform_) {
+      controller::PlatformLoopConfig lc = platform_->loop;
+      lc.counts_per_rev = static_cast<int>(std::lround(pc.wheel_counts_per_rev));
+      loop_.emplace(lc, controller::build_path(platform_->path));
+      every_ = std::max<std::int64_t>(1, std::llround(lc.period / pc.cycle));
+    }
+  }
+
+  C1Master& master() { return *master_; }
+  const C1Master& master() const { return *master_; }
+  const ServoAxis& axis(int i) const { return axes_[static_cast<std::size_t>(i)]; }
+  void start(SimTime t) {
+    start_ns_ = t;
+    master_->start(t);
+  }
+  // Past the start-up limit without every servo on, or the driver failed: nothing will come.
+  bool failed() const { return failure_.has_value() || master_->state() == DriverState::failed; }
+  const std::optional<std::string>& failure() const { return failure_; }
+  bool finished() const { return finished_; }
+  bool halted() const { return halted_; }
+
+  // The program's state for --stats: failed | stopped | finished | running | starting.
+  std::string state() const {
+    if (failed()) return "failed";
+    if (halted_) return "stopped";
+    if (finished_) return "finished";
+    return started_ ? "running" : "starting";
+  }
+
+  simclock::MasterReport report() const {
+    simclock::MasterReport r;
+    if (failed()) {
+      r.state = simclock::MasterState::stopped;
+      r.reason = simclock::StopReason::startup_timeout;
+    } else if (halted_) {
+      r.state = simclock::MasterState::stopped;
+      r.reason = simclock::StopReason::feedback_missing;
+      r.node = static_cast<std::uint8_t>(lost_axis_ + 1);
+    } else if (finished_) {
+      r.state = simclock::MasterState::finished;
+    } else {
+      r.state = started_ ? simclock::MasterState::running : simclock::MasterState::detecting;
+    }
+    r.path_origin_ns = started_ ? origin_ : -1;
+    if (loop_) {
+      const controller::Pose2& ref = out_.reference.pose;
+      const controller::Pose2& odo = loop_->odometry().pose();
+      r.reference = {ref.x, ref.y, ref.phi};
+      r.odometry = {odo.x, odo.y, odo.phi};
+    }
+    return r;
+  }
+
+  nlohmann::json stats() const {
+    const C1Master& m = *master_;
+    nlohmann::json slaves = nlohmann::json::array();
+    for (int k = 0; k < m.slaves(); ++k) {
+      const SlaveCounters& c = m.counters(k);
+      const ServoAxis& a = axis(k);
+      slaves.push_back({{"address", pc_.wheels[static_cast<std::size_t>(k)]}, {"tr_dly_ns", m.tr_dly_ns(k)},
+                        {"t_rsp_ns", m.t_rsp_ns(k)}, {"exchanges", c.exchanges}, {"retries", c.retries},
+                        {"retry_recovered", c.retry_recovered}, {"missed", c.missed}, {"late", c.late},
+                        {"bad", c.bad}, {"axis_step", to_string(a.step())}, {"recoveries", a.recoveries()},
+                        {"device", a.device()}});
+    }
+    return {{"driver_state", to_string(m.state())}, {"state", state()}, {"why", m.why()},
+            {"failure", failure_.value_or("")}, {"cycles", m.cycles()}, {"cycle_ns", std::llround(pc_.cycle * 1e9)},
+            {"int_offset_ns", m.int_offset_ns()}, {"min_cycle_ns", m.min_cycle_ns()},
+            {"foreign_master_frames", m.foreign_master_frames()}, {"platform_stopped", halted_},
+            {"lost_axis", halted_ ? lost_axis_ + 1 : 0}, {"slaves", slaves}};
+  }
+
+ private:
+  // At INT_OFFSET of every cycle: the axes' step machines, then the platform loop.
+  void on_interrupt(std::uint64_t, SimTime t) {
+    for (int k = 0; k < 4; ++k) {
+      auto& a = axes_[static_cast<std::size_t>(k)];
+      const bool fresh = master_->fresh(k);
+      misses_[static_cast<std::size_t>(k)] = fresh ? 0 : misses_[static_cast<std::size_t>(k)] + 1;
+      a.on_interrupt(master_->response(k), fresh, master_->command(k), t);
+    }
+    platform(t);
+  }
+
+  void command(const std::array<double, 4>& ref_per_s) {
+    for (std::size_t i = 0; i < 4; ++i) {
+      if (pc_.command == WheelCommand::velctrl) {
+        axes_[i].set_velocity(static_cast<std::int32_t>(std::lround(ref_per_s[i])));
+      } else {
+        target_[i] += ref_per_s[i] * pc_.cycle;
+        axes_[i].set_position(static_cast<std::int32_t>(std::llround(target_[i])),
+                              static_cast<std::int32_t>(std::lround(ref_per_s[i])));
+      }
+    }
+  }
+  controller::WheelCounts counts() const {
+    controller::WheelCounts c{};
+    for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = axis(i).position();
+    return c;
+  }
+  // Which axis is lost (no fresh response for lost_cycles, or out of operation), or -1.
+  int lost_axis() const {
+    for (int k = 0; k < 4; ++k)
+      if (misses_[static_cast<std::size_t>(k)] >= pc_.lost_cycles || axis(k).step() != AxisStep::running) return k;
+    return -1;
+  }
+  void halt(int k, SimTime t) {
+    halted_ = true;
+    lost_axis_ = k;
+    const controller::WheelCounts c = counts();
+    for (std::size_t i = 0; i < 4; ++i) target_[i] = c[i];
+    command({0, 0, 0, 0});
+    spdlog::error("{} platform loop stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero",
+                  stamp(t), k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
+  }
+  bool begin(SimTime t) {
+    for (int k = 0; k < 4; ++k)
+      if (axis(k).step() != AxisStep::running) {
+        if (!failure_ && static_cast<double>(t - start_ns_) * 1e-9 > pc_.startup_timeout) {
+          failure_ = fmt::format("axis {} not running {} s after the start (step {}{})", k + 1, pc_.startup_timeout,
+                                 to_string(axis(k).step()), axis(k).why().empty() ? "" : ": " + axis(k).why());
+          spdlog::error("{} {}", stamp(t), *failure_);
+        }
+        return false;
+      }
+    const controller::WheelCounts c = counts();
+    for (std::size_t i = 0; i < 4; ++i) target_[i] = c[i];
+    loop_->reset(loop_->path().start_pose(), c);
+    origin_ = t;
+    started_ = true;
+    n_ = 0;
+    spdlog::info("{} all four servos on: platform loop running", stamp(t));
+    return true;
+  }
+  void platform(SimTime t) {
+    if (!loop_ || failed() || halted_) return;
+    if (!started_ && !begin(t)) return;
+    if (const int k = lost_axis(); k >= 0) return halt(k, t);
+    if (finished_) return command({0, 0, 0, 0});
+    const double ts = static_cast<double>(t - origin_) * 1e-9;
+    if (n_++ % every_ == 0) {
+      out_ = loop_->step(ts, counts());
+      const double k = pc_.wheel_counts_per_rev / (2 * std::numbers::pi);
+      for (std::size_t i = 0; i < 4; ++i) ref_per_s_[i] = out_.wheel_rad_s[i] * k;
+    }
+    command(ref_per_s_);
+    if (platform_->settle >= 0 && ts >= loop_->path().duration() + platform_->settle) {
+      finished_ = true;
+      command({0, 0, 0, 0});
+      spdlog::info("{} path done", stamp(t));
+    }
+  }
+
+  const M3ProgramConfig& pc_;
+  std::optional<controller::MasterConfig> platform_;
+  std::vector<ServoAxis> axes_;
+  std::unique_ptr<C1Master> master_;
+  std::optional<PlatformLoop> loop_;
+  controller::PlatformLoopOutput out_;
+  std::int64_t every_ = 1, n_ = 0;
+  std::array<int, 4> misses_{};
+  std::array<double, 4> ref_per_s_{}, target_{};
+  bool started_ = false, finished_ = false, halted_ = false;
+  int lost_axis_ = -1;
+  SimTime start_ns_ = 0, origin_ = -1;
+  std::optional<std::string> failure_;
+};
+
+// Lockstep: one Grant per transmission cycle, every frame met with Sent/Horizon.
+int run_sim(const ProgramOptions& o, Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
+  simclock::Client& client = ls.clock();
+  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  bool started = false;
+  (void)o;
+  for (;;) {
+    simclock::Grant g;
+    simclock::End end{kNoEnd};
+    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const int pr = ::poll(fds, 2, kGrantTimeoutMs);
+    if (pr == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
+    if (pr > 0 && (fds[1].revents & POLLIN) && controller::signalled(sigfd)) return kExitOk;
+    const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
+    if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
+    if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    if (!started) r.start(g.t_ns), started = true;
+    if (const auto st = ls.run_tick(r.master(), g, cycle_ns); st != simclock::WaitStatus::ok)
+      throw RuntimeFailure{fmt::format("tick {}: the twin stopped answering inside the tick ({})", g.tick, simclock::to_string(st))};
+    simclock::Done done{g.tick, {ls.frames_sent(), 0, 0, 0}, r.report()};
+    if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+  }
+}
+
+// Wall clock: the core's next deadline is waited for on the transport; frames are handed over
+// as they arrive. A driver that failed detection (the twin not up yet) starts again.
+int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::function<std::unique_ptr<Runner>()>& make,
+             std::unique_ptr<Runner>& r, M3Transport& tr, int sigfd, std::uint64_t& rx) {
+  controller::try_realtime(kRtPriority);
+  const std::int64_t start = controller::monotonic_ns();
+  const std::int64_t end = o.duration >= 0 ? std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
+  std::array<std::uint8_t, 2 * kMaxFrame> buf{};
+  r->start(0);
+  for (;;) {
+    SimTime now = controller::monotonic_ns() - start;
+    if (controller::signalled(sigfd) || now >= end) break;
+    if (r->master().state() == DriverState::failed) {
+      if (static_cast<double>(now) * 1e-9 > pc.startup_timeout) return kExitRuntime;
+      spdlog::warn("{} driver failed ({}); starting again in 100 ms", stamp(now), r->master().why());
+      ::usleep(100'000);  // the twin may not be up yet: the whole driver sequence again
+      r = make();
+      r->start(controller::monotonic_ns() - start);
+      continue;
+    }
+    const SimTime wake = r->master().next_wakeup();
+    const SimTime wait = wake < 0 ? 10'000'000 : std::max<SimTime>(0, wake - now);
+    const int n = tr.receive(buf, std::chrono::nanoseconds(std::min<SimTime>(wait, 10'000'000)));
+    now = controller::monotonic_ns() - start;
+    if (n > 0) ++rx;
+    if (n > 0) r->master().on_frame(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), now);
+    r->master().advance(now);
+  }
+  return r->failed() ? kExitRuntime : kExitOk;
+}
+
+void write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std::uint64_t rx) {
+  nlohmann::json j = r.stats();
+  j["frames_tx"] = tx;
+  j["frames_rx"] = rx;
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp);
+  f << j.dump() << "\n";
+  f.close();
+  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+}
+
+void log_end(const Runner& r) {
+  const C1Master& m = r.master();
+  spdlog::info("end: state {}, driver {}, cycles {}, INT_OFFSET {} ns, shortest cycle {} ns, foreign C1 frames {}",
+               r.state(), to_string(m.state()), m.cycles(), m.int_offset_ns(), m.min_cycle_ns(), m.foreign_master_frames());
+  if (!m.why().empty()) spdlog::error("driver: {}", m.why());
+  for (int k = 0; k < m.slaves(); ++k) {
+    const SlaveCounters& c = m.counters(k);
+    spdlog::info("slave {}: TR_DLY {} ns, T_RSP {} ns, exchanges {}, retries {} (recovered {}), missed {}, late {}, bad {}, "
+                 "axis {}, recoveries {}",
+                 k + 1, m.tr_dly_ns(k), m.t_rsp_ns(k), c.exchanges, c.retries, c.retry_recovered, c.missed, c.late, c.bad,
+                 to_string(r.axis(k).step()), r.axis(k).recoveries());
+  }
+}
+
+}  // namespace
+
+int run_m3_program(const ProgramOptions& o) {
+  M3ProgramConfig pc;
+  std::optional<controller::MasterConfig> platform;
+  try {
+    pc = load_m3_config(o.config);
+    if (!pc.platform_file.empty()) platform = controller::load_master_config(pc.platform_file);
+    else if (!pc.platform_yaml.empty()) platform = controller::parse_master_config(pc.platform_yaml, o.config + " (platform)");
+  } catch (const M3ConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  } catch (const controller::MasterConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  }
+  if (o.print_config) {
+    std::cout << dump_m3_config(pc);
+    if (platform) std::cout << controller::dump_master_config(*platform);
+    return kExitOk;
+  }
+  std::unique_ptr<M3Transport> tr;
+  try {
+    tr = open_transport(o.iface, Role::master);
+  } catch (const std::exception& e) {
+    spdlog::error("--iface {}: {}", o.iface, e.what());
+    return kExitUsage;
+  }
+  const SimTime cycle_ns = std::llround(pc.cycle * 1e9);
+  const int sigfd = controller::open_signal_fd();
+  spdlog::info("M-III C1 master on {} (clock {}, transmission cycle {} µs, {} retry slot(s), {} bytes, {})", tr->describe(),
+               o.clock, cycle_ns / 1000, pc.retry_slots, pc.data_bytes,
+               pc.command == WheelCommand::velctrl ? "VELCTRL" : "INTERPOLATE");
+  int code = kExitOk;
+  std::unique_ptr<Runner> runner;
+  std::uint64_t tx = 0, rx = 0;
+  try {
+    if (o.clock == "sim") {
+      simclock::Client client(o.sim_clock, kConnectTimeout);
+      MasterLockstep ls(*tr, client);
+      runner = std::make_unique<Runner>(pc, platform, [&ls](std::span<const std::uint8_t> f, SimTime t) { ls.emit(f, t); });
+      try {
+        code = run_sim(o, *runner, ls, sigfd, cycle_ns);
+      } catch (const RuntimeFailure&) {
+        tx = ls.frames_sent(), rx = ls.frames_received();
+        throw;
+      }
+      tx = ls.frames_sent(), rx = ls.frames_received();
+    } else {
+      auto make = [&] {
+        return std::make_unique<Runner>(pc, platform, [&tr, &tx](std::span<const std::uint8_t> f, SimTime) {
+          if (tr->send(f)) ++tx;
+        });
+      };
+      runner = make();
+      code = run_wall(o, pc, make, runner, *tr, sigfd, rx);
+    }
+  } catch (const RuntimeFailure& f) {
+    spdlog::error("{}", f.message);
+    code = kExitRuntime;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = kExitRuntime;
+  }
+  if (runner) {
+    if (runner->failed()) code = kExitRuntime;
+    log_end(*runner);
+    if (!o.stats.empty()) write_stats(o.stats, *runner, tx, rx);
+  }
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
+}
+
+}  // namespace omnitwin::m3
