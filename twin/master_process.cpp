@@ -192,9 +192,13 @@ std::string m3_master_config_yaml(const Scenario& s, const std::string& platform
   std::string out = fmt::format("# omni-master --bus m3 configuration written by omnitwin for scenario {}\n", s.name);
   out += fmt::format("cycle: {}\nretry_slots: {}\ndata_bytes: {}\n", m.cycle, m.retry_slots, m.data_bytes);
   out += "wheels: [0x03, 0x04, 0x05, 0x06]\n";
-  out += fmt::format("response_us: {}\nmargin_us: {}\n", m.response_us, m.margin(s.clock == ClockMode::realtime));
+  const bool realtime = s.clock == ClockMode::realtime;
+  out += fmt::format("response_us: {}\nmargin_us: {}\n", m.response_us, m.margin(realtime));
+  // Detection and delay measurement wait per station; across processes in realtime the
+  // transport's round trip, not the wire's microseconds, sets how long an answer takes.
+  if (realtime) out += "detect_timeout_ms: 5\n";
   // The servos must be on before the path starts (and a realtime master may start before the twin).
-  out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (realtime ? 3.0 : 0.0)));
   out += fmt::format("wheel_command: {}\nwheel_counts_per_rev: {}\n", m.mode, m.counts_per_rev);
   out += fmt::format("platform: {}\n", platform_file);
   return out;

@@ -140,8 +140,9 @@ struct M3Spec {
   std::string topology = "cascade";         // cascade | star
   double cable_m = 1.0;                     // every cable's length [m]
   double response_us = 2.0;                 // each slave's response time [µs]
-  // Added to every T_RSP by the master [µs]; < 0: 1 µs in lockstep, 200 µs in realtime (the
-  // transport's latency across processes, which no real M-III line has).
+  // Added to every T_RSP by the master [µs]; < 0: 1 µs in lockstep, 80 µs in realtime. The
+  // master's delay measurement already holds the transport's round trip across processes;
+  // the margin absorbs its jitter (no real M-III line has either).
   double margin_us = -1;
   double drive_period = 0.001;              // the servos' own update period [s]
   int counts_per_rev = 131072;              // the servos' reference units per wheel revolution
@@ -149,7 +150,7 @@ struct M3Spec {
   std::string master;                       // master program; "" = omni-master beside omnitwin
   std::uint64_t seed = 1;                   // random faults (frame loss, corruption)
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
-  double margin(bool realtime) const { return margin_us >= 0 ? margin_us : realtime ? 200.0 : 1.0; }
+  double margin(bool realtime) const { return margin_us >= 0 ? margin_us : realtime ? 80.0 : 1.0; }
 };
 
 // How a realtime run watches the master process it started (bus.supervision). Lockstep

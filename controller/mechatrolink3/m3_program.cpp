@@ -266,8 +266,8 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
     if (controller::signalled(sigfd) || now >= end) break;
     if (r->master().state() == DriverState::failed) {
       if (static_cast<double>(now) * 1e-9 > pc.startup_timeout) return kExitRuntime;
-      spdlog::warn("{} driver failed ({}); starting again in 100 ms", stamp(now), r->master().why());
-      ::usleep(100'000);  // the twin may not be up yet: the whole driver sequence again
+      spdlog::warn("{} driver failed ({}); starting again in 20 ms", stamp(now), r->master().why());
+      ::usleep(20'000);  // the twin may not be up yet: the whole driver sequence again
       r = make();
       r->start(controller::monotonic_ns() - start);
       continue;
