@@ -220,6 +220,13 @@ int cmd_run(const RunArgs& a) {
                                  s.name, iface)
                   << std::flush;
       };
+    } else if (a.external_master && s.bus.kind == BusKind::m3) {
+      o.on_bus_ready = [&s](const std::string& iface) {
+        std::cout << fmt::format("twin {}: MECHATROLINK-III line of 4 servos (03h-06h, {} µs cycle); a C1 master "
+                                 "connects on {} (Ctrl-C ends)\n",
+                                 s.name, std::llround(s.bus.m3.cycle * 1e6), iface)
+                  << std::flush;
+      };
     } else if (a.external_master) {
       o.on_bus_ready = [&s](const std::string& iface) {
         std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
@@ -532,12 +539,12 @@ int main(int argc, char** argv) {
 
   RunArgs ta;
   ta.external_master = true;
-  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can or ethercat, realtime) for an external master");
+  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, ethercat or m3, realtime) for an external master");
   twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
   twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
-  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, or ethercat)")
-      ->check(CLI::IsMember({"can", "ethercat"}));
+  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, ethercat or m3)")
+      ->check(CLI::IsMember({"can", "ethercat", "m3"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
   add_output_flags(twin, ta);

@@ -98,6 +98,14 @@ void SlaveLink::on_link_service(const FrameView& f, SimTime t) {
 void SlaveLink::on_command(const FrameView& f, SimTime t) {
   ++s_.stats.commands;
   s_.fcs_in_row = 0;
+  const FrameType type = f.type == FrameType::cyclic_command ? FrameType::cyclic_response : FrameType::event_response;
+  // A retry of the command just executed (its response was lost or late): answered with the
+  // stored response, not executed again — CONNECT or a POSING must not run twice (ours).
+  if (f.retry() && f.sequence() == s_.last_sequence && f.data.size() == s_.last_length && rsp_[0] == f.data[0]) {
+    ++s_.stats.repeated;
+    s_.last_command = t;
+    return reply(type, std::span(rsp_).first(s_.last_length), f.sequence(), t + cfg_.response_ns);
+  }
   CommandHeader h;
   read_header(f.data, h);  // every command length is at least 8 bytes
   const CmdCtrl ctrl = unpack_ctrl(h.ctrl);
@@ -116,7 +124,8 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(), ctrl.alm_clr,
              ctrl.cmd_id, s_.cmd_alm, s_.comm_alm};
   put_u16(rsp, 2, pack(st));
-  const FrameType type = f.type == FrameType::cyclic_command ? FrameType::cyclic_response : FrameType::event_response;
+  s_.last_sequence = f.sequence();
+  s_.last_length = f.data.size();
   reply(type, rsp, f.sequence(), t + cfg_.response_ns);
 }
 

@@ -85,6 +85,7 @@ struct LinkStats {
   std::uint64_t commands = 0, responses = 0, fcs_errors = 0, bad_frames = 0, not_for_me = 0;
   std::uint64_t missed_commands = 0, missed_syncs = 0, wdt_errors = 0, phase_errors = 0, unsupported = 0;
   std::uint64_t comm_alarms = 0;  // COMM_ALM alarms (8h-Ch) raised
+  std::uint64_t repeated = 0;     // retries of the last command answered from its stored response
 };
 
 class SlaveLink {
@@ -138,6 +139,8 @@ class SlaveLink {
     int sync_misses = 0, command_misses = 0, fcs_in_row = 0;
     std::uint8_t last_wdt = 0, own_count = 0;
     bool wdt_seen = false;
+    int last_sequence = -1;           // of the command last executed (its response is in rsp_)
+    std::size_t last_length = 0;
     LinkStats stats;
   } s_;
   std::array<std::uint8_t, kMaxFrame> out_{};

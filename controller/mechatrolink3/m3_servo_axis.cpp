@@ -62,6 +62,13 @@ void ServoAxis::go(AxisStep next, SimTime t) {
 bool ServoAxis::accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t) {
   if (rsp[0] != static_cast<std::uint8_t>(c)) return false;  // not yet the answer to this command
   if (!is_alarm(stat_.cmd_alm)) return true;
+  if (c == Command::connect && stat_.cmd_alm == CmdAlarm::phase_error) {
+    // Already connected: an earlier CONNECT of ours took effect but its answers were lost.
+    // DISCONNECT and connect again rather than give up.
+    if (log_) log_(t, fmt::format("{}: CONNECT answered with a phase error: already connected; disconnecting first", name_));
+    go(AxisStep::disconnect, t);
+    return false;
+  }
   why_ = fmt::format("{} answered with CMD_ALM {:X}h ({})", to_string(c), static_cast<int>(stat_.cmd_alm),
                      to_string(stat_.cmd_alm));
   go(AxisStep::failed, t);

@@ -5,11 +5,13 @@
 // only in synchronous mode, DISCONNECT, power off and on), CMD_ALM for a wrong phase, an
 // unknown command and a bad subcommand, and COMM_ALM as the profile counts it: FCS errors,
 // missing commands and a stopped master (a warning, then an alarm that drops phase 3 to 2
-// and stops the profile), a stalled WDT (an alarm at once), and ALM_CLR clearing it.
+// and stops the profile), a stalled WDT (an alarm at once), and ALM_CLR clearing it; a retry
+// of the command just executed is answered from its stored response, never run twice.
 #include "bus_emulators/mechatrolink3/m3_link.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <vector>
 
 namespace omnitwin::m3 {
@@ -153,6 +155,25 @@ TEST_F(M3Link, ConnectMovesToPhase2AndEchoesItsParameters) {
   EXPECT_TRUE(link.connection().subcommand);
   EXPECT_EQ(link.connection().com_tim, 4);
   EXPECT_EQ(link.connection().data_bytes, 48u);
+}
+
+// The response to CONNECT was lost; the master's retry (retry bit, same sequence number) gets
+// the stored answer instead of a phase error, while a fresh CONNECT in phase 2 is one.
+TEST_F(M3Link, ARetryOfTheLastCommandIsAnsweredFromItsStoredResponse) {
+  start();
+  connect();
+  ASSERT_EQ(link.phase(), Phase::p2);
+  const std::vector<std::uint8_t> first = sent.back().bytes;
+  const auto mod = static_cast<std::uint8_t>(kComModSync);
+  command(Command::connect, 32, 0, false, true, {{4, 0x30}, {5, mod}, {6, 1}, {7, 0x10}});
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(link.stats().repeated, 1u);
+  FrameView a = sent.back().view(), b;
+  ASSERT_EQ(decode(first, b), FrameStatus::ok);
+  EXPECT_TRUE(std::equal(a.data.begin(), a.data.end(), b.data.begin(), b.data.end())) << "the same answer";
+  connect();
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::phase_error) << "not a retry: executed, and refused in phase 2";
+  EXPECT_EQ(link.stats().repeated, 1u);
 }
 
 TEST_F(M3Link, ABadConnectIsInvalidDataAndStaysInPhase1) {

@@ -2,7 +2,8 @@
 // step of seed 000 fig. 8 writes its command and moves on only when the response echoes it
 // with CMD_ALM normal, a stale (not fresh) response moves nothing, SVPRM_WR goes through
 // every configured parameter, SV_ON waits for CMDRDY and SV_ON, a CMD_ALM alarm fails the
-// axis naming the command, and the running axis writes its set-point.
+// axis naming the command (but CONNECT refused with a phase error, i.e. already connected,
+// disconnects first), and the running axis writes its set-point.
 #include "controller/mechatrolink3/m3_servo_axis.hpp"
 
 #include <gtest/gtest.h>
@@ -73,6 +74,28 @@ TEST(M3ServoAxis, ACommandAlarmDuringStartUpFailsTheAxis) {
   EXPECT_EQ(axis.step(), AxisStep::failed);
   EXPECT_NE(axis.why().find("CONNECT"), std::string::npos) << axis.why();
   EXPECT_NE(axis.why().find("invalid data"), std::string::npos) << axis.why();
+}
+
+// An earlier CONNECT took effect but both its answer and the retry's were lost: the slave is
+// in phase 2 and refuses the next CONNECT with a phase error. The axis disconnects and
+// connects again instead of failing.
+TEST(M3ServoAxis, ConnectRefusedAsAlreadyConnectedDisconnectsFirst) {
+  ServoAxis axis("axis 2", ServoAxisConfig{});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);  // DISCONNECT accepted → CONNECT
+  ASSERT_EQ(static_cast<Command>(cmd[0]), Command::connect);
+  rsp = answer(cmd, CmdStat{.cmd_alm = CmdAlarm::phase_error});
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(axis.step(), AxisStep::disconnect);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::disconnect);
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::connect);
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::sync_set);
 }
 
 TEST(M3ServoAxis, PositionModeSendsInterpolate) {
