@@ -257,7 +257,8 @@ void PlatformRun::fail(std::string why) {
 // The master process: its configuration and log in the run directory; lockstep meets it on
 // the sim-clock channel, realtime lets it run on its own wall clock.
 void PlatformRun::start_master() {
-  const fs::path dir(o_.out_dir);
+  // Absolute: the master resolves the paths inside its configuration against the file's folder.
+  const fs::path dir = fs::absolute(o_.out_dir);
   const std::string cfg = (dir / "master.yaml").string();
   if (s_.bus.kind == BusKind::ethercat) {
     const std::string platform = (dir / "master-platform.yaml").string();

@@ -115,9 +115,14 @@ class Runner {
   nlohmann::json stats() const {
     const C1Master& m = *master_;
     nlohmann::json slaves = nlohmann::json::array();
+    SlaveCounters sum;
+    int recoveries = 0;
     for (int k = 0; k < m.slaves(); ++k) {
       const SlaveCounters& c = m.counters(k);
       const ServoAxis& a = axis(k);
+      sum.exchanges += c.exchanges, sum.retries += c.retries, sum.retry_recovered += c.retry_recovered;
+      sum.missed += c.missed, sum.late += c.late, sum.bad += c.bad;
+      recoveries += a.recoveries();
       slaves.push_back({{"address", pc_.wheels[static_cast<std::size_t>(k)]}, {"tr_dly_ns", m.tr_dly_ns(k)},
                         {"t_rsp_ns", m.t_rsp_ns(k)}, {"exchanges", c.exchanges}, {"retries", c.retries},
                         {"retry_recovered", c.retry_recovered}, {"missed", c.missed}, {"late", c.late},
@@ -128,7 +133,9 @@ class Runner {
             {"failure", failure_.value_or("")}, {"cycles", m.cycles()}, {"cycle_ns", std::llround(pc_.cycle * 1e9)},
             {"int_offset_ns", m.int_offset_ns()}, {"min_cycle_ns", m.min_cycle_ns()},
             {"foreign_master_frames", m.foreign_master_frames()}, {"platform_stopped", halted_},
-            {"lost_axis", halted_ ? lost_axis_ + 1 : 0}, {"slaves", slaves}};
+            {"lost_axis", halted_ ? lost_axis_ + 1 : 0}, {"exchanges", sum.exchanges}, {"retries", sum.retries},
+            {"retry_recovered", sum.retry_recovered}, {"missed", sum.missed}, {"late", sum.late}, {"bad", sum.bad},
+            {"recoveries", recoveries}, {"slaves", slaves}};
   }
 
  private:
