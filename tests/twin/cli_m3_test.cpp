@@ -1,0 +1,155 @@
+// Tests `omnitwin run --bus m3` and `omnitwin twin --bus m3` end to end through the real
+// programs: the twin's MECHATROLINK-III line of four standard servos and our C1 master
+// (`omni-master --bus m3`) as two processes over a real transport (a veth pair made for the
+// run, or M-III over UDP), in exchange-level lockstep. Lockstep runs are byte-identical
+// (trajectory, bus records and capture); master.log holds the driver sequence of seed 000
+// figs. 9-11 and the servo start-up of fig. 8; the capture decodes with the project's
+// Wireshark dissector with no malformed frame and exactly the frames the line saw; position
+// mode (INTERPOLATE) and a relative run directory work; a cycle the line cannot fit is
+// refused naming the shortest one that fits; and an external master on its own wall clock
+// drives the twin's servos.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cstdlib>
+#include <string>
+#include <thread>
+
+#include "tests/support/veth.hpp"
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::twin::cli {
+namespace {
+
+using omnitwin::testing::lines_of;
+
+class CliM3 : public CliTest {
+ protected:
+  Finished run_short(const fs::path& out, std::vector<std::string> sets = {}) {
+    std::vector<std::string> args{"run", test_scenario("m3_short.yaml"), "--out", out.string(), "--no-progress"};
+    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
+    return run(args);
+  }
+  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
+};
+
+// The master ran the whole path with every exchange answered in time.
+void expect_clean_run(const Finished& f, const nlohmann::json& m) {
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_EQ(ms.at("state"), "finished") << ms.dump(2);
+  EXPECT_EQ(ms.at("driver_state"), "cyclic communication");
+  EXPECT_EQ(ms.at("missed"), 0);
+  EXPECT_EQ(ms.at("late"), 0);
+  EXPECT_EQ(ms.at("retries"), 0);
+  EXPECT_GT(ms.at("cycles").get<int>(), 4000);
+  EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
+  for (const auto& s : m.at("slaves")) {
+    EXPECT_EQ(s.at("phase"), 3);
+    EXPECT_EQ(s.at("comm_alarms"), 0);
+    EXPECT_EQ(s.at("wdt_errors"), 0);
+  }
+  EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
+}
+
+bool have_tshark() { return std::system("command -v tshark >/dev/null 2>&1") == 0; }
+
+std::string tshark(const fs::path& capture, const std::string& args) {
+  return "tshark -X lua_script:" + source_path("tools/wireshark/mechatrolink3.lua") + " -r " + capture.string() + " " +
+         args;
+}
+
+// Over a veth pair (root): two runs are byte-identical; master.log tells the driver sequence
+// and the servo start-up; the dissector reads every frame of the capture, none malformed.
+TEST_F(CliM3, LockstepOverVethIsByteIdenticalAndDecodes) {
+  if (const auto why = omnitwin::testing::VethPair::unavailable_reason()) GTEST_SKIP() << *why;
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  const Finished fa = run_short(a, {"bus.transport=veth"});
+  const Finished fb = run_short(b, {"bus.transport=veth"});
+  const nlohmann::json m = metrics(a);
+  expect_clean_run(fa, m);
+  EXPECT_EQ(fb.code, 0);
+  EXPECT_TRUE(m.at("bus").at("transport").get<std::string>().starts_with("raw:"));
+  for (const char* f : {"trajectory.csv", "bus.csv", "bus-m3.pcap"}) EXPECT_EQ(read_bytes(a / f), read_bytes(b / f)) << f;
+  const std::string log = read_bytes(a / "master.log");
+  for (const char* step : {"initialisation request", "connected-station detection", "station 06h detected",
+                           "delay-time measurement request", "station 03h TR_DLY", "INT_OFFSET", "station 06h T_RSP",
+                           "transmission-cycle notification: 1000 µs", "communication start: cyclic",
+                           "axis 1 (03h): CONNECT", "axis 1 (03h): SYNC_SET", "axis 1 (03h): ID_RD",
+                           "axis 4 (06h): SENS_ON", "axis 4 (06h): SV_ON", "axis 4 (06h): running",
+                           "all four servos on: platform loop running", "path done"})
+    EXPECT_TRUE(contains(log, step)) << step << "\n" << log;
+  if (!have_tshark()) GTEST_SKIP() << "tshark is not installed";
+  const fs::path pcap = a / "bus-m3.pcap", info = dir_ / "info.txt", bad = dir_ / "bad.txt";
+  ASSERT_EQ(std::system((tshark(pcap, "-T fields -e _ws.col.Info > ") + info.string() + " 2>/dev/null").c_str()), 0);
+  ASSERT_EQ(std::system((tshark(pcap, "-Y '_ws.malformed || _ws.expert.severity >= error' > ") + bad.string() +
+                         " 2>/dev/null").c_str()), 0);
+  const auto lines = lines_of(read_bytes(info));
+  const nlohmann::json& bus = m.at("bus");
+  EXPECT_EQ(lines.size(), bus.at("frames_rx").get<std::size_t>() + bus.at("frames_tx").get<std::size_t>());
+  EXPECT_TRUE(read_bytes(bad).empty()) << read_bytes(bad);
+  for (const char* what : {"DETECT", "DLY_REQ", "CYC_NOTIFY", "COMM_START", "SYNC", "CONNECT", "SYNC_SET", "ID_RD",
+                           "SENS_ON", "SV_ON", "VELCTRL"}) {
+    EXPECT_TRUE(std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return contains(l, what); }))
+        << "no frame with " << what;
+  }
+}
+
+// M-III over UDP on loopback, position mode, and a run directory given relative to the
+// working directory (the master resolves its configuration's paths against the file's folder).
+TEST_F(CliM3, LockstepOverUdpInPositionModeWithARelativeRunDirectory) {
+  const Finished f = run_short("relative-out", {"bus.transport=udp:127.0.0.1:0", "bus.mode=interpolate"});
+  const nlohmann::json m = metrics(work() / "relative-out");
+  expect_clean_run(f, m);
+  EXPECT_TRUE(m.at("bus").at("transport").get<std::string>().starts_with("udp:127.0.0.1:"));
+  EXPECT_TRUE(contains(read_bytes(work() / "relative-out" / "master.log"), "INTERPOLATE"));
+}
+
+// A transmission cycle too short for four slaves with a retry slot and the software time:
+// the master refuses to start cyclic communication and names the shortest cycle that fits.
+TEST_F(CliM3, ACycleTheLineCannotFitIsRefusedNamingTheShortestThatFits) {
+  const fs::path out = dir_ / "short-cycle";
+  run_short(out, {"bus.cycle=0.0001", "duration=0.5"});
+  const std::string log = read_bytes(out / "master.log");
+  EXPECT_TRUE(contains(log, "a 0.100 ms transmission cycle is too short")) << log;
+  EXPECT_TRUE(contains(log, "the shortest cycle that fits is 172 µs")) << log;
+  const nlohmann::json m = metrics(out);
+  EXPECT_EQ(m.at("master").at("state"), "failed") << "the master's own word (master-stats.json)";
+  EXPECT_EQ(m.at("master").at("stop_reason"), "startup_timeout") << "what it reported on the sim clock";
+  EXPECT_EQ(m.at("master").at("driver_state"), "failed");
+  EXPECT_EQ(m.at("master").at("exit"), "exit 3");
+}
+
+// `omnitwin twin --bus m3` and `omni-master --bus m3` started by hand, both on the wall clock:
+// the master finds the four servos, measures the line (the transport's round trip included)
+// and brings every servo into operation.
+TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
+  const std::string iface = "udp:127.0.0.1:47711";
+  Child twin({"twin", test_scenario("m3_short.yaml"), "--bus", "m3", "--set", "bus.transport=" + iface, "--set",
+              "duration=30", "--out", (dir_ / "twin").string(), "--no-progress"},
+             work(), io());
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "a C1 master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "a C1 master connects on " + iface)) << twin.out() << twin.err();
+  const fs::path stats = dir_ / "master-stats.json";
+  Child master(binary_path("controller/omni-master"),
+               {"--bus", "m3", "--iface", iface, "--config", source_path("tests/data/m3/servos_only.yaml"), "--duration",
+                "2", "--stats", stats.string()},
+               work(), io(), "master-");
+  EXPECT_EQ(master.wait(30s), 0) << master.out() << master.err();
+  twin.signal(SIGINT);
+  EXPECT_NE(twin.wait(30s), -1);
+  const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
+  EXPECT_EQ(s.at("driver_state"), "cyclic communication") << s.dump(2);
+  EXPECT_GT(s.at("cycles").get<int>(), 1000);
+  for (const auto& sl : s.at("slaves")) {
+    EXPECT_EQ(sl.at("axis_step"), "running") << s.dump(2);
+    EXPECT_GT(sl.at("tr_dly_ns").get<int>(), 1000) << "across processes the round trip is microseconds";
+  }
+}
+
+}  // namespace
+}  // namespace omnitwin::twin::cli
