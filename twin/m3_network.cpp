@@ -117,9 +117,15 @@ bool M3Network::drain_transport(std::uint64_t count, SimTime t, std::chrono::mil
   return segment_->take_sent(count, t, timeout).ok;
 }
 
-int M3Network::poll_transport(SimTime t) {
+// Realtime: frames are taken only when the pacer wakes on the transport (on_wake), stamped
+// with the wall-clock instant they are handled. Taking them here, before a physics step,
+// would stamp them with that step's simulated time, up to the twin's lateness before the
+// instant they came: SYNC intervals would look stretched to the slaves (missed SYNCs).
+int M3Network::poll_transport(SimTime) { return 0; }
+
+void M3Network::on_wake(SimTime t) {
   advance(t);
-  return segment_->poll(t);
+  segment_->poll(std::max(t, linked_to_));
 }
 
 int M3Network::wake_fd() const { return transport_->fd(); }

@@ -63,7 +63,7 @@ class M3Network final : public BusNetwork {
   bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
   int poll_transport(SimTime t) override;
   int wake_fd() const override;
-  void on_wake(SimTime t) override { poll_transport(t); }
+  void on_wake(SimTime t) override;
   void observe_wheels() override {}  // the servos read their shafts every drive period
 
   void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;

@@ -28,10 +28,12 @@ void SlaveLink::transition(Transition tr, SimTime t) {
     case Transition::sync_set:
       if (s_.phase != Phase::p2) return;
       s_.phase = Phase::p3;
-      // The first check comes one and a half communication cycles from now.
-      s_.next_check = t + 3 * s_.cycle_ns * s_.conn.com_tim / 2;
+      // Without a SYNC, the first check comes one and a half transmission cycles from now.
+      s_.next_check = t + 3 * s_.cycle_ns / 2;
       s_.last_sync = s_.last_command = t;
       s_.sync_misses = s_.command_misses = 0;
+      s_.cycle_open = false;
+      s_.syncs = 0;
       s_.wdt_seen = false;
       return;
     case Transition::disconnect:
@@ -74,10 +76,10 @@ void SlaveLink::on_frame(std::span<const std::uint8_t> bytes, SimTime t) {
 void SlaveLink::on_link_service(const FrameView& f, SimTime t) {
   switch (f.type) {
     case FrameType::sync:
-      if (s_.phase == Phase::p3) s_.sync_misses = 0;
       // A slave that was not told the cycle (it came back after the notification) takes it
       // from the interval of two sync frames, as its ASIC locks onto them.
       if (s_.cycle_ns <= 0 && s_.last_sync >= 0 && t > s_.last_sync) s_.cycle_ns = t - s_.last_sync;
+      if (s_.phase == Phase::p3) on_sync(t);
       s_.last_sync = t;
       return;
     case FrameType::detect: {
@@ -111,7 +113,7 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   const CmdCtrl ctrl = unpack_ctrl(h.ctrl);
   if (s_.phase == Phase::p3 && !f.retry()) check_watchdog(h.wdt, t);
   s_.last_command = t;
-  if (s_.phase == Phase::p3) s_.command_misses = 0;
+  if (s_.phase == Phase::p3) s_.command_misses = 0, s_.commanded = true;
   if (ctrl.alm_clr || h.code == static_cast<std::uint8_t>(Command::alm_clr)) s_.comm_alm = CommAlarm::normal;
   const auto rsp = std::span(rsp_).first(f.data.size());
   std::fill(rsp.begin(), rsp.end(), std::uint8_t{0});
@@ -185,15 +187,26 @@ void SlaveLink::check_watchdog(std::uint8_t wdt, SimTime t) {
   s_.wdt_seen = true;
 }
 
+// A SYNC in phase 3: the slave's cycle follows the master's. The SYNC that opens a new
+// communication cycle (every COM_TIM transmission cycles) closes the previous one, which must
+// have brought a command; and the next SYNC is due within one and a half transmission cycles
+// of this one. Anchored on the SYNC, not on a fixed grid, so jitter of up to half a cycle in
+// when frames arrive is no miss.
+void SlaveLink::on_sync(SimTime t) {
+  s_.sync_misses = 0;
+  s_.next_check = t + 3 * s_.cycle_ns / 2;
+  if (s_.syncs++ % s_.conn.com_tim != 0) return;
+  if (s_.cycle_open && !s_.commanded) count_miss(false, t);
+  s_.cycle_open = true;
+  s_.commanded = false;
+}
+
 void SlaveLink::advance(SimTime t) {
   if (s_.phase != Phase::p3 || s_.cycle_ns <= 0) return;
-  const SimTime period = s_.cycle_ns * s_.conn.com_tim;
+  // No SYNC: each transmission cycle without one is a miss (the master stopped or lost it).
   while (t >= s_.next_check && s_.phase == Phase::p3) {
-    const SimTime from = s_.next_check - period;
-    const bool sync_ok = s_.last_sync > from, command_ok = s_.last_command > from;
-    s_.next_check += period;
-    if (!sync_ok) count_miss(true, s_.next_check - period);
-    if (!command_ok && s_.phase == Phase::p3) count_miss(false, s_.next_check - period);
+    s_.next_check += s_.cycle_ns;
+    count_miss(true, s_.next_check - s_.cycle_ns);
   }
 }
 

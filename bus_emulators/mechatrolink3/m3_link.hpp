@@ -97,7 +97,9 @@ class SlaveLink {
   // A frame fully received at t [ns] (bytes as the line delivered them, FCS included).
   // Real-time safe.
   void on_frame(std::span<const std::uint8_t> bytes, SimTime t);
-  // Time passes to t [ns]: in phase 3, a missing sync or command is noticed here. Real-time safe.
+  // Time passes to t [ns]: in phase 3, a missing SYNC is noticed here (1.5 transmission cycles
+  // after the last one, then every cycle); a missing command when the next communication
+  // cycle's SYNC comes. Real-time safe.
   void advance(SimTime t);
   void power_on(SimTime t);
   void power_off(SimTime t);
@@ -120,6 +122,7 @@ class SlaveLink {
   void run_subcommand(Command main, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp);
   CmdAlarm connect(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t);
   void check_watchdog(std::uint8_t wdt, SimTime t);
+  void on_sync(SimTime t);
   void raise(CommAlarm a, SimTime t);
   void count_miss(bool sync, SimTime t);
   void reply(FrameType type, std::span<const std::uint8_t> data, std::uint8_t sequence, SimTime t);
@@ -140,6 +143,9 @@ class SlaveLink {
     std::uint8_t last_wdt = 0, own_count = 0;
     bool wdt_seen = false;
     int last_sequence = -1;           // of the command last executed (its response is in rsp_)
+    bool cycle_open = false;          // phase 3: a communication cycle was opened by a SYNC
+    bool commanded = false;           // and a command has come in it
+    std::uint32_t syncs = 0;          // SYNCs since phase 3 (COM_TIM of them per communication cycle)
     std::size_t last_length = 0;
     LinkStats stats;
   } s_;

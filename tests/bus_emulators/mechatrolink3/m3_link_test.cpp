@@ -240,19 +240,46 @@ TEST_F(M3Link, HealthyCyclesKeepPhase3WithoutAlarms) {
   EXPECT_EQ(link.stats().missed_commands + link.stats().missed_syncs, 0u);
 }
 
+// A cycle without a command is noticed when the next SYNC opens the next cycle.
 TEST_F(M3Link, AMissingCommandIsAWarningTwiceInARowAnAlarm) {
   to_phase3();
   for (int k = 0; k < 5; ++k) cycle();
   cycle(true, false);
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::normal) << "not known before the next cycle begins";
+  cycle();
   EXPECT_EQ(link.comm_alarm(), CommAlarm::no_command_warning);
   EXPECT_EQ(link.phase(), Phase::p3);
-  cycle();
   cycle(true, false);
+  cycle();
   EXPECT_EQ(link.phase(), Phase::p3) << "not in a row";
   cycle(true, false);
+  cycle(true, false);
+  cycle();
   EXPECT_EQ(link.comm_alarm(), CommAlarm::no_command);
   EXPECT_EQ(link.phase(), Phase::p2);
   EXPECT_EQ(profile.stops, 1);
+  EXPECT_EQ(link.stats().missed_commands, 4u);
+}
+
+// SYNC frames 0.2 ms early or late, alternately (intervals of 0.6 and 1.4 cycles), with the
+// command late in its cycle, are no miss: the slave's checks follow the master's SYNC, not a
+// grid of its own. A SYNC is missing 1.5 cycles after the last one.
+TEST_F(M3Link, SyncJitterIsNoMissWhileTheIntervalStaysBelowOneAndAHalfCycles) {
+  to_phase3();
+  const SimTime start = now;
+  for (int k = 1; k <= 40; ++k) {
+    const SimTime nominal = start + k * kCycle, jitter = (k % 2 == 0 ? 1 : -1) * 200'000;
+    now = nominal + jitter;
+    link.advance(now);
+    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+    now += 550'000;
+    command(Command::nop);
+    link.advance(now);
+  }
+  EXPECT_EQ(link.stats().missed_syncs + link.stats().missed_commands, 0u);
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::normal);
+  link.advance(now - 550'000 + 3 * kCycle / 2);
+  EXPECT_EQ(link.stats().missed_syncs, 1u) << "1.5 cycles after the last SYNC";
 }
 
 TEST_F(M3Link, AStoppedMasterIsNoSyncAndStopsTheProfile) {
