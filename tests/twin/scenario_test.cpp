@@ -389,6 +389,46 @@ TEST(ScenarioErrors, EthercatSettingsAndFaultsOfTheOtherBus) {
   expect_error(load_error(scenario("bad_ethercat_esi.yaml")), scenario("bad_ethercat_esi.yaml"), 4, "bus.esi");
 }
 
+TEST(ScenarioM3, SettingsAndFaultsAreRead) {
+  const Scenario s = load_scenario(scenario("good_m3.yaml"));
+  const M3Spec& m = s.bus.m3;
+  EXPECT_EQ(s.bus.kind, BusKind::m3);
+  EXPECT_EQ(m.transport, "udp:127.0.0.1:48998");
+  EXPECT_DOUBLE_EQ(m.cycle, 0.0005);
+  EXPECT_EQ(m.retry_slots, 2);
+  EXPECT_EQ(m.data_bytes, 48);
+  EXPECT_EQ(m.mode, "interpolate");
+  EXPECT_EQ(m.topology, "star");
+  EXPECT_DOUBLE_EQ(m.cable_m, 5);
+  EXPECT_DOUBLE_EQ(m.response_us, 3);
+  EXPECT_DOUBLE_EQ(m.margin(false), 40);
+  EXPECT_DOUBLE_EQ(m.drive_period, 0.0005);
+  EXPECT_EQ(m.counts_per_rev, 65536);
+  EXPECT_EQ(m.seed, 9u);
+  EXPECT_DOUBLE_EQ(m.handshake_timeout, 4.0);
+  EXPECT_DOUBLE_EQ(s.duration, 3 + 1.0 + 0.7) << "path, settle and the start-up";
+  ASSERT_EQ(s.faults.size(), 5u);
+  EXPECT_EQ(s.faults[0].wheel, FaultSpec::kMaster);
+  EXPECT_EQ(s.faults[1].kind, FaultSpec::Kind::corruption);
+  EXPECT_EQ(s.faults[1].wheel, 1);
+  EXPECT_DOUBLE_EQ(s.faults[2].extra_ms, 0.005);
+  EXPECT_EQ(s.faults[4].kind, FaultSpec::Kind::link_break);
+  // The defaults, by name: the margin follows the clock (the realtime one holds the jitter).
+  const Scenario by_name = load_scenario(scenario("minimal.yaml"), {{"bus", "m3"}});
+  EXPECT_EQ(by_name.bus.m3.transport, "auto");
+  EXPECT_EQ(by_name.bus.m3.mode, "velctrl");
+  EXPECT_DOUBLE_EQ(by_name.bus.m3.cycle, 0.001);
+  EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(false), 1.0);
+  EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(true), 80.0);
+}
+
+TEST(ScenarioErrors, M3SettingsAndFaultsOfTheOtherBuses) {
+  expect_error(load_error(scenario("bad_m3_drift.yaml")), scenario("bad_m3_drift.yaml"), 7, "faults.0.drift");
+  expect_error(load_error(scenario("bad_m3_data_bytes.yaml")), scenario("bad_m3_data_bytes.yaml"), 5, "bus.data_bytes");
+  expect_error(load_error(scenario("bad_m3_corruption_on_can.yaml")), scenario("bad_m3_corruption_on_can.yaml"), 7,
+               "faults.0.corruption");
+}
+
 // The outputs section: video size, rate and inset, DDS domain/interface/rate, report; a
 // plain `video: false` form; the defaults when absent (video and report on, DDS off).
 TEST(ScenarioOutputs, EveryKeyIsReadAndDefaultsHold) {
