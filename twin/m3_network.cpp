@@ -52,7 +52,7 @@ void M3Network::open_transport(const Scenario& s) {
   // auto: a veth pair of its own (as root), else UDP on loopback; in lockstep on a free port
   // so that concurrent runs never share a line (realtime keeps the documented port).
   if (spec == "auto")
-    spec = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : "udp:127.0.0.1:34990");
+    spec = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : "udp:127.0.0.1:34997");
   if (spec == "veth") {
     veth_ = std::make_unique<ethercat::VethPair>();
     transport_spec_ = "raw:" + veth_->b();

@@ -419,7 +419,7 @@ int main(int argc, char** argv) {
   if (!o.script.empty()) o.bus = "ethercat";  // Botnana scripts drive the EtherCAT master
   setup_logging(o.log_level);
   if (o.bus == "ethercat" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34980";
-  if (o.bus == "m3" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34990";
+  if (o.bus == "m3" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34997";
   if (const std::string p = usage_problem(o); !p.empty()) {
     spdlog::error("{}", p);
     return kExitUsage;

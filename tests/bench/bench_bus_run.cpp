@@ -1,5 +1,6 @@
-// Benchmarks whole EtherCAT runs through the real programs: `omnitwin run` (built beside this
-// benchmark) with `--bus ethercat`, which starts `omni-master --bus ethercat` as its own process.
+// Benchmarks whole bus runs through the real programs: `omnitwin run` (built beside this
+// benchmark) with `--bus ethercat` or `--bus m3`, which starts `omni-master --bus …` as its own
+// process.
 // Every figure is read from the run's metrics.json; the baseline is the same scenario with
 // `--bus direct`, run in the same benchmark (DESIGN §11).
 //
@@ -26,6 +27,18 @@
 //                    recoveries, … whatever master-stats.json holds; printed whole on stderr).
 //   BM_DirectRealtime/P      the same realtime run with --bus direct: the baseline of the
 //                    deadline figures (the twin's clock without a bus).
+//   BM_M3Lockstep/T          the thesis line (22.5 s simulated) in exchange-level lockstep over
+//                    MECHATROLINK-III: a 1 ms transmission cycle (one master tick each), four
+//                    servo slaves, every frame met inside the tick (Sent/Horizon); transport T
+//                    (0: veth, needs root; 1: UDP on 127.0.0.1, a free port). Baseline: the same
+//                    scenario with --bus direct at a 1 ms control period (one master tick per
+//                    ms too), in the same iteration. Counters as BM_EthercatLockstep (rtf,
+//                    direct_rtf, slowdown, process_rtf, us_per_tick) and the master's retries,
+//                    missed and late responses per run.
+//   BM_M3Realtime            `--bus m3 --clock realtime` for 60 s (--set duration=60), the
+//                    default transport: the twin's tick figures (realtime.*), the master's
+//                    statistics (cycles, exchanges, retries, missed, late …) and the slaves'
+//                    communication alarms, watchdog errors and missed SYNCs summed over the four.
 // The exact command of every run is printed on stderr. A run that cannot start (exit 2 or 3)
 // skips with the tail of its log.
 #include <benchmark/benchmark.h>
@@ -71,7 +84,7 @@ std::string quoted(const std::vector<std::string>& args) {
 // Runs `omnitwin run <thesis_line> <extra…> --out DIR --no-video --no-report --no-progress`,
 // stdout and stderr into DIR.log; reads DIR/metrics.json.
 RunOutcome run_omnitwin(const std::string& name, const std::vector<std::string>& extra) {
-  const fs::path root = fs::temp_directory_path() / "omnitwin-bench-ethercat";
+  const fs::path root = fs::temp_directory_path() / "omnitwin-bench-bus";
   const fs::path out = root / name;
   fs::remove_all(out);
   fs::create_directories(root);
@@ -171,8 +184,12 @@ void BM_EthercatLockstep(benchmark::State& state) {
 }
 
 void realtime(benchmark::State& state, const char* bus) {
+  // The M-III master's tick is its transmission cycle (bus.cycle, 1 ms by default); the others'
+  // the control period.
+  const bool m3 = std::string(bus) == "m3";
   const std::vector<std::string> args{"--bus", bus, "--clock", "realtime", "--set",
-                                      "controller.period=" + period_s(state.range(0)), "--set", "duration=60"};
+                                      m3 ? "bus.cycle=0.001" : "controller.period=" + period_s(state.range(0)), "--set",
+                                      "duration=60"};
   for (auto _ : state) {
     const RunOutcome r = run_omnitwin(std::string("realtime-") + bus, args);
     if (!usable(state, r)) break;
@@ -188,11 +205,57 @@ void realtime(benchmark::State& state, const char* bus) {
         if (v.is_number()) state.counters["master." + k] = v.get<double>();
     }
     if (m.contains("bus")) std::cerr << "    bus:      " << m["bus"].dump() << "\n";
+    if (m.contains("slaves") && m["slaves"].is_array()) {
+      for (const char* k : {"comm_alarms", "wdt_errors", "missed_syncs", "missed_commands"}) {
+        double sum = 0;
+        for (const auto& sl : m["slaves"]) sum += sl.value(k, 0.0);
+        if (m["bus"].value("name", "") == "m3") state.counters[std::string("slaves.") + k] = sum;
+      }
+    }
     state.counters["passed"] = r.exit_code == 0 ? 1 : 0;
   }
 }
 
+void BM_M3Lockstep(benchmark::State& state) {
+  const bool udp = state.range(0) == 1;
+  const std::vector<std::string> m3{"--bus", "m3", "--set", udp ? "bus.transport=udp:127.0.0.1:0" : "bus.transport=veth"};
+  const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.001"};
+  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, retries = 0, missed = 0, late = 0, cycles = 0;
+  double passed = 1;
+  for (auto _ : state) {
+    const RunOutcome e = run_omnitwin("m3", m3);
+    if (!usable(state, e)) break;
+    const RunOutcome d = run_omnitwin("direct", direct);
+    if (!usable(state, d)) break;
+    sim += e.metrics.at("sim_time_s").get<double>();
+    wall += e.metrics.at("wall_time_s").get<double>();
+    process_wall += e.wall_s;
+    dsim += d.metrics.at("sim_time_s").get<double>();
+    dwall += d.metrics.at("wall_time_s").get<double>();
+    retries += number(e.metrics, "master", "retries");
+    missed += number(e.metrics, "master", "missed");
+    late += number(e.metrics, "master", "late");
+    cycles += number(e.metrics, "master", "cycles");
+    passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
+    std::cerr << "    m3:     rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code << "\n"
+              << "    direct: rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
+  }
+  if (wall <= 0 || dwall <= 0) return;
+  const auto runs = static_cast<double>(state.iterations());
+  state.counters["rtf"] = sim / wall;
+  state.counters["direct_rtf"] = dsim / dwall;
+  state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
+  state.counters["process_rtf"] = sim / process_wall;
+  state.counters["us_per_tick"] = 1e6 * wall / (sim / 0.001);
+  state.counters["retries"] = retries / runs;
+  state.counters["missed"] = missed / runs;
+  state.counters["late"] = late / runs;
+  state.counters["cycles"] = cycles / runs;
+  state.counters["passed"] = passed;
+}
+
 void BM_EthercatRealtime(benchmark::State& state) { realtime(state, "ethercat"); }
+void BM_M3Realtime(benchmark::State& state) { realtime(state, "m3"); }
 void BM_DirectRealtime(benchmark::State& state) { realtime(state, "direct"); }
 
 }  // namespace
@@ -203,6 +266,8 @@ BENCHMARK(BM_EthercatLockstep)
     ->Unit(benchmark::kSecond)
     ->Iterations(3)
     ->UseRealTime();
+BENCHMARK(BM_M3Lockstep)->Arg(0)->Arg(1)->ArgName("udp")->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
+BENCHMARK(BM_M3Realtime)->Arg(1)->ArgName("cycle_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_EthercatRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_DirectRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK_MAIN();
