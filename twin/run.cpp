@@ -831,6 +831,8 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const ethercat::TransportError& e) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+    } catch (const m3::TransportError& e) {
+      throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const std::exception& e) {
       throw RunSetupError(one_line(e.what()));
     }

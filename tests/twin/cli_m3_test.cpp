@@ -6,8 +6,8 @@
 // figs. 9-11 and the servo start-up of fig. 8; the capture decodes with the project's
 // Wireshark dissector with no malformed frame and exactly the frames the line saw; position
 // mode (INTERPOLATE) and a relative run directory work; a cycle the line cannot fit is
-// refused naming the shortest one that fits; and an external master on its own wall clock
-// drives the twin's servos.
+// refused naming the shortest one that fits; a transport that cannot be opened is bad input;
+// and an external master on its own wall clock drives the twin's servos.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -120,6 +120,15 @@ TEST_F(CliM3, ACycleTheLineCannotFitIsRefusedNamingTheShortestThatFits) {
   EXPECT_EQ(m.at("master").at("stop_reason"), "startup_timeout") << "what it reported on the sim clock";
   EXPECT_EQ(m.at("master").at("driver_state"), "failed");
   EXPECT_EQ(m.at("master").at("exit"), "exit 3");
+}
+
+// A transport that cannot be opened is bad input named by its key; nothing is written.
+TEST_F(CliM3, AnUnopenableTransportIsRefused) {
+  const fs::path out = dir_ / "never";
+  const Finished f = run_short(out, {"bus.transport=udp:no.such.host.invalid:1"});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "bus.transport")) << f.err;
+  EXPECT_FALSE(fs::exists(out));
 }
 
 // `omnitwin twin --bus m3` and `omni-master --bus m3` started by hand, both on the wall clock:

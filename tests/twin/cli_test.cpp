@@ -112,11 +112,11 @@ TEST_F(CliBadInput, BadSetNamesSet) {
 // scenario, before anything is written.
 TEST_F(CliBadInput, UnbuiltBusIsRefused) {
   const std::string file = test_scenario("run_short_line.yaml");
-  const Finished f = run({"run", file, "--bus", "m3", "--out", (dir_ / "never").string()});
+  const Finished f = run({"run", file, "--bus", "canopen", "--out", (dir_ / "never").string()});
   EXPECT_EQ(f.code, 2);
   EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
   EXPECT_TRUE(contains(f.err, file)) << f.err;
-  EXPECT_TRUE(contains(f.err, "bus 'm3' is not available")) << f.err;
+  EXPECT_TRUE(contains(f.err, "bus 'canopen' is not available")) << f.err;
   EXPECT_FALSE(fs::exists(dir_ / "never"));
 }
 

@@ -457,11 +457,11 @@ TEST_F(RunShort, RealtimePacesWithoutChangingResults) {
 
 // A bus that is not built yet is refused before anything runs or is written.
 TEST_F(RunShort, UnbuiltBusRefusedBeforeWriting) {
-  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "m3"}});
+  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "canopen"}});
   RunOptions o;
-  o.out_dir = (dir_ / "m3").string();
+  o.out_dir = (dir_ / "canopen").string();
   EXPECT_THROW(run_scenario(s, o), RunSetupError);
-  EXPECT_FALSE(fs::exists(dir_ / "m3"));
+  EXPECT_FALSE(fs::exists(dir_ / "canopen"));
 }
 
 // The twin alone (for an external master) needs bus can and the realtime clock.
