@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/ethercat/transport/ec_veth.hpp"
 
 namespace omnitwin::twin {
@@ -18,7 +19,8 @@ constexpr double kTwoPi = 2 * std::numbers::pi;
 m3::SegmentConfig segment_config(const Scenario& s) {
   const M3Spec& m = s.bus.m3;
   m3::SegmentConfig c;
-  c.topology = m.topology == "star" ? m3::Topology::star_of(4, m.cable_m) : m3::Topology::cascade_of(4, m.cable_m);
+  c.topology = m.topology == "star" ? m3::Topology::star_of(m.stations, m.cable_m)
+                                    : m3::Topology::cascade_of(m.stations, m.cable_m);
   c.response_ns = std::llround(m.response_us * 1e3);
   c.servo.drive.counts_per_rev = m.counts_per_rev;
   c.servo.drive.gear_ratio = 1.0;
@@ -36,11 +38,17 @@ M3Network::M3Network(const Scenario& s, Scheduler& sched, Hooks hooks)
   segment_ = std::make_unique<m3::M3Segment>(segment_config(s), *transport_);
   segment_->line().set_fault_hook(
       [this](bool from_master, int k, std::span<const std::uint8_t> f) { return fate(from_master, k, f); });
-  // Each servo's drive period, the four a little apart (they follow the master's SYNC for
+  const int n = spec_.stations;
+  powered_.assign(static_cast<std::size_t>(n), true);
+  loss_.assign(static_cast<std::size_t>(n), 0.0);
+  corrupt_.assign(static_cast<std::size_t>(n), 0.0);
+  last_.assign(static_cast<std::size_t>(n), {});
+  shafts_.resize(static_cast<std::size_t>(n - 4));  // the servos beyond the wheels turn no wheel
+  // Each servo's drive period, a little apart (they follow the master's SYNC for
   // communication; their control loops run on their own).
   const SimTime period = std::llround(spec_.drive_period * 1e9);
-  for (int i = 0; i < 4; ++i)
-    sched_.add_periodic(fmt::format("m3-servo{}", i + 1), Phase::device, period * (i + 1) / 8, period,
+  for (int i = 0; i < n; ++i)
+    sched_.add_periodic(fmt::format("m3-servo{}", i + 1), Phase::device, period * (i % 8 + 1) / 8, period,
                         [this, i](SimTime t) { on_drive_timer(i, t); });
 }
 
@@ -80,7 +88,7 @@ std::string M3Network::pcap_error() const {
 
 // The line's fault hook: a frame to (from_master) or from slave k is lost, corrupted or passes.
 m3::Fate M3Network::fate(bool from_master, int k, std::span<const std::uint8_t>) {
-  if (k < 0 || k > 3) return m3::Fate::deliver;
+  if (k < 0 || k >= spec_.stations) return m3::Fate::deliver;
   const auto i = static_cast<std::size_t>(k);
   const double loss = from_master ? std::max(loss_[i], master_loss_) : loss_[i];
   if (loss > 0 && std::uniform_real_distribution<double>(0, 1)(rng_) < loss) {
@@ -132,11 +140,17 @@ int M3Network::wake_fd() const { return transport_->fd(); }
 
 // ---- servos ----------------------------------------------------------------------------
 
-// One drive period of servo k against its wheel: feedback from the shaft, setpoint back.
+// One drive period of servo k against its wheel: feedback from the shaft, setpoint back. A
+// servo beyond the wheels drives its own unloaded shaft.
 void M3Network::on_drive_timer(int axis0, SimTime t) {
   advance(t);
   const auto k = static_cast<std::size_t>(axis0);
   if (!powered_[k]) return;
+  if (axis0 >= 4) {
+    drive::AxisModel& shaft = shafts_[k - 4];
+    shaft.step(segment_->step_drive(axis0, t, shaft.feedback()), spec_.drive_period);
+    return watch_states(t);
+  }
   drive::Feedback fb;
   fb.position_rad = hooks_.wheel_angle(axis0);
   fb.velocity_rad_s = hooks_.wheel_speed(axis0);
@@ -151,18 +165,18 @@ void M3Network::on_drive_timer(int axis0, SimTime t) {
 // Events for phase, alarm and servo changes, and the instant all four servos first were on.
 void M3Network::watch_states(SimTime t) {
   bool all_on = true;
-  for (int i = 0; i < 4; ++i) {
+  for (int i = 0; i < spec_.stations; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const m3::SlaveLink& l = segment_->link(i);
-    const auto phase = static_cast<std::uint8_t>(l.phase()), comm = static_cast<std::uint8_t>(l.comm_alarm()),
-               cmd = static_cast<std::uint8_t>(l.cmd_alarm());
-    const auto servo = static_cast<std::uint8_t>(segment_->servo(i).drive().state());
-    if (phase != last_phase_[k] || comm != last_comm_[k] || cmd != last_cmd_[k] || servo != last_servo_[k]) {
+    const StationState now{static_cast<std::uint8_t>(l.phase()), static_cast<std::uint8_t>(l.comm_alarm()),
+                           static_cast<std::uint8_t>(l.cmd_alarm()),
+                           static_cast<std::uint8_t>(segment_->servo(i).drive().state())};
+    if (now != last_[k]) {
       if (hooks_.log)
         hooks_.log(t, "bus", fmt::format("slave {} ({:02X}h) phase {}, COMM_ALM {}, CMD_ALM {}, servo {}", i + 1,
-                                         l.address(), phase, m3::to_string(l.comm_alarm()), m3::to_string(l.cmd_alarm()),
+                                         l.address(), now.phase, m3::to_string(l.comm_alarm()), m3::to_string(l.cmd_alarm()),
                                          drive::to_string(segment_->servo(i).drive().state())));
-      last_phase_[k] = phase, last_comm_[k] = comm, last_cmd_[k] = cmd, last_servo_[k] = servo;
+      last_[k] = now;
     }
     all_on = all_on && drive_state(i) == DriveStateCode::running;
   }
@@ -176,7 +190,7 @@ void M3Network::watch_states(SimTime t) {
 void M3Network::update_reachability() {
   const bool cascade = spec_.topology != "star";
   bool path = true;
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < spec_.stations; ++k) {
     const bool cut = cut_after_ >= 0 && (cascade ? k >= cut_after_ : k == cut_after_);
     const bool on = powered_[static_cast<std::size_t>(k)] && !cut && path;
     segment_->line().set_reachable(k, on);
@@ -206,18 +220,18 @@ void M3Network::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
   switch (f.kind) {
     case FaultSpec::Kind::frame_loss:
       if (master) master_loss_ = begin ? f.rate : 0.0;
-      for (int i = 0; i < 4; ++i)
+      for (int i = 0; i < spec_.stations; ++i)
         if (all || (!master && i == k)) loss_[static_cast<std::size_t>(i)] = begin ? f.rate : 0.0;
       what = fmt::format("frame_loss {} rate {}", who, f.rate);
       break;
     case FaultSpec::Kind::corruption:
-      for (int i = 0; i < 4; ++i)
+      for (int i = 0; i < spec_.stations; ++i)
         if (all || master || i == k) corrupt_[static_cast<std::size_t>(i)] = begin ? f.rate : 0.0;
       what = fmt::format("corruption {} rate {}", who, f.rate);
       break;
     case FaultSpec::Kind::delay: {
       const SimTime extra = begin ? std::llround(f.extra_ms * 1e6 + std::uniform_real_distribution<double>(0, f.jitter_ms * 1e6)(rng_)) : 0;
-      for (int i = 0; i < 4; ++i)
+      for (int i = 0; i < spec_.stations; ++i)
         if (master || i == k) segment_->line().set_extra_delay(i, extra);
       what = fmt::format("delay of {}'s responses {} ms", master ? std::string("every slave") : who, f.extra_ms);
       break;
@@ -299,7 +313,7 @@ nlohmann::json M3Network::bus_metrics(SimTime now) const {
 
 nlohmann::json M3Network::slave_metrics() const {
   nlohmann::json out = nlohmann::json::array();
-  for (int i = 0; i < 4; ++i) {
+  for (int i = 0; i < spec_.stations; ++i) {
     const m3::SlaveLink& l = segment_->link(i);
     const m3::LinkStats& st = l.stats();
     const drive::Cia402Drive& d = segment_->servo(i).drive();

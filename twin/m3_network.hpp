@@ -1,6 +1,7 @@
 // twin layer — the twin's side of a MECHATROLINK-III line (bus `m3`): four standard servo
 // slaves (profile 10h), one per wheel, on one simulated line (cascade or star) between a real
-// transport and the physics.
+// transport and the physics, and optionally more servo stations (bus.stations, up to 62)
+// whose motors turn unloaded shafts of their own.
 //
 // The line and the stations are the segment (bus_emulators/mechatrolink3/transport/
 // m3_segment): each slave is a SlaveLink (phases, watchdog, alarms) over a ServoProfile on the
@@ -31,6 +32,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 #include "twin/bus_network.hpp"
 
@@ -98,11 +100,16 @@ class M3Network final : public BusNetwork {
   std::unique_ptr<m3::M3Segment> segment_;
   std::string transport_spec_, master_iface_;
   SimTime linked_to_ = 0;                  // the slaves' link timers have run to here
-  std::array<bool, 4> powered_{true, true, true, true};
+  struct StationState {                    // what the event log reports changes of
+    std::uint8_t phase = 0, comm = 0, cmd = 0, servo = 0;
+    bool operator==(const StationState&) const = default;
+  };
+  std::vector<bool> powered_;              // per station
   int cut_after_ = -1;                     // link_break: stations from this index on are cut off
-  std::array<std::uint8_t, 4> last_phase_{}, last_comm_{}, last_cmd_{}, last_servo_{};
-  // Frame faults: per target (slave 0..3), the loss and corruption probabilities.
-  std::array<double, 4> loss_{}, corrupt_{};
+  std::vector<StationState> last_;
+  std::vector<drive::AxisModel> shafts_;   // the unloaded shafts of the stations beyond the wheels
+  // Frame faults: per target station, the loss and corruption probabilities.
+  std::vector<double> loss_, corrupt_;
   double master_loss_ = 0;                 // frames from the master, to every slave
   std::mt19937_64 rng_;
   std::uint64_t lost_ = 0, corrupted_ = 0;

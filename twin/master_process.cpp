@@ -192,6 +192,7 @@ std::string m3_master_config_yaml(const Scenario& s, const std::string& platform
   std::string out = fmt::format("# omni-master --bus m3 configuration written by omnitwin for scenario {}\n", s.name);
   out += fmt::format("cycle: {}\nretry_slots: {}\ndata_bytes: {}\n", m.cycle, m.retry_slots, m.data_bytes);
   out += "wheels: [0x03, 0x04, 0x05, 0x06]\n";
+  if (m.stations > 4) out += fmt::format("extra_axes: {}\n", m.stations - 4);
   const bool realtime = s.clock == ClockMode::realtime;
   out += fmt::format("response_us: {}\nmargin_us: {}\n", m.response_us, m.margin(realtime));
   // Detection and delay measurement wait per station; across processes in realtime the

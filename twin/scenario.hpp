@@ -138,6 +138,9 @@ struct M3Spec {
   int data_bytes = 32;                      // 32 or 48 (subcommands)
   std::string mode = "velctrl";             // velctrl | interpolate: how the wheels are commanded
   std::string topology = "cascade";         // cascade | star
+  // Stations on the line, 4..62: the four wheel servos (03h-06h), then servos whose motors
+  // turn no wheel (unloaded shafts), started by the master and held at zero speed.
+  int stations = 4;
   double cable_m = 1.0;                     // every cable's length [m]
   double response_us = 2.0;                 // each slave's response time [µs]
   // Added to every T_RSP by the master [µs]; < 0: 1 µs in lockstep, 80 µs in realtime. The

@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -54,12 +55,18 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
   M3ProgramConfig c;
   c.file = file;
   const Members top(file, root, "",
-                    {"cycle", "retry_slots", "wheels", "data_bytes", "response_us", "margin_us", "software_us",
+                    {"cycle", "retry_slots", "wheels", "extra_axes", "data_bytes", "response_us", "margin_us", "software_us",
                      "detect_timeout_ms", "startup_timeout", "lost_cycles", "wheel_command", "wheel_counts_per_rev",
                      "params", "platform"});
   if (const Val* n = top.get("cycle")) c.cycle = bounded(file, *n, "cycle", 31.25e-6, 0.064);
   if (const Val* n = top.get("retry_slots")) c.retry_slots = static_cast<int>(bounded_int(file, *n, "retry_slots", 0, 4));
   if (const Val* n = top.get("wheels")) read_wheels(file, *n, c);
+  if (const Val* n = top.get("extra_axes")) {
+    c.extra_axes = static_cast<int>(bounded_int(file, *n, "extra_axes", 0, 58));
+    const int highest = *std::max_element(c.wheels.begin(), c.wheels.end());
+    if (highest + c.extra_axes > kFirstSlave + 61)
+      fail(file, *n, "extra_axes", fmt::format("addresses after {:02X}h run past 40h (62 stations at most)", highest));
+  }
   if (const Val* n = top.get("data_bytes")) {
     c.data_bytes = static_cast<std::size_t>(integer(file, *n, "data_bytes"));
     if (c.data_bytes != 32 && c.data_bytes != 48) fail(file, *n, "data_bytes", "the servo profile's lengths are 32 and 48");
@@ -85,9 +92,16 @@ M3ProgramConfig load_m3_config(const std::string& path) {
   return parse_m3_config(read_file(path), path, std::filesystem::path(path).parent_path().string());
 }
 
+std::vector<std::uint8_t> station_addresses(const M3ProgramConfig& c) {
+  std::vector<std::uint8_t> out(c.wheels.begin(), c.wheels.end());
+  const int highest = *std::max_element(c.wheels.begin(), c.wheels.end());
+  for (int i = 1; i <= c.extra_axes; ++i) out.push_back(static_cast<std::uint8_t>(highest + i));
+  return out;
+}
+
 MasterConfig make_master_config(const M3ProgramConfig& c) {
   MasterConfig m;
-  for (std::uint8_t a : c.wheels)
+  for (std::uint8_t a : station_addresses(c))
     m.slaves.push_back(MasterSlave{.address = a, .data_bytes = c.data_bytes, .response_ns = std::llround(c.response_us * 1e3)});
   m.cycle_ns = std::llround(c.cycle * 1e9);
   m.retry_slots = c.retry_slots;
@@ -100,6 +114,7 @@ MasterConfig make_master_config(const M3ProgramConfig& c) {
 std::string dump_m3_config(const M3ProgramConfig& c) {
   std::string out = fmt::format("cycle: {}\nretry_slots: {}\nwheels: [0x{:02X}, 0x{:02X}, 0x{:02X}, 0x{:02X}]\n", c.cycle,
                                 c.retry_slots, c.wheels[0], c.wheels[1], c.wheels[2], c.wheels[3]);
+  if (c.extra_axes > 0) out += fmt::format("extra_axes: {}\n", c.extra_axes);
   out += fmt::format("data_bytes: {}\nresponse_us: {}\nmargin_us: {}\nsoftware_us: {}\n", c.data_bytes, c.response_us,
                      c.margin_us, c.software_us);
   out += fmt::format("detect_timeout_ms: {}\nstartup_timeout: {}\nlost_cycles: {}\n", c.detect_timeout_ms,

@@ -30,6 +30,9 @@ struct M3ProgramConfig {
   double cycle = 0.001;                 // transmission cycle [s]
   int retry_slots = 1;                  // 0..4
   std::array<std::uint8_t, 4> wheels{0x03, 0x04, 0x05, 0x06};  // station address of wheel 1..4
+  // Servo axes beside the wheels, at the addresses after the highest wheel's; started as the
+  // wheels are and held in VELCTRL at zero speed (a full line: up to 62 stations in all).
+  int extra_axes = 0;
   std::size_t data_bytes = 32;          // 32 or 48 (subcommands)
   double response_us = 2.0;             // each slave's response time allowed for [µs]
   double margin_us = 1.0;               // added to every T_RSP [µs]
@@ -46,6 +49,8 @@ struct M3ProgramConfig {
 
 M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, const std::string& base_dir);
 M3ProgramConfig load_m3_config(const std::string& path);
+// Every station's address: the four wheels, then the extra axes.
+std::vector<std::uint8_t> station_addresses(const M3ProgramConfig& c);
 // The C1 master core's configuration (cycle and T_RSP inputs in ns).
 MasterConfig make_master_config(const M3ProgramConfig& c);
 // The configuration as YAML (what omni-master --print-config shows).

@@ -98,6 +98,7 @@ class C1Master {
 
   DriverState state() const { return state_; }
   const std::string& why() const { return why_; }
+  std::uint8_t address(int k) const { return cfg_.slaves[static_cast<std::size_t>(k)].address; }
   SimTime tr_dly_ns(int k) const { return slave_[static_cast<std::size_t>(k)].tr_dly; }
   SimTime t_rsp_ns(int k) const { return slave_[static_cast<std::size_t>(k)].t_rsp; }
   SimTime int_offset_ns() const { return int_offset_; }

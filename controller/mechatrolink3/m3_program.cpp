@@ -53,9 +53,11 @@ class Runner {
     ac.position_mode = pc.command == WheelCommand::interpolate;
     ac.com_tim = 1;
     ac.params = pc.params;
-    for (int i = 0; i < 4; ++i)
-      axes_.emplace_back(fmt::format("axis {} ({:02X}h)", i + 1, pc.wheels[static_cast<std::size_t>(i)]), ac,
+    const std::vector<std::uint8_t> stations = station_addresses(pc);
+    for (std::size_t i = 0; i < stations.size(); ++i)
+      axes_.emplace_back(fmt::format("axis {} ({:02X}h)", i + 1, stations[i]), ac,
                          [](SimTime t, const std::string& s) { spdlog::info("{} {}", stamp(t), s); });
+    misses_.assign(stations.size(), 0);
     master_ = std::make_unique<C1Master>(
         make_master_config(pc), std::move(emit), [this](std::uint64_t n, SimTime t) { on_interrupt(n, t); },
         [](SimTime t, const std::string& s) { spdlog::info("{} driver: {}", stamp(t), s); });
@@ -123,7 +125,7 @@ class Runner {
       sum.exchanges += c.exchanges, sum.retries += c.retries, sum.retry_recovered += c.retry_recovered;
       sum.missed += c.missed, sum.late += c.late, sum.bad += c.bad;
       recoveries += a.recoveries();
-      slaves.push_back({{"address", pc_.wheels[static_cast<std::size_t>(k)]}, {"tr_dly_ns", m.tr_dly_ns(k)},
+      slaves.push_back({{"address", m.address(k)}, {"tr_dly_ns", m.tr_dly_ns(k)},
                         {"t_rsp_ns", m.t_rsp_ns(k)}, {"exchanges", c.exchanges}, {"retries", c.retries},
                         {"retry_recovered", c.retry_recovered}, {"missed", c.missed}, {"late", c.late},
                         {"bad", c.bad}, {"axis_step", to_string(a.step())}, {"recoveries", a.recoveries()},
@@ -141,7 +143,7 @@ class Runner {
  private:
   // At INT_OFFSET of every cycle: the axes' step machines, then the platform loop.
   void on_interrupt(std::uint64_t, SimTime t) {
-    for (int k = 0; k < 4; ++k) {
+    for (int k = 0; k < static_cast<int>(axes_.size()); ++k) {
       auto& a = axes_[static_cast<std::size_t>(k)];
       const bool fresh = master_->fresh(k);
       misses_[static_cast<std::size_t>(k)] = fresh ? 0 : misses_[static_cast<std::size_t>(k)] + 1;
@@ -166,7 +168,7 @@ class Runner {
     for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = axis(i).position();
     return c;
   }
-  // Which axis is lost (no fresh response for lost_cycles, or out of operation), or -1.
+  // Which wheel axis is lost (no fresh response for lost_cycles, or out of operation), or -1.
   int lost_axis() const {
     for (int k = 0; k < 4; ++k)
       if (misses_[static_cast<std::size_t>(k)] >= pc_.lost_cycles || axis(k).step() != AxisStep::running) return k;
@@ -181,8 +183,10 @@ class Runner {
     spdlog::error("{} platform loop stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero",
                   stamp(t), k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
   }
+  // The path starts once every servo on the line is on (the extra axes too: the line is
+  // commissioned as a whole).
   bool begin(SimTime t) {
-    for (int k = 0; k < 4; ++k)
+    for (int k = 0; k < static_cast<int>(axes_.size()); ++k)
       if (axis(k).step() != AxisStep::running) {
         if (!failure_ && static_cast<double>(t - start_ns_) * 1e-9 > pc_.startup_timeout) {
           failure_ = fmt::format("axis {} not running {} s after the start (step {}{})", k + 1, pc_.startup_timeout,
@@ -197,7 +201,7 @@ class Runner {
     origin_ = t;
     started_ = true;
     n_ = 0;
-    spdlog::info("{} all four servos on: platform loop running", stamp(t));
+    spdlog::info("{} all {} servos on: platform loop running", stamp(t), axes_.size());
     return true;
   }
   void platform(SimTime t) {
@@ -226,7 +230,7 @@ class Runner {
   std::optional<PlatformLoop> loop_;
   controller::PlatformLoopOutput out_;
   std::int64_t every_ = 1, n_ = 0;
-  std::array<int, 4> misses_{};
+  std::vector<int> misses_;  // per axis: cycles since its last fresh response
   std::array<double, 4> ref_per_s_{}, target_{};
   bool started_ = false, finished_ = false, halted_ = false;
   int lost_axis_ = -1;

@@ -27,16 +27,18 @@
 //                    recoveries, … whatever master-stats.json holds; printed whole on stderr).
 //   BM_DirectRealtime/P      the same realtime run with --bus direct: the baseline of the
 //                    deadline figures (the twin's clock without a bus).
-//   BM_M3Lockstep/T          the thesis line (22.5 s simulated) in exchange-level lockstep over
-//                    MECHATROLINK-III: a 1 ms transmission cycle (one master tick each), four
-//                    servo slaves, every frame met inside the tick (Sent/Horizon); transport T
-//                    (0: veth, needs root; 1: UDP on 127.0.0.1, a free port). Baseline: the same
+//   BM_M3Lockstep/T/N        the thesis line (22.5 s simulated) in exchange-level lockstep over
+//                    MECHATROLINK-III: N servo stations (4: the wheels, a 1 ms transmission
+//                    cycle; 62: a full line, 3 ms, the shortest the wire model fits being
+//                    2.82 ms), one master tick per cycle, every frame met inside the tick
+//                    (Sent/Horizon); transport T (0: veth, needs root; 1: UDP on 127.0.0.1). Baseline: the same
 //                    scenario with --bus direct at a 1 ms control period (one master tick per
 //                    ms too), in the same iteration. Counters as BM_EthercatLockstep (rtf,
 //                    direct_rtf, slowdown, process_rtf, us_per_tick) and the master's retries,
 //                    missed and late responses per run.
-//   BM_M3Realtime            `--bus m3 --clock realtime` for 60 s (--set duration=60), the
-//                    default transport: the twin's tick figures (realtime.*), the master's
+//   BM_M3Realtime/N          `--bus m3 --clock realtime` for 60 s (--set duration=60), N stations
+//                    (4 at a 1 ms cycle; 62 at 10 ms: across processes the measured round
+//                    trips make 9.3 ms the shortest that fits), the default transport: the twin's tick figures (realtime.*), the master's
 //                    statistics (cycles, exchanges, retries, missed, late …) and the slaves'
 //                    communication alarms, watchdog errors and missed SYNCs summed over the four.
 // The exact command of every run is printed on stderr. A run that cannot start (exit 2 or 3)
@@ -183,13 +185,20 @@ void BM_EthercatLockstep(benchmark::State& state) {
   state.counters["passed"] = passed;
 }
 
+// The cycle a line of N stations gets: 1 ms for the four wheels; 62 stations need 2.82 ms in
+// lockstep (the wire model) and 9.3 ms across processes (the measured round trips).
+std::string m3_cycle(std::int64_t stations, bool realtime) {
+  return stations <= 4 ? "bus.cycle=0.001" : realtime ? "bus.cycle=0.010" : "bus.cycle=0.003";
+}
+
 void realtime(benchmark::State& state, const char* bus) {
-  // The M-III master's tick is its transmission cycle (bus.cycle, 1 ms by default); the others'
-  // the control period.
+  // The M-III master's tick is its transmission cycle (bus.cycle); the others' the control
+  // period. For M-III the argument is the number of stations.
   const bool m3 = std::string(bus) == "m3";
-  const std::vector<std::string> args{"--bus", bus, "--clock", "realtime", "--set",
-                                      m3 ? "bus.cycle=0.001" : "controller.period=" + period_s(state.range(0)), "--set",
-                                      "duration=60"};
+  std::vector<std::string> args{"--bus", bus, "--clock", "realtime", "--set",
+                                m3 ? m3_cycle(state.range(0), true) : "controller.period=" + period_s(state.range(0)),
+                                "--set", "duration=60"};
+  if (m3) args.insert(args.end(), {"--set", "bus.stations=" + std::to_string(state.range(0))});
   for (auto _ : state) {
     const RunOutcome r = run_omnitwin(std::string("realtime-") + bus, args);
     if (!usable(state, r)) break;
@@ -218,7 +227,9 @@ void realtime(benchmark::State& state, const char* bus) {
 
 void BM_M3Lockstep(benchmark::State& state) {
   const bool udp = state.range(0) == 1;
-  const std::vector<std::string> m3{"--bus", "m3", "--set", udp ? "bus.transport=udp:127.0.0.1:0" : "bus.transport=veth"};
+  const std::int64_t stations = state.range(1);
+  const std::vector<std::string> m3{"--bus", "m3", "--set", udp ? "bus.transport=udp:127.0.0.1:0" : "bus.transport=veth",
+                                    "--set", "bus.stations=" + std::to_string(stations), "--set", m3_cycle(stations, false)};
   const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.001"};
   double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, retries = 0, missed = 0, late = 0, cycles = 0;
   double passed = 1;
@@ -246,7 +257,7 @@ void BM_M3Lockstep(benchmark::State& state) {
   state.counters["direct_rtf"] = dsim / dwall;
   state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
   state.counters["process_rtf"] = sim / process_wall;
-  state.counters["us_per_tick"] = 1e6 * wall / (sim / 0.001);
+  state.counters["us_per_tick"] = 1e6 * wall / (cycles > 0 ? cycles : sim / 0.001);
   state.counters["retries"] = retries / runs;
   state.counters["missed"] = missed / runs;
   state.counters["late"] = late / runs;
@@ -266,8 +277,15 @@ BENCHMARK(BM_EthercatLockstep)
     ->Unit(benchmark::kSecond)
     ->Iterations(3)
     ->UseRealTime();
-BENCHMARK(BM_M3Lockstep)->Arg(0)->Arg(1)->ArgName("udp")->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
-BENCHMARK(BM_M3Realtime)->Arg(1)->ArgName("cycle_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_M3Lockstep)
+    ->Args({0, 4})
+    ->Args({1, 4})
+    ->Args({0, 62})
+    ->ArgNames({"udp", "stations"})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(3)
+    ->UseRealTime();
+BENCHMARK(BM_M3Realtime)->Arg(4)->Arg(62)->ArgName("stations")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_EthercatRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_DirectRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK_MAIN();

@@ -79,7 +79,7 @@ TEST_F(CliM3, LockstepOverVethIsByteIdenticalAndDecodes) {
                            "transmission-cycle notification: 1000 µs", "communication start: cyclic",
                            "axis 1 (03h): CONNECT", "axis 1 (03h): SYNC_SET", "axis 1 (03h): ID_RD",
                            "axis 4 (06h): SENS_ON", "axis 4 (06h): SV_ON", "axis 4 (06h): running",
-                           "all four servos on: platform loop running", "path done"})
+                           "all 4 servos on: platform loop running", "path done"})
     EXPECT_TRUE(contains(log, step)) << step << "\n" << log;
   if (!have_tshark()) GTEST_SKIP() << "tshark is not installed";
   const fs::path pcap = a / "bus-m3.pcap", info = dir_ / "info.txt", bad = dir_ / "bad.txt";

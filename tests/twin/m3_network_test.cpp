@@ -8,7 +8,8 @@
 // and captured; a power loss in the cascade drops the station and every one behind it, and
 // the station reconnects; a cable break cuts off the stations behind it (communication
 // alarms there, none before it); corruption is an FCS error at the slave; a late station's
-// responses are late at the master; the metrics name every slave's phase and alarms.
+// responses are late at the master; stations beyond the wheels are on the line with shafts
+// of their own; the metrics name every slave's phase and alarms.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -33,8 +34,8 @@ constexpr SimTime kCycle = 1'000'000;  // 1 ms transmission cycle
 
 class M3NetworkTest : public ::testing::Test {
  protected:
-  void build(const std::string& name, std::vector<Override> extra = {}) {
-    std::vector<Override> o{{"bus.transport", "mem:" + name}};
+  void build(const std::string& name, std::vector<Override> extra = {}, int stations = 4) {
+    std::vector<Override> o{{"bus.transport", "mem:" + name}, {"bus.stations", std::to_string(stations)}};
     o.insert(o.end(), extra.begin(), extra.end());
     scenario_ = load_scenario(source_path("tests/data/scenarios/m3_short.yaml"), o);
     BusNetwork::Hooks h;
@@ -47,12 +48,12 @@ class M3NetworkTest : public ::testing::Test {
     net_->open_pcap((dir_ / "bus-m3.pcap").string());
     link_ = m3::open_transport("mem:" + name, m3::Role::master);
     m3::MasterConfig mc;
-    for (int k = 0; k < 4; ++k) mc.slaves.push_back(m3::MasterSlave{.address = static_cast<std::uint8_t>(0x03 + k)});
-    for (int k = 0; k < 4; ++k) axes_.emplace_back("axis", m3::ServoAxisConfig{});
+    for (int k = 0; k < stations; ++k) mc.slaves.push_back(m3::MasterSlave{.address = static_cast<std::uint8_t>(0x03 + k)});
+    for (int k = 0; k < stations; ++k) axes_.emplace_back("axis", m3::ServoAxisConfig{});
     master_ = std::make_unique<m3::C1Master>(
         mc, [this](std::span<const std::uint8_t> f, SimTime t) { emit(f, t); },
         [this](std::uint64_t, SimTime t) {
-          for (int k = 0; k < 4; ++k)
+          for (int k = 0; k < static_cast<int>(axes_.size()); ++k)
             axes_[static_cast<std::size_t>(k)].on_interrupt(master_->response(k), master_->fresh(k), master_->command(k), t);
         });
     sched_.add_periodic("master", Phase::master, 0, kCycle, [this](SimTime t) { tick(t); });
@@ -211,6 +212,22 @@ TEST_F(M3NetworkTest, ALateStationsResponsesAreLateAtTheMaster) {
   const auto late = master_->counters(2).late;
   run_until(0.12);
   EXPECT_EQ(master_->counters(2).late, late) << "on time again";
+}
+
+// Stations beyond the four wheels: on the line at the next addresses, started like the
+// wheels, their servos turning shafts of their own; the wheels are unaffected.
+TEST_F(M3NetworkTest, StationsBeyondTheWheelsAreOnTheLineWithShaftsOfTheirOwn) {
+  build("m3net-stations", {}, 6);
+  axes_[5].set_velocity(131072);
+  run_until(0.5);
+  ASSERT_EQ(master_->state(), m3::DriverState::cyclic) << master_->why();
+  for (int k = 0; k < 6; ++k) EXPECT_TRUE(running(k)) << k;
+  const nlohmann::json s = net_->slave_metrics();
+  ASSERT_EQ(s.size(), 6u);
+  EXPECT_EQ(s[5]["address"], 0x08);
+  EXPECT_EQ(s[5]["servo"], "operation enabled");
+  EXPECT_GT(net_->segment().servo(5).drive().objects().velocity_actual, 100000) << "its own shaft turns";
+  for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(speed_[i], 0.0) << "no wheel was asked to move";
 }
 
 TEST_F(M3NetworkTest, TheMetricsNameEverySlavesPhaseAndAlarms) {

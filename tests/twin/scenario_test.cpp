@@ -399,6 +399,7 @@ TEST(ScenarioM3, SettingsAndFaultsAreRead) {
   EXPECT_EQ(m.data_bytes, 48);
   EXPECT_EQ(m.mode, "interpolate");
   EXPECT_EQ(m.topology, "star");
+  EXPECT_EQ(m.stations, 12);
   EXPECT_DOUBLE_EQ(m.cable_m, 5);
   EXPECT_DOUBLE_EQ(m.response_us, 3);
   EXPECT_DOUBLE_EQ(m.margin(false), 40);
@@ -418,6 +419,7 @@ TEST(ScenarioM3, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.m3.transport, "auto");
   EXPECT_EQ(by_name.bus.m3.mode, "velctrl");
   EXPECT_DOUBLE_EQ(by_name.bus.m3.cycle, 0.001);
+  EXPECT_EQ(by_name.bus.m3.stations, 4);
   EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(false), 1.0);
   EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(true), 80.0);
 }

@@ -1,5 +1,5 @@
 // Tests controller/mechatrolink3/m3_config: the C1 master program's configuration file. Every
-// key is read, a minimal file has the documented defaults, the core's configuration carries
+// key is read, extra axes take the addresses after the wheels (62 stations at most), a minimal file has the documented defaults, the core's configuration carries
 // the cycle, slaves and T_RSP inputs in ns, a dump reads back the same, and each error names
 // the file, the line and the key.
 #include "controller/mechatrolink3/m3_config.hpp"
@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <vector>
 
 namespace omnitwin::m3 {
 namespace {
@@ -63,15 +64,26 @@ TEST(M3Config, AMinimalFileHasTheDefaultsAndTheCoreGetsNanoseconds) {
   EXPECT_EQ(m.detect_timeout_ns, 100'000);
 }
 
+TEST(M3Config, ExtraAxesFollowTheHighestWheelAddress) {
+  const M3ProgramConfig c = parse_m3_config("wheels: [3, 4, 5, 6]\nextra_axes: 3\n", "t.yaml", "");
+  EXPECT_EQ(station_addresses(c), (std::vector<std::uint8_t>{3, 4, 5, 6, 7, 8, 9}));
+  EXPECT_EQ(make_master_config(c).slaves.size(), 7u);
+  EXPECT_EQ(make_master_config(c).slaves[6].address, 9);
+  EXPECT_EQ(station_addresses(parse_m3_config("extra_axes: 58\n", "t.yaml", "")).back(), 0x40) << "62 stations";
+  EXPECT_EQ(error_of("wheels: [3, 4, 5, 10]\nextra_axes: 58\n"),
+            "t.yaml:2: extra_axes: addresses after 0Ah run past 40h (62 stations at most)");
+}
+
 TEST(M3Config, ADumpReadsBackTheSame) {
   const M3ProgramConfig a = parse_m3_config(
-      "cycle: 0.0005\nretry_slots: 0\nwheels: [7, 8, 9, 10]\nmargin_us: 80\nwheel_command: interpolate\n"
+      "cycle: 0.0005\nretry_slots: 0\nwheels: [7, 8, 9, 10]\nextra_axes: 2\nmargin_us: 80\nwheel_command: interpolate\n"
       "params:\n  - {number: 0x0105, value: -3}\n",
       "t.yaml", "");
   const M3ProgramConfig b = parse_m3_config(dump_m3_config(a), "dump.yaml", "");
   EXPECT_EQ(b.cycle, a.cycle);
   EXPECT_EQ(b.retry_slots, a.retry_slots);
   EXPECT_EQ(b.wheels, a.wheels);
+  EXPECT_EQ(b.extra_axes, 2);
   EXPECT_EQ(b.margin_us, a.margin_us);
   EXPECT_EQ(b.command, a.command);
   EXPECT_EQ(b.params, a.params);
