@@ -16,6 +16,7 @@
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport_udp.hpp"
 #include "bus_emulators/ethercat/transport/ec_veth.hpp"
+#include "twin/line_transport.hpp"
 
 namespace omnitwin::twin {
 
@@ -93,21 +94,11 @@ void EthercatNetwork::open_transport(const Scenario& s) {
   std::string spec = spec_.transport;
   const bool lockstep = s.clock == ClockMode::lockstep;
   batch_ = lockstep;
-  // auto: a veth pair of its own (as root), else UDP on loopback; in lockstep on a free port
-  // so that concurrent runs never share a segment (realtime keeps the documented port).
-  if (spec == "auto")
-    spec = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : "udp:127.0.0.1:34980");
-  if (spec == "veth") {
-    veth_ = std::make_unique<ethercat::VethPair>();
-    transport_spec_ = "raw:" + veth_->b();
-    master_iface_ = "raw:" + veth_->a();
-  } else if (spec.starts_with("raw:")) {
-    transport_spec_ = spec;
-    master_iface_ = spec_.master_iface.starts_with("raw:") ? spec_.master_iface : "raw:" + spec_.master_iface;
-  } else {
-    transport_spec_ = spec;
-    master_iface_ = spec;
-  }
+  // auto: veth as root, else UDP on loopback (lockstep: a free port; realtime: the documented one).
+  LineTransport line = choose_line_transport(spec, spec_.master_iface, lockstep, "udp:127.0.0.1:34980");
+  veth_ = line.veth;
+  transport_spec_ = line.slaves_spec;
+  master_iface_ = line.master_iface.empty() ? line.slaves_spec : line.master_iface;
   transport_ = ethercat::open_transport(transport_spec_, ethercat::Role::slaves);
   // A UDP segment on port 0: the master is told the port the slaves' socket was given.
   if (const auto* udp = dynamic_cast<const ethercat::UdpTransport*>(transport_.get()); udp) {

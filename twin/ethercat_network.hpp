@@ -119,7 +119,7 @@ class EthercatNetwork final : public BusNetwork {
   ethercat::DeviceDescription device_;
   std::array<std::unique_ptr<ethercat::DriveSlave>, 4> slaves_;
   ethercat::EscChain chain_;
-  std::unique_ptr<ethercat::VethPair> veth_;
+  std::shared_ptr<ethercat::VethPair> veth_;
   std::unique_ptr<ethercat::EcTransport> transport_;
   std::unique_ptr<ethercat::PcapWriter> pcap_;
   std::string transport_spec_, master_iface_;

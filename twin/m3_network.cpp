@@ -9,6 +9,7 @@
 
 #include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/ethercat/transport/ec_veth.hpp"
+#include "twin/line_transport.hpp"
 
 namespace omnitwin::twin {
 
@@ -55,25 +56,14 @@ M3Network::M3Network(const Scenario& s, Scheduler& sched, Hooks hooks)
 M3Network::~M3Network() = default;
 
 void M3Network::open_transport(const Scenario& s) {
-  std::string spec = spec_.transport;
-  const bool lockstep = s.clock == ClockMode::lockstep;
-  // auto: a veth pair of its own (as root), else UDP on loopback; in lockstep on a free port
-  // so that concurrent runs never share a line (realtime keeps the documented port).
-  if (spec == "auto")
-    spec = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : "udp:127.0.0.1:34997");
-  if (spec == "veth") {
-    veth_ = std::make_unique<ethercat::VethPair>();
-    transport_spec_ = "raw:" + veth_->b();
-    master_iface_ = "raw:" + veth_->a();
-  } else if (spec.starts_with("raw:")) {
-    transport_spec_ = spec;
-    master_iface_ = spec_.master_iface.starts_with("raw:") ? spec_.master_iface : "raw:" + spec_.master_iface;
-  } else {
-    transport_spec_ = spec;
-  }
+  // auto: veth as root, else UDP on loopback (lockstep: a free port; realtime: the documented one).
+  LineTransport line = choose_line_transport(spec_.transport, spec_.master_iface, s.clock == ClockMode::lockstep,
+                                             "udp:127.0.0.1:34997");
+  veth_ = line.veth;
+  transport_spec_ = line.slaves_spec;
   transport_ = m3::open_transport(transport_spec_, m3::Role::slaves);
   // UDP on port 0: the master is told the port the slaves' socket was given.
-  if (master_iface_.empty()) master_iface_ = transport_->spec();
+  master_iface_ = line.master_iface.empty() ? transport_->spec() : line.master_iface;
 }
 
 void M3Network::flush_pcap() {

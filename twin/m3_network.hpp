@@ -95,7 +95,7 @@ class M3Network final : public BusNetwork {
   ClockMode clock_;
   Scheduler& sched_;
   Hooks hooks_;
-  std::unique_ptr<ethercat::VethPair> veth_;
+  std::shared_ptr<ethercat::VethPair> veth_;  // the pair made for the run (bus.transport veth)
   std::unique_ptr<m3::M3Transport> transport_;
   std::unique_ptr<m3::M3Segment> segment_;
   std::string transport_spec_, master_iface_;

@@ -1,0 +1,26 @@
+// twin layer — where slaves and master meet on a frame bus; see line_transport.hpp.
+#include "twin/line_transport.hpp"
+
+#include "bus_emulators/ethercat/transport/ec_veth.hpp"
+
+namespace omnitwin::twin {
+
+LineTransport choose_line_transport(const std::string& spec, const std::string& master_iface, bool lockstep,
+                                    const std::string& realtime_udp) {
+  std::string s = spec;
+  if (s == "auto") s = !ethercat::VethPair::unavailable_reason() ? "veth" : (lockstep ? "udp:127.0.0.1:0" : realtime_udp);
+  LineTransport t;
+  if (s == "veth") {
+    t.veth = std::make_shared<ethercat::VethPair>();
+    t.slaves_spec = "raw:" + t.veth->b();
+    t.master_iface = "raw:" + t.veth->a();
+  } else if (s.starts_with("raw:")) {
+    t.slaves_spec = s;
+    t.master_iface = master_iface.starts_with("raw:") ? master_iface : "raw:" + master_iface;
+  } else {
+    t.slaves_spec = s;
+  }
+  return t;
+}
+
+}  // namespace omnitwin::twin
