@@ -143,6 +143,39 @@ double number(const nlohmann::json& j, const char* section, const char* key) {
 
 std::string period_s(std::int64_t ms) { return ms == 10 ? "0.01" : ms == 1 ? "0.001" : std::to_string(ms / 1000.0); }
 
+// Each iteration: the bus run, then the same scenario with --bus direct. Counters: rtf,
+// direct_rtf, slowdown, process_rtf, us_per_tick (the bus run's wall time per master tick,
+// tick_s long), the master's `keys` per run (metrics.json master.*), passed.
+void lockstep_vs_direct(benchmark::State& state, const char* name, const std::vector<std::string>& bus,
+                        const std::vector<std::string>& direct, double tick_s, const std::vector<const char*>& keys) {
+  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, passed = 1;
+  std::vector<double> sums(keys.size(), 0.0);
+  for (auto _ : state) {
+    const RunOutcome e = run_omnitwin(name, bus);
+    if (!usable(state, e)) break;
+    const RunOutcome d = run_omnitwin("direct", direct);
+    if (!usable(state, d)) break;
+    sim += e.metrics.at("sim_time_s").get<double>();
+    wall += e.metrics.at("wall_time_s").get<double>();
+    process_wall += e.wall_s;
+    dsim += d.metrics.at("sim_time_s").get<double>();
+    dwall += d.metrics.at("wall_time_s").get<double>();
+    for (std::size_t i = 0; i < keys.size(); ++i) sums[i] += number(e.metrics, "master", keys[i]);
+    passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
+    std::cerr << "    " << name << ": rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code
+              << "\n    direct: rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
+  }
+  if (wall <= 0 || dwall <= 0) return;
+  state.counters["rtf"] = sim / wall;
+  state.counters["direct_rtf"] = dsim / dwall;
+  state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
+  state.counters["process_rtf"] = sim / process_wall;
+  state.counters["us_per_tick"] = 1e6 * wall / (sim / tick_s);
+  const auto runs = static_cast<double>(state.iterations());
+  for (std::size_t i = 0; i < keys.size(); ++i) state.counters[keys[i]] = sums[i] / runs;  // per run
+  state.counters["passed"] = passed;
+}
+
 void BM_EthercatLockstep(benchmark::State& state) {
   const std::int64_t ms = state.range(0);
   const bool udp = state.range(1) == 1;
@@ -152,37 +185,8 @@ void BM_EthercatLockstep(benchmark::State& state) {
   else
     ecat.insert(ecat.end(), {"--set", "bus.transport=veth"});
   const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=" + period_s(ms)};
-  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0;
-  double wkc = 0, lost = 0, cycles = 0, passed = 1;
-  for (auto _ : state) {
-    const RunOutcome e = run_omnitwin("ecat", ecat);
-    if (!usable(state, e)) break;
-    const RunOutcome d = run_omnitwin("direct", direct);
-    if (!usable(state, d)) break;
-    sim += e.metrics.at("sim_time_s").get<double>();
-    wall += e.metrics.at("wall_time_s").get<double>();
-    process_wall += e.wall_s;
-    dsim += d.metrics.at("sim_time_s").get<double>();
-    dwall += d.metrics.at("wall_time_s").get<double>();
-    wkc += number(e.metrics, "master", "wkc_errors");
-    lost += number(e.metrics, "master", "lost_frames");
-    cycles += number(e.metrics, "master", "cycles");
-    passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
-    std::cerr << "    ethercat: rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code
-              << ", master " << (e.metrics.contains("master") ? e.metrics["master"].dump() : "{}") << "\n"
-              << "    direct:   rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
-  }
-  if (wall <= 0 || dwall <= 0) return;
-  state.counters["rtf"] = sim / wall;
-  state.counters["direct_rtf"] = dsim / dwall;
-  state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
-  state.counters["process_rtf"] = sim / process_wall;
-  state.counters["us_per_tick"] = 1e6 * wall / (sim / (static_cast<double>(ms) / 1000.0));
-  const auto runs = static_cast<double>(state.iterations());
-  state.counters["wkc_errors"] = wkc / runs;  // per run
-  state.counters["lost_frames"] = lost / runs;
-  state.counters["cycles"] = cycles / runs;
-  state.counters["passed"] = passed;
+  lockstep_vs_direct(state, "ethercat", ecat, direct, static_cast<double>(ms) / 1000.0,
+                     {"wkc_errors", "lost_frames", "cycles"});
 }
 
 // The cycle a line of N stations gets: 1 ms for the four wheels; 62 stations need 2.82 ms in
@@ -231,38 +235,7 @@ void BM_M3Lockstep(benchmark::State& state) {
   const std::vector<std::string> m3{"--bus", "m3", "--set", udp ? "bus.transport=udp:127.0.0.1:0" : "bus.transport=veth",
                                     "--set", "bus.stations=" + std::to_string(stations), "--set", m3_cycle(stations, false)};
   const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.001"};
-  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, retries = 0, missed = 0, late = 0, cycles = 0;
-  double passed = 1;
-  for (auto _ : state) {
-    const RunOutcome e = run_omnitwin("m3", m3);
-    if (!usable(state, e)) break;
-    const RunOutcome d = run_omnitwin("direct", direct);
-    if (!usable(state, d)) break;
-    sim += e.metrics.at("sim_time_s").get<double>();
-    wall += e.metrics.at("wall_time_s").get<double>();
-    process_wall += e.wall_s;
-    dsim += d.metrics.at("sim_time_s").get<double>();
-    dwall += d.metrics.at("wall_time_s").get<double>();
-    retries += number(e.metrics, "master", "retries");
-    missed += number(e.metrics, "master", "missed");
-    late += number(e.metrics, "master", "late");
-    cycles += number(e.metrics, "master", "cycles");
-    passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
-    std::cerr << "    m3:     rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code << "\n"
-              << "    direct: rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
-  }
-  if (wall <= 0 || dwall <= 0) return;
-  const auto runs = static_cast<double>(state.iterations());
-  state.counters["rtf"] = sim / wall;
-  state.counters["direct_rtf"] = dsim / dwall;
-  state.counters["slowdown"] = (dsim / dwall) / (sim / wall);
-  state.counters["process_rtf"] = sim / process_wall;
-  state.counters["us_per_tick"] = 1e6 * wall / (cycles > 0 ? cycles : sim / 0.001);
-  state.counters["retries"] = retries / runs;
-  state.counters["missed"] = missed / runs;
-  state.counters["late"] = late / runs;
-  state.counters["cycles"] = cycles / runs;
-  state.counters["passed"] = passed;
+  lockstep_vs_direct(state, "m3", m3, direct, stations <= 4 ? 0.001 : 0.003, {"retries", "missed", "late", "cycles"});
 }
 
 void BM_EthercatRealtime(benchmark::State& state) { realtime(state, "ethercat"); }
