@@ -13,10 +13,41 @@
 #include <sys/socket.h>
 
 #include <cerrno>
+#include <cstdint>
+#include <cstring>
 #include <chrono>
 #include <ctime>
 
 namespace omnitwin::bus_emulators {
+
+// The kernel's receive time of a datagram (SO_TIMESTAMPNS, CLOCK_REALTIME): how long before
+// recvmsg() returned it the frame had arrived. A process that was busy (or descheduled) when
+// frames came learns when they came, as the station on a real wire would have seen them.
+// enable() once on the socket; attach() to each msghdr before recvmsg(); age_ns() after.
+// Real-time safe.
+struct ReceiveStamp {
+  static bool enable(int fd) noexcept {
+    const int one = 1;
+    return ::setsockopt(fd, SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof one) == 0;
+  }
+  void attach(msghdr& msg) noexcept {
+    msg.msg_control = control;
+    msg.msg_controllen = sizeof control;
+  }
+  // How long ago the kernel received the message msg holds [ns] (≥ 0), or -1 without a stamp.
+  static std::int64_t age_ns(msghdr& msg) noexcept {
+    for (cmsghdr* c = CMSG_FIRSTHDR(&msg); c; c = CMSG_NXTHDR(&msg, c)) {
+      if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SCM_TIMESTAMPNS) continue;
+      timespec at{}, now{};
+      std::memcpy(&at, CMSG_DATA(c), sizeof at);
+      if (::clock_gettime(CLOCK_REALTIME, &now) != 0) return -1;
+      const std::int64_t age = (now.tv_sec - at.tv_sec) * 1'000'000'000LL + (now.tv_nsec - at.tv_nsec);
+      return age > 0 ? age : 0;
+    }
+    return -1;
+  }
+  alignas(cmsghdr) unsigned char control[CMSG_SPACE(sizeof(timespec))]{};
+};
 
 class ReadableWaiter {
  public:

@@ -53,6 +53,7 @@ class UdpPairTransport final : public Traits::Base {
     fd_ = ::socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
     if (fd_ < 0) throw Error(spec_.canonical() + ": socket: " + std::strerror(errno));
     bind_socket(family);
+    ReceiveStamp::enable(fd_);  // best effort: without it last_age_ns() says -1
     sockaddr_storage self{};
     socklen_t len = sizeof self;
     if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&self), &len) != 0) fail("getsockname");
@@ -93,6 +94,7 @@ class UdpPairTransport final : public Traits::Base {
       msg.msg_namelen = sizeof from;
       msg.msg_iov = &iov;
       msg.msg_iovlen = 1;
+      stamp_.attach(msg);
       const long n = waiter.receive(fd_, msg);  // the datagram's real length even when buf is smaller
       if (n == ReadableWaiter::kTimedOut) return 0;
       if (n < 0) {
@@ -111,11 +113,14 @@ class UdpPairTransport final : public Traits::Base {
       }
       if (role_ == Role::slaves) remember_sender(from, msg.msg_namelen);
       ++stats_.received;
+      last_age_ns_ = ReceiveStamp::age_ns(msg);
       return static_cast<int>(size);
     }
     return 0;
   }
   int fd() const { return fd_; }
+  // How long before receive() returned it the last frame had arrived [ns]; -1: unknown.
+  std::int64_t last_age_ns() const { return last_age_ns_; }
   // slaves: the bound port (the free one for port 0); master: the slaves' port.
   std::string spec() const {
     FrameTransportSpec real = spec_;
@@ -180,6 +185,8 @@ class UdpPairTransport final : public Traits::Base {
   bool have_peer_ = false;
   std::uint16_t local_port_ = 0;
   Stats stats_;
+  ReceiveStamp stamp_;
+  std::int64_t last_age_ns_ = -1;
 };
 
 }  // namespace omnitwin::bus_emulators

@@ -77,7 +77,12 @@ void RealtimePacer::set_wake(int fd, std::function<void(SimTime)> on_readable) {
 void RealtimePacer::wait_waking(std::int64_t deadline) {
   for (;;) {
     const std::int64_t now = monotonic_ns();
-    if (now >= deadline) return;
+    if (now >= deadline) {
+      // Late: frames that came meanwhile are still handed over before the late event runs.
+      pollfd p{wake_fd_, POLLIN, 0};
+      if (::poll(&p, 1, 0) > 0 && (p.revents & POLLIN) != 0) on_wake_(now - wall_start_);
+      return;
+    }
     const std::int64_t left_ns = deadline - now;
     timespec ts{};
     ts.tv_sec = static_cast<time_t>(left_ns / kNsPerSecond);

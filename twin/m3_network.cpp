@@ -115,15 +115,14 @@ bool M3Network::drain_transport(std::uint64_t count, SimTime t, std::chrono::mil
   return segment_->take_sent(count, t, timeout).ok;
 }
 
-// Realtime: frames are taken only when the pacer wakes on the transport (on_wake), stamped
-// with the wall-clock instant they are handled. Taking them here, before a physics step,
-// would stamp them with that step's simulated time, up to the twin's lateness before the
-// instant they came: SYNC intervals would look stretched to the slaves (missed SYNCs).
+// Realtime: frames are taken only when the pacer wakes on the transport (on_wake), each
+// stamped with its arrival (the kernel's receive time). Taking them here, before a physics
+// step, would stamp them with that step's simulated time instead.
 int M3Network::poll_transport(SimTime) { return 0; }
 
 void M3Network::on_wake(SimTime t) {
+  segment_->poll(t, linked_to_);  // each frame at its arrival, the slaves' timers up to it
   advance(t);
-  segment_->poll(std::max(t, linked_to_));
 }
 
 int M3Network::wake_fd() const { return transport_->fd(); }

@@ -1,11 +1,13 @@
 // Tests twin/clock: the realtime pacer sleeps to absolute deadlines (never returns early)
 // and its statistics count lateness and overruns (a tick half a period late or more, so one
-// 9.4 ms late at 10 ms counts); the lockstep pacer never waits.
+// 9.4 ms late at 10 ms counts); a readable wake descriptor is answered while waiting and also
+// when the pacer is already late; the lockstep pacer never waits.
 // Wall-clock figures are only bounded loosely from below (sleeping never ends early);
 // nothing here asserts how fast this machine is.
 #include "twin/clock.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <thread>
 
@@ -35,6 +37,31 @@ TEST(Clock, RealtimePacerCountsOverruns) {
   p.tick(1'000'000);
   EXPECT_EQ(p.stats().overruns, 1u);
   EXPECT_GT(p.stats().jitter_max_us, 3000.0);
+}
+
+// Frames that came while the twin was busy are handed over before a late event runs.
+TEST(Clock, ALatePacerStillAnswersTheWakeDescriptorFirst) {
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  RealtimePacer p(1'000'000, 8);
+  int woken = 0;
+  SimTime at = -1;
+  p.set_wake(fds[0], [&](SimTime t) {
+    ++woken;
+    at = t;
+    char c;
+    ASSERT_EQ(::read(fds[0], &c, 1), 1);
+  });
+  p.start();
+  ASSERT_EQ(::write(fds[1], "x", 1), 1);
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  p.wait_until(1'000'000);  // 4 ms late
+  EXPECT_EQ(woken, 1);
+  EXPECT_GT(at, 4'000'000) << "the wall-clock instant it was handled";
+  p.wait_until(1'500'000);  // late, nothing readable: returns at once
+  EXPECT_EQ(woken, 1);
+  ::close(fds[0]);
+  ::close(fds[1]);
 }
 
 TEST(Clock, AnOverrunIsATickHalfAPeriodLateOrMore) {

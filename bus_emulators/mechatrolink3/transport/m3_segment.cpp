@@ -1,6 +1,8 @@
 // bus_emulators/mechatrolink3/transport — the twin's side of an M-III line; see m3_segment.hpp.
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 
+#include <algorithm>
+
 namespace omnitwin::m3 {
 
 namespace {
@@ -59,14 +61,19 @@ SegmentAnswer M3Segment::take_sent(std::uint64_t master_frames, SimTime t_send, 
   return a;
 }
 
-int M3Segment::poll(SimTime t) {
+int M3Segment::poll(SimTime t, SimTime not_before) {
   int taken = 0;
   for (int n = transport_.receive(rx_, std::chrono::nanoseconds(0)); n > 0;
        n = transport_.receive(rx_, std::chrono::nanoseconds(0))) {
-    enter(n, t);
+    // When the frame came (the kernel's stamp), in the order frames came, never ahead of t.
+    const std::int64_t age = transport_.last_age_ns();
+    const SimTime at = std::clamp<SimTime>(age >= 0 ? t - age : t, std::max(not_before, last_entry_), t);
+    stations_.advance(at);  // the slaves' timers up to its arrival, not up to now
+    enter(n, at);
+    last_entry_ = at;
+    run_dry();
     ++taken;
   }
-  if (taken > 0) run_dry();
   return taken;
 }
 

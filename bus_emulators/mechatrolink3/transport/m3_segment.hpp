@@ -55,9 +55,12 @@ class M3Segment {
   const PcapWriter* pcap() const { return pcap_.get(); }
 
   SegmentAnswer take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait);
-  // Realtime: every frame the transport holds now enters the line at t, and the line runs dry
-  // (the answers go out at once). Returns the number of frames taken. Real-time safe.
-  int poll(SimTime t);
+  // Realtime: every frame the transport holds now enters the line when it arrived — t minus
+  // its age from the kernel's receive stamp (t where there is none), in arrival order, never
+  // before not_before nor after t — with the slaves' timers run to that instant first, and the
+  // line runs dry after each (the answers go out at once). So a twin that was busy when frames
+  // came still has its slaves see them when they came. Returns the frames taken. Real-time safe.
+  int poll(SimTime t, SimTime not_before = 0);
   // The slaves' communication timers up to t (missing sync or commands). Real-time safe.
   void advance(SimTime t);
   // One drive period of slave k at t (its servo profile and drive core). Real-time safe.
@@ -86,6 +89,7 @@ class M3Segment {
   std::unique_ptr<PcapWriter> pcap_;
   std::uint64_t from_master_ = 0, to_master_ = 0, send_failures_ = 0;
   SimTime last_arrival_ = -1;
+  SimTime last_entry_ = 0;  // realtime: when the last polled frame entered the line
   std::int64_t busy_ns_ = 0;
   std::array<std::uint8_t, 2 * kMaxFrame> rx_{};
 };

@@ -74,6 +74,9 @@ class M3Transport {
   // not wait). Returns its size, 0 on timeout, -1 on a system error (counted in
   // receive_errors). Never throws.
   virtual int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) = 0;
+  // How long before receive() returned it the last frame had arrived [ns], from the kernel's
+  // receive time stamp (raw, udp); -1 where unknown (mem: handed over directly). Real-time safe.
+  virtual std::int64_t last_age_ns() const { return -1; }
   // A descriptor that polls readable (POLLIN) while a frame may be waiting, for event loops.
   virtual int fd() const = 0;
   // The canonical spec as opened, with the real port where one was chosen at open
@@ -120,6 +123,7 @@ FrameCheck check_frame(const std::uint8_t* data, std::size_t n, std::size_t& siz
 namespace detail {
 // The waiting part of receive(), shared by every bus's transports (bus_emulators/readable_waiter.hpp).
 using ReadableWaiter = bus_emulators::ReadableWaiter;
+using ReceiveStamp = bus_emulators::ReceiveStamp;
 }  // namespace detail
 
 }  // namespace omnitwin::m3

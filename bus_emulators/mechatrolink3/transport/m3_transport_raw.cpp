@@ -49,6 +49,7 @@ RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions opti
     throw TransportError(spec() + ": bad interface name (1 to 15 characters)");
   open_socket();
   set_options(options);
+  detail::ReceiveStamp::enable(fd_);  // best effort: without it last_age_ns() says -1
   if (options.kernel_filter) attach_filter();
   bind_interface(options.kernel_filter ? kEtherType : ETH_P_ALL);
 }
@@ -176,6 +177,7 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     msg.msg_namelen = sizeof from;
     msg.msg_iov = iov;
     msg.msg_iovlen = 2;
+    stamp_.attach(msg);
     const long n = waiter.receive(fd_, msg);  // the frame's real length even when buf is smaller
     if (n == detail::ReadableWaiter::kTimedOut) return 0;
     if (n < 0) {
@@ -188,6 +190,7 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
       continue;
     }
     ++stats_.received;
+    last_age_ns_ = detail::ReceiveStamp::age_ns(msg);
     return static_cast<int>(size);
   }
   return 0;

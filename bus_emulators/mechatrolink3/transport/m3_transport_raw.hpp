@@ -56,6 +56,7 @@ class RawTransport final : public M3Transport {
   std::string spec() const override { return "raw:" + ifname_; }
   std::string describe() const override;
   Stats stats() const override { return stats_; }
+  std::int64_t last_age_ns() const override { return last_age_ns_; }
 
   const Mac& mac() const { return mac_; }                // the interface's MAC when opened
   bool kernel_filter() const { return kernel_filter_; }  // the BPF filter is attached
@@ -83,6 +84,8 @@ class RawTransport final : public M3Transport {
   std::array<std::uint8_t, kEthHeaderSize> tx_hdr_{};  // scratch for send()
   std::array<std::uint8_t, kEthHeaderSize> rx_hdr_{};  // scratch for receive()
   Stats stats_;
+  detail::ReceiveStamp stamp_;
+  std::int64_t last_age_ns_ = -1;
 };
 
 }  // namespace omnitwin::m3

@@ -4,13 +4,16 @@
 // when the wire model says (TR_DLY + both frame times + the slave's response time); a frame
 // no slave answers gives no arrival; frames that never come make take_sent() fail instead of
 // waiting for ever; the capture holds both directions with their simulated times; in realtime
-// poll() takes whatever has arrived and answers it at once, and nothing when nothing came.
+// poll() takes whatever has arrived and answers it at once, and nothing when nothing came; a
+// frame that waited (a busy twin) enters the line when it came, by its kernel receive stamp.
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 
 #include <gtest/gtest.h>
 #include <pcap/pcap.h>
 
+#include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bus_emulators/mechatrolink3/transport/m3_transport_mem.hpp"
@@ -69,6 +72,31 @@ TEST(M3Segment, PollTakesWhatHasArrivedAndAnswersAtOnce) {
   EXPECT_GT(master.receive(buf, 0s), 0);
   EXPECT_GT(master.receive(buf, 0s), 0);
   EXPECT_EQ(seg.line().next_due(), -1) << "the line ran dry";
+}
+
+TEST(M3Segment, PollEntersAFrameThatWaitedWhenItCame) {
+  omnitwin::testing::TempDir dir("omnitwin-m3-segment");
+  const std::string file = (dir / "bus-m3.pcap").string();
+  {
+    std::unique_ptr<M3Transport> slaves = open_transport("udp:127.0.0.1:0", Role::slaves);
+    std::unique_ptr<M3Transport> master = open_transport(slaves->spec(), Role::master);
+    M3Segment seg(SegmentConfig{}, *slaves);
+    seg.open_pcap(file);
+    ASSERT_TRUE(master->send(frame(0x03, FrameType::detect)));
+    std::this_thread::sleep_for(30ms);  // the twin busy elsewhere
+    EXPECT_EQ(seg.poll(100'000'000), 1);
+    ASSERT_TRUE(seg.pcap()->close());
+  }
+  char err[PCAP_ERRBUF_SIZE];
+  pcap_t* p = pcap_open_offline_with_tstamp_precision(file.c_str(), PCAP_TSTAMP_PRECISION_NANO, err);
+  ASSERT_NE(p, nullptr) << err;
+  pcap_pkthdr* h = nullptr;
+  const u_char* data = nullptr;
+  ASSERT_EQ(pcap_next_ex(p, &h, &data), 1);
+  const std::int64_t in_ns = static_cast<std::int64_t>(h->ts.tv_sec) * 1'000'000'000 + h->ts.tv_usec;
+  EXPECT_LE(in_ns, 71'000'000) << "entered about 30 ms before the poll at 100 ms";
+  EXPECT_GE(in_ns, 0);
+  pcap_close(p);
 }
 
 TEST(M3Segment, TheCaptureHoldsBothDirections) {

@@ -4,8 +4,8 @@
 // frames on the wire are m3::encapsulate()'s (station MACs, EtherType 0x88B5, padded to 60) and
 // receive() removes the padding; a frame with a bad FCS goes out and arrives untouched; neither
 // end receives its own frames; frames of another EtherType and what cannot be a frame are
-// dropped and counted; set-up errors (missing interface, not Ethernet, missing privilege) name
-// the spec. Needs root for veth pairs and raw sockets (CI runs as root); skips with the reason
+// dropped and counted; a frame's age (the kernel's receive stamp) says how long it waited before
+// receive(); set-up errors (missing interface, not Ethernet, missing privilege) name the spec. Needs root for veth pairs and raw sockets (CI runs as root); skips with the reason
 // otherwise.
 #include "bus_emulators/mechatrolink3/transport/m3_transport_raw.hpp"
 
@@ -24,6 +24,7 @@
 #include <array>
 #include <chrono>
 #include <optional>
+#include <thread>
 #include <vector>
 
 namespace omnitwin::m3 {
@@ -140,6 +141,17 @@ TEST_F(M3RawTransport, MasterAndSlavesExchangeOverAVethPair) {
   EXPECT_EQ(slaves.stats().received, 3u);
   EXPECT_EQ(master.stats().send_errors, 0u);
   EXPECT_TRUE(master.kernel_filter());
+}
+
+TEST_F(M3RawTransport, AFramesAgeIsHowLongItWaitedBeforeReceive) {
+  RawTransport master(veth_->a(), Role::master);
+  RawTransport slaves(veth_->b(), Role::slaves);
+  ASSERT_TRUE(master.send(command(32)));
+  std::this_thread::sleep_for(20ms);
+  std::array<std::uint8_t, kMaxFrame> buf{};
+  ASSERT_GT(slaves.receive(buf, 1s), 0);
+  EXPECT_GE(slaves.last_age_ns(), 19'000'000) << "it came before the 20 ms sleep";
+  EXPECT_LT(slaves.last_age_ns(), 2'000'000'000);
 }
 
 TEST_F(M3RawTransport, FramesOnTheWireAreTheEncapsulationAndPaddingIsRemoved) {

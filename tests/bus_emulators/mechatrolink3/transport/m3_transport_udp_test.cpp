@@ -2,7 +2,8 @@
 // the slaves on a free port (port 0): the datagram is exactly the frame (no padding), the master
 // sends from an ephemeral port to HOST:PORT and the slaves answer the sender of the last frame;
 // a corrupted-FCS frame passes untouched; datagrams that cannot be a frame are dropped and
-// counted, trailing bytes trimmed; send errors are counted, set-up errors name the spec.
+// counted, trailing bytes trimmed; send errors are counted, set-up errors name the spec; a
+// frame's age (the kernel's receive stamp) says how long it waited before receive().
 #include "bus_emulators/mechatrolink3/transport/m3_transport_udp.hpp"
 
 #include <arpa/inet.h>
@@ -14,6 +15,7 @@
 #include <array>
 #include <chrono>
 #include <memory>
+#include <thread>
 #include <vector>
 
 namespace omnitwin::m3 {
@@ -90,6 +92,19 @@ TEST(M3UdpTransport, MasterAndSlavesExchangeOnLoopback) {
   EXPECT_EQ(s.master->stats().received, 1u);
   EXPECT_EQ(s.slaves->stats().sent, 1u);
   EXPECT_EQ(s.slaves->stats().received, 1u);
+}
+
+TEST(M3UdpTransport, AFramesAgeIsHowLongItWaitedBeforeReceive) {
+  Segment s;
+  ASSERT_TRUE(s.master->send(command()));
+  std::this_thread::sleep_for(20ms);
+  std::array<std::uint8_t, kMaxFrame> buf{};
+  ASSERT_GT(s.slaves->receive(buf, 1s), 0);
+  EXPECT_GE(s.slaves->last_age_ns(), 19'000'000) << "it came before the 20 ms sleep";
+  EXPECT_LT(s.slaves->last_age_ns(), 2'000'000'000);
+  ASSERT_TRUE(s.master->send(command()));
+  ASSERT_GT(s.slaves->receive(buf, 1s), 0);
+  EXPECT_LT(s.slaves->last_age_ns(), 19'000'000) << "taken as it came";
 }
 
 TEST(M3UdpTransport, OneFramePerDatagramWithoutPadding) {
