@@ -239,11 +239,10 @@ class Runner {
 };
 
 // Lockstep: one Grant per transmission cycle, every frame met with Sent/Horizon.
-int run_sim(const ProgramOptions& o, Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
+int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
   simclock::Client& client = ls.clock();
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
   bool started = false;
-  (void)o;
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
@@ -361,7 +360,7 @@ int run_m3_program(const ProgramOptions& o) {
       MasterLockstep ls(*tr, client);
       runner = std::make_unique<Runner>(pc, platform, [&ls](std::span<const std::uint8_t> f, SimTime t) { ls.emit(f, t); });
       try {
-        code = run_sim(o, *runner, ls, sigfd, cycle_ns);
+        code = run_sim(*runner, ls, sigfd, cycle_ns);
       } catch (const RuntimeFailure&) {
         tx = ls.frames_sent(), rx = ls.frames_received();
         throw;
