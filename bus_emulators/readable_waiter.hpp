@@ -24,6 +24,9 @@ namespace omnitwin::bus_emulators {
 // recvmsg() returned it the frame had arrived. A process that was busy (or descheduled) when
 // frames came learns when they came, as the station on a real wire would have seen them.
 // enable() once on the socket; attach() to each msghdr before recvmsg(); age_ns() after.
+// The kernel turns its receive stamping on from a work item shortly after the first socket
+// asks (net_enable_timestamp): frames in the first moments after enable() are stamped when
+// recvmsg() takes them (age about 0) — a twin opens its transport long before a run starts.
 // Real-time safe.
 struct ReceiveStamp {
   static bool enable(int fd) noexcept {

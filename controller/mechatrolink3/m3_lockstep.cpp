@@ -1,6 +1,8 @@
 // controller/mechatrolink3 — our C1 master in exchange-level lockstep; see m3_lockstep.hpp.
 #include "controller/mechatrolink3/m3_lockstep.hpp"
 
+#include "bus_emulators/mechatrolink3/m3_wire.hpp"
+
 #include <algorithm>
 #include <chrono>
 
@@ -19,7 +21,22 @@ MasterLockstep::MasterLockstep(M3Transport& transport, simclock::Client& clock, 
 
 void MasterLockstep::emit(std::span<const std::uint8_t> frame, SimTime t) {
   if (status_ != simclock::WaitStatus::ok) return;  // the twin is gone: nothing more to say
+  // A SYNC waiting to be reported goes alone unless this frame follows it back to back.
+  if (unreported_at_ >= 0 && t != unreported_at_ + unreported_slot_) report(unreported_at_);
   if (transport_.send(frame)) ++sent_;
+  // A SYNC has no answer: it is reported with the frame that follows it back to back (the
+  // first command), one exchange fewer per cycle, or on its own at the end of the tick.
+  if (frame.size() > kHeaderSize + kFcsSize && frame[3] == static_cast<std::uint8_t>(FrameType::sync)) {
+    unreported_at_ = t;
+    unreported_slot_ = frame_slot_ns(frame.size() - kHeaderSize - kFcsSize);
+    return;
+  }
+  report(t);
+}
+
+// Sent for every frame so far, the last starting at t; the Horizon's frames into the inbox.
+void MasterLockstep::report(SimTime t) {
+  unreported_at_ = -1;
   simclock::Sent s;
   s.tick = tick_;
   s.t_ns = t;
@@ -64,7 +81,11 @@ simclock::WaitStatus MasterLockstep::run_tick(C1Master& master, const simclock::
     if (status_ != simclock::WaitStatus::ok) return status_;
     if (!inbox_.empty()) continue;  // delivering made the master send again
     const SimTime next = master.next_wakeup();
-    if (next < 0 || next >= end) return status_;
+    if (next < 0 || next >= end) {
+      if (unreported_at_ < 0 || status_ != simclock::WaitStatus::ok) return status_;
+      report(unreported_at_);  // a SYNC nothing followed within the tick
+      continue;
+    }
     master.advance(next);  // a deadline or the next frame to send, in simulated time
   }
 }

@@ -5,7 +5,8 @@
 // channels; the core itself never sees a socket or a clock.
 //
 // Per frame the core emits: send it on the transport, report it with Sent{tick, t_send,
-// count}, and take the twin's Horizon (what reached the master and when; nothing else before
+// count} (a SYNC, which nothing answers, is reported together with the frame that follows it
+// back to back: one exchange fewer per cycle), and take the twin's Horizon (what reached the master and when; nothing else before
 // quiet_until), draining the transport up to the Horizon's count into an inbox. The frames in
 // the inbox are handed to the core at their arrival times after the core's call returns (so
 // the core is never re-entered), the core's own deadlines run in simulated time in between,
@@ -47,12 +48,14 @@ class MasterLockstep {
     std::array<std::uint8_t, kMaxFrame> bytes{};
   };
   simclock::WaitStatus drain_to(std::uint64_t count, SimTime arrival);
+  void report(SimTime t);
   void deliver_inbox(C1Master& master);
 
   M3Transport& transport_;
   simclock::Client& clock_;
   std::size_t bus_;
   std::uint64_t tick_ = 0, sent_ = 0, received_ = 0;
+  SimTime unreported_at_ = -1, unreported_slot_ = 0;  // a SYNC sent, not yet reported
   simclock::WaitStatus status_ = simclock::WaitStatus::ok;
   std::vector<Arrived> inbox_;  // reserved once; frames the twin delivered, not yet handed over
   std::array<std::uint8_t, 2 * kMaxFrame> rx_{};

@@ -48,10 +48,23 @@ void M3Segment::run_dry() {
 
 SegmentAnswer M3Segment::take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait) {
   SegmentAnswer a;
-  while (from_master_ < master_frames) {
-    const int n = transport_.receive(rx_, wait);
-    if (n <= 0) return a;
-    enter(n, t_send);
+  // Frames reported together were sent back to back, the last starting at t_send: each
+  // earlier one a frame slot before the next. Taken first, then entered in order.
+  std::size_t n = 0;
+  while (from_master_ + n < master_frames) {
+    if (n == batch_.size()) return a;  // more than a cycle's back-to-back frames: not our master
+    const int got = transport_.receive(batch_[n].bytes, wait);
+    if (got <= 0) return a;
+    batch_[n++].size = static_cast<std::size_t>(got);
+  }
+  SimTime start = t_send;
+  for (std::size_t i = n; i-- > 0;) {
+    batch_[i].at = start;
+    if (i > 0) start -= wire_ns(batch_[i - 1].size);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    std::copy_n(batch_[i].bytes.begin(), batch_[i].size, rx_.begin());
+    enter(static_cast<int>(batch_[i].size), batch_[i].at);
   }
   last_arrival_ = -1;
   run_dry();

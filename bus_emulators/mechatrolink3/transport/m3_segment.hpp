@@ -6,7 +6,9 @@
 // controller code.
 //
 // take_sent(): the master reported `count` frames sent, the last starting at t_send. Each new
-// frame is taken from the transport and enters the line at t_send; the line then runs until
+// frame is taken from the transport and enters the line when it started: the last at t_send,
+// earlier ones (reported together, e.g. a SYNC with the command after it) back to back
+// before it, a frame slot each; the line then runs until
 // nothing is in flight (a slave only answers what it receives), and every frame that reaches
 // the master goes onto the transport and into the capture. The answer says how many frames
 // the twin has sent in all and when the last of them reached the master. Between the
@@ -92,6 +94,12 @@ class M3Segment {
   SimTime last_entry_ = 0;  // realtime: when the last polled frame entered the line
   std::int64_t busy_ns_ = 0;
   std::array<std::uint8_t, 2 * kMaxFrame> rx_{};
+  struct Batched {  // a frame of a Sent that covered several
+    std::array<std::uint8_t, 2 * kMaxFrame> bytes{};
+    std::size_t size = 0;
+    SimTime at = 0;
+  };
+  std::array<Batched, 8> batch_{};
 };
 
 }  // namespace omnitwin::m3

@@ -7,7 +7,8 @@
 // run must not change).
 // Checks: the driver sequence measures TR_DLY exactly as in process, four servos start and
 // turn, every cycle exchanges with every slave and nothing is missed or late, the frame counts
-// of both ends agree, and two runs give the same log.
+// of both ends agree, a SYNC is reported with the command after it (one exchange fewer per
+// cycle), and two runs give the same log.
 #include "controller/mechatrolink3/m3_lockstep.hpp"
 
 #include <gtest/gtest.h>
@@ -51,7 +52,9 @@ struct TwinSide {
   // What the master opens: the same pair, or the port the slaves' UDP socket was given.
   std::string master_spec() const { return transport->spec(); }
   std::uint64_t to_master() const { return segment.to_master(); }
+  std::uint64_t sents = 0;  // Sent records answered
   simclock::Horizon answer(const simclock::Sent& s) {
+    ++sents;
     const SegmentAnswer a = segment.take_sent(s.frames[0], s.t_ns, 5s);
     simclock::Horizon h;
     h.tick = s.tick;
@@ -71,7 +74,7 @@ struct RunResult {
   std::vector<SimTime> tr_dly;
   std::vector<SlaveCounters> counters;
   std::vector<AxisStep> steps;
-  std::uint64_t master_sent = 0, master_received = 0, twin_from_master = 0, twin_to_master = 0;
+  std::uint64_t master_sent = 0, master_received = 0, twin_from_master = 0, twin_to_master = 0, sents = 0;
   double wheel0_rad_s = 0;
   std::string error;
 };
@@ -143,6 +146,7 @@ RunResult run_lockstep(const std::string& spec, int ticks, const std::string& ma
   master_thread.join();
   r.twin_from_master = twin.segment.from_master();
   r.twin_to_master = twin.segment.to_master();
+  r.sents = twin.sents;
   r.wheel0_rad_s = twin.axes[0].velocity_rad_s();
   return r;
 }
@@ -160,6 +164,7 @@ TEST(M3Lockstep, TheMasterRunsAgainstTheTwinOverATransportAndTheSimClock) {
   }
   EXPECT_EQ(r.master_sent, r.twin_from_master);
   EXPECT_EQ(r.master_received, r.twin_to_master);
+  EXPECT_LE(r.sents + 590, r.twin_from_master) << "each cycle's SYNC goes with its first command: one exchange fewer";
   EXPECT_NEAR(r.wheel0_rad_s, 2 * M_PI, 0.2) << "1 rev/s";
 }
 

@@ -3,7 +3,8 @@
 // master frame enters the line at its send time and its answer reaches the master exactly
 // when the wire model says (TR_DLY + both frame times + the slave's response time); a frame
 // no slave answers gives no arrival; frames that never come make take_sent() fail instead of
-// waiting for ever; the capture holds both directions with their simulated times; in realtime
+// waiting for ever; frames reported together entered back to back, the last at its send time;
+// the capture holds both directions with their simulated times; in realtime
 // poll() takes whatever has arrived and answers it at once, and nothing when nothing came; a
 // frame that waited (a busy twin) enters the line when it came, by its kernel receive stamp.
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
@@ -60,6 +61,40 @@ TEST(M3Segment, NoAnswerNoArrivalAndMissingFramesFail) {
   EXPECT_FALSE(seg.take_sent(2, 0, 50ms).ok) << "a frame the master counted but never sent";
 }
 
+// A SYNC reported with the command after it: the command enters at t_send, the SYNC one frame
+// slot (its frame time and the inter-frame gap) before it.
+TEST(M3Segment, FramesReportedTogetherEnteredBackToBack) {
+  omnitwin::testing::TempDir dir("omnitwin-m3-segment");
+  const std::string file = (dir / "bus-m3.pcap").string();
+  const SimTime t = 5'000'000;
+  {
+    MemTransport master("m3-segment-batch", Role::master), slaves("m3-segment-batch", Role::slaves);
+    M3Segment seg(SegmentConfig{}, slaves);
+    seg.open_pcap(file);
+    std::vector<std::uint8_t> sync(kMaxFrame);
+    const std::vector<std::uint8_t> eight(8, 0);
+    sync.resize(encode(FrameSpec{.dst = kBroadcast, .src = kC1Master, .type = FrameType::sync, .data = eight}, sync));
+    ASSERT_TRUE(master.send(sync));
+    ASSERT_TRUE(master.send(frame(0x03, FrameType::detect)));
+    const SegmentAnswer a = seg.take_sent(2, t, 1s);
+    ASSERT_TRUE(a.ok);
+    EXPECT_EQ(seg.from_master(), 2u);
+    EXPECT_EQ(a.to_master, 1u) << "the detection answered, the SYNC not";
+    ASSERT_TRUE(seg.pcap()->close());
+  }
+  char err[PCAP_ERRBUF_SIZE];
+  pcap_t* p = pcap_open_offline_with_tstamp_precision(file.c_str(), PCAP_TSTAMP_PRECISION_NANO, err);
+  ASSERT_NE(p, nullptr) << err;
+  std::vector<std::int64_t> at;
+  pcap_pkthdr* h = nullptr;
+  const u_char* data = nullptr;
+  while (pcap_next_ex(p, &h, &data) == 1) at.push_back(static_cast<std::int64_t>(h->ts.tv_sec) * 1'000'000'000 + h->ts.tv_usec);
+  pcap_close(p);
+  ASSERT_EQ(at.size(), 3u);
+  EXPECT_EQ(at[0], t - frame_slot_ns(8)) << "the SYNC";
+  EXPECT_EQ(at[1], t) << "the command";
+}
+
 TEST(M3Segment, PollTakesWhatHasArrivedAndAnswersAtOnce) {
   MemTransport master("m3-segment-poll", Role::master), slaves("m3-segment-poll", Role::slaves);
   M3Segment seg(SegmentConfig{}, slaves);
@@ -82,6 +117,7 @@ TEST(M3Segment, PollEntersAFrameThatWaitedWhenItCame) {
     std::unique_ptr<M3Transport> master = open_transport(slaves->spec(), Role::master);
     M3Segment seg(SegmentConfig{}, *slaves);
     seg.open_pcap(file);
+    std::this_thread::sleep_for(100ms);  // the kernel turns receive stamping on from a work item
     ASSERT_TRUE(master->send(frame(0x03, FrameType::detect)));
     std::this_thread::sleep_for(30ms);  // the twin busy elsewhere
     EXPECT_EQ(seg.poll(100'000'000), 1);
