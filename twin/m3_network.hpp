@@ -9,8 +9,9 @@
 // the tick (exchange-level lockstep, docs/protocols/sim-clock.md "Inside a tick"): on_sent()
 // lets the frame enter the line at its simulated send time and answers with the Horizon of
 // the response the line delivers. Between the master's exchanges the scheduler runs each
-// servo's drive period against its wheel. In realtime the master's frames are taken as they
-// arrive (wake_fd) and answered at once. Both directions go into bus-m3.pcap.
+// servo's drive period against its wheel. In realtime the master's frames are taken when the
+// pacer wakes on the transport (wake_fd), enter the line at the instant the kernel received
+// them (m3_segment poll), and are answered at once. Both directions go into bus-m3.pcap.
 //
 // Faults: frame loss and corruption (bad FCS) to and from one slave or all, a late response
 // (extra delay of a slave's frames), a slave's power loss and return (in a cascade the
