@@ -260,7 +260,9 @@ DriveStateCode M3Network::drive_state(int axis0) const {
   const m3::SlaveLink& l = segment_->link(axis0);
   const m3::ServoProfile& servo = segment_->servo(axis0);
   if (servo.device_alarm() || l.comm_alarm() != m3::CommAlarm::normal) return DriveStateCode::fault;
-  return l.phase() == m3::Phase::p3 && servo.servo_on() ? DriveStateCode::running : DriveStateCode::waiting;
+  // Connected (phase 3 cyclic, phase 2 event-driven) with its servo on.
+  const bool connected = l.phase() == m3::Phase::p3 || (l.phase() == m3::Phase::p2 && !l.connection().synchronous);
+  return connected && servo.servo_on() ? DriveStateCode::running : DriveStateCode::waiting;
 }
 
 WheelRecord M3Network::wheel_record(int axis0) const {

@@ -190,7 +190,9 @@ std::string m3_platform_yaml(const Scenario& s) {
 std::string m3_master_config_yaml(const Scenario& s, const std::string& platform_file) {
   const M3Spec& m = s.bus.m3;
   std::string out = fmt::format("# omni-master --bus m3 configuration written by omnitwin for scenario {}\n", s.name);
-  out += fmt::format("cycle: {}\nretry_slots: {}\ndata_bytes: {}\n", m.cycle, m.retry_slots, m.data_bytes);
+  out += fmt::format("cycle: {}\nretry_slots: {}\n", m.cycle, m.retry_slots);
+  if (m.communication == "event") out += "communication: event\n";  // 64-byte data
+  else out += fmt::format("data_bytes: {}\n", m.data_bytes);
   out += "wheels: [0x03, 0x04, 0x05, 0x06]\n";
   if (m.stations > 4) out += fmt::format("extra_axes: {}\n", m.stations - 4);
   const bool realtime = s.clock == ClockMode::realtime;

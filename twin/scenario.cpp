@@ -409,6 +409,9 @@ void read_m3(const YamlField& f, M3Spec& m) {
   read_integer(f, "retry_slots", m.retry_slots, Bounds::closed(0, 4));
   if (f["data_bytes"].exists()) m.data_bytes = std::stoi(f["data_bytes"].choice({"32", "48"}));
   if (f["mode"].exists()) m.mode = f["mode"].choice({"velctrl", "interpolate"});
+  if (f["communication"].exists()) m.communication = f["communication"].choice({"cyclic", "event"});
+  if (m.communication == "event" && m.mode == "interpolate")
+    f["mode"].fail("INTERPOLATE needs phase 3, which event-driven communication never enters (mode: velctrl)");
   if (f["topology"].exists()) m.topology = f["topology"].choice({"cascade", "star"});
   read_integer(f, "stations", m.stations, Bounds::closed(4, 62));
   read_number(f, "cable_m", m.cable_m, Bounds::closed(0, 100));
@@ -457,7 +460,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     read_ethercat(f, bus.ethercat, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::m3) {
-    f.allow_keys({"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "mode", "topology", "stations",
+    f.allow_keys({"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "communication", "mode", "topology", "stations",
                   "cable_m", "response_us", "margin_us", "drive_period", "counts_per_rev", "startup", "master",
                   "seed", "handshake_timeout", "supervision"});
     read_m3(f, bus.m3);

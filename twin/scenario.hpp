@@ -135,6 +135,9 @@ struct M3Spec {
   std::string master_iface;
   double cycle = 0.001;                     // transmission cycle [s]; the master's tick
   int retry_slots = 1;                      // retries inside one cycle
+  // cyclic, or event: no SYNC, the servos stay in phase 2, the master asks each one for an
+  // exchange (64 bytes, VELCTRL) every `cycle`, within seed 000's 50 ms limit.
+  std::string communication = "cyclic";
   int data_bytes = 32;                      // 32 or 48 (subcommands)
   std::string mode = "velctrl";             // velctrl | interpolate: how the wheels are commanded
   std::string topology = "cascade";         // cascade | star

@@ -55,7 +55,7 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
   M3ProgramConfig c;
   c.file = file;
   const Members top(file, root, "",
-                    {"cycle", "retry_slots", "wheels", "extra_axes", "data_bytes", "response_us", "margin_us", "software_us",
+                    {"cycle", "retry_slots", "wheels", "extra_axes", "data_bytes", "communication", "response_us", "margin_us", "software_us",
                      "detect_timeout_ms", "startup_timeout", "lost_cycles", "wheel_command", "wheel_counts_per_rev",
                      "params", "platform"});
   if (const Val* n = top.get("cycle")) c.cycle = bounded(file, *n, "cycle", 31.25e-6, 0.064);
@@ -67,9 +67,16 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
     if (highest + c.extra_axes > kFirstSlave + 61)
       fail(file, *n, "extra_axes", fmt::format("addresses after {:02X}h run past 40h (62 stations at most)", highest));
   }
+  if (const Val* n = top.get("communication")) {
+    const std::string m = n->node.IsScalar() ? n->node.Scalar() : "";
+    if (m != "cyclic" && m != "event") fail(file, *n, "communication", "cyclic or event");
+    c.event_driven = m == "event";
+    if (c.event_driven) c.data_bytes = kMaxData;  // event-driven frames carry 64 bytes
+  }
   if (const Val* n = top.get("data_bytes")) {
     c.data_bytes = static_cast<std::size_t>(integer(file, *n, "data_bytes"));
-    if (c.data_bytes != 32 && c.data_bytes != 48) fail(file, *n, "data_bytes", "the servo profile's lengths are 32 and 48");
+    if (c.event_driven ? c.data_bytes != kMaxData : c.data_bytes != 32 && c.data_bytes != 48)
+      fail(file, *n, "data_bytes", c.event_driven ? "event-driven data is 64 bytes" : "the servo profile's lengths are 32 and 48");
   }
   if (const Val* n = top.get("response_us")) c.response_us = bounded(file, *n, "response_us", 0, 10'000);
   if (const Val* n = top.get("margin_us")) c.margin_us = bounded(file, *n, "margin_us", 0, 10'000);
@@ -85,6 +92,8 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
   if (const Val* n = top.get("wheel_counts_per_rev")) c.wheel_counts_per_rev = bounded(file, *n, "wheel_counts_per_rev", 4, 1 << 30);
   if (const Val* n = top.get("params")) read_params(file, *n, c);
   if (const Val* n = top.get("platform")) read_platform(file, *n, base_dir, c.platform_yaml, c.platform_file);
+  if (c.event_driven && c.command == WheelCommand::interpolate)
+    fail(file, *top.get("wheel_command"), "wheel_command", "INTERPOLATE needs phase 3, which event-driven communication never enters");
   return c;
 }
 
@@ -108,6 +117,7 @@ MasterConfig make_master_config(const M3ProgramConfig& c) {
   m.margin_ns = std::llround(c.margin_us * 1e3);
   m.software_ns = std::llround(c.software_us * 1e3);
   m.detect_timeout_ns = std::llround(c.detect_timeout_ms * 1e6);
+  m.event_driven = c.event_driven;
   return m;
 }
 
@@ -115,6 +125,7 @@ std::string dump_m3_config(const M3ProgramConfig& c) {
   std::string out = fmt::format("cycle: {}\nretry_slots: {}\nwheels: [0x{:02X}, 0x{:02X}, 0x{:02X}, 0x{:02X}]\n", c.cycle,
                                 c.retry_slots, c.wheels[0], c.wheels[1], c.wheels[2], c.wheels[3]);
   if (c.extra_axes > 0) out += fmt::format("extra_axes: {}\n", c.extra_axes);
+  if (c.event_driven) out += "communication: event\n";
   out += fmt::format("data_bytes: {}\nresponse_us: {}\nmargin_us: {}\nsoftware_us: {}\n", c.data_bytes, c.response_us,
                      c.margin_us, c.software_us);
   out += fmt::format("detect_timeout_ms: {}\nstartup_timeout: {}\nlost_cycles: {}\n", c.detect_timeout_ms,

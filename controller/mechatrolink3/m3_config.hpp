@@ -33,7 +33,11 @@ struct M3ProgramConfig {
   // Servo axes beside the wheels, at the addresses after the highest wheel's; started as the
   // wheels are and held in VELCTRL at zero speed (a full line: up to 62 stations in all).
   int extra_axes = 0;
-  std::size_t data_bytes = 32;          // 32 or 48 (subcommands)
+  std::size_t data_bytes = 32;          // 32 or 48 (subcommands); 64 when event-driven
+  // Event-driven communication instead of cyclic: no SYNC, the servos stay in phase 2, and
+  // the program asks for one exchange per axis every `cycle` (its tick), each answered within
+  // the 50 ms limit or retried by the driver. VELCTRL only (INTERPOLATE needs phase 3).
+  bool event_driven = false;
   double response_us = 2.0;             // each slave's response time allowed for [µs]
   double margin_us = 1.0;               // added to every T_RSP [µs]
   double software_us = 100.0;           // the application's time after INT_OFFSET [µs]

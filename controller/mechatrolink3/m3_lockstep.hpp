@@ -36,6 +36,9 @@ class MasterLockstep {
   // Runs the master's events of tick g (from g.t_ns up to g.t_ns + period, exclusive) and
   // hands it every frame the twin delivered. ok, or why the twin stopped answering.
   simclock::WaitStatus run_tick(C1Master& master, const simclock::Grant& g, SimTime period);
+  // Tick g begins: what the master sends from now on (before run_tick, e.g. event-driven
+  // requests at the tick's start) is reported in it.
+  void begin_tick(const simclock::Grant& g) { tick_ = g.tick; }
 
   simclock::Client& clock() { return clock_; }
   std::uint64_t frames_sent() const { return sent_; }

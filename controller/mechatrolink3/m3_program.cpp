@@ -51,6 +51,7 @@ class Runner {
       : pc_(pc), platform_(std::move(platform)) {
     ServoAxisConfig ac;
     ac.position_mode = pc.command == WheelCommand::interpolate;
+    ac.synchronous = !pc.event_driven;
     ac.com_tim = 1;
     ac.params = pc.params;
     const std::vector<std::uint8_t> stations = station_addresses(pc);
@@ -58,9 +59,11 @@ class Runner {
       axes_.emplace_back(fmt::format("axis {} ({:02X}h)", i + 1, stations[i]), ac,
                          [](SimTime t, const std::string& s) { spdlog::info("{} {}", stamp(t), s); });
     misses_.assign(stations.size(), 0);
+    requested_.assign(stations.size(), 0);
     master_ = std::make_unique<C1Master>(
         make_master_config(pc), std::move(emit), [this](std::uint64_t n, SimTime t) { on_interrupt(n, t); },
         [](SimTime t, const std::string& s) { spdlog::info("{} driver: {}", stamp(t), s); });
+    master_->on_event([this](int k, bool ok, SimTime latency) { on_exchange(k, ok, latency); });
     if (platform_) {
       controller::PlatformLoopConfig lc = platform_->loop;
       lc.counts_per_rev = static_cast<int>(std::lround(pc.wheel_counts_per_rev));
@@ -70,6 +73,16 @@ class Runner {
   }
 
   C1Master& master() { return *master_; }
+  // Event-driven: each tick the platform loop, then one exchange requested per axis (the
+  // driver queues them and runs one at a time). Cyclic communication needs none of this.
+  void event_tick(SimTime t) {
+    if (!pc_.event_driven || master_->state() != DriverState::event) return;
+    platform(t);
+    for (int k = 0; k < static_cast<int>(axes_.size()); ++k) {
+      requested_[static_cast<std::size_t>(k)] = t;
+      master_->request(k, t);
+    }
+  }
   const C1Master& master() const { return *master_; }
   const ServoAxis& axis(int i) const { return axes_[static_cast<std::size_t>(i)]; }
   void start(SimTime t) {
@@ -152,6 +165,13 @@ class Runner {
     platform(t);
   }
 
+  // Event-driven: axis k's exchange ended (ok: its response came) latency after its request.
+  void on_exchange(int k, bool ok, SimTime latency) {
+    const auto i = static_cast<std::size_t>(k);
+    misses_[i] = ok ? 0 : misses_[i] + 1;
+    axes_[i].on_interrupt(master_->response(k), ok, master_->command(k), requested_[i] + latency);
+  }
+
   void command(const std::array<double, 4>& ref_per_s) {
     for (std::size_t i = 0; i < 4; ++i) {
       if (pc_.command == WheelCommand::velctrl) {
@@ -230,7 +250,8 @@ class Runner {
   std::optional<PlatformLoop> loop_;
   controller::PlatformLoopOutput out_;
   std::int64_t every_ = 1, n_ = 0;
-  std::vector<int> misses_;  // per axis: cycles since its last fresh response
+  std::vector<int> misses_;  // per axis: cycles (exchanges) since its last fresh response
+  std::vector<SimTime> requested_;  // event-driven: when each axis's exchange was requested
   std::array<double, 4> ref_per_s_{}, target_{};
   bool started_ = false, finished_ = false, halted_ = false;
   int lost_axis_ = -1;
@@ -255,6 +276,9 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     if (!started) r.start(g.t_ns), started = true;
+    ls.begin_tick(g);
+    r.master().advance(g.t_ns);
+    r.event_tick(g.t_ns);
     if (const auto st = ls.run_tick(r.master(), g, cycle_ns); st != simclock::WaitStatus::ok)
       throw RuntimeFailure{fmt::format("tick {}: the twin stopped answering inside the tick ({})", g.tick, simclock::to_string(st))};
     simclock::Done done{g.tick, {ls.frames_sent(), 0, 0, 0}, r.report()};
@@ -271,6 +295,8 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
   const std::int64_t end = o.duration >= 0 ? std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
   std::array<std::uint8_t, 2 * kMaxFrame> buf{};
   r->start(0);
+  const SimTime tick = std::llround(pc.cycle * 1e9);
+  SimTime next_tick = 0;
   for (;;) {
     SimTime now = controller::monotonic_ns() - start;
     if (controller::signalled(sigfd) || now >= end) break;
@@ -282,7 +308,12 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
       r->start(controller::monotonic_ns() - start);
       continue;
     }
-    const SimTime wake = r->master().next_wakeup();
+    if (pc.event_driven && now >= next_tick) {
+      r->event_tick(now);
+      next_tick += tick * (1 + (now - next_tick) / tick);
+    }
+    SimTime wake = r->master().next_wakeup();
+    if (pc.event_driven) wake = wake < 0 ? next_tick : std::min(wake, next_tick);
     const SimTime wait = wake < 0 ? 10'000'000 : std::max<SimTime>(0, wake - now);
     const int n = tr.receive(buf, std::chrono::nanoseconds(std::min<SimTime>(wait, 10'000'000)));
     now = controller::monotonic_ns() - start;
@@ -348,9 +379,13 @@ int run_m3_program(const ProgramOptions& o) {
   }
   const SimTime cycle_ns = std::llround(pc.cycle * 1e9);
   const int sigfd = controller::open_signal_fd();
-  spdlog::info("M-III C1 master on {} (clock {}, transmission cycle {} µs, {} retry slot(s), {} bytes, {})", tr->describe(),
-               o.clock, cycle_ns / 1000, pc.retry_slots, pc.data_bytes,
-               pc.command == WheelCommand::velctrl ? "VELCTRL" : "INTERPOLATE");
+  if (pc.event_driven)
+    spdlog::info("M-III C1 master on {} (clock {}, event-driven: one exchange per axis every {} µs, {} bytes, VELCTRL)",
+                 tr->describe(), o.clock, cycle_ns / 1000, pc.data_bytes);
+  else
+    spdlog::info("M-III C1 master on {} (clock {}, transmission cycle {} µs, {} retry slot(s), {} bytes, {})", tr->describe(),
+                 o.clock, cycle_ns / 1000, pc.retry_slots, pc.data_bytes,
+                 pc.command == WheelCommand::velctrl ? "VELCTRL" : "INTERPOLATE");
   int code = kExitOk;
   std::unique_ptr<Runner> runner;
   std::uint64_t tx = 0, rx = 0;

@@ -6,7 +6,8 @@
 // figs. 9-11 and the servo start-up of fig. 8; the capture decodes with the project's
 // Wireshark dissector with no malformed frame and exactly the frames the line saw; position
 // mode (INTERPOLATE) and a relative run directory work; a cycle the line cannot fit is
-// refused naming the shortest one that fits; a transport that cannot be opened is bad input;
+// refused naming the shortest one that fits; event-driven communication drives the platform;
+// a transport that cannot be opened is bad input;
 // and an external master on its own wall clock drives the twin's servos.
 #include <gtest/gtest.h>
 
@@ -120,6 +121,26 @@ TEST_F(CliM3, ACycleTheLineCannotFitIsRefusedNamingTheShortestThatFits) {
   EXPECT_EQ(m.at("master").at("stop_reason"), "startup_timeout") << "what it reported on the sim clock";
   EXPECT_EQ(m.at("master").at("driver_state"), "failed");
   EXPECT_EQ(m.at("master").at("exit"), "exit 3");
+}
+
+// Event-driven communication: no SYNC, the servos connected asynchronously and left in phase
+// 2, one exchange per axis every millisecond driving the platform to its goal.
+TEST_F(CliM3, EventDrivenCommunicationDrivesThePlatform) {
+  const fs::path out = dir_ / "event";
+  const Finished f = run_short(out, {"bus.communication=event", "bus.transport=udp:127.0.0.1:0"});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json m = metrics(out);
+  EXPECT_EQ(m.at("master").at("driver_state"), "event-driven communication");
+  EXPECT_EQ(m.at("master").at("state"), "finished");
+  EXPECT_EQ(m.at("master").at("missed"), 0);
+  EXPECT_GT(m.at("master").at("exchanges").get<int>(), 4 * 4000);
+  for (const auto& s : m.at("slaves")) {
+    EXPECT_EQ(s.at("phase"), 2) << "event-driven: never phase 3";
+    EXPECT_EQ(s.at("missed_syncs"), 0);
+  }
+  EXPECT_GE(m.at("bus").at("servos_on_since_s").get<double>(), 0.0);
+  EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
+  EXPECT_TRUE(contains(read_bytes(out / "master.log"), "communication start: event-driven"));
 }
 
 // A transport that cannot be opened is bad input named by its key; nothing is written.

@@ -420,6 +420,9 @@ TEST(ScenarioM3, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.m3.mode, "velctrl");
   EXPECT_DOUBLE_EQ(by_name.bus.m3.cycle, 0.001);
   EXPECT_EQ(by_name.bus.m3.stations, 4);
+  EXPECT_EQ(by_name.bus.m3.communication, "cyclic");
+  EXPECT_EQ(load_scenario(scenario("minimal.yaml"), {{"bus", "m3"}, {"bus.communication", "event"}}).bus.m3.communication,
+            "event");
   EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(false), 1.0);
   EXPECT_DOUBLE_EQ(by_name.bus.m3.margin(true), 80.0);
 }
@@ -429,6 +432,9 @@ TEST(ScenarioErrors, M3SettingsAndFaultsOfTheOtherBuses) {
   expect_error(load_error(scenario("bad_m3_data_bytes.yaml")), scenario("bad_m3_data_bytes.yaml"), 5, "bus.data_bytes");
   expect_error(load_error(scenario("bad_m3_corruption_on_can.yaml")), scenario("bad_m3_corruption_on_can.yaml"), 7,
                "faults.0.corruption");
+  const ScenarioError e = load_error(scenario("minimal.yaml"),
+                                     {{"bus", "m3"}, {"bus.communication", "event"}, {"bus.mode", "interpolate"}});
+  EXPECT_EQ(e.key(), "bus.mode") << e.what();
 }
 
 // The outputs section: video size, rate and inset, DDS domain/interface/rate, report; a

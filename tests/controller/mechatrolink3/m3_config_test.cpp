@@ -1,5 +1,6 @@
 // Tests controller/mechatrolink3/m3_config: the C1 master program's configuration file. Every
-// key is read, extra axes take the addresses after the wheels (62 stations at most), a minimal file has the documented defaults, the core's configuration carries
+// key is read, extra axes take the addresses after the wheels (62 stations at most),
+// event-driven communication carries 64 bytes and refuses INTERPOLATE, a minimal file has the documented defaults, the core's configuration carries
 // the cycle, slaves and T_RSP inputs in ns, a dump reads back the same, and each error names
 // the file, the line and the key.
 #include "controller/mechatrolink3/m3_config.hpp"
@@ -72,6 +73,20 @@ TEST(M3Config, ExtraAxesFollowTheHighestWheelAddress) {
   EXPECT_EQ(station_addresses(parse_m3_config("extra_axes: 58\n", "t.yaml", "")).back(), 0x40) << "62 stations";
   EXPECT_EQ(error_of("wheels: [3, 4, 5, 10]\nextra_axes: 58\n"),
             "t.yaml:2: extra_axes: addresses after 0Ah run past 40h (62 stations at most)");
+}
+
+TEST(M3Config, EventDrivenCommunicationCarries64BytesAndNoInterpolate) {
+  const M3ProgramConfig c = parse_m3_config("communication: event\n", "t.yaml", "");
+  EXPECT_TRUE(c.event_driven);
+  EXPECT_EQ(c.data_bytes, 64u);
+  const MasterConfig m = make_master_config(c);
+  EXPECT_TRUE(m.event_driven);
+  EXPECT_EQ(m.slaves[0].data_bytes, 64u);
+  EXPECT_TRUE(parse_m3_config(dump_m3_config(c), "dump.yaml", "").event_driven);
+  EXPECT_EQ(error_of("communication: event\ndata_bytes: 32\n"), "t.yaml:2: data_bytes: event-driven data is 64 bytes");
+  EXPECT_EQ(error_of("communication: event\nwheel_command: interpolate\n"),
+            "t.yaml:2: wheel_command: INTERPOLATE needs phase 3, which event-driven communication never enters");
+  EXPECT_EQ(error_of("communication: sometimes\n"), "t.yaml:1: communication: cyclic or event");
 }
 
 TEST(M3Config, ADumpReadsBackTheSame) {
