@@ -313,6 +313,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       return;  // physics, not the bus
     case FaultSpec::Kind::link_break:  // line faults; the loader refuses them on `can`
     case FaultSpec::Kind::corruption:
+    case FaultSpec::Kind::second_master:
       throw std::invalid_argument("CAN network: link_break is an EtherCAT fault");
   }
 }

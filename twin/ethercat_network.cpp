@@ -341,7 +341,8 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       break;
     case FaultSpec::Kind::wheel_slip:
     case FaultSpec::Kind::bus_off:
-    case FaultSpec::Kind::corruption:  // M-III only; the loader refuses it on `ethercat`
+    case FaultSpec::Kind::corruption:
+    case FaultSpec::Kind::second_master:  // M-III only; the loader refuses it on `ethercat`
       return;  // not a fault of this bus (the scenario loader refuses bus_off here)
   }
   if (hooks_.log) hooks_.log(t, "fault", fmt::format("{} ({})", what, begin ? "begins" : "ends"));

@@ -92,6 +92,26 @@ m3::Fate M3Network::fate(bool from_master, int k, std::span<const std::uint8_t>)
   return m3::Fate::deliver;
 }
 
+// The second C1 master's commands, one NOP per station, at the tick's instant: address 01h
+// like ours, a WDT count stuck at 5 (so a slave whose previous command carried 5 sees it
+// repeat: a WDT error).
+void M3Network::flush_transport() {
+  if (!second_master_) return;
+  std::array<std::uint8_t, m3::kMaxFrame> out{};
+  std::array<std::uint8_t, 32> cmd{};
+  m3::write_header(cmd, m3::CommandHeader{static_cast<std::uint8_t>(m3::Command::nop), 0x50, 0});
+  second_sequence_ = static_cast<std::uint8_t>((second_sequence_ + 1) & 0xF);
+  SimTime at = linked_to_;
+  for (int k = 0; k < spec_.stations; ++k) {
+    const std::size_t n = m3::encode(m3::FrameSpec{.dst = static_cast<std::uint8_t>(m3::kFirstSlave + k),
+                                                   .src = m3::kC1Master, .type = m3::FrameType::cyclic_command,
+                                                   .sequence = second_sequence_, .retry = false, .data = cmd},
+                                     out);
+    segment_->inject(std::span<const std::uint8_t>(out.data(), n), at);
+    at += m3::frame_slot_ns(cmd.size());
+  }
+}
+
 void M3Network::advance(SimTime t) {
   if (t <= linked_to_) return;  // the exchange inside a tick may already have run them further
   linked_to_ = t;
@@ -233,6 +253,10 @@ void M3Network::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       cut_after_ = begin ? f.wheel : -1;
       update_reachability();
       what = f.wheel == 0 ? std::string("link_break between master and slave 1") : fmt::format("link_break after slave {}", f.wheel);
+      break;
+    case FaultSpec::Kind::second_master:
+      second_master_ = begin;
+      what = "a second C1 master on the line";
       break;
     case FaultSpec::Kind::wheel_slip:
     case FaultSpec::Kind::drift:

@@ -13,7 +13,9 @@
 // pacer wakes on the transport (wake_fd), enter the line at the instant the kernel received
 // them (m3_segment poll), and are answered at once. Both directions go into bus-m3.pcap.
 //
-// Faults: frame loss and corruption (bad FCS) to and from one slave or all, a late response
+// Faults: frame loss and corruption (bad FCS) to and from one slave or all, a second C1 master
+// (its commands at each tick's start, before ours, with a WDT count that never advances; our
+// master hears them and the slaves' answers to them at the next grant), a late response
 // (extra delay of a slave's frames), a slave's power loss and return (in a cascade the
 // stations behind a powered-off one drop off too: nothing passes a dead station), a cable
 // break. Power and cable state make up each station's reachability.
@@ -57,7 +59,9 @@ class M3Network final : public BusNetwork {
   void flush_pcap() override;
   std::string close_pcap() override { return close_capture(segment_->pcap()); }
   std::string pcap_error() const override;
-  void flush_transport() override {}  // answers go out as the line delivers them
+  // Answers go out as the line delivers them; here, before each grant, a second C1 master
+  // (fault) sends its commands.
+  void flush_transport() override;
 
   bool answers_inside_tick() const override { return clock_ == ClockMode::lockstep; }
   simclock::Horizon on_sent(const simclock::Sent& s, std::chrono::milliseconds timeout) override;
@@ -112,6 +116,8 @@ class M3Network final : public BusNetwork {
   // Frame faults: per target station, the loss and corruption probabilities.
   std::vector<double> loss_, corrupt_;
   double master_loss_ = 0;                 // frames from the master, to every slave
+  bool second_master_ = false;             // fault: another C1 master on the line
+  std::uint8_t second_sequence_ = 0;
   std::mt19937_64 rng_;
   std::uint64_t lost_ = 0, corrupted_ = 0;
   SimTime running_since_ns_ = -1;

@@ -559,7 +559,8 @@ double path_duration(const PathSpec& path) {
 
 // The fault kinds a scenario may name.
 const std::vector<std::string_view> kFaultKinds = {"wheel_slip", "frame_loss", "delay",      "drift",
-                                                   "power_loss", "bus_off",    "link_break", "corruption"};
+                                                   "power_loss", "bus_off",    "link_break", "corruption",
+                                                   "second_master"};
 
 // `node:` of a CAN fault: 1..4 (a slave), or `master` / `all` where the kind allows them.
 int read_fault_node(const YamlField& v, bool master_ok, bool all_ok) {
@@ -583,6 +584,7 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can)");
   if (kind == "link_break" && !ethercat && !m3) v.fail("link_break is a fault of a line (bus: ethercat or m3)");
   if (kind == "corruption" && !m3) v.fail("corruption is an M-III fault (bus: m3)");
+  if (kind == "second_master" && !m3) v.fail("second_master is an M-III fault (bus: m3)");
   if (kind == "drift" && m3) v.fail("drift has no meaning on M-III: the slaves follow the master's SYNC");
   if (kind == "wheel_slip") {
     v.allow_keys({"wheel", "at", "duration", "friction_scale"});
@@ -610,6 +612,9 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
     v.allow_keys({"after", "at", "duration"});
     f.kind = K::link_break;
     f.wheel = v.required("after").integer(Bounds::closed(0, 3));  // slaves 1..after stay reachable
+  } else if (kind == "second_master") {
+    v.allow_keys({"at", "duration"});
+    f.kind = K::second_master;
   } else if (kind == "corruption") {
     v.allow_keys({"node", "at", "duration", "rate"});
     f.kind = K::corruption;
@@ -803,6 +808,7 @@ const char* to_string(FaultSpec::Kind k) {
     case FaultSpec::Kind::bus_off: return "bus_off";
     case FaultSpec::Kind::link_break: return "link_break";
     case FaultSpec::Kind::corruption: return "corruption";
+    case FaultSpec::Kind::second_master: return "second_master";
   }
   return "?";
 }

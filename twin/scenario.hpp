@@ -194,6 +194,8 @@ struct FaultSpec {
                  // 1) is cut; EtherCAT frames return from the last slave still reached (none
                  // for 0), M-III stations behind the cut drop off the line
     corruption,  // M-III: frames to and from `node` get a bad FCS with probability `rate`
+    second_master,  // M-III: another C1 master on the line (address 01h too) sends every slave a
+                    // command of its own each transmission cycle, its WDT count never advancing
   };
   Kind kind = Kind::wheel_slip;
   double at = 0;              // start [s]

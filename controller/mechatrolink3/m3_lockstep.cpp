@@ -75,6 +75,8 @@ void MasterLockstep::deliver_inbox(C1Master& master) {
 simclock::WaitStatus MasterLockstep::run_tick(C1Master& master, const simclock::Grant& g, SimTime period) {
   tick_ = g.tick;
   const SimTime end = g.t_ns + period;
+  // Frames the twin sent outside an exchange (another station on the line) arrive at the grant.
+  if (status_ == simclock::WaitStatus::ok && received_ < g.frames[bus_]) status_ = drain_to(g.frames[bus_], g.t_ns);
   master.advance(g.t_ns);
   for (;;) {
     deliver_inbox(master);

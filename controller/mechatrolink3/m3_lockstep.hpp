@@ -9,7 +9,8 @@
 // back to back: one exchange fewer per cycle), and take the twin's Horizon (what reached the master and when; nothing else before
 // quiet_until), draining the transport up to the Horizon's count into an inbox. The frames in
 // the inbox are handed to the core at their arrival times after the core's call returns (so
-// the core is never re-entered), the core's own deadlines run in simulated time in between,
+// the core is never re-entered); frames the Grant counts beyond those (another station's,
+// sent outside any exchange) are handed over at the grant's instant; the core's own deadlines run in simulated time in between,
 // and the tick ends when the core's next event lies beyond it. Our master polls: every Sent
 // is answered by at most one frame (the response to it).
 #pragma once

@@ -408,7 +408,8 @@ TEST(ScenarioM3, SettingsAndFaultsAreRead) {
   EXPECT_EQ(m.seed, 9u);
   EXPECT_DOUBLE_EQ(m.handshake_timeout, 4.0);
   EXPECT_DOUBLE_EQ(s.duration, 3 + 1.0 + 0.7) << "path, settle and the start-up";
-  ASSERT_EQ(s.faults.size(), 5u);
+  ASSERT_EQ(s.faults.size(), 6u);
+  EXPECT_EQ(s.faults[5].kind, FaultSpec::Kind::second_master);
   EXPECT_EQ(s.faults[0].wheel, FaultSpec::kMaster);
   EXPECT_EQ(s.faults[1].kind, FaultSpec::Kind::corruption);
   EXPECT_EQ(s.faults[1].wheel, 1);
@@ -435,6 +436,8 @@ TEST(ScenarioErrors, M3SettingsAndFaultsOfTheOtherBuses) {
   const ScenarioError e = load_error(scenario("minimal.yaml"),
                                      {{"bus", "m3"}, {"bus.communication", "event"}, {"bus.mode", "interpolate"}});
   EXPECT_EQ(e.key(), "bus.mode") << e.what();
+  const ScenarioError sm = load_error(scenario("bad_second_master_on_ethercat.yaml"));
+  EXPECT_EQ(sm.key(), "faults.0.second_master") << sm.what();
 }
 
 // The outputs section: video size, rate and inset, DDS domain/interface/rate, report; a

@@ -90,6 +90,15 @@ int M3Segment::poll(SimTime t, SimTime not_before) {
   return taken;
 }
 
+void M3Segment::inject(std::span<const std::uint8_t> frame, SimTime t) {
+  busy_ns_ += wire_ns(frame.size());
+  if (pcap_) pcap_->write_frame(frame, t, Direction::out);
+  if (transport_.send(frame)) ++to_master_;
+  else ++send_failures_;
+  stations_.line().from_master(frame, t);
+  run_dry();
+}
+
 void M3Segment::advance(SimTime t) { stations_.advance(t); }
 
 drive::Command M3Segment::step_drive(int k, SimTime t, const drive::Feedback& fb) {

@@ -63,6 +63,11 @@ class M3Segment {
   // line runs dry after each (the answers go out at once). So a twin that was busy when frames
   // came still has its slaves see them when they came. Returns the frames taken. Real-time safe.
   int poll(SimTime t, SimTime not_before = 0);
+  // A frame another station puts on the line at t (a second C1 master: fault injection): it
+  // enters the line towards the slaves, reaches our master too (every station hears the
+  // line) and goes into the capture; the line then runs dry. The frames it causes reach our
+  // master outside any exchange: the next Grant counts them. Real-time safe.
+  void inject(std::span<const std::uint8_t> frame, SimTime t);
   // The slaves' communication timers up to t (missing sync or commands). Real-time safe.
   void advance(SimTime t);
   // One drive period of slave k at t (its servo profile and drive core). Real-time safe.

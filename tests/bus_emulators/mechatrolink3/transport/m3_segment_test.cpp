@@ -6,7 +6,8 @@
 // waiting for ever; frames reported together entered back to back, the last at its send time;
 // the capture holds both directions with their simulated times; in realtime
 // poll() takes whatever has arrived and answers it at once, and nothing when nothing came; a
-// frame that waited (a busy twin) enters the line when it came, by its kernel receive stamp.
+// frame that waited (a busy twin) enters the line when it came, by its kernel receive stamp;
+// another station's injected frame reaches the slaves and our master.
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 
 #include <gtest/gtest.h>
@@ -93,6 +94,25 @@ TEST(M3Segment, FramesReportedTogetherEnteredBackToBack) {
   ASSERT_EQ(at.size(), 3u);
   EXPECT_EQ(at[0], t - frame_slot_ns(8)) << "the SYNC";
   EXPECT_EQ(at[1], t) << "the command";
+}
+
+// Another station's frame (a second C1 master): it reaches the slaves and our master, goes
+// into the capture, and the slave's answer to it comes to our master too, outside any Sent.
+TEST(M3Segment, AnInjectedFrameReachesTheSlavesAndOurMaster) {
+  MemTransport master("m3-segment-inject", Role::master), slaves("m3-segment-inject", Role::slaves);
+  M3Segment seg(SegmentConfig{}, slaves);
+  seg.inject(frame(0x03, FrameType::detect), 1'000'000);
+  EXPECT_EQ(seg.from_master(), 0u) << "not our master's";
+  EXPECT_EQ(seg.to_master(), 2u) << "the frame itself and the slave's answer";
+  std::array<std::uint8_t, kMaxFrame> buf{};
+  FrameView v;
+  ASSERT_GT(master.receive(buf, 0s), 0);
+  ASSERT_EQ(decode(std::span<const std::uint8_t>(buf.data(), kHeaderSize + kFcsSize), v), FrameStatus::ok);
+  EXPECT_EQ(v.src, kC1Master) << "another C1 master's frame";
+  const int n = master.receive(buf, 0s);
+  ASSERT_GT(n, 0);
+  ASSERT_EQ(decode(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), v), FrameStatus::ok);
+  EXPECT_EQ(v.type, FrameType::detect_reply);
 }
 
 TEST(M3Segment, PollTakesWhatHasArrivedAndAnswersAtOnce) {
