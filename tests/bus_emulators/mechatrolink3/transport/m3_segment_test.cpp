@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "bus_emulators/mechatrolink3/transport/m3_transport_mem.hpp"
+#include "tests/support/receive_stamps.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace omnitwin::m3 {
@@ -135,9 +136,9 @@ TEST(M3Segment, PollEntersAFrameThatWaitedWhenItCame) {
   {
     std::unique_ptr<M3Transport> slaves = open_transport("udp:127.0.0.1:0", Role::slaves);
     std::unique_ptr<M3Transport> master = open_transport(slaves->spec(), Role::master);
+    ASSERT_TRUE(omnitwin::testing::wait_for_receive_stamps(*master, *slaves, frame(0x03, FrameType::detect)));
     M3Segment seg(SegmentConfig{}, *slaves);
     seg.open_pcap(file);
-    std::this_thread::sleep_for(100ms);  // the kernel turns receive stamping on from a work item
     ASSERT_TRUE(master->send(frame(0x03, FrameType::detect)));
     std::this_thread::sleep_for(30ms);  // the twin busy elsewhere
     EXPECT_EQ(seg.poll(100'000'000), 1);

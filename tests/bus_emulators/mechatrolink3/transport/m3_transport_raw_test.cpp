@@ -9,6 +9,7 @@
 // otherwise.
 #include "bus_emulators/mechatrolink3/transport/m3_transport_raw.hpp"
 
+#include "tests/support/receive_stamps.hpp"
 #include "tests/support/veth.hpp"
 
 #include <arpa/inet.h>
@@ -146,7 +147,7 @@ TEST_F(M3RawTransport, MasterAndSlavesExchangeOverAVethPair) {
 TEST_F(M3RawTransport, AFramesAgeIsHowLongItWaitedBeforeReceive) {
   RawTransport master(veth_->a(), Role::master);
   RawTransport slaves(veth_->b(), Role::slaves);
-  std::this_thread::sleep_for(100ms);  // the kernel turns receive stamping on from a work item
+  ASSERT_TRUE(omnitwin::testing::wait_for_receive_stamps(master, slaves, command(32)));
   ASSERT_TRUE(master.send(command(32)));
   std::this_thread::sleep_for(20ms);
   std::array<std::uint8_t, kMaxFrame> buf{};

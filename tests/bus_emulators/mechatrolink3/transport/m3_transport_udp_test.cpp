@@ -18,6 +18,8 @@
 #include <thread>
 #include <vector>
 
+#include "tests/support/receive_stamps.hpp"
+
 namespace omnitwin::m3 {
 namespace {
 
@@ -96,7 +98,7 @@ TEST(M3UdpTransport, MasterAndSlavesExchangeOnLoopback) {
 
 TEST(M3UdpTransport, AFramesAgeIsHowLongItWaitedBeforeReceive) {
   Segment s;
-  std::this_thread::sleep_for(100ms);  // the kernel turns receive stamping on from a work item
+  ASSERT_TRUE(omnitwin::testing::wait_for_receive_stamps(*s.master, *s.slaves, command()));
   ASSERT_TRUE(s.master->send(command()));
   std::this_thread::sleep_for(20ms);
   std::array<std::uint8_t, kMaxFrame> buf{};
