@@ -24,24 +24,23 @@
 
 #include "bus_emulators/mechatrolink3/m3_frame.hpp"
 
+#include "bus_emulators/ethernet_capture.hpp"
+
 #include <array>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
 
-namespace omnitwin::bus_emulators {
-class PcapFile;
-}
 
 namespace omnitwin::m3 {
 
 enum class Direction : std::uint8_t { out, back };  // out: a master sent it; back: a slave did
 const char* to_string(Direction d);
 
-inline constexpr std::size_t kMaxEthFrame = 1514;  // what write_ethernet() takes (no Ethernet FCS)
+inline constexpr std::size_t kMaxEthFrame = bus_emulators::EthernetCapture::kMaxEthFrame;  // what write_ethernet() takes
 
-class PcapWriter {
+class PcapWriter : public bus_emulators::EthernetCapture {
  public:
   struct Options {
     bool flush_each_frame = false;  // true: every record reaches the kernel at once
@@ -50,11 +49,9 @@ class PcapWriter {
 
   // Creates `path`'s .part file (removing a stale `path`); throws std::runtime_error naming
   // `path` on failure.
-  explicit PcapWriter(const std::string& path);
-  PcapWriter(const std::string& path, Options options);
-  ~PcapWriter();
-  PcapWriter(const PcapWriter&) = delete;
-  PcapWriter& operator=(const PcapWriter&) = delete;
+  explicit PcapWriter(const std::string& path) : PcapWriter(path, Options{}) {}
+  PcapWriter(const std::string& path, Options options)
+      : EthernetCapture(path, options.buffer_bytes, options.flush_each_frame) {}
 
   // Appends one bare M-III frame (header, data, FCS) in its Ethernet encapsulation, stamped
   // t_ns. Any 2 … kMaxFrame bytes are taken, corrupted frames included; others are counted
@@ -62,36 +59,12 @@ class PcapWriter {
   bool write_frame(std::span<const std::uint8_t> m3_frame, SimTime t_ns, Direction dir);
   // Appends a whole Ethernet frame as it is, padded to 60 bytes if shorter; over
   // kMaxEthFrame bytes it is refused. RT-safe.
-  bool write_ethernet(std::span<const std::uint8_t> eth_frame, SimTime t_ns, Direction dir);
-  // Hands buffered records to the kernel; the .part file is valid afterwards.
-  bool flush();
-  // Flushes and closes; renames the .part file to path() when every write succeeded, else
-  // removes it. Idempotent. True when path() now holds the complete capture.
-  bool close();
-  bool is_open() const;
-  // false once a write, flush, sync or the final rename failed; error() then names the file
-  // and the system's reason ("" while ok). Both stay readable after close().
-  bool ok() const;
-  std::string error() const;
-  std::string part_path() const;  // where the capture is until close()
+  bool write_ethernet(std::span<const std::uint8_t> eth_frame, SimTime t_ns, Direction dir) {
+    return EthernetCapture::write_ethernet(eth_frame, t_ns, static_cast<int>(dir));
+  }
 
-  std::uint64_t written() const { return written_[0] + written_[1]; }
-  std::uint64_t written(Direction d) const { return written_[static_cast<int>(d)]; }
-  std::uint64_t refused() const { return refused_; }
-  const std::string& path() const { return path_; }
-
-  static constexpr int kLinkType = 1;  // LINKTYPE_ETHERNET / DLT_EN10MB
-
- private:
-  bool writable() const;
-  bool emit(std::size_t size, SimTime t_ns, Direction dir);
-
-  std::string path_;
-  Options options_;
-  std::unique_ptr<bus_emulators::PcapFile> file_;  // opaque, so users need not include <pcap.h>
-  std::array<std::uint8_t, kMaxEthFrame> frame_{};
-  std::uint64_t written_[2] = {0, 0};
-  std::uint64_t refused_ = 0;
+  using EthernetCapture::written;
+  std::uint64_t written(Direction d) const { return written_in(static_cast<int>(d)); }
 };
 
 }  // namespace omnitwin::m3

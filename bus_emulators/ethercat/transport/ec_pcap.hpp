@@ -27,15 +27,13 @@
 
 #include "bus_emulators/ethercat/ec_frame.hpp"
 
+#include "bus_emulators/ethernet_capture.hpp"
+
 #include <array>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
-
-namespace omnitwin::bus_emulators {
-class PcapFile;
-}
 
 namespace omnitwin::ethercat {
 
@@ -46,7 +44,7 @@ const char* to_string(Direction d);
 // byte is clear, so the marked source of returned frames (02:00:5e:00:53:01) differs from it.
 inline constexpr Mac kDefaultMasterMac = {0x00, 0x00, 0x5e, 0x00, 0x53, 0x01};
 
-class PcapWriter {
+class PcapWriter : public bus_emulators::EthernetCapture {
  public:
   struct Options {
     Mac master_mac = kDefaultMasterMac;  // source of out frames (a raw master: its NIC's MAC)
@@ -56,47 +54,24 @@ class PcapWriter {
 
   // Creates `path`'s .part file (removing a stale `path`); throws std::runtime_error naming
   // `path` on failure.
-  explicit PcapWriter(const std::string& path);
-  PcapWriter(const std::string& path, Options options);
-  ~PcapWriter();
-  PcapWriter(const PcapWriter&) = delete;
-  PcapWriter& operator=(const PcapWriter&) = delete;
+  explicit PcapWriter(const std::string& path) : PcapWriter(path, Options{}) {}
+  PcapWriter(const std::string& path, Options options)
+      : EthernetCapture(path, options.buffer_bytes, options.flush_each_frame), master_mac_(options.master_mac) {}
 
   // Appends one PDU as an Ethernet frame stamped t [ns] (see the file comment for the
   // addresses). Returns false once closed, for a PDU over kMaxPdu bytes (counted in
   // refused()), or when writing or flushing failed (then and from then on). RT-safe.
   bool write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir);
   // Appends a whole Ethernet frame (header included) as it is, padded to 60 bytes if shorter.
-  bool write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir);
-  // Hands buffered records to the kernel; the .part file is valid afterwards. false on an
-  // I/O error (kept in error()).
-  bool flush();
-  // Flushes and closes; renames the .part file to path() when every write succeeded, else
-  // removes it. Idempotent. True when path() now holds the complete capture.
-  bool close();
-  bool is_open() const;
-  // false once a write, flush, sync or the final rename failed; error() then names the file
-  // and the system's reason ("" while ok). Both stay readable after close().
-  bool ok() const;
-  std::string error() const;
-  std::string part_path() const;  // where the capture is until close()
+  bool write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir) {
+    return write_ethernet(frame, t, static_cast<int>(dir));
+  }
 
-  std::uint64_t written() const { return written_[0] + written_[1]; }
-  std::uint64_t written(Direction d) const { return written_[static_cast<int>(d)]; }
-  std::uint64_t refused() const { return refused_; }
-  const std::string& path() const { return path_; }
-
-  static constexpr int kLinkType = 1;  // LINKTYPE_ETHERNET / DLT_EN10MB
+  using EthernetCapture::written;
+  std::uint64_t written(Direction d) const { return written_in(static_cast<int>(d)); }
 
  private:
-  bool emit(std::size_t size, SimTime t, Direction dir);
-
-  std::string path_;
-  Options options_;
-  std::unique_ptr<bus_emulators::PcapFile> file_;  // opaque, so users need not include <pcap.h>
-  std::array<std::uint8_t, kEthHeaderSize + kMaxPdu> frame_{};
-  std::uint64_t written_[2] = {0, 0};
-  std::uint64_t refused_ = 0;
+  Mac master_mac_;
 };
 
 }  // namespace omnitwin::ethercat
