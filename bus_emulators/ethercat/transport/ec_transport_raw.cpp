@@ -1,6 +1,8 @@
 // bus_emulators/ethercat/transport — EtherCAT on raw Ethernet; see ec_transport_raw.hpp.
 #include "bus_emulators/ethercat/transport/ec_transport_raw.hpp"
 
+#include "bus_emulators/raw_ethernet.hpp"
+
 #include <arpa/inet.h>
 #include <linux/filter.h>
 #include <net/if_arp.h>
@@ -27,42 +29,13 @@ namespace {
 #endif
 
 constexpr Mac kBroadcast = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff};
-constexpr std::uint8_t kZeros[kMinEthFrame] = {};
-
-std::string mac_text(const Mac& m) {
-  return fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}", m[0], m[1], m[2], m[3], m[4], m[5]);
-}
 
 }  // namespace
 
 RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions options) : ifname_(ifname), role_(role) {
   const std::string spec = "raw:" + ifname_;
-  if (ifname_.empty() || ifname_.size() >= IFNAMSIZ)
-    throw TransportError(spec + ": bad interface name (1 to 15 characters)");
-  // Protocol 0 until bind(): the socket receives nothing before it is bound to the interface.
-  fd_ = ::socket(AF_PACKET, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (fd_ < 0) {
-    if (errno == EPERM || errno == EACCES)
-      throw TransportError(fmt::format("{}: opening a raw AF_PACKET socket needs root or CAP_NET_RAW ({})", spec,
-                                       std::strerror(errno)));
-    throw TransportError(fmt::format("{}: socket(AF_PACKET, SOCK_RAW): {}", spec, std::strerror(errno)));
-  }
-  const auto fail = [&](const std::string& what) {
-    const std::string m = fmt::format("{}: {}: {}", spec, what, std::strerror(errno));
-    ::close(fd_);
-    fd_ = -1;
-    throw TransportError(m);
-  };
-  ifreq ifr{};
-  std::memcpy(ifr.ifr_name, ifname_.c_str(), ifname_.size());
-  if (::ioctl(fd_, SIOCGIFINDEX, &ifr) != 0) fail("no network interface '" + ifname_ + "'");
-  ifindex_ = ifr.ifr_ifindex;
-  if (::ioctl(fd_, SIOCGIFHWADDR, &ifr) != 0) fail("SIOCGIFHWADDR");
-  if (ifr.ifr_hwaddr.sa_family != ARPHRD_ETHER) {
-    errno = EINVAL;
-    fail("'" + ifname_ + "' is not an Ethernet interface (use a veth pair or a NIC)");
-  }
-  std::memcpy(mac_.data(), ifr.ifr_hwaddr.sa_data, mac_.size());
+  bus_emulators::RawSocket sock = bus_emulators::open_raw_socket<TransportError>(ifname_, spec);
+  fd_ = sock.fd, ifindex_ = sock.ifindex, mac_ = sock.mac;
   write_eth_header(tx_hdr_.data(), kBroadcast, mac_);
 
   // Best effort, each: the checks in receive() cover what the kernel does not do.
@@ -87,11 +60,7 @@ RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions opti
   sock_fprog fp{static_cast<unsigned short>(sizeof prog / sizeof prog[0]), prog};
   kernel_filter_ = ::setsockopt(fd_, SOL_SOCKET, SO_ATTACH_FILTER, &fp, sizeof fp) == 0;
 
-  sockaddr_ll sll{};
-  sll.sll_family = AF_PACKET;
-  sll.sll_protocol = htons(kEtherType);
-  sll.sll_ifindex = ifindex_;
-  if (::bind(fd_, reinterpret_cast<sockaddr*>(&sll), sizeof sll) != 0) fail("bind");
+  bus_emulators::bind_raw_socket<TransportError>(sock, kEtherType, spec);
 }
 
 RawTransport::~RawTransport() {
@@ -99,7 +68,7 @@ RawTransport::~RawTransport() {
 }
 
 std::string RawTransport::describe() const {
-  return fmt::format("raw:{} ({}, {})", ifname_, to_string(role_), mac_text(mac_));
+  return fmt::format("raw:{} ({}, {})", ifname_, to_string(role_), bus_emulators::mac_text(mac_));
 }
 
 bool RawTransport::send(std::span<const std::uint8_t> pdu) {
@@ -108,24 +77,12 @@ bool RawTransport::send(std::span<const std::uint8_t> pdu) {
     return false;
   }
   const std::uint8_t* hdr = role_ == Role::master ? tx_hdr_.data() : reply_hdr_.data();
-  const std::size_t used = kEthHeaderSize + pdu.size();
-  const std::size_t pad = used < kMinEthFrame ? kMinEthFrame - used : 0;
-  iovec iov[3] = {{const_cast<std::uint8_t*>(hdr), kEthHeaderSize},
-                  {const_cast<std::uint8_t*>(pdu.data()), pdu.size()},
-                  {const_cast<std::uint8_t*>(kZeros), pad}};
-  msghdr msg{};
-  msg.msg_iov = iov;
-  msg.msg_iovlen = pad > 0 ? 3 : 2;
-  for (;;) {
-    const ssize_t n = ::sendmsg(fd_, &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
-    if (n == static_cast<ssize_t>(used + pad)) {
-      ++stats_.sent;
-      return true;
-    }
-    if (n < 0 && errno == EINTR) continue;
-    ++stats_.send_errors;  // ENETDOWN, ENOBUFS (driver queue full), ENXIO (interface gone), …
-    return false;
+  if (bus_emulators::send_padded(fd_, hdr, pdu)) {
+    ++stats_.sent;
+    return true;
   }
+  ++stats_.send_errors;  // ENETDOWN, ENOBUFS (driver queue full), ENXIO (interface gone), …
+  return false;
 }
 
 int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) {

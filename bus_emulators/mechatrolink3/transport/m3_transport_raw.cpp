@@ -1,6 +1,8 @@
 // bus_emulators/mechatrolink3/transport — M-III on raw Ethernet; see m3_transport_raw.hpp.
 #include "bus_emulators/mechatrolink3/transport/m3_transport_raw.hpp"
 
+#include "bus_emulators/raw_ethernet.hpp"
+
 #include <arpa/inet.h>
 #include <linux/filter.h>
 #include <linux/if_ether.h>
@@ -27,12 +29,6 @@ namespace {
 #define PACKET_IGNORE_OUTGOING 23  // Linux >= 4.20
 #endif
 
-constexpr std::uint8_t kZeros[kMinEthFrame] = {};
-
-std::string mac_text(const Mac& m) {
-  return fmt::format("{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}", m[0], m[1], m[2], m[3], m[4], m[5]);
-}
-
 // The Ethernet header m3::encapsulate() writes for a frame starting with these address bytes.
 void write_eth_header(std::uint8_t* h, std::uint8_t dst, std::uint8_t src) {
   const Mac d = station_mac(dst), s = station_mac(src);
@@ -45,45 +41,16 @@ void write_eth_header(std::uint8_t* h, std::uint8_t dst, std::uint8_t src) {
 }  // namespace
 
 RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions options) : ifname_(ifname), role_(role) {
-  if (ifname_.empty() || ifname_.size() >= IFNAMSIZ)
-    throw TransportError(spec() + ": bad interface name (1 to 15 characters)");
-  open_socket();
+  bus_emulators::RawSocket sock = bus_emulators::open_raw_socket<TransportError>(ifname_, spec());
+  fd_ = sock.fd, ifindex_ = sock.ifindex, mac_ = sock.mac;
   set_options(options);
   detail::ReceiveStamp::enable(fd_);  // best effort: without it last_age_ns() says -1
   if (options.kernel_filter) attach_filter();
-  bind_interface(options.kernel_filter ? kEtherType : ETH_P_ALL);
+  bus_emulators::bind_raw_socket<TransportError>(sock, options.kernel_filter ? kEtherType : ETH_P_ALL, spec());
 }
 
 RawTransport::~RawTransport() {
   if (fd_ >= 0) ::close(fd_);
-}
-
-void RawTransport::fail(const std::string& what) {
-  const std::string m = fmt::format("{}: {}: {}", spec(), what, std::strerror(errno));
-  ::close(fd_);
-  fd_ = -1;
-  throw TransportError(m);
-}
-
-void RawTransport::open_socket() {
-  // Protocol 0 until bind(): the socket receives nothing before it is bound to the interface.
-  fd_ = ::socket(AF_PACKET, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (fd_ < 0) {
-    if (errno == EPERM || errno == EACCES)
-      throw TransportError(fmt::format("{}: opening a raw AF_PACKET socket needs root or CAP_NET_RAW ({})", spec(),
-                                       std::strerror(errno)));
-    throw TransportError(fmt::format("{}: socket(AF_PACKET, SOCK_RAW): {}", spec(), std::strerror(errno)));
-  }
-  ifreq ifr{};
-  std::memcpy(ifr.ifr_name, ifname_.c_str(), ifname_.size());
-  if (::ioctl(fd_, SIOCGIFINDEX, &ifr) != 0) fail("no network interface '" + ifname_ + "'");
-  ifindex_ = ifr.ifr_ifindex;
-  if (::ioctl(fd_, SIOCGIFHWADDR, &ifr) != 0) fail("SIOCGIFHWADDR");
-  if (ifr.ifr_hwaddr.sa_family != ARPHRD_ETHER) {
-    errno = EINVAL;
-    fail("'" + ifname_ + "' is not an Ethernet interface (use a veth pair or a NIC)");
-  }
-  std::memcpy(mac_.data(), ifr.ifr_hwaddr.sa_data, mac_.size());
 }
 
 void RawTransport::set_options(const RawOptions& options) {
@@ -115,16 +82,8 @@ void RawTransport::attach_filter() {
   kernel_filter_ = ::setsockopt(fd_, SOL_SOCKET, SO_ATTACH_FILTER, &fp, sizeof fp) == 0;
 }
 
-void RawTransport::bind_interface(std::uint16_t protocol) {
-  sockaddr_ll sll{};
-  sll.sll_family = AF_PACKET;
-  sll.sll_protocol = htons(protocol);
-  sll.sll_ifindex = ifindex_;
-  if (::bind(fd_, reinterpret_cast<sockaddr*>(&sll), sizeof sll) != 0) fail("bind");
-}
-
 std::string RawTransport::describe() const {
-  return fmt::format("{} ({}, {})", spec(), to_string(role_), mac_text(mac_));
+  return fmt::format("{} ({}, {})", spec(), to_string(role_), bus_emulators::mac_text(mac_));
 }
 
 bool RawTransport::send(std::span<const std::uint8_t> frame) {
@@ -133,24 +92,12 @@ bool RawTransport::send(std::span<const std::uint8_t> frame) {
     return false;
   }
   write_eth_header(tx_hdr_.data(), frame[0], frame[1]);
-  const std::size_t used = kEthHeaderSize + frame.size();
-  const std::size_t pad = used < kMinEthFrame ? kMinEthFrame - used : 0;
-  iovec iov[3] = {{tx_hdr_.data(), kEthHeaderSize},
-                  {const_cast<std::uint8_t*>(frame.data()), frame.size()},
-                  {const_cast<std::uint8_t*>(kZeros), pad}};
-  msghdr msg{};
-  msg.msg_iov = iov;
-  msg.msg_iovlen = pad > 0 ? 3 : 2;
-  for (;;) {
-    const ssize_t n = ::sendmsg(fd_, &msg, MSG_DONTWAIT | MSG_NOSIGNAL);
-    if (n == static_cast<ssize_t>(used + pad)) {
-      ++stats_.sent;
-      return true;
-    }
-    if (n < 0 && errno == EINTR) continue;
-    ++stats_.send_errors;  // ENETDOWN, ENOBUFS (driver queue full), ENXIO (interface gone), …
-    return false;
+  if (bus_emulators::send_padded(fd_, tx_hdr_.data(), frame)) {
+    ++stats_.sent;
+    return true;
   }
+  ++stats_.send_errors;  // ENETDOWN, ENOBUFS (driver queue full), ENXIO (interface gone), …
+  return false;
 }
 
 std::uint64_t* RawTransport::drop_reason(unsigned pkttype, std::size_t n, std::span<const std::uint8_t> buf,

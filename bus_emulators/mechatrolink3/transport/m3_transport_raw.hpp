@@ -64,11 +64,8 @@ class RawTransport final : public M3Transport {
   bool promiscuous() const { return promiscuous_; }      // promiscuous membership is held
 
  private:
-  void open_socket();                          // the socket, the interface's index and MAC
   void set_options(const RawOptions& options);  // best effort: ignore outgoing, bypass, promisc
   void attach_filter();                        // the kernel filter (best effort)
-  void bind_interface(std::uint16_t protocol);  // host order: 0x88B5, or ETH_P_ALL
-  [[noreturn]] void fail(const std::string& what);  // closes fd_, throws naming the spec
   // Why the frame just received into rx_hdr_ and buf is dropped (its stats field), or null.
   // `pkttype` is the sockaddr_ll's, n the Ethernet frame's real length; ok: size is the frame's.
   std::uint64_t* drop_reason(unsigned pkttype, std::size_t n, std::span<const std::uint8_t> buf, std::size_t& size);
