@@ -1,0 +1,113 @@
+// bus_emulators/canopen — the EMCY producer (see co_emcy.hpp).
+#include "bus_emulators/canopen/co_emcy.hpp"
+
+#include <algorithm>
+
+namespace omnitwin::canopen {
+
+std::uint8_t register_bit_of(std::uint16_t code) {
+  switch (code >> 12) {
+    case 0x2: return error_register::current;
+    case 0x3: return error_register::voltage;
+    case 0x4: return error_register::temperature;
+    case 0x8: return (code & 0xFF00) == 0x8600 || (code & 0xFF00) == 0x8500 ? error_register::device_profile
+                                                                            : error_register::communication;
+    case 0xF: return (code & 0xFF00) == 0xFF00 ? error_register::manufacturer : 0;
+    default: return 0;
+  }
+}
+
+EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od), node_id_(node_id) {}
+
+std::uint8_t EmcyProducer::error_register() const {
+  std::uint8_t r = 0;
+  for (int i = 0; i < active_n_; ++i) r |= static_cast<std::uint8_t>(error_register::generic | register_bit_of(active_[static_cast<std::size_t>(i)]));
+  return r;
+}
+
+void EmcyProducer::update_register() {
+  if (OdEntry* e = od_.entry(0x1001, 0)) e->set_int(error_register());
+}
+
+// The newest error at 0x1003:1, the others one down; sub 0 counts them (up to the entries the
+// object has).
+void EmcyProducer::push_history(std::uint16_t code, std::array<std::uint8_t, 5> mfr) {
+  OdObject* h = od_.find(0x1003);
+  if (!h || !h->entry(0)) return;
+  const int cap = h->max_subindex();
+  for (int s = cap; s > 1; --s) {
+    OdEntry* dst = h->entry(static_cast<std::uint8_t>(s));
+    const OdEntry* src = h->entry(static_cast<std::uint8_t>(s - 1));
+    if (dst && src) dst->set_int(src->as_int());
+  }
+  // Low 16 bits the error code, high 16 bits manufacturer-specific additional information.
+  if (OdEntry* first = h->entry(1)) first->set_int(static_cast<std::int64_t>(code | (std::uint32_t{mfr[0]} << 16) | (std::uint32_t{mfr[1]} << 24)));
+  OdEntry* n = h->entry(0);
+  n->set_int(std::min<std::int64_t>(n->as_int() + 1, cap));
+}
+
+bool EmcyProducer::raise(std::uint16_t code, SimTime now, const SendFn& send, std::array<std::uint8_t, 5> mfr) {
+  if (std::find(active_.begin(), active_.begin() + active_n_, code) != active_.begin() + active_n_) return true;
+  if (active_n_ < kActive) active_[static_cast<std::size_t>(active_n_++)] = code;
+  update_register();
+  push_history(code, mfr);
+  const std::size_t before = dropped_;
+  enqueue({code, error_register(), mfr}, now, send);
+  return dropped_ == before;
+}
+
+bool EmcyProducer::clear(std::uint16_t code, SimTime now, const SendFn& send) {
+  auto* end = active_.begin() + active_n_;
+  auto* it = std::find(active_.begin(), end, code);
+  if (it == end) return false;
+  std::copy(it + 1, end, it);
+  --active_n_;
+  update_register();
+  if (active_n_ == 0) enqueue({emcy_code::reset, 0, {}}, now, send);
+  return true;
+}
+
+void EmcyProducer::clear_all(SimTime now, const SendFn& send) {
+  if (active_n_ == 0) return;
+  active_n_ = 0;
+  update_register();
+  enqueue({emcy_code::reset, 0, {}}, now, send);
+}
+
+void EmcyProducer::reset_communication() {
+  queue_n_ = 0;
+  last_sent_ = -1;
+}
+
+void EmcyProducer::enqueue(const Pending& p, SimTime now, const SendFn& send) {
+  if (queue_n_ >= kQueue) {
+    ++dropped_;
+    return;
+  }
+  queue_[static_cast<std::size_t>(queue_n_++)] = p;
+  on_time(now, send);
+}
+
+void EmcyProducer::on_time(SimTime now, const SendFn& send) {
+  const OdEntry* inh = od_.entry(0x1015, 0);
+  const SimTime inhibit = inh ? inh->as_int() * 100'000 : 0;  // [100 µs] → ns
+  while (queue_n_ > 0 && (last_sent_ < 0 || now - last_sent_ >= inhibit)) {
+    emit(queue_[0], now, send);
+    std::copy(queue_.begin() + 1, queue_.begin() + queue_n_, queue_.begin());
+    --queue_n_;
+  }
+}
+
+void EmcyProducer::emit(const Pending& p, SimTime now, const SendFn& send) {
+  const OdEntry* cob_e = od_.entry(0x1014, 0);
+  const auto cob_id = cob_e ? static_cast<std::uint32_t>(cob_e->as_int()) : cob::emcy + node_id_;
+  last_sent_ = now;
+  if (cob_id & cob::invalid) return;  // EMCY disabled: recorded, not sent
+  can::Frame f = frame11(cob_id, 8);
+  put_u16(f.data.data(), p.code);
+  f.data[2] = p.reg;
+  std::copy(p.mfr.begin(), p.mfr.end(), f.data.begin() + 3);
+  if (send(f, now)) ++sent_;
+}
+
+}  // namespace omnitwin::canopen
