@@ -1,0 +1,128 @@
+// Tests bus_emulators/canopen/co_node: one node's services working together through frames
+// only — boot-up, NMT, an SDO upload of the identity, heartbeat and guarding, SYNC-driven
+// PDOs, the heartbeat consumer's timeout with its EMCY and error behaviour (0x1029), reset
+// communication restoring the communication objects, the TIME consumer, and a STOPPED node
+// answering nothing but NMT and error control.
+#include "bus_emulators/canopen/co_node.hpp"
+
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "tests/bus_emulators/canopen/co_test_od.hpp"
+
+namespace omnitwin::canopen {
+namespace {
+
+constexpr SimTime kMs = 1'000'000;
+
+struct NodeTest : ::testing::Test {
+  ObjectDictionary od;
+  std::vector<can::Frame> sent;
+  std::vector<std::uint16_t> comm_errors;
+  std::unique_ptr<Node> node;
+  int syncs = 0;
+
+  void SetUp() override {
+    test::build_node_od(od);
+    NodeHooks h;
+    h.on_sync = [this](std::uint8_t, SimTime) { ++syncs; };
+    h.on_comm_error = [this](std::uint16_t c, SimTime) { comm_errors.push_back(c); };
+    node = std::make_unique<Node>(od, 5, [this](const can::Frame& f, SimTime) {
+      sent.push_back(f);
+      return true;
+    }, h);
+    node->power_on(0);
+  }
+  std::vector<can::Frame> take() { return std::exchange(sent, {}); }
+  void nmt(std::uint8_t cs, SimTime t = 0) { node->on_frame(can::make_data(0, {cs, 5}), t); }
+};
+
+TEST_F(NodeTest, BootsUpAndAnswersAnExpeditedUploadOfItsIdentity) {
+  ASSERT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x705, {0x00})}));
+  EXPECT_EQ(node->state(), NmtState::pre_operational);
+  node->on_frame(can::make_data(0x605, {0x40, 0x18, 0x10, 0x01, 0, 0, 0, 0}), kMs);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x585, {0x43, 0x18, 0x10, 0x01, 0x4E, 0x57, 0x54, 0x4F})}));
+}
+
+TEST_F(NodeTest, OperationalNodeRunsSynchronousPdos) {
+  take();
+  node->on_frame(can::make_data(0x80, {}), kMs);  // pre-operational: no PDOs
+  EXPECT_TRUE(take().empty());
+  nmt(0x01);
+  EXPECT_EQ(node->state(), NmtState::operational);
+  od.entry(0x2002, 0)->set_int(0x0A0B);
+  node->on_frame(can::make_data(0x205, {0x34, 0x12, 1, 0, 0, 0}), 2 * kMs);
+  node->on_frame(can::make_data(0x80, {}), 3 * kMs);
+  EXPECT_EQ(od.entry(0x2000, 0)->as_int(), 0x1234);  // applied at the SYNC
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x185, {0x0B, 0x0A, 0, 0, 0, 0})}));
+  EXPECT_EQ(syncs, 2);
+}
+
+TEST_F(NodeTest, HeartbeatFollowsAnSdoWriteOf1017) {
+  take();
+  node->on_frame(can::make_data(0x605, {0x2B, 0x17, 0x10, 0x00, 100, 0, 0, 0}), 0);  // 100 ms
+  ASSERT_EQ(take().size(), 1u);  // the download response
+  for (SimTime t = 0; t <= 250 * kMs; t += kMs) node->on_time(t);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x705, {0x7F}), can::make_data(0x705, {0x7F})}));
+}
+
+TEST_F(NodeTest, LosingTheConsumedHeartbeatRaisesEmcyAndLeavesOperational) {
+  od.entry(0x1016, 1)->set_int(0x007F'0064);  // node 127, 100 ms (written directly: no hook)
+  node->on_frame(can::make_data(0x605, {0x23, 0x16, 0x10, 0x01, 0x64, 0x00, 0x7F, 0x00}), 0);  // via SDO: hook
+  nmt(0x01);
+  take();
+  node->on_frame(can::make_data(0x77F, {0x05}), 10 * kMs);
+  node->on_time(110 * kMs);
+  EXPECT_EQ(node->state(), NmtState::operational);
+  node->on_time(111 * kMs);
+  EXPECT_EQ(node->state(), NmtState::pre_operational);  // 0x1029:1 = 0
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x85, {0x30, 0x81, 0x11, 0, 0, 0, 0, 0})}));
+  EXPECT_EQ(comm_errors, (std::vector<std::uint16_t>{0x8130}));
+}
+
+TEST_F(NodeTest, ResetCommunicationRestoresTheCommunicationObjects) {
+  node->on_frame(can::make_data(0x605, {0x2B, 0x17, 0x10, 0x00, 100, 0, 0, 0}), 0);
+  od.entry(0x2004, 0)->set_int(77);
+  ASSERT_EQ(od.entry(0x1017, 0)->as_int(), 100);
+  take();
+  nmt(0x82, kMs);
+  EXPECT_EQ(od.entry(0x1017, 0)->as_int(), 0);
+  EXPECT_EQ(od.entry(0x2004, 0)->as_int(), 77);  // application objects keep their values
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x705, {0x00})}));
+  nmt(0x81, 2 * kMs);  // reset node: everything
+  EXPECT_EQ(od.entry(0x2004, 0)->as_int(), 0);
+}
+
+TEST_F(NodeTest, StoppedNodeAnswersOnlyNmtAndGuarding) {
+  nmt(0x02);
+  take();
+  node->on_frame(can::make_data(0x605, {0x40, 0x18, 0x10, 0x01, 0, 0, 0, 0}), kMs);
+  EXPECT_TRUE(take().empty());
+  node->on_frame(can::make_remote(0x705, 1), kMs);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x705, {0x04})}));
+  nmt(0x80, 2 * kMs);
+  EXPECT_EQ(node->state(), NmtState::pre_operational);
+}
+
+TEST_F(NodeTest, ConsumesTimeStamps) {
+  EXPECT_FALSE(node->last_time());
+  node->on_frame(encode_time(TimeOfDay{1000, 15000}), 5 * kMs);
+  ASSERT_TRUE(node->last_time());
+  EXPECT_EQ(node->last_time()->days, 15000);
+  EXPECT_EQ(node->last_time_at(), 5 * kMs);
+}
+
+TEST_F(NodeTest, WrongSyncLengthIsSignalled) {
+  nmt(0x01);
+  take();
+  node->on_frame(can::make_data(0x80, {3}), kMs);  // no counter configured
+  const auto f = take();
+  ASSERT_EQ(f.size(), 2u);  // the error and its end
+  EXPECT_EQ(f[0].data[0], 0x40);
+  EXPECT_EQ(f[0].data[1], 0x82);
+  EXPECT_EQ(node->stats().sync_length_errors, 1u);
+}
+
+}  // namespace
+}  // namespace omnitwin::canopen
