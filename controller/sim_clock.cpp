@@ -38,6 +38,7 @@ const char* to_string(StopReason r) {
     case StopReason::nmt_stop: return "nmt_stop";
     case StopReason::startup_timeout: return "startup_timeout";
     case StopReason::bus_error: return "bus_error";
+    case StopReason::drive_fault: return "drive_fault";
   }
   return "unknown";
 }
@@ -210,7 +211,7 @@ Decoded read_done(Reader& r) {
   for (double& v : d.report.reference) floats_ok = r.f32(v) && floats_ok;
   for (double& v : d.report.odometry) floats_ok = r.f32(v) && floats_ok;
   if (state > static_cast<std::uint8_t>(MasterState::finished) ||
-      reason > static_cast<std::uint8_t>(StopReason::bus_error) || pad != 0 || !floats_ok)
+      reason > static_cast<std::uint8_t>(StopReason::drive_fault) || pad != 0 || !floats_ok)
     return DecodeError::bad_value;
   d.report.state = static_cast<MasterState>(state);
   d.report.reason = static_cast<StopReason>(reason);

@@ -55,6 +55,7 @@ enum class StopReason : std::uint8_t {
   nmt_stop = 3,        // an NMT stop from the bus (PC node or another participant)
   startup_timeout = 4, // not every slave answered detection at start-up
   bus_error = 5,       // its transport refused frames
+  drive_fault = 6,     // a drive reported a fault (CANopen EMCY; node in `node`)
 };
 const char* to_string(MasterState s);
 const char* to_string(StopReason r);

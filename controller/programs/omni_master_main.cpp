@@ -36,6 +36,7 @@
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/ethercat/ec_program.hpp"
+#include "controller/canopen/co_program.hpp"
 #include "controller/mechatrolink3/m3_program.hpp"
 #include "controller/master_config.hpp"
 #include "controller/omni_master.hpp"
@@ -287,12 +288,12 @@ int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& 
 // main
 
 void add_options(CLI::App& app, Options& o) {
-  app.add_option("--bus", o.bus, "bus kind: can, ethercat or m3")->capture_default_str();
+  app.add_option("--bus", o.bus, "bus kind: can, canopen, ethercat or m3")->capture_default_str();
   app.add_option("--iface", o.iface, "transport: udp:GROUP[:PORT], socketcan:IFACE (or IFACE), mem:NAME")
       ->capture_default_str();
   app.add_option("--config", o.config, "the master's configuration file (YAML)");
   app.add_option("--script", o.script, "ethercat: run this Botnana script, exit when its tasks end");
-  app.add_option("--stats", o.stats, "ethercat, m3: write the master's counters to this JSON file at exit");
+  app.add_option("--stats", o.stats, "canopen, ethercat, m3: write the master's counters to this JSON file at exit");
   app.add_option("--clock", o.clock, "sim: lockstep with the twin; wall: real time")
       ->check(CLI::IsMember({"sim", "wall"}))
       ->capture_default_str();
@@ -308,9 +309,9 @@ void add_options(CLI::App& app, Options& o) {
 // Option combinations CLI11 cannot check; the message of the first problem, or "".
 std::string usage_problem(const Options& o) {
   if (o.config.empty()) return "--config is required";
-  if (o.bus != "can" && o.bus != "ethercat" && o.bus != "m3")
-    return fmt::format("--bus {}: not supported (can, ethercat or m3)", o.bus);
-  if (o.bus == "m3") {
+  if (o.bus != "can" && o.bus != "canopen" && o.bus != "ethercat" && o.bus != "m3")
+    return fmt::format("--bus {}: not supported (can, canopen, ethercat or m3)", o.bus);
+  if (o.bus == "m3" || o.bus == "canopen") {
     if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
     if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
     return "";
@@ -400,7 +401,7 @@ std::optional<controller::MasterConfig> load(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"omni-master: the master program — the thesis's Omni CAN master (seed 002, fig. 4-15) or our EtherCAT master"};
+  CLI::App app{"omni-master: the master program — the thesis's Omni CAN master (seed 002, fig. 4-15), or our CANopen, EtherCAT or MECHATROLINK-III master"};
   Options o;
   add_options(app, o);
   CLI::App* shell = app.add_subcommand("shell", "interactive Botnana shell on the EtherCAT master (wall clock)");
@@ -423,6 +424,10 @@ int main(int argc, char** argv) {
   if (const std::string p = usage_problem(o); !p.empty()) {
     spdlog::error("{}", p);
     return kExitUsage;
+  }
+  if (o.bus == "canopen") {
+    controller::canopen::ProgramOptions co{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};
+    return controller::canopen::run_canopen_program(co);
   }
   if (o.bus == "m3") {
     m3::ProgramOptions mo{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};

@@ -1,0 +1,337 @@
+// controller/canopen — the `--bus canopen` program path (see co_program.hpp).
+#include "controller/canopen/co_program.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <poll.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <vector>
+
+#include "bus_emulators/can/transport.hpp"
+#include "bus_emulators/canopen/co_eds.hpp"
+#include "controller/canopen/co_config.hpp"
+#include "controller/canopen/co_master.hpp"
+#include "controller/master_config.hpp"
+#include "controller/platform_loop.hpp"
+#include "controller/program_support.hpp"
+#include "controller/sim_clock.hpp"
+
+namespace omnitwin::controller::canopen {
+
+namespace {
+
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
+constexpr auto kConnectTimeout = std::chrono::seconds(10);
+constexpr int kGrantTimeoutMs = 60'000;
+constexpr std::int64_t kDrainLimitNs = 5'000'000'000;
+constexpr int kRtPriority = 40;
+constexpr int kDrainBatch = 256;
+
+struct RuntimeFailure {
+  std::string message;
+};
+
+std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t) * 1e-6); }
+
+// The master core and the platform loop, one SYNC period at a time; frames out through an
+// outbox (lockstep: sent in one batch after the tick) or straight to the transport.
+class Runner {
+ public:
+  Runner(const CoProgramConfig& pc, const omnitwin::canopen::EdsDevice& eds, std::optional<MasterConfig> platform,
+         can::Transport& tr, bool hold)
+      : pc_(pc),
+        tr_(tr),
+        hold_(hold),
+        master_(pc, eds, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
+        platform_(std::move(platform)) {
+    master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
+      if (warning) spdlog::warn("{} {}", stamp(t), s);
+      else spdlog::info("{} {}", stamp(t), s);
+    });
+    if (platform_) {
+      PlatformLoopConfig lc = platform_->loop;
+      lc.counts_per_rev = static_cast<int>(std::lround(pc_.wheel_counts_per_rev));
+      loop_.emplace(lc, build_path(platform_->path));
+      every_ = std::max<std::int64_t>(1, std::llround(lc.period / pc_.cycle));
+    }
+    outbox_.reserve(64);
+  }
+
+  CoMaster& master() { return master_; }
+  const CoMaster& master() const { return master_; }
+
+  void on_frame(const can::Frame& f, SimTime t) {
+    ++frames_rx;
+    master_.on_frame(f, t);
+  }
+  // One SYNC period at t: the platform's set-points, then the core's frames.
+  void tick(SimTime t) {
+    platform(t);
+    master_.on_tick(t);
+  }
+  // Lockstep: the tick's frames in one batch. Refusals reach the core.
+  void flush() {
+    while (!outbox_.empty()) {
+      const std::size_t sent = tr_.send_many(outbox_);
+      frames_tx += sent;
+      master_.note_send_failures(outbox_.size() - sent);
+      outbox_.clear();
+    }
+  }
+  void release() { hold_ = false; }
+
+  simclock::MasterReport report() const {
+    simclock::MasterReport r;
+    r.state = master_.report_state();
+    r.reason = master_.reason();
+    r.node = master_.reason_node();
+    r.path_origin_ns = started_ ? origin_ : -1;
+    if (loop_) {
+      const Pose2& ref = out_.reference.pose;
+      const Pose2& odo = loop_->odometry().pose();
+      r.reference = {ref.x, ref.y, ref.phi};
+      r.odometry = {odo.x, odo.y, odo.phi};
+    }
+    return r;
+  }
+
+  nlohmann::json stats() const {
+    const CoMasterStats& s = master_.stats();
+    nlohmann::json nodes = nlohmann::json::array();
+    for (int i = 0; i < 4; ++i) {
+      const CoNodeView v = master_.node(i);
+      nodes.push_back({{"node", v.id}, {"nmt_state", omnitwin::canopen::to_string(v.nmt)}, {"statusword", v.statusword},
+                       {"emcy", v.emcy}, {"last_emcy", v.last_emcy}, {"tpdos", v.tpdos}, {"configured", v.configured},
+                       {"lost", v.lost}});
+    }
+    return {{"phase", to_string(master_.phase())}, {"cycles", s.ticks}, {"syncs", s.syncs},
+            {"sdo_done", s.sdo_done}, {"sdo_aborts", s.sdo_aborts}, {"last_sdo_abort", s.last_abort},
+            {"emcy", s.emcy}, {"heartbeat_timeouts", s.heartbeat_timeouts}, {"boot_ups", s.boot_ups},
+            {"recoveries", s.recoveries}, {"tpdo_rx", s.tpdo_rx}, {"nmt_sent", s.nmt_sent},
+            {"send_failures", s.tx_refused}, {"nodes", nodes}};
+  }
+
+  bool failed() const { return master_.phase() == CoPhase::failed; }
+  std::uint64_t frames_tx = 0, frames_rx = 0;
+
+ private:
+  bool out(const can::Frame& f, SimTime t) {
+    if (hold_) {
+      outbox_.push_back(can::TimedFrame{f, t});
+      return true;
+    }
+    const bool ok = tr_.send(f, t);
+    frames_tx += ok ? 1 : 0;
+    return ok;
+  }
+  WheelCounts counts() const {
+    WheelCounts c{};
+    for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
+    return c;
+  }
+  void platform(SimTime t) {
+    if (!loop_ || master_.phase() != CoPhase::running) return;
+    if (!started_) {
+      loop_->reset(loop_->path().start_pose(), counts());
+      origin_ = t;
+      started_ = true;
+      n_ = 0;
+      spdlog::info("{} wheel drives enabled: platform loop running", stamp(t));
+    }
+    const double ts = static_cast<double>(t - origin_) * 1e-9;
+    if (n_++ % every_ == 0) {
+      out_ = loop_->step(ts, counts());
+      const double k = pc_.wheel_counts_per_rev / (2 * std::numbers::pi);
+      for (int i = 0; i < 4; ++i) master_.set_velocity(i, static_cast<std::int32_t>(std::llround(out_.wheel_rad_s[i] * k)));
+    }
+    if (platform_->settle >= 0 && ts >= loop_->path().duration() + platform_->settle) {
+      master_.finish(t);
+      spdlog::info("{} path done", stamp(t));
+    }
+  }
+
+  const CoProgramConfig& pc_;
+  can::Transport& tr_;
+  bool hold_;
+  std::vector<can::TimedFrame> outbox_;
+  CoMaster master_;
+  std::optional<MasterConfig> platform_;
+  std::optional<PlatformLoop> loop_;
+  PlatformLoopOutput out_;
+  std::int64_t every_ = 1, n_ = 0;
+  bool started_ = false;
+  SimTime origin_ = -1;
+};
+
+// ---------------------------------------------------------------------------------------
+// Lockstep with the twin (--clock sim)
+
+bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, SimTime t) {
+  const std::int64_t give_up = monotonic_ns() + kDrainLimitNs;
+  while (r.frames_rx < target) {
+    if (auto tf = tr.receive()) {
+      r.on_frame(tf->frame, t);
+      continue;
+    }
+    if (monotonic_ns() >= give_up) return false;
+    can::wait_readable(tr, std::chrono::milliseconds(10));
+  }
+  while (auto tf = tr.receive()) r.on_frame(tf->frame, t);  // anyone else's (python-can, a PC)
+  return true;
+}
+
+int run_sim(const ProgramOptions& o, Runner& r, can::Transport& tr, int sigfd) {
+  simclock::Client client(o.sim_clock, kConnectTimeout);
+  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  for (;;) {
+    simclock::Grant g;
+    simclock::End end{kNoEnd};
+    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const int p = ::poll(fds, 2, kGrantTimeoutMs);
+    if (p == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
+    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return kExitOk;
+    const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
+    if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
+    if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    if (!drain_until(tr, r, g.frames[0], g.t_ns))
+      throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
+    r.tick(g.t_ns);
+    r.flush();
+    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
+    if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Real time (--clock wall)
+
+int run_wall(const ProgramOptions& o, Runner& r, can::Transport& tr, int sigfd) {
+  try_realtime(kRtPriority);
+  const std::int64_t period = std::llround(r.master().config().cycle * 1e9);
+  const std::int64_t start = monotonic_ns();
+  const std::int64_t end = o.duration >= 0 ? start + std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
+  std::int64_t deadline = start;
+  std::uint64_t overruns = 0;
+  for (;;) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= end) break;
+    if (now >= deadline) {
+      const std::int64_t late = now - deadline;
+      if (late >= period) ++overruns, deadline += (late / period) * period;
+      r.tick(deadline - start);
+      deadline += period;
+      continue;
+    }
+    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const timespec timeout = to_timespec(std::max<std::int64_t>(0, std::min(deadline, end) - now));
+    const int p = ::ppoll(fds, 2, &timeout, nullptr);
+    if (p < 0 && errno != EINTR) throw RuntimeFailure{fmt::format("poll failed: {}", std::strerror(errno))};
+    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) break;
+    for (int i = 0; i < kDrainBatch; ++i) {
+      auto tf = tr.receive();
+      if (!tf) break;
+      r.on_frame(tf->frame, monotonic_ns() - start);
+    }
+  }
+  if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
+  r.master().shutdown(monotonic_ns() - start);
+  return kExitOk;
+}
+
+void write_stats(const std::string& path, const Runner& r) {
+  nlohmann::json j = r.stats();
+  j["frames_tx"] = r.frames_tx;
+  j["frames_rx"] = r.frames_rx;
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp);
+  f << j.dump() << "\n";
+  f.close();
+  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+}
+
+void log_end(const Runner& r) {
+  const CoMaster& m = r.master();
+  const CoMasterStats& s = m.stats();
+  spdlog::info("end: phase {}, reason {}{}, ticks {}, SYNCs {}, SDO transfers {} (aborted {}), EMCY {}, heartbeat timeouts {}, "
+               "recoveries {}, frames tx {} rx {}",
+               to_string(m.phase()), simclock::to_string(m.reason()),
+               m.reason_node() ? fmt::format(" (node {})", m.reason_node()) : "", s.ticks, s.syncs, s.sdo_done, s.sdo_aborts,
+               s.emcy, s.heartbeat_timeouts, s.recoveries, r.frames_tx, r.frames_rx);
+}
+
+}  // namespace
+
+int run_canopen_program(const ProgramOptions& o) {
+  CoProgramConfig pc;
+  std::optional<MasterConfig> platform;
+  std::optional<omnitwin::canopen::EdsDevice> eds;
+  try {
+    pc = load_co_config(o.config);
+    if (!pc.platform_file.empty()) platform = load_master_config(pc.platform_file);
+    else if (!pc.platform_yaml.empty()) platform = parse_master_config(pc.platform_yaml, o.config + " (platform)");
+    eds = omnitwin::canopen::load_eds(pc.eds);
+  } catch (const CoConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  } catch (const MasterConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  } catch (const omnitwin::canopen::EdsError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  }
+  if (o.print_config) {
+    std::cout << dump_co_config(pc);
+    if (platform) std::cout << dump_master_config(*platform);
+    return kExitOk;
+  }
+  std::unique_ptr<can::Transport> tr;
+  try {
+    tr = can::open_transport(normalize_iface(o.iface));
+  } catch (const can::TransportError& e) {
+    spdlog::error("--iface {}: {}", o.iface, e.what());
+    return kExitUsage;
+  }
+  std::unique_ptr<Runner> runner;
+  try {
+    runner = std::make_unique<Runner>(pc, *eds, platform, *tr, o.clock == "sim");
+  } catch (const std::runtime_error& e) {  // the EDS lacks what the master maps
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  }
+  spdlog::info("CANopen master on {} (clock {}, SYNC every {} µs, nodes {} {} {} {}, {})", tr->spec(), o.clock,
+               std::llround(pc.cycle * 1e6), pc.nodes[0], pc.nodes[1], pc.nodes[2], pc.nodes[3],
+               pc.mode == WheelMode::csv ? "CSV" : "PV");
+  const int sigfd = open_signal_fd();
+  int code = kExitOk;
+  try {
+    code = o.clock == "sim" ? run_sim(o, *runner, *tr, sigfd) : run_wall(o, *runner, *tr, sigfd);
+  } catch (const RuntimeFailure& f) {
+    spdlog::error("{}", f.message);
+    code = kExitRuntime;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = kExitRuntime;
+  }
+  runner->flush();
+  runner->release();
+  if (runner->failed()) code = kExitRuntime;
+  log_end(*runner);
+  if (!o.stats.empty()) write_stats(o.stats, *runner);
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
+}
+
+}  // namespace omnitwin::controller::canopen

@@ -1,0 +1,173 @@
+// Tests controller/canopen/co_master: our CANopen master against four emulated CiA 402 drive
+// nodes (bus_emulators/canopen/co_drive, built from the shipped EDS) on the simulated CAN wire
+// (can_bus), in process: the start-up (reset, SDO configuration, NMT start, CiA 402 power-up),
+// velocities reaching the drives through RPDO1 and positions coming back in TPDO1, a drive
+// losing power (heartbeat timeout: the platform stops; back on: configured and started
+// again), a drive fault signalled by EMCY, and the start-up script's checks against the EDS.
+#include "controller/canopen/co_master.hpp"
+
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <vector>
+
+#include "bus_emulators/can/can_bus.hpp"
+#include "bus_emulators/canopen/co_drive.hpp"
+#include "bus_emulators/canopen/co_eds.hpp"
+
+namespace omnitwin::controller::canopen {
+namespace {
+
+namespace co = omnitwin::canopen;
+constexpr SimTime kMs = 1'000'000;
+
+const co::EdsDevice& shipped_eds() {
+  static const co::EdsDevice eds = co::load_eds(std::string(OMNITWIN_SOURCE_DIR) + "/models/canopen/omnitwin_drive.eds");
+  return eds;
+}
+
+// The master (bus node 0) and four drives (bus nodes 1..4, node IDs 1..4) on one wire.
+struct Network {
+  can::CanBus bus{can::BusConfig{.bit_rate_bps = 1'000'000, .queue_capacity = 64, .max_nodes = 5}};
+  CoProgramConfig cfg;
+  std::unique_ptr<CoMaster> master;
+  std::vector<std::unique_ptr<co::DriveNode>> drives;
+  std::vector<bool> powered = {true, true, true, true};
+  std::vector<std::string> events;
+  SimTime now = 0;
+
+  Network() {
+    for (int i = 0; i < 5; ++i) bus.attach();
+    cfg.eds = shipped_eds().source;
+    cfg.wheel_counts_per_rev = 10000;
+    master = std::make_unique<CoMaster>(cfg, shipped_eds(), [this](const can::Frame& f, SimTime t) {
+      return bus.submit(0, f, t) == can::SubmitStatus::queued;
+    });
+    master->set_event_callback([this](SimTime, const std::string& s, bool) { events.push_back(s); });
+    for (int i = 0; i < 4; ++i) {
+      drive::DriveConfig dc;
+      dc.counts_per_rev = 10000;
+      drives.push_back(std::make_unique<co::DriveNode>(shipped_eds(), static_cast<std::uint8_t>(i + 1), dc,
+                                                       [this, i](const can::Frame& f, SimTime t) {
+                                                         return bus.submit(i + 1, f, t) == can::SubmitStatus::queued;
+                                                       }));
+    }
+    bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) {
+      if (r == 0) master->on_frame(f, t.end_ns);
+      else drives[static_cast<std::size_t>(r - 1)]->on_frame(f, t.end_ns);
+    });
+    for (auto& d : drives) d->power_on(0);
+  }
+  // Runs for `ms` milliseconds: the master's tick on each ms, the drives' steps half-way.
+  void run(int ms) {
+    for (int k = 0; k < ms; ++k) {
+      bus.advance(now);
+      master->on_tick(now);
+      bus.advance(now + kMs / 2);
+      for (std::size_t i = 0; i < 4; ++i)
+        if (powered[i]) drives[i]->step(now + kMs / 2, drive::Feedback{});
+      now += kMs;
+    }
+  }
+  void power(int i, bool on) {
+    powered[static_cast<std::size_t>(i)] = on;
+    if (on) {
+      bus.reattach(i + 1, now);
+      drives[static_cast<std::size_t>(i)]->power_on(now);
+    } else {
+      bus.detach(i + 1, now);
+      drives[static_cast<std::size_t>(i)]->power_off();
+    }
+  }
+};
+
+TEST(CoMaster, StartsTheFourDrivesAndCommandsThem) {
+  Network n;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running) << (n.events.empty() ? "" : n.events.back());
+  EXPECT_GT(n.master->running_since(), 0);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(n.drives[static_cast<std::size_t>(i)]->node().state(), co::NmtState::operational);
+    EXPECT_EQ(n.drives[static_cast<std::size_t>(i)]->drive().state(), drive::State::operation_enabled);
+    EXPECT_TRUE(n.master->node(i).configured);
+  }
+  EXPECT_EQ(n.master->stats().sdo_aborts, 0u);
+  EXPECT_EQ(n.master->stats().sdo_done, 4 * startup_script(n.cfg, shipped_eds(), 1).size());
+  for (int i = 0; i < 4; ++i) n.master->set_velocity(i, 1000 * (i + 1));
+  n.run(5);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(n.drives[static_cast<std::size_t>(i)]->drive().objects().target_velocity, 1000 * (i + 1));
+  // Position actual comes back in TPDO1.
+  n.drives[2]->drive().objects();
+  EXPECT_EQ(n.master->position(2), n.drives[2]->drive().objects().position_actual);
+  EXPECT_GT(n.master->stats().tpdo_rx, 0u);
+}
+
+TEST(CoMaster, ALostDriveStopsThePlatformAndIsBroughtBack) {
+  Network n;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  n.power(1, false);
+  n.run(100);
+  EXPECT_EQ(n.master->phase(), CoPhase::running);  // within the heartbeat timeout (150 ms)
+  n.run(120);
+  EXPECT_EQ(n.master->phase(), CoPhase::stopped);
+  EXPECT_EQ(n.master->reason(), simclock::StopReason::node_missing);
+  EXPECT_EQ(n.master->reason_node(), 2);
+  EXPECT_EQ(n.master->stats().heartbeat_timeouts, 1u);
+  // The others hold in quick stop.
+  EXPECT_EQ(n.drives[0]->drive().state(), drive::State::switch_on_disabled);
+  n.power(1, true);
+  n.run(300);
+  EXPECT_EQ(n.drives[1]->node().state(), co::NmtState::operational);
+  EXPECT_EQ(n.master->stats().recoveries, 1u);
+  EXPECT_EQ(n.master->phase(), CoPhase::stopped);  // the platform stays stopped
+}
+
+TEST(CoMaster, ADriveFaultStopsThePlatformWithItsNode) {
+  Network n;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  n.drives[2]->drive().raise_fault(drive::kErrorFollowing);
+  n.run(10);
+  EXPECT_EQ(n.master->phase(), CoPhase::stopped);
+  EXPECT_EQ(n.master->reason(), simclock::StopReason::drive_fault);
+  EXPECT_EQ(n.master->reason_node(), 3);
+  EXPECT_EQ(n.master->node(2).last_emcy, drive::kErrorFollowing);
+}
+
+TEST(CoMaster, StartupFailsWhenTheDrivesDoNotAnswer) {
+  Network n;
+  for (int i = 0; i < 4; ++i) n.power(i, false);
+  n.run(3100);
+  EXPECT_EQ(n.master->phase(), CoPhase::failed);
+  EXPECT_EQ(n.master->reason(), simclock::StopReason::startup_timeout);
+}
+
+TEST(StartupScript, FollowsTheCia301MappingProcedureWithEdsSizes) {
+  CoProgramConfig c;
+  const std::vector<SdoStep> s = startup_script(c, shipped_eds(), 5);
+  auto find = [&](std::uint16_t idx, std::uint8_t sub, std::uint32_t v) {
+    for (std::size_t i = 0; i < s.size(); ++i)
+      if (!s[i].upload && s[i].index == idx && s[i].sub == sub && s[i].value == v) return static_cast<int>(i);
+    return -1;
+  };
+  const int off = find(0x1400, 1, 0x80000205), cleared = find(0x1600, 0, 0), cw = find(0x1600, 1, 0x60400010),
+            v = find(0x1600, 2, 0x60FF0020), enabled = find(0x1600, 0, 2), on = find(0x1400, 1, 0x205);
+  ASSERT_GE(off, 0);
+  EXPECT_LT(off, cleared);
+  EXPECT_LT(cleared, cw);
+  EXPECT_LT(cw, v);
+  EXPECT_LT(v, enabled);
+  EXPECT_LT(enabled, on);
+  EXPECT_GE(find(0x1A00, 2, 0x60640020), 0);
+  EXPECT_GE(find(0x6060, 0, 9), 0);
+}
+
+TEST(StartupScript, RefusesAnEdsThatLacksTheObjects) {
+  co::EdsDevice eds = shipped_eds();
+  std::erase_if(eds.objects, [](const co::EdsObject& o) { return o.index == 0x60FF; });
+  EXPECT_THROW(startup_script(CoProgramConfig{}, eds, 1), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace omnitwin::controller::canopen
