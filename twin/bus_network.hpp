@@ -60,6 +60,9 @@ class BusNetwork {
 
   // "can", "ethercat": the master's --bus and the capture's name (bus-<name>.pcap).
   virtual const char* name() const = 0;
+  // The wire the capture records (bus-<wire>.pcap): the bus's name, except for protocols that
+  // share a wire (canopen runs on the CAN wire: bus-can.pcap).
+  virtual const char* wire_name() const { return name(); }
   // The transport spec the master process is given (--iface).
   virtual std::string master_iface() const = 0;
 

@@ -186,6 +186,13 @@ void print_summary(const RunResult& r) {
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
                              ms.value("cycles", 0), retries, missed, late, b.value("frames_rx", 0), b.value("frames_tx", 0),
                              b.value("lost_frames", 0), b.value("corrupted_frames", 0));
+  } else if (m.contains("master") && m["bus"].value("name", "") == "canopen") {
+    const auto& ms = m["master"];
+    const auto& b = m["bus"];
+    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} %, EMCY {}, SDO aborts {}\n",
+                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
+                             b.value("emcy", 0), b.value("sdo_aborts", 0));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
@@ -225,6 +232,13 @@ int cmd_run(const RunArgs& a) {
         std::cout << fmt::format("twin {}: MECHATROLINK-III line of 4 servos (03h-06h, {} µs cycle); a C1 master "
                                  "connects on {} (Ctrl-C ends)\n",
                                  s.name, std::llround(s.bus.m3.cycle * 1e6), iface)
+                  << std::flush;
+      };
+    } else if (a.external_master && s.bus.kind == BusKind::canopen) {
+      o.on_bus_ready = [&s](const std::string& iface) {
+        std::cout << fmt::format("twin {}: CANopen bus of 4 CiA 402 drives (nodes 1-4) on {} at {} bit/s, waiting "
+                                 "for a master (Ctrl-C ends)\n",
+                                 s.name, iface, s.bus.can.bit_rate)
                   << std::flush;
       };
     } else if (a.external_master) {
@@ -543,8 +557,8 @@ int main(int argc, char** argv) {
   twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
   twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
-  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, ethercat or m3)")
-      ->check(CLI::IsMember({"can", "ethercat", "m3"}));
+  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, canopen, ethercat or m3)")
+      ->check(CLI::IsMember({"can", "canopen", "ethercat", "m3"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
   add_output_flags(twin, ta);

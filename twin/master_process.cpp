@@ -1,6 +1,7 @@
 // twin layer — the master program as a child process; see master_process.hpp.
 #include "twin/master_process.hpp"
 
+#include "twin/canopen_network.hpp"
 #include "twin/ethercat_network.hpp"
 
 #include <fcntl.h>
@@ -203,6 +204,29 @@ std::string m3_master_config_yaml(const Scenario& s, const std::string& platform
   // The servos must be on before the path starts (and a realtime master may start before the twin).
   out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (realtime ? 3.0 : 0.0)));
   out += fmt::format("wheel_command: {}\nwheel_counts_per_rev: {}\n", m.mode, m.counts_per_rev);
+  out += fmt::format("platform: {}\n", platform_file);
+  return out;
+}
+
+std::string canopen_platform_yaml(const Scenario& s) {
+  controller::MasterConfig m = master_config(s);
+  // The platform loop's odometry counts what the drives report: position actual values.
+  m.loop.counts_per_rev = s.bus.canopen.counts_per_rev;
+  return fmt::format("# platform loop of omni-master --bus canopen, written by omnitwin for scenario {}\n", s.name) +
+         controller::dump_master_config(m);
+}
+
+std::string canopen_master_config_yaml(const Scenario& s, const std::string& platform_file) {
+  const CanopenSpec& c = s.bus.canopen;
+  std::string out = fmt::format("# omni-master --bus canopen configuration written by omnitwin for scenario {}\n", s.name);
+  out += fmt::format("eds: {}\n", canopen_eds_path(c));
+  out += fmt::format("cycle: {}\n", c.cycle);
+  out += "nodes: [1, 2, 3, 4]\n";
+  out += fmt::format("master_heartbeat_ms: {}\nnode_heartbeat_ms: {}\nheartbeat_timeout_ms: {}\n", c.heartbeat_ms,
+                     c.heartbeat_ms, 3 * c.heartbeat_ms);
+  out += fmt::format("wheel_mode: {}\nwheel_counts_per_rev: {}\n", c.mode, c.counts_per_rev);
+  // A realtime master may start before the twin's nodes are up.
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, c.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
   out += fmt::format("platform: {}\n", platform_file);
   return out;
 }

@@ -64,5 +64,9 @@ std::string ethercat_master_config_yaml(const Scenario& s, const std::string& pl
 // The same for `omni-master --bus m3` (controller/mechatrolink3/m3_config's vocabulary).
 std::string m3_platform_yaml(const Scenario& s);
 std::string m3_master_config_yaml(const Scenario& s, const std::string& platform_file);
+// bus canopen: the platform loop (odometry on position actual counts) and the CANopen master's
+// configuration file (the drives' EDS, SYNC period, heartbeat times, wheel mode).
+std::string canopen_platform_yaml(const Scenario& s);
+std::string canopen_master_config_yaml(const Scenario& s, const std::string& platform_file);
 
 }  // namespace omnitwin::twin

@@ -25,6 +25,7 @@
 #include "twin/can_network.hpp"
 #include "twin/ethercat_network.hpp"
 #include "twin/m3_network.hpp"
+#include "twin/canopen_network.hpp"
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
 #include "twin/master_process.hpp"
@@ -147,9 +148,11 @@ class PlatformRun {
   void on_master_bus(SimTime t);
   static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
   // How often the master is met: its bus cycle on M-III (a polling master exchanges with
-  // every slave each cycle), else the control period.
+  // every slave each cycle) and CANopen (one SYNC per tick), else the control period.
   SimTime master_period_ns() const {
-    return seconds_to_ns(s_.bus.kind == BusKind::m3 ? s_.bus.m3.cycle : s_.controller.period);
+    if (s_.bus.kind == BusKind::m3) return seconds_to_ns(s_.bus.m3.cycle);
+    if (s_.bus.kind == BusKind::canopen) return seconds_to_ns(s_.bus.canopen.cycle);  // one SYNC per tick
+    return seconds_to_ns(s_.controller.period);
   }
   void on_physics_bus(SimTime t);
   void note_report(const simclock::MasterReport& r, SimTime t);
@@ -242,6 +245,10 @@ void PlatformRun::build_network() {
     master_program_ = find_master_program(s_.bus.m3.master);
     handshake_timeout_s_ = s_.bus.m3.handshake_timeout;
     net_ = std::make_unique<M3Network>(s_, sched_, std::move(h));
+  } else if (s_.bus.kind == BusKind::canopen) {
+    master_program_ = find_master_program(s_.bus.can.master);
+    handshake_timeout_s_ = s_.bus.can.handshake_timeout;
+    net_ = std::make_unique<CanopenNetwork>(s_, sched_, std::move(h));
   } else {
     master_program_ = find_master_program(s_.bus.can.master);
     handshake_timeout_s_ = s_.bus.can.handshake_timeout;
@@ -268,11 +275,15 @@ void PlatformRun::start_master() {
     const std::string platform = (dir / "master-platform.yaml").string();
     write_text_atomic(platform, m3_platform_yaml(s_));
     write_text_atomic(cfg, m3_master_config_yaml(s_, platform));
+  } else if (s_.bus.kind == BusKind::canopen) {
+    const std::string platform = (dir / "master-platform.yaml").string();
+    write_text_atomic(platform, canopen_platform_yaml(s_));
+    write_text_atomic(cfg, canopen_master_config_yaml(s_, platform));
   } else {
     write_text_atomic(cfg, master_config_yaml(s_));
   }
   std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
-  if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3)
+  if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3 || s_.bus.kind == BusKind::canopen)
     args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
   const bool lockstep = s_.clock == ClockMode::lockstep;
   if (lockstep) {
@@ -659,7 +670,7 @@ RunResult PlatformRun::execute() {
                         to_string(s_.clock), model_name(s_.platform), s_.platform.source));
 
   if (on_bus()) {
-    net_->open_pcap((fs::path(o_.out_dir) / fmt::format("bus-{}.pcap", net_->name())).string());
+    net_->open_pcap((fs::path(o_.out_dir) / fmt::format("bus-{}.pcap", net_->wire_name())).string());
     try {
       if (!o_.external_master) start_master();
     } catch (const std::exception& e) {
@@ -765,7 +776,7 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
 // The records this run must leave (docs/run-directory.md), video and report aside.
 std::vector<std::string> PlatformRun::expected_records() const {
   std::vector<std::string> names{"run.json", "platform.xml", "trajectory.csv", "bus.csv", "events.log", "metrics.json"};
-  if (on_bus()) names.push_back(fmt::format("bus-{}.pcap", net_->name()));
+  if (on_bus()) names.push_back(fmt::format("bus-{}.pcap", net_->wire_name()));
   if (master_) names.push_back("master.log");
   return names;
 }
@@ -793,7 +804,8 @@ std::string lockstep_can_spec(const std::string& given) {
 
 Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
   Scenario e = s;
-  if (s.bus.kind != BusKind::can || s.clock != ClockMode::lockstep || external_master) return e;
+  const bool on_can = s.bus.kind == BusKind::can || s.bus.kind == BusKind::canopen;
+  if (!on_can || s.clock != ClockMode::lockstep || external_master) return e;
   e.bus.can.transport = lockstep_can_spec(s.bus.can.transport);
   return e;
 }
@@ -808,9 +820,9 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
     throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
   }
   const BusKind bus = scenario.bus.kind;
-  if (bus != BusKind::direct && bus != BusKind::can && bus != BusKind::ethercat && bus != BusKind::m3)
+  if (bus == BusKind::tml)
     throw RunSetupError(fmt::format(
-        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can', 'ethercat' and 'm3' are",
+        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can', 'canopen', 'ethercat' and 'm3' are",
         to_string(bus)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
@@ -833,6 +845,8 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const m3::TransportError& e) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+    } catch (const canopen::EdsError& e) {
+      throw RunSetupError(fmt::format("bus.eds: {}", e.what()));
     } catch (const std::exception& e) {
       throw RunSetupError(one_line(e.what()));
     }

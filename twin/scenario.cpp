@@ -318,11 +318,20 @@ physics::PlatformParams read_platform(const YamlField& s, const std::string& sce
 // Bus, clock, controller
 
 // The `can` bus's settings (bus: {type: can, …}).
-void read_can(const YamlField& f, CanSpec& c) {
+// The CAN wire's settings, shared by the buses on it (can, canopen).
+void read_can_wire(const YamlField& f, CanSpec& c) {
   double rate = static_cast<double>(c.bit_rate);
   if (read_number(f, "bit_rate", rate, Bounds::closed(10'000, 1'000'000))) c.bit_rate = std::llround(rate);
   if (f["transport"].exists()) c.transport = f["transport"].string();
   read_number(f, "t_pre_us", c.t_pre_us, Bounds::non_negative());
+  if (f["master"].exists()) c.master = f["master"].string();
+  int seed = static_cast<int>(c.seed);
+  if (read_integer(f, "seed", seed, Bounds::non_negative())) c.seed = static_cast<std::uint64_t>(seed);
+  read_number(f, "handshake_timeout", c.handshake_timeout, Bounds::positive());
+}
+
+void read_can(const YamlField& f, CanSpec& c) {
+  read_can_wire(f, c);
   read_number(f, "t_post_us", c.t_post_us, Bounds::non_negative());
   if (const YamlField d = f["drift"]; d.exists()) {
     // One drift for every slave, or one per axis.
@@ -349,10 +358,6 @@ void read_can(const YamlField& f, CanSpec& c) {
     }
   }
   read_integer(f, "detect_every", c.detect_every, Bounds::non_negative());
-  if (f["master"].exists()) c.master = f["master"].string();
-  int seed = static_cast<int>(c.seed);
-  if (read_integer(f, "seed", seed, Bounds::non_negative())) c.seed = static_cast<std::uint64_t>(seed);
-  read_number(f, "handshake_timeout", c.handshake_timeout, Bounds::positive());
 }
 
 // The `ethercat` bus's settings (bus: {type: ethercat, …}); paths relative to the scenario.
@@ -392,6 +397,32 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   int seed = static_cast<int>(e.seed);
   if (read_integer(f, "seed", seed, Bounds::non_negative())) e.seed = static_cast<std::uint64_t>(seed);
   read_number(f, "handshake_timeout", e.handshake_timeout, Bounds::positive());
+}
+
+// The `canopen` bus's own settings (bus: {type: canopen, …}); the wire's are read by read_can.
+void read_canopen(const YamlField& f, CanopenSpec& c, const std::string& scenario_file) {
+  if (const YamlField eds = f["eds"]; eds.exists()) {
+    const fs::path given = eds.string();
+    const fs::path resolved =
+        given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();
+    if (!fs::is_regular_file(resolved)) eds.fail(fmt::format("cannot open EDS file '{}'", resolved.string()));
+    c.eds = resolved.string();
+  }
+  if (f["mode"].exists()) c.mode = f["mode"].choice({"csv", "pv"});
+  read_number(f, "cycle", c.cycle, Bounds::closed(250e-6, 0.1));
+  read_number(f, "drive_period", c.drive_period, Bounds::closed(50e-6, 0.01));
+  read_integer(f, "counts_per_rev", c.counts_per_rev, Bounds::closed(4, 1 << 24));
+  read_integer(f, "heartbeat_ms", c.heartbeat_ms, Bounds::closed(1, 10000));
+  if (const YamlField d = f["drift"]; d.exists()) {
+    const Bounds b{-1e-3, 1e-3};  // crystal oscillators: within ±1000 ppm
+    if (d.node().IsSequence()) {
+      const auto v = d.numbers(4, b);
+      std::copy(v.begin(), v.end(), c.drift.begin());
+    } else {
+      c.drift.fill(d.number(b));
+    }
+  }
+  read_number(f, "startup", c.startup, Bounds::non_negative());
 }
 
 // The `m3` bus's settings (bus: {type: m3, …}).
@@ -453,6 +484,12 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
                   "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision"});
     read_can(f, bus.can);
+    read_supervision(f["supervision"], bus.supervision);
+  } else if (bus.kind == BusKind::canopen) {
+    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
+                  "eds", "mode", "cycle", "drive_period", "counts_per_rev", "heartbeat_ms", "drift", "startup"});
+    read_can_wire(f, bus.can);
+    read_canopen(f, bus.canopen, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
@@ -579,9 +616,11 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   FaultSpec f;
   f.line = v.line();
   const std::string& kind = v.name();
-  const bool can = bus.kind == BusKind::can, ethercat = bus.kind == BusKind::ethercat, m3 = bus.kind == BusKind::m3;
-  if (kind != "wheel_slip" && !can && !ethercat && !m3) v.fail("a bus fault needs bus: can, ethercat or m3");
-  if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can)");
+  // canopen runs on the same CAN wire as can: the same wire faults.
+  const bool can = bus.kind == BusKind::can || bus.kind == BusKind::canopen, ethercat = bus.kind == BusKind::ethercat,
+             m3 = bus.kind == BusKind::m3;
+  if (kind != "wheel_slip" && !can && !ethercat && !m3) v.fail("a bus fault needs bus: can, canopen, ethercat or m3");
+  if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can or canopen)");
   if (kind == "link_break" && !ethercat && !m3) v.fail("link_break is a fault of a line (bus: ethercat or m3)");
   if (kind == "corruption" && !m3) v.fail("corruption is an M-III fault (bus: m3)");
   if (kind == "second_master" && !m3) v.fail("second_master is an M-III fault (bus: m3)");
@@ -741,6 +780,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   s.duration = path_duration(s.path) + s.settle;
   if (s.bus.kind == BusKind::ethercat) s.duration += s.bus.ethercat.startup;
   if (s.bus.kind == BusKind::m3) s.duration += s.bus.m3.startup;
+  if (s.bus.kind == BusKind::canopen) s.duration += s.bus.canopen.startup;
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   for (const auto& item : root["faults"].elements()) {

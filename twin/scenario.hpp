@@ -125,6 +125,23 @@ struct EthercatSpec {
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
 };
 
+// Settings of the `canopen` bus: four single-axis CiA 402 drives as CANopen nodes (one per
+// wheel) on the simulated CAN wire, driven by our CANopen master (docs/protocols/canopen.md).
+// The wire's own settings (bit_rate, transport, t_pre_us, master, seed, handshake_timeout)
+// are bus.can's: `bus: {type: canopen, bit_rate: …}` reads them into CanSpec.
+struct CanopenSpec {
+  std::string eds;                          // device description; "" = models/canopen/omnitwin_drive.eds
+  std::string mode = "csv";                 // csv | pv: how the master commands the wheels
+  double cycle = 0.001;                     // the master's SYNC period [s]
+  double drive_period = 0.001;              // the drives' own update period [s]
+  int counts_per_rev = 131072;              // the drives' motor encoder (17 bit) [counts/rev]
+  int heartbeat_ms = 50;                    // the nodes' (and the master's) heartbeat period
+  std::array<double, 4> drift{20e-6, -15e-6, 35e-6, -30e-6};  // the drives' oscillators [-]
+  // Time the master is given to configure the drives (SDO) and enable them before its path
+  // starts; added to the default duration. [s]
+  double startup = 1.0;
+};
+
 // Settings of the `m3` bus: four MECHATROLINK-III standard servos (profile 10h), one per
 // wheel, on one line, driven by our C1 master with VELCTRL or INTERPOLATE
 // (docs/protocols/mechatrolink3.md).
@@ -176,6 +193,7 @@ struct BusSpec {
   CanSpec can;
   EthercatSpec ethercat;
   M3Spec m3;
+  CanopenSpec canopen;
   SupervisionSpec supervision;
 };
 
