@@ -1,0 +1,313 @@
+// controller programs — `omni-tml`: the Technosoft Binary Code Viewer (seed 003 chapter 6) on
+// the command line, over the codecs in bus_emulators/tml.
+//
+//   omni-tml encode --protocol rs232|rs485|tmlcan|techcan|raw --axis N [--group] [--host N]
+//                   [--value HEX] [--from N] 'KPP=5' | '?KPP' | '??KPP' | --raw OPCODE [DATA...]
+//     prints the instruction in words, the bytes (or CAN frame) to send and the expected
+//     answer: 'O' on serial links (not for RS-485 group messages) and, for a query, the TakeData
+//     (?NAME) or TakeData2 (??NAME) that comes back; without --value its value and checksum
+//     bytes are shown as ??. With --group, N is a group number 1-8 (0 = broadcast).
+//   omni-tml decode --protocol P INPUT...
+//     serial: hex bytes (packets, 'O' 4F, SYNC 0D); CAN: ID#DATA as can-utils' cansend writes
+//     it (3 hex digits: 11-bit, 8: 29-bit); raw: hex words, opcode first.
+// Pure text in, text out: nothing is sent anywhere. Exit codes: 0 ok; 2 bad usage or input
+// (a one-line message on stderr naming what is wrong).
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include <cctype>
+#include <charconv>
+#include <iostream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bus_emulators/tml/tml_can.hpp"
+#include "bus_emulators/tml/tml_message.hpp"
+#include "bus_emulators/tml/tml_serial.hpp"
+
+using namespace omnitwin;
+using namespace omnitwin::tml;
+
+namespace {
+
+constexpr int kExitOk = 0, kExitUsage = 2;
+
+// A bad-input failure: main prints it and exits 2.
+struct InputError {
+  std::string what;
+};
+
+struct Options {
+  std::string protocol = "rs232";
+  int axis = 255;
+  int host = 255;
+  bool group = false;
+  bool raw = false;
+  std::string value;  // hex; empty: unknown
+  int from = -1;      // the answering axis of a group query
+  std::vector<std::string> input;
+};
+
+// ---- Text helpers ------------------------------------------------------------------------------
+
+std::string hex_bytes(std::span<const std::uint8_t> b) {
+  std::string s;
+  for (const auto x : b) s += fmt::format("{}{:02X}", s.empty() ? "" : " ", x);
+  return s;
+}
+
+std::uint32_t parse_hex(std::string_view s, std::uint64_t max, const char* what) {
+  if (s.starts_with("0x") || s.starts_with("0X")) s.remove_prefix(2);
+  std::uint64_t v = 0;
+  const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v, 16);
+  if (s.empty() || ec != std::errc{} || p != s.data() + s.size() || v > max)
+    throw InputError{fmt::format("{} '{}' is not a hex number up to 0x{:X}", what, s, max)};
+  return static_cast<std::uint32_t>(v);
+}
+
+// Hex digits (spaces, commas and 0x prefixes allowed between bytes) → bytes.
+std::vector<std::uint8_t> parse_hex_bytes(const std::vector<std::string>& args) {
+  std::string digits;
+  for (const auto& a : args) {
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      if (a[i] == '0' && i + 1 < a.size() && (a[i + 1] == 'x' || a[i + 1] == 'X')) { ++i; continue; }
+      if (std::isxdigit(static_cast<unsigned char>(a[i]))) digits += a[i];
+      else if (a[i] != ' ' && a[i] != ',' && a[i] != ':') throw InputError{fmt::format("'{}' is not a hex digit", a[i])};
+    }
+  }
+  if (digits.empty() || digits.size() % 2) throw InputError{"the bytes must be an even number of hex digits"};
+  std::vector<std::uint8_t> out;
+  for (std::size_t i = 0; i < digits.size(); i += 2) out.push_back(static_cast<std::uint8_t>(parse_hex(digits.substr(i, 2), 0xFF, "byte")));
+  return out;
+}
+
+// `ID#DATA` or `ID#R` (cansend): 3 hex digits are an 11-bit ID, 8 a 29-bit one.
+can::Frame parse_cansend(const std::string& s) {
+  const auto hash = s.find('#');
+  if (hash == std::string::npos) throw InputError{fmt::format("'{}' is not ID#DATA", s)};
+  const std::string id = s.substr(0, hash), data = s.substr(hash + 1);
+  if (id.size() != 3 && id.size() != 8) throw InputError{fmt::format("CAN ID '{}' must have 3 (11-bit) or 8 (29-bit) hex digits", id)};
+  can::Frame f;
+  f.extended = id.size() == 8;
+  f.id = parse_hex(id, f.extended ? 0x1FFFFFFF : 0x7FF, "CAN ID");
+  if (data == "R" || data == "r") {
+    f.kind = can::FrameKind::remote;
+    return f;
+  }
+  const auto bytes = data.empty() ? std::vector<std::uint8_t>{} : parse_hex_bytes({data});
+  if (bytes.size() > 8) throw InputError{fmt::format("'{}' has more than 8 data bytes", s)};
+  std::copy(bytes.begin(), bytes.end(), f.data.begin());
+  f.dlc = static_cast<std::uint8_t>(bytes.size());
+  return f;
+}
+
+std::string cansend(const can::Frame& f) {
+  std::string s = f.extended ? fmt::format("{:08X}#", f.id) : fmt::format("{:03X}#", f.id);
+  for (int i = 0; i < f.payload_size(); ++i) s += fmt::format("{:02X}", f.data[i]);
+  return s;
+}
+
+// ---- Encoding ----------------------------------------------------------------------------------
+
+// The message on the chosen protocol as a list of bytes (serial) or a frame (CAN).
+std::string wire_text(const std::string& protocol, const Message& m) {
+  if (protocol == "rs232" || protocol == "rs485") return hex_bytes(encode_packet(m).view());
+  if (protocol == "raw") return to_string(m).substr(5);  // opcode and data words (no ID code)
+  can::Frame f;
+  const CanStatus st = protocol == "tmlcan" ? encode_tmlcan(m, f) : encode_techcan(m, f);
+  if (st != CanStatus::ok) throw InputError{fmt::format("{} cannot carry this message: {}", protocol, to_string(st))};
+  return fmt::format("{}   (ID 0x{:0{}X}, {} data bytes)", cansend(f), f.id, f.extended ? 8 : 3, f.dlc);
+}
+
+// The wire text of an answer; without a known value the bytes that depend on it are "??".
+std::string answer_text(const std::string& protocol, Message (*make)(std::uint32_t, const void*), const void* ctx,
+                        const std::optional<std::uint32_t>& value) {
+  if (value) return wire_text(protocol, make(*value, ctx));
+  const std::string a = wire_text(protocol, make(0, ctx)), b = wire_text(protocol, make(0xFFFFFFFF, ctx));
+  std::string out = a;
+  for (std::size_t i = 0; i < a.size() && i < b.size(); ++i)
+    if (a[i] != b[i]) out[i] = '?';
+  return out;
+}
+
+struct Query {
+  Classified c;
+  std::uint16_t answering;  // ID code of the answering axis
+};
+
+Message make_take_data(std::uint32_t v, const void* ctx) {
+  const auto& q = *static_cast<const Query*>(ctx);
+  return take_data(q.c.sender, q.answering, q.c.address, v, q.c.wide);
+}
+
+Message make_take_data2(std::uint32_t v, const void* ctx) {
+  const auto& q = *static_cast<const Query*>(ctx);
+  return take_data2(q.c.sender, id_of(q.answering), q.c.address, v, q.c.wide);
+}
+
+Message build_message(const Options& o, std::uint16_t dest, std::uint16_t sender) {
+  Message m;
+  m.id_code = dest;
+  if (o.raw) {
+    if (o.input.empty() || o.input.size() > 1 + kMaxDataWords) throw InputError{"--raw takes an opcode and 0-4 data words (hex)"};
+    m.opcode = static_cast<std::uint16_t>(parse_hex(o.input[0], 0xFFFF, "opcode"));
+    for (std::size_t i = 1; i < o.input.size(); ++i) m.data[m.count++] = static_cast<std::uint16_t>(parse_hex(o.input[i], 0xFFFF, "data word"));
+    return m;
+  }
+  if (o.input.size() != 1) throw InputError{"give one instruction: 'NAME=VALUE', '?NAME' or '??NAME' (or --raw)"};
+  TextInstruction t;
+  if (std::string e = parse_text(o.input[0], t); !e.empty()) throw InputError{e};
+  if (std::string e = build_text(t, dest, sender, m); !e.empty()) throw InputError{e};
+  return m;
+}
+
+void print_expected(const Options& o, const Message& m) {
+  const bool serial = o.protocol == "rs232" || o.protocol == "rs485";
+  const Link link = o.protocol == "rs485" ? Link::rs485 : Link::rs232;
+  if (serial) {
+    fmt::print("expect:    {}\n", acknowledged(link, m) ? "4F   ('O': received, checksum good)"
+                                                        : "nothing (RS-485 group message: no acknowledgement)");
+  }
+  const Classified c = classify(m);
+  if (c.kind != Kind::give_me_data && c.kind != Kind::give_me_data2) {
+    if (!serial) fmt::print("expect:    no answer (type A)\n");
+    return;
+  }
+  if (is_group(m.id_code) && o.from < 0) {
+    fmt::print("answer:    one TakeData2 from each group member, lower axis IDs first (give --from N to see one)\n");
+    return;
+  }
+  const Query q{c, axis_id_code(static_cast<std::uint8_t>(o.from >= 0 ? o.from : id_of(m.id_code)))};
+  const auto make = c.kind == Kind::give_me_data ? make_take_data : make_take_data2;
+  std::optional<std::uint32_t> value;
+  if (!o.value.empty()) value = parse_hex(o.value, c.wide ? 0xFFFFFFFFull : 0xFFFF, "--value");
+  fmt::print("answer:    {}   ({})\n", answer_text(o.protocol, make, &q, value),
+             c.kind == Kind::give_me_data ? "TakeData" : "TakeData2");
+  if (!value) fmt::print("           ?? = the value bytes (and checksum); --value HEX fills them in\n");
+  else fmt::print("           {}\n", describe(make(*value, &q)));
+}
+
+int run_encode(const Options& o) {
+  if (o.axis < 0 || o.axis > 255 || o.host < 0 || o.host > 255) throw InputError{"--axis and --host take 0-255"};
+  if (o.group && o.axis > 8) throw InputError{"with --group, --axis is a group number 1-8 (0 = broadcast)"};
+  const std::uint16_t dest = o.group ? group_id_code(group_mask(o.axis)) : axis_id_code(static_cast<std::uint8_t>(o.axis));
+  const auto host_axis = static_cast<std::uint8_t>(o.host);
+  const std::uint16_t sender = o.protocol == "rs232" ? host_id_code(host_axis) : axis_id_code(host_axis);
+  const Message m = build_message(o, dest, sender);
+  if (o.protocol == "rs232" || o.protocol == "rs485") {
+    const Link link = o.protocol == "rs485" ? Link::rs485 : Link::rs232;
+    if (const LinkCheck lc = check_host_message(link, m); lc != LinkCheck::ok) throw InputError{to_string(lc)};
+  }
+  const std::string send = wire_text(o.protocol, m);  // may fail: nothing printed yet
+  fmt::print("message:   {}\n", describe(m, o.protocol != "raw"));
+  fmt::print("send:      {}\n", send);
+  print_expected(o, m);
+  return kExitOk;
+}
+
+// ---- Decoding ----------------------------------------------------------------------------------
+
+int decode_serial(const Options& o) {
+  const auto bytes = parse_hex_bytes(o.input);
+  for (std::size_t i = 0; i < bytes.size();) {
+    const std::uint8_t b = bytes[i];
+    if (b == kAckByte || b == kSyncByte) {
+      fmt::print("{:02X}         {}\n", b, b == kAckByte ? "acknowledgement 'O'" : "SYNC");
+      ++i;
+      continue;
+    }
+    if (b < kMinLengthByte || b > kMaxLengthByte || b % 2) throw InputError{fmt::format("byte {}: 0x{:02X} is not a length byte, 'O' or SYNC", i, b)};
+    const std::size_t n = static_cast<std::size_t>(b) + 2;
+    if (i + n > bytes.size()) throw InputError{fmt::format("byte {}: packet of {} bytes, only {} left", i, n, bytes.size() - i)};
+    const std::span packet(bytes.data() + i, n);
+    Message m;
+    if (const PacketStatus st = decode_packet(packet, m); st != PacketStatus::ok) {
+      const std::uint8_t want = checksum(packet.first(n - 1));
+      throw InputError{st == PacketStatus::bad_checksum
+                           ? fmt::format("byte {}: bad checksum 0x{:02X} (sum mod 256 is 0x{:02X})", i + n - 1, packet.back(), want)
+                           : fmt::format("byte {}: {}", i, to_string(st))};
+    }
+    fmt::print("{}\n           {}\n", hex_bytes(packet), describe(m));
+    i += n;
+  }
+  return kExitOk;
+}
+
+int decode_can(const Options& o) {
+  for (const auto& s : o.input) {
+    const can::Frame f = parse_cansend(s);
+    if (o.protocol == "tmlcan") {
+      Message m;
+      if (const CanStatus st = decode_tmlcan(f, m); st != CanStatus::ok) throw InputError{fmt::format("{}: {}", s, to_string(st))};
+      fmt::print("{}\n           {}\n", cansend(f), describe(m));
+      continue;
+    }
+    TechCanMessage t;
+    if (const CanStatus st = decode_techcan(f, t); st != CanStatus::ok) throw InputError{fmt::format("{}: {}", s, to_string(st))};
+    std::string words;
+    for (const std::uint16_t w : t.message.words()) words += fmt::format(" {:04X}", w);
+    std::string text = t.kind == TechCanKind::pong ? fmt::format("PONG from axis {}, words:{}", t.cob_number, words)
+                                                   : describe(t.message, t.destination_known);
+    if (!t.destination_known && t.kind != TechCanKind::pong)
+      text += fmt::format(", destination not carried (COB-ID axis {})", t.cob_number);
+    fmt::print("{}   TechCAN {}\n           {}\n", cansend(f), to_string(t.kind), text);
+  }
+  return kExitOk;
+}
+
+int decode_raw(const Options& o) {
+  if (o.input.empty() || o.input.size() > 1 + kMaxDataWords) throw InputError{"raw: give an opcode and 0-4 data words (hex)"};
+  Message m;
+  m.opcode = static_cast<std::uint16_t>(parse_hex(o.input[0], 0xFFFF, "opcode"));
+  for (std::size_t i = 1; i < o.input.size(); ++i) m.data[m.count++] = static_cast<std::uint16_t>(parse_hex(o.input[i], 0xFFFF, "data word"));
+  fmt::print("{}\n           {} (the raw form has no ID code)\n", to_string(m).substr(5), describe(m, false));
+  return kExitOk;
+}
+
+int run_decode(const Options& o) {
+  if (o.input.empty()) throw InputError{"nothing to decode"};
+  if (o.protocol == "rs232" || o.protocol == "rs485") return decode_serial(o);
+  if (o.protocol == "raw") return decode_raw(o);
+  return decode_can(o);
+}
+
+void add_common(CLI::App* sub, Options& o) {
+  sub->add_option("--protocol,-p", o.protocol, "rs232, rs485, tmlcan, techcan or raw")
+      ->check(CLI::IsMember({"rs232", "rs485", "tmlcan", "techcan", "raw"}))
+      ->capture_default_str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"omni-tml: the Technosoft TML Binary Code Viewer (seed 003) on the command line"};
+  app.require_subcommand(1);
+  Options o;
+  CLI::App* enc = app.add_subcommand("encode", "bytes to send for a TML instruction, and the expected answer");
+  add_common(enc, o);
+  enc->add_option("--axis,-a", o.axis, "destination axis ID 0-255 (with --group: group number 1-8, 0 = broadcast)")->capture_default_str();
+  enc->add_option("--host", o.host, "the host's axis ID (RS-232: the relay drive's, HOST bit set)")->capture_default_str();
+  enc->add_flag("--group,-g", o.group, "--axis is a group number");
+  enc->add_flag("--raw", o.raw, "the instruction is OPCODE [DATA...] in hex");
+  enc->add_option("--value", o.value, "query: the value the drive returns (hex), to show the whole answer");
+  enc->add_option("--from", o.from, "group query: the member axis whose answer to show");
+  enc->add_option("INSTRUCTION", o.input, "'NAME=VALUE', '?NAME', '??NAME' (or with --raw: OPCODE DATA...)")->required();
+  CLI::App* dec = app.add_subcommand("decode", "a received packet or frame in words");
+  add_common(dec, o);
+  dec->add_option("INPUT", o.input, "serial: hex bytes; tmlcan/techcan: ID#DATA; raw: hex words")->required();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "omni-tml: " << e.what() << "\n";
+    return kExitUsage;
+  }
+  try {
+    return enc->parsed() ? run_encode(o) : run_decode(o);
+  } catch (const InputError& e) {
+    std::cerr << "omni-tml: " << e.what << "\n";
+    return kExitUsage;
+  }
+}
