@@ -1,0 +1,121 @@
+// Tests `omnitwin run --bus canopen` end to end through the real programs: the twin's four
+// CiA 402 CANopen drives on the simulated CAN wire and our CANopen master (`omni-master --bus
+// canopen`) as two processes over UDP multicast in lockstep. Lockstep runs are byte-identical
+// (trajectory, bus records, capture); master.log tells the start-up (device names read by
+// segmented SDO, configuration, NMT and CiA 402 phases); tshark decodes the capture as
+// CANopen with no malformed frame; the per-node metrics are filled; profile velocity mode
+// drives the platform too; a drive losing power stops the platform and is brought back; a
+// malformed EDS is bad input naming the file, line and key.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::twin::cli {
+namespace {
+
+class CliCanopen : public CliTest {
+ protected:
+  Finished run_short(const fs::path& out, std::vector<std::string> sets = {}) {
+    std::vector<std::string> args{"run", test_scenario("canopen_short.yaml"), "--out", out.string(), "--no-progress"};
+    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
+    return run(args);
+  }
+  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
+};
+
+void expect_clean_run(const Finished& f, const nlohmann::json& m) {
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_EQ(ms.at("state"), "finished") << ms.dump(2);
+  EXPECT_EQ(ms.at("sdo_aborts"), 0);
+  EXPECT_EQ(ms.at("heartbeat_timeouts"), 0);
+  EXPECT_GT(ms.at("syncs").get<int>(), 3000);
+  EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
+  EXPECT_LT(ms.at("path_origin_s").get<double>(), 0.2);
+  for (const auto& s : m.at("slaves")) {
+    EXPECT_EQ(s.at("nmt_state"), "operational");
+    EXPECT_EQ(s.at("emcy"), 0);
+    EXPECT_EQ(s.at("sdo_aborts"), 0);
+    EXPECT_GT(s.at("rpdo_rx").get<int>(), 3000);
+    EXPECT_GT(s.at("tpdo_tx").get<int>(), 3000);
+  }
+  EXPECT_EQ(m.at("bus").at("error_frames"), 0);
+  EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
+}
+
+bool have_tshark() { return std::system("command -v tshark >/dev/null 2>&1") == 0; }
+
+// A shell command's standard output.
+std::string shell(const std::string& cmd) {
+  std::string out;
+  if (FILE* p = ::popen(cmd.c_str(), "r")) {
+    char buf[4096];
+    while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) out.append(buf, n);
+    ::pclose(p);
+  }
+  return out;
+}
+
+TEST_F(CliCanopen, LockstepIsByteIdenticalAndDecodesAsCanopen) {
+  const fs::path a = dir_ / "a", b = dir_ / "b";
+  const Finished fa = run_short(a);
+  const Finished fb = run_short(b);
+  const nlohmann::json m = metrics(a);
+  expect_clean_run(fa, m);
+  EXPECT_EQ(fb.code, 0);
+  for (const char* f : {"trajectory.csv", "bus.csv", "bus-can.pcap"}) EXPECT_EQ(read_bytes(a / f), read_bytes(b / f)) << f;
+  const std::string log = read_bytes(a / "master.log");
+  for (const char* line : {"node 1: omnitwin CiA 402 drive", "node 4: configured", "phase configuring -> starting",
+                           "phase starting -> enabling", "phase enabling -> running", "path done"})
+    EXPECT_NE(log.find(line), std::string::npos) << line << "\n" << log;
+  if (!have_tshark()) GTEST_SKIP() << "tshark is not installed";
+  const std::string base = "tshark -r " + (a / "bus-can.pcap").string() + " -d can.subdissector,canopen";
+  EXPECT_EQ(std::stoll(shell(base + " 2>/dev/null | wc -l")), m.at("bus").at("frames").get<long long>());
+  EXPECT_EQ(shell(base + " 2>/dev/null | grep -ci malformed"), "0\n");
+  const std::string kinds = shell(base + " 2>/dev/null | grep -o 'NMT: Reset communication\\|Boot-up\\|Initiate upload request"
+                                      "\\|Upload segment response\\|Initiate download request\\|NMT: Start remote node\\|SYNC\\|PDO'"
+                                      " | sort -u");
+  for (const char* k : {"NMT: Reset communication", "Boot-up", "Initiate upload request", "Upload segment response",
+                        "Initiate download request", "NMT: Start remote node", "SYNC", "PDO"})
+    EXPECT_NE(kinds.find(k), std::string::npos) << k << "\n" << kinds;
+}
+
+TEST_F(CliCanopen, ProfileVelocityModeDrivesThePlatform) {
+  const fs::path a = dir_ / "pv";
+  const Finished f = run_short(a, {"bus.mode=pv"});
+  expect_clean_run(f, metrics(a));
+  EXPECT_NE(read_bytes(a / "master.log").find("PV"), std::string::npos);
+}
+
+TEST_F(CliCanopen, ADriveLosingPowerStopsThePlatformAndComesBack) {
+  const fs::path a = dir_ / "power";
+  const Finished f = run({"run", test_scenario("canopen_power_loss.yaml"), "--out", a.string(), "--no-progress"});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json m = metrics(a);
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_EQ(ms.at("state"), "stopped");
+  EXPECT_EQ(ms.at("stop_reason"), "node_missing");
+  EXPECT_EQ(ms.at("missing_node"), 2);
+  EXPECT_GT(ms.at("stopped_at_s").get<double>(), 1.1);   // the heartbeat timeout (150 ms) after the loss
+  EXPECT_LT(ms.at("stopped_at_s").get<double>(), 1.2);
+  EXPECT_EQ(ms.at("recoveries"), 1);
+  EXPECT_EQ(m.at("slaves")[1].at("nmt_state"), "operational");
+  EXPECT_NE(read_bytes(a / "master.log").find("node 2 back in OPERATIONAL"), std::string::npos);
+}
+
+TEST_F(CliCanopen, AMalformedEdsIsBadInputNamingFileLineAndKey) {
+  const fs::path a = dir_ / "bad";
+  const Finished f = run_short(a, {"bus.eds=" + source_path("tests/data/canopen/bad_access.eds")});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_NE(f.err.find("bad_access.eds:"), std::string::npos) << f.err;
+  EXPECT_NE(f.err.find("AccessType"), std::string::npos) << f.err;
+}
+
+}  // namespace
+}  // namespace omnitwin::twin::cli
