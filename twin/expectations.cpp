@@ -20,29 +20,36 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
     "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
-// bus can, ethercat and m3 (not_returned … op_since_s are EtherCAT's, the last two M-III's).
-constexpr std::array<std::string_view, 18> kBusMetrics = {
+// bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
+// M-III's, the last three CANopen's).
+constexpr std::array<std::string_view, 21> kBusMetrics = {
     "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
     "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",
     "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s",
-    "corrupted_frames", "servos_on_since_s"};
+    "corrupted_frames", "servos_on_since_s", "emcy", "sdo_aborts", "power_cycles"};
 // The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
 // bus ethercat also its own counters (from the master's statistics file).
 // The twin's view (lockstep report, realtime supervision: lost_at_s) and the EtherCAT and
 // M-III masters' own counters (master-stats.json: segment losses and returns among them;
-// M-III: exchanges … int_offset_ns, summed over the slaves where per slave).
-constexpr std::array<std::string_view, 26> kMasterMetrics = {
+// M-III: exchanges … int_offset_ns, summed over the slaves where per slave; CANopen: syncs …
+// tpdo_rx, with recoveries = drives brought back to OPERATIONAL).
+constexpr std::array<std::string_view, 33> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
     "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
     "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s",
     "exchanges",    "retries",          "retry_recovered", "missed",     "late",       "bad",
-    "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns"};
-// Per slave: CAN's first nine, EtherCAT's next three, M-III's last nine.
-constexpr std::array<std::string_view, 21> kSlaveMetrics = {
+    "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns",
+    "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
+    "tpdo_rx"};
+// Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
+// (tec, bus_off_events and error_code serve CANopen too).
+constexpr std::array<std::string_view, 30> kSlaveMetrics = {
     "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
     "tec",     "bus_off_events", "stale_samples",   "al_status_code",  "station_address", "error_code",
     "phase",   "responses",      "fcs_errors",      "missed_syncs",    "missed_commands", "wdt_errors",
-    "phase_errors", "comm_alarms", "repeated"};
+    "phase_errors", "comm_alarms", "repeated",
+    "emcy",    "sdo_aborts",     "rpdo_rx",         "tpdo_tx",         "pdo_length_errors", "syncs",
+    "heartbeats", "faults",      "comm_faults"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;

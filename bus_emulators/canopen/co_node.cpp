@@ -119,10 +119,10 @@ void Node::reset_communication(SimTime now) {
 void Node::communication_error(std::uint16_t code, SimTime now) {
   emcy_.raise(code, now, send_counted_);
   ++stats_.emcy;
+  if (hooks_.on_comm_error) hooks_.on_comm_error(code, now);  // the application first: the cause is this code
   const std::int64_t behaviour = error_behaviour_ ? error_behaviour_->as_int() : 0;
   if (behaviour == 0 && nmt_.state() == NmtState::operational) apply(NmtTransition::enter_pre_operational, now);
   if (behaviour == 2) apply(NmtTransition::stop, now);
-  if (hooks_.on_comm_error) hooks_.on_comm_error(code, now);
 }
 
 void Node::on_bus_off_recovered(SimTime now) { communication_error(emcy_code::bus_off_recovered, now); }

@@ -37,7 +37,7 @@ struct NodeHooks {
   // the boot-up; it is called before the dictionary's communication objects are restored).
   std::function<void(NmtTransition tr, SimTime t)> on_nmt;
   // A communication error (EMCY code 0x8130 heartbeat/life guarding, 0x8140 bus-off
-  // recovered) — after the node's own reaction.
+  // recovered) — after its EMCY, before the NMT state change 0x1029 asks for.
   std::function<void(std::uint16_t emcy_code, SimTime t)> on_comm_error;
 };
 

@@ -200,6 +200,7 @@ void CoMaster::on_heartbeat_event(const co::HeartbeatEvent& e) {
     case co::HeartbeatEvent::timeout:
       ++stats_.heartbeat_timeouts;
       n->view.lost = true;
+      n->start_sent = false;
       event(e.t, fmt::format("node {}: heartbeat lost", e.node), true);
       if (phase_ == CoPhase::running || phase_ == CoPhase::enabling || phase_ == CoPhase::starting)
         stop(simclock::StopReason::node_missing, e.node, e.t, fmt::format("node {} missing: platform stopped", e.node));
@@ -217,7 +218,9 @@ void CoMaster::on_heartbeat_event(const co::HeartbeatEvent& e) {
       return;
     case co::HeartbeatEvent::resumed:
     case co::HeartbeatEvent::state_changed:
-      if (n->view.lost && e.state == NmtState::operational) {
+      // Recovered: operational again after we started it (not a stale heartbeat it had queued
+      // while bus-off).
+      if (n->view.lost && e.state == NmtState::operational && n->start_sent) {
         n->view.lost = false;
         ++stats_.recoveries;
         event(e.t, fmt::format("node {} back in OPERATIONAL", e.node));
@@ -309,9 +312,12 @@ void CoMaster::on_tick(SimTime t) {
 // (after a recovery: on its own, NMT start to that node).
 void CoMaster::run_scripts(SimTime t) {
   for (Node& n : nodes_) {
-    if (!consumer_.heard(n.view.id) || n.view.configured) continue;
-    if (!run_script(n, t)) return;  // an SDO failed: the phase changed
-    if (n.view.configured && phase_ == CoPhase::stopped && !n.start_sent) {
+    if (!consumer_.heard(n.view.id)) continue;
+    if (!n.view.configured && !run_script(n, t)) return;  // an SDO failed: the phase changed
+    // Stopped: a lost drive heard again (configured anew after a boot-up, or back from
+    // bus-off in PRE-OPERATIONAL with its configuration) is started again.
+    const bool back = n.view.lost && consumer_.alive(n.view.id) && consumer_.state(n.view.id) != NmtState::operational;
+    if (n.view.configured && phase_ == CoPhase::stopped && back && !n.start_sent) {
       nmt(co::NmtCommand::start, n.view.id, t);
       n.start_sent = true;
     }
