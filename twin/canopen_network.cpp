@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include "bus_emulators/can/can_bits.hpp"
+
 #include <cmath>
 #include <filesystem>
 #include <numbers>
@@ -48,6 +50,24 @@ std::string node_name(int fault_node) {
 
 }  // namespace
 
+LoadBudget canopen_load_budget(const Scenario& s) {
+  const CanopenSpec& c = s.bus.canopen;
+  LoadBudget out;
+  for (const bool worst : {false, true}) {
+    // A frame's bits: all-zero data (the stuffing a run mostly sees) or the worst case.
+    auto bits = [worst](std::uint32_t id, int bytes) {
+      if (worst) return static_cast<double>(can::worst_case_frame_bits(false, bytes));
+      return static_cast<double>(can::frame_bits_with_intermission(canopen::frame11(id, static_cast<std::uint8_t>(bytes))));
+    };
+    const double per_s = 1.0 / c.cycle;
+    double b = per_s * (bits(0x80, 0) + 4 * bits(0x201, 6) + 4 * bits(0x181, 6));  // SYNC, RPDO1, TPDO1
+    b += 4 * bits(0x281, 6) * per_s / 10;                                          // TPDO2, inhibit 10 SYNCs
+    b += 5 * bits(0x701, 1) * 1000.0 / c.heartbeat_ms;                             // four drives and the master
+    (worst ? out.worst : out.nominal) = b / static_cast<double>(s.bus.can.bit_rate);
+  }
+  return out;
+}
+
 std::string canopen_eds_path(const CanopenSpec& c) {
   if (!c.eds.empty()) return std::filesystem::absolute(c.eds).lexically_normal().string();
   return std::string(OMNITWIN_SOURCE_DIR) + "/models/canopen/omnitwin_drive.eds";
@@ -89,11 +109,17 @@ CanopenNetwork::CanopenNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
   pending_.reserve(kPendingCapacity);
   // Power on at t = 0: each node's boot-up message goes onto the wire.
   for (auto& d : drives_) d->power_on(0);
+  budget_ = canopen_load_budget(s);
 }
 
 CanopenNetwork::~CanopenNetwork() { flush_transport(); }
 
 void CanopenNetwork::open_pcap(const std::string& path) {
+  // The run's records are open now: the configuration's budget goes into events.log.
+  hooks_.log(0, "bus", fmt::format("load budget {:.1f} % of {} bit/s at a {} ms SYNC ({:.1f} % with worst-case bit "
+                                   "stuffing){}",
+                                   100 * budget_.nominal, s_.bus.can.bit_rate, spec_.cycle * 1e3, 100 * budget_.worst,
+                                   budget_.nominal > 1 ? ": the configuration does not fit the wire" : ""));
   can::PcapWriter::Options o;
   o.flush_each_packet = false;
   pcap_ = std::make_unique<can::PcapWriter>(path, o);
@@ -399,6 +425,8 @@ nlohmann::json CanopenNetwork::bus_metrics(SimTime now) const {
           {"lost_frames", lost_frames_},
           {"bus_off_events", bus_off_events_},
           {"load", bus_.bus_load(now)},
+          {"load_budget", budget_.nominal},
+          {"load_budget_worst", budget_.worst},
           {"dropouts", 0},
           {"errors", b.errors},
           {"emcy", emcy},

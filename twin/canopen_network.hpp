@@ -38,6 +38,13 @@ namespace omnitwin::twin {
 
 // The EDS a scenario's canopen bus uses (absolute path).
 std::string canopen_eds_path(const CanopenSpec& c);
+// The wire's share the four-drive configuration needs: per SYNC the SYNC, four RPDO1 and four
+// TPDO1 (6 bytes), TPDO2 at most every 10 SYNCs, five heartbeats per heartbeat period; with
+// the stuffing of all-zero data (nominal) and the worst case. nominal > 1: it does not fit.
+struct LoadBudget {
+  double nominal = 0, worst = 0;
+};
+LoadBudget canopen_load_budget(const Scenario& s);
 
 class CanopenNetwork final : public BusNetwork {
  public:
@@ -128,6 +135,7 @@ class CanopenNetwork final : public BusNetwork {
   bool bus_stopped_ = false;
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t power_cycles_ = 0;
+  LoadBudget budget_;
   SimTime master_start_ns_ = -1;
 };
 

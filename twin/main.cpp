@@ -189,10 +189,11 @@ void print_summary(const RunResult& r) {
   } else if (m.contains("master") && m["bus"].value("name", "") == "canopen") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
-    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} %, EMCY {}, SDO aborts {}\n",
+    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} % (budget {:.1f} %), "
+                             "EMCY {}, SDO aborts {}\n",
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
-                             b.value("emcy", 0), b.value("sdo_aborts", 0));
+                             100.0 * b.value("load_budget", 0.0), b.value("emcy", 0), b.value("sdo_aborts", 0));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];

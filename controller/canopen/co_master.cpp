@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "bus_emulators/canopen/co_eds.hpp"
@@ -80,7 +82,13 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const co::EdsDevic
   configure_pdo(s, false, 0, 0x200u + id, 1, {map_entry(eds, 0x6040, 0, true), map_entry(eds, 0x60FF, 0, true)});
   for (int n = 1; n < 4; ++n) configure_pdo(s, false, n, static_cast<std::uint32_t>(0x200 + 0x100 * n + id), 0, {});
   configure_pdo(s, true, 0, 0x180u + id, 1, {map_entry(eds, 0x6041, 0, false), map_entry(eds, 0x6064, 0, false)});
-  configure_pdo(s, true, 1, 0x280u + id, 254, {map_entry(eds, 0x6041, 0, false), map_entry(eds, 0x606C, 0, false)}, 100, 100);
+  // TPDO2 on change, at most every 10 SYNC periods, at least every 100: its share of the wire
+  // scales with the SYNC as the synchronous PDOs' does.
+  const double cycle_ms = c.cycle * 1e3;
+  const auto inhibit = static_cast<std::uint16_t>(std::min(65535.0, std::round(cycle_ms * 10 * 10)));   // [100 µs]
+  const auto event_ms = static_cast<std::uint16_t>(std::min(65535.0, std::round(cycle_ms * 100)));
+  configure_pdo(s, true, 1, 0x280u + id, 254, {map_entry(eds, 0x6041, 0, false), map_entry(eds, 0x606C, 0, false)},
+                inhibit, event_ms);
   for (int n = 2; n < 4; ++n) configure_pdo(s, true, n, static_cast<std::uint32_t>(0x180 + 0x100 * n + id), 0, {});
   s.push_back(dl(0x6060, 0, 1, c.mode == WheelMode::csv ? 9 : 3, "modes of operation"));
   return s;

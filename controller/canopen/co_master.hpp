@@ -49,8 +49,8 @@ struct SdoStep {
 // The start-up script of one drive: checks (device type 0x1000 is CiA 402, identity 0x1018
 // matches the EDS), heartbeat 0x1017 and consumer 0x1016, SYNC counter 0x1019, RPDO1 =
 // controlword + target velocity (synchronous), TPDO1 = statusword + position actual
-// (synchronous), TPDO2 = statusword + velocity actual (event-driven, 10 ms inhibit, 100 ms
-// event timer), the other PDOs off, modes of operation 0x6060. Mapping entries carry the bit
+// (synchronous), TPDO2 = statusword + velocity actual (event-driven, inhibit time 10 SYNC
+// periods, event timer 100), the other PDOs off, modes of operation 0x6060. Mapping entries carry the bit
 // sizes of the EDS; throws std::runtime_error when the EDS lacks an object or does not allow
 // it in that PDO (set-up).
 std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::canopen::EdsDevice& eds, std::uint8_t node);

@@ -1,5 +1,5 @@
 // Benchmarks whole bus runs through the real programs: `omnitwin run` (built beside this
-// benchmark) with `--bus ethercat` or `--bus m3`, which starts `omni-master --bus …` as its own
+// benchmark) with `--bus ethercat`, `--bus m3` or `--bus canopen`, which starts `omni-master --bus …` as its own
 // process.
 // Every figure is read from the run's metrics.json; the baseline is the same scenario with
 // `--bus direct`, run in the same benchmark (DESIGN §11).
@@ -41,6 +41,14 @@
 //                    trips make 9.3 ms the shortest that fits), the default transport: the twin's tick figures (realtime.*), the master's
 //                    statistics (cycles, exchanges, retries, missed, late …) and the slaves'
 //                    communication alarms, watchdog errors and missed SYNCs summed over the four.
+//   BM_CanopenLockstep/R/C   the thesis line (22 s simulated) in lockstep over CANopen: our master
+//                    and four CiA 402 drives on the simulated CAN wire at R kbit/s with a C ms SYNC
+//                    (one master tick per SYNC), UDP multicast on loopback. Baseline: --bus direct
+//                    at a C ms control period, in the same iteration. Counters as
+//                    BM_EthercatLockstep plus load (metrics.json bus.load: the wire's busy
+//                    fraction over the run) and the master's SDO transfers, EMCYs and heartbeat
+//                    timeouts per run; passed says whether the run met the scenario's
+//                    expectations (500 kbit/s at 1 ms does not fit: the wire saturates).
 // The exact command of every run is printed on stderr. A run that cannot start (exit 2 or 3)
 // skips with the tail of its log.
 #include <benchmark/benchmark.h>
@@ -148,7 +156,7 @@ std::string period_s(std::int64_t ms) { return ms == 10 ? "0.01" : ms == 1 ? "0.
 // tick_s long), the master's `keys` per run (metrics.json master.*), passed.
 void lockstep_vs_direct(benchmark::State& state, const char* name, const std::vector<std::string>& bus,
                         const std::vector<std::string>& direct, double tick_s, const std::vector<const char*>& keys) {
-  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, passed = 1;
+  double sim = 0, wall = 0, process_wall = 0, dsim = 0, dwall = 0, passed = 1, load = -1;
   std::vector<double> sums(keys.size(), 0.0);
   for (auto _ : state) {
     const RunOutcome e = run_omnitwin(name, bus);
@@ -161,6 +169,7 @@ void lockstep_vs_direct(benchmark::State& state, const char* name, const std::ve
     dsim += d.metrics.at("sim_time_s").get<double>();
     dwall += d.metrics.at("wall_time_s").get<double>();
     for (std::size_t i = 0; i < keys.size(); ++i) sums[i] += number(e.metrics, "master", keys[i]);
+    load = std::max(load, number(e.metrics, "bus", "load"));
     passed = std::min(passed, e.exit_code == 0 ? 1.0 : 0.0);
     std::cerr << "    " << name << ": rtf " << e.metrics.value("real_time_factor", 0.0) << ", exit " << e.exit_code
               << "\n    direct: rtf " << d.metrics.value("real_time_factor", 0.0) << "\n";
@@ -174,6 +183,7 @@ void lockstep_vs_direct(benchmark::State& state, const char* name, const std::ve
   const auto runs = static_cast<double>(state.iterations());
   for (std::size_t i = 0; i < keys.size(); ++i) state.counters[keys[i]] = sums[i] / runs;  // per run
   state.counters["passed"] = passed;
+  if (load >= 0) state.counters["load"] = load;
 }
 
 void BM_EthercatLockstep(benchmark::State& state) {
@@ -238,6 +248,15 @@ void BM_M3Lockstep(benchmark::State& state) {
   lockstep_vs_direct(state, "m3", m3, direct, stations <= 4 ? 0.001 : 0.003, {"retries", "missed", "late", "cycles"});
 }
 
+void BM_CanopenLockstep(benchmark::State& state) {
+  const std::int64_t kbit = state.range(0), ms = state.range(1);
+  const std::vector<std::string> co{"--bus", "canopen", "--set", "bus.bit_rate=" + std::to_string(kbit * 1000),
+                                    "--set", "bus.cycle=" + period_s(ms)};
+  const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=" + period_s(ms)};
+  lockstep_vs_direct(state, "canopen", co, direct, static_cast<double>(ms) / 1000.0,
+                     {"sdo_done", "emcy", "heartbeat_timeouts", "cycles"});
+}
+
 void BM_EthercatRealtime(benchmark::State& state) { realtime(state, "ethercat"); }
 void BM_M3Realtime(benchmark::State& state) { realtime(state, "m3"); }
 void BM_DirectRealtime(benchmark::State& state) { realtime(state, "direct"); }
@@ -255,6 +274,16 @@ BENCHMARK(BM_M3Lockstep)
     ->Args({1, 4})
     ->Args({0, 62})
     ->ArgNames({"udp", "stations"})
+    ->Unit(benchmark::kSecond)
+    ->Iterations(3)
+    ->UseRealTime();
+BENCHMARK(BM_CanopenLockstep)
+    ->Args({1000, 1})
+    ->Args({500, 1})
+    ->Args({500, 2})
+    ->Args({250, 4})
+    ->Args({125, 8})
+    ->ArgNames({"kbit", "sync_ms"})
     ->Unit(benchmark::kSecond)
     ->Iterations(3)
     ->UseRealTime();
