@@ -184,7 +184,9 @@ CanStatus encode_techcan(const Message& m, can::Frame& out) {
   if (c.kind == Kind::take_data) return encode_take_data(m, out);
   if (c.kind == Kind::take_data2) return encode_take_data2(m, out);
   if (c.kind == Kind::pvt && c.complete && !is_group(m.id_code)) return encode_pvt(m, out);
-  if (c.kind == Kind::sync && is_broadcast(m.id_code)) {
+  // The synchronisation frame carries no data: only a SYNC without data words takes that layout
+  // (opcode 0x1000 with data goes as a plain broadcast, so decoding gives back what was sent).
+  if (c.kind == Kind::sync && is_broadcast(m.id_code) && m.count == 0) {
     out = data_frame(techcan::sync_id, false);  // no data bytes
     return CanStatus::ok;
   }

@@ -128,6 +128,18 @@ TEST(TechCan, GoldenSyncAndSetMasterTime) {
   expect_techcan(set_master_time(0x0246C46F), 0x200, {0x01, 0x14, 0x6F, 0xC4, 0x46, 0x02}, TechCanKind::broadcast);
 }
 
+// Found by fuzz.tml_decode: a broadcast frame carrying the SYNC opcode with data words must
+// re-encode as that broadcast, not as the data-less synchronisation frame 0x020.
+TEST(TechCan, SyncOpcodeWithDataStaysABroadcast) {
+  TechCanMessage t;
+  ASSERT_EQ(decode_techcan(can::make_data(0x200, {0x00, 0x10, 0x24, 0xEB, 0x00, 0x00}), t), CanStatus::ok);
+  can::Frame g;
+  ASSERT_EQ(encode_techcan(t.message, g), CanStatus::ok);
+  EXPECT_EQ(g, can::make_data(0x200, {0x00, 0x10, 0x24, 0xEB, 0x00, 0x00}));
+  ASSERT_EQ(encode_techcan(sync_message(), g), CanStatus::ok);
+  EXPECT_EQ(g, can::make_data(0x020, {}));
+}
+
 TEST(TechCan, GoldenTakeData2WithMer) {
   // The seed prints byte 3 as 40h; MER = 0x0008 makes it 08h.
   expect_techcan(take_data2(master_id(3), 2, 0x08FC, 0x0008, false), 0x102, {0x00, 0xFC, 0x08, 0x08, 0x00},
