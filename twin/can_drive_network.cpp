@@ -1,0 +1,350 @@
+// twin layer — four servo drives on the simulated CAN wire; see can_drive_network.hpp.
+#include "twin/can_drive_network.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+namespace omnitwin::twin {
+
+namespace {
+
+constexpr int kBusNodes = 5;
+constexpr std::size_t kPendingCapacity = 256;
+constexpr double kTwoPi = 2 * std::numbers::pi;
+
+double timer_drift(double d) { return 1.0 / (1.0 + d) - 1.0; }
+
+can::BusConfig bus_config(const Scenario& s) {
+  can::BusConfig c;
+  c.bit_rate_bps = s.bus.can.bit_rate;
+  c.queue_capacity = 64;
+  c.max_nodes = kBusNodes;
+  return c;
+}
+
+const char* error_state_name(can::ErrorState e) {
+  switch (e) {
+    case can::ErrorState::error_active: return "error_active";
+    case can::ErrorState::error_passive: return "error_passive";
+    case can::ErrorState::bus_off: return "bus_off";
+  }
+  return "?";
+}
+
+std::string node_name(int fault_node) {
+  if (fault_node == FaultSpec::kMaster) return "master";
+  if (fault_node == FaultSpec::kAllNodes) return "all nodes";
+  return fmt::format("axis {} (node {})", fault_node + 1, fault_node + 1);
+}
+
+}  // namespace
+
+CanDriveNetwork::CanDriveNetwork(const Scenario& s, Scheduler& sched, Hooks hooks, CanDriveSetup setup)
+    : s_(s), setup_(setup), sched_(sched), hooks_(std::move(hooks)), bus_(bus_config(s)), rng_(s.bus.can.seed) {
+  for (int i = 0; i < kBusNodes; ++i) bus_.attach();
+  bus_.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
+  bus_.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
+  bus_.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
+  transport_ = can::open_transport(s.bus.can.transport);
+  batch_ = s.clock == ClockMode::lockstep;
+  pending_.reserve(kPendingCapacity);
+}
+
+CanDriveNetwork::~CanDriveNetwork() { flush_transport(); }
+
+// Each drive's firmware cycle on its own oscillator, the four starting at different instants;
+// every drive powers on at t = 0.
+void CanDriveNetwork::start() {
+  const SimTime period = std::llround(setup_.drive_period * 1e9);
+  for (int i = 0; i < 4; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    timers_[k] = sched_.add_periodic(fmt::format("{}-node{}", setup_.name, i + 1), Phase::device, period / (i + 2), period,
+                                     [this, i](SimTime t) { on_drive_timer(i, t); }, timer_drift(setup_.drift[k]));
+    drive_power(i, true, 0);
+    last_state_[k] = drive_protocol_state(i);
+  }
+}
+
+void CanDriveNetwork::open_pcap(const std::string& path) {
+  can::PcapWriter::Options o;
+  o.flush_each_packet = false;
+  pcap_ = std::make_unique<can::PcapWriter>(path, o);
+}
+
+std::string CanDriveNetwork::close_pcap() { return close_capture(pcap_.get()); }
+std::string CanDriveNetwork::pcap_error() const { return capture_error(pcap_.get()); }
+
+// ---------------------------------------------------------------------------------------
+// The transport side
+
+void CanDriveNetwork::submit_from_far(const can::Frame& f, SimTime t) {
+  const SimTime stamp = t + std::llround(s_.bus.can.t_pre_us * 1e3) + extra_delay(FaultSpec::kMaster);
+  if (bus_.submit(kFar, f, stamp) != can::SubmitStatus::queued) ++refused_from_far_;
+}
+
+void CanDriveNetwork::flush_transport() {
+  if (pending_.empty()) return;
+  const std::size_t sent = transport_->send_many(pending_);
+  to_transport_ += sent;
+  send_failures_ += pending_.size() - sent;
+  pending_.clear();
+}
+
+bool CanDriveNetwork::drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) {
+  flush_transport();
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (from_transport_ < count) {
+    if (auto r = transport_->receive()) {
+      ++from_transport_;
+      submit_from_far(r->frame, t);
+      continue;
+    }
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0 || !can::wait_readable(*transport_, left)) return from_transport_ >= count;
+  }
+  return true;
+}
+
+int CanDriveNetwork::poll_transport(SimTime t) {
+  int n = 0;
+  while (auto r = transport_->receive()) {
+    ++from_transport_;
+    ++n;
+    submit_from_far(r->frame, t);
+  }
+  return n;
+}
+
+// ---------------------------------------------------------------------------------------
+// Wire callbacks
+
+void CanDriveNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing) {
+  if (receiver == kFar) return;  // the far side hears it through the transport (on_tx_done)
+  const int i = receiver - 1;
+  if (lose(i)) {
+    ++lost_frames_;
+    return;
+  }
+  if (powered_[static_cast<std::size_t>(i)]) deliver(i, f, timing.end_ns);
+  watch(i, timing.end_ns);
+}
+
+void CanDriveNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
+  if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
+  if (sender == kFar) return on_master_frame(f, timing.end_ns);
+  if (lose(FaultSpec::kMaster)) {
+    ++lost_frames_;
+    return;
+  }
+  if (batch_) {
+    pending_.push_back(can::TimedFrame{f, timing.end_ns});
+    if (pending_.size() >= kPendingCapacity) flush_transport();
+  } else if (transport_->send(f, timing.end_ns)) {
+    ++to_transport_;
+  } else {
+    ++send_failures_;
+  }
+}
+
+void CanDriveNetwork::on_bus_event(const can::BusEvent& e) {
+  if (e.kind == can::BusEventKind::error_frame || e.node == kFar) return;
+  const int i = e.node - 1;
+  const std::string who = node_name(i);
+  if (e.kind == can::BusEventKind::state_changed) {
+    if (e.state == can::ErrorState::bus_off) ++bus_off_events_;
+    hooks_.log(e.t_ns, "can", fmt::format("{} is {}", who, error_state_name(e.state)));
+  } else {
+    hooks_.log(e.t_ns, "can", fmt::format("{} recovered from bus-off", who));
+    if (powered_[static_cast<std::size_t>(i)]) drive_bus_off_recovered(i, e.t_ns);
+  }
+}
+
+// One drive period: the protocol's step against the wheel, the amplifier's set-point back.
+void CanDriveNetwork::on_drive_timer(int i, SimTime t) {
+  if (!powered_[static_cast<std::size_t>(i)]) return;
+  bus_.advance(t);
+  drive::Feedback fb;
+  fb.position_rad = hooks_.wheel_angle(i);
+  fb.velocity_rad_s = hooks_.wheel_speed(i);
+  const drive::Command c = drive_step(i, t, fb);
+  hooks_.set_setpoint(i, (c.power && !c.brake_engaged) ? c.velocity_rad_s : 0.0);
+  const drive::Objects& o = drive_core(i).objects();
+  if (o.velocity_demand != 0 || o.velocity_actual != 0)
+    hooks_.axis_sample(i, static_cast<double>(o.velocity_demand - o.velocity_actual) * setup_.drive_period);
+  watch(i, t);
+}
+
+// Protocol and drive state changes go to the event log.
+void CanDriveNetwork::watch(int i, SimTime t) {
+  const auto k = static_cast<std::size_t>(i);
+  const drive::Cia402Drive& d = drive_core(i);
+  std::string state = fmt::format("{}, drive {}", drive_protocol_state(i), drive::to_string(d.state()));
+  if (d.state() == drive::State::fault) state += fmt::format(" (error 0x{:04X})", d.objects().error_code);
+  if (state == last_state_[k]) return;
+  if (hooks_.log) hooks_.log(t, "bus", fmt::format("node {} {}", i + 1, state));
+  last_state_[k] = std::move(state);
+}
+
+// ---------------------------------------------------------------------------------------
+// Faults
+
+bool CanDriveNetwork::lose(int target) {
+  for (LossState* l : {&loss_[static_cast<std::size_t>(target)], &loss_[FaultSpec::kAllNodes]}) {
+    if (!l->active) continue;
+    if (l->left > 0) {
+      --l->left;
+      return true;
+    }
+    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < l->rate) {
+      l->left = l->burst - 1;
+      return true;
+    }
+  }
+  return false;
+}
+
+std::int64_t CanDriveNetwork::extra_delay(int node) {
+  const DelayState& d = delay_[static_cast<std::size_t>(node)];
+  if (!d.active) return 0;
+  const double jitter = d.jitter_ns > 0 ? std::uniform_real_distribution<double>(0.0, d.jitter_ns)(rng_) : 0.0;
+  return std::llround(d.extra_ns + jitter);
+}
+
+void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
+  const bool slave = f.wheel >= 0 && f.wheel < 4;
+  const bool ok = f.kind == FaultSpec::Kind::frame_loss ? (slave || f.wheel == FaultSpec::kMaster || f.wheel == FaultSpec::kAllNodes)
+                  : f.kind == FaultSpec::Kind::delay    ? (slave || f.wheel == FaultSpec::kMaster)
+                                                        : slave || f.kind == FaultSpec::Kind::wheel_slip;
+  if (!ok) throw std::invalid_argument(fmt::format("{} fault {} cannot act on node {}", setup_.name, to_string(f.kind), f.wheel));
+  bus_.advance(t);
+  const auto n = static_cast<std::size_t>(f.wheel);
+  const std::string who = node_name(f.wheel);
+  const char* edge = begin ? "begins" : "ends";
+  switch (f.kind) {
+    case FaultSpec::Kind::frame_loss:
+      loss_[n] = LossState{f.rate, f.burst, 0, begin};
+      hooks_.log(t, "fault", fmt::format("frame_loss to {} rate {} burst {} ({})", who, f.rate, f.burst, edge));
+      return;
+    case FaultSpec::Kind::delay:
+      delay_[n] = DelayState{f.extra_ms * 1e6, f.jitter_ms * 1e6, begin};
+      hooks_.log(t, "fault", fmt::format("delay of {} +{} ms jitter {} ms ({})", who, f.extra_ms, f.jitter_ms, edge));
+      return;
+    case FaultSpec::Kind::drift: {
+      const double d = begin ? f.drift : setup_.drift[n];
+      sched_.set_drift(timers_[n], timer_drift(d));
+      hooks_.log(t, "fault", fmt::format("drift of {} now {} ({})", who, d, edge));
+      return;
+    }
+    case FaultSpec::Kind::power_loss:
+      if (begin) {
+        bus_.detach(f.wheel + 1, t);
+        drive_power(f.wheel, false, t);
+        powered_[n] = false;
+        hooks_.set_setpoint(f.wheel, 0.0);
+      } else {
+        // Power-on: the drive in its power-on state (a boot-up where the protocol has one).
+        bus_.reattach(f.wheel + 1, t);
+        powered_[n] = true;
+        drive_power(f.wheel, true, t);
+        ++power_cycles_;
+      }
+      hooks_.log(t, "fault", fmt::format("power_loss of {} ({})", who, edge));
+      return;
+    case FaultSpec::Kind::bus_off:
+      if (begin) {
+        bus_.corrupt_frames_of(f.wheel + 1, 32);  // 32 × 8 > 255: bus-off
+      } else if (!bus_.request_recovery(f.wheel + 1, t)) {
+        hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
+        return;
+      }
+      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}{})", who, edge, begin ? "" : ": recovery requested"));
+      return;
+    case FaultSpec::Kind::wheel_slip:
+      return;
+    case FaultSpec::Kind::link_break:
+    case FaultSpec::Kind::corruption:
+    case FaultSpec::Kind::second_master:
+      throw std::invalid_argument(fmt::format("{} network: {} is not a CAN fault", setup_.name, to_string(f.kind)));
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Metrics
+
+nlohmann::json CanDriveNetwork::slave_metrics() const {
+  nlohmann::json a = nlohmann::json::array();
+  for (int i = 0; i < 4; ++i) {
+    const can::NodeStats& ns = bus_.node_stats(i + 1);
+    const drive::Cia402Drive& d = drive_core(i);
+    nlohmann::json j = {{"node", i + 1},
+                        {"drive_state", drive::to_string(d.state())},
+                        {"error_code", d.objects().error_code},
+                        {"can_state", error_state_name(bus_.error_state(i + 1))},
+                        {"tec", bus_.tec(i + 1)},
+                        {"tx_errors", ns.tx_errors},
+                        {"bus_off_events", ns.bus_off_events}};
+    j.update(drive_json(i));
+    a.push_back(std::move(j));
+  }
+  return a;
+}
+
+BusSample CanDriveNetwork::bus_sample() const {
+  BusSample b;
+  b.has_frames = true;
+  b.frames_tx = to_transport_ + pending_.size();
+  b.frames_rx = from_transport_;
+  const can::TransportStats ts = transport_->stats();
+  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
+  b.errors = bus_.stats().error_frames + malformed + send_failures_ + refused_from_far_;
+  return b;
+}
+
+DriveStateCode CanDriveNetwork::drive_state(int axis0) const {
+  if (!powered_[static_cast<std::size_t>(axis0)]) return DriveStateCode::off;
+  if (bus_.error_state(axis0 + 1) == can::ErrorState::bus_off) return DriveStateCode::fault;
+  const drive::State fsa = drive_core(axis0).state();
+  if (fsa == drive::State::fault || fsa == drive::State::fault_reaction_active) return DriveStateCode::fault;
+  return drive_running(axis0) ? DriveStateCode::running : DriveStateCode::waiting;
+}
+
+WheelRecord CanDriveNetwork::wheel_record(int axis0) const {
+  const drive::Objects& o = drive_core(axis0).objects();
+  const double per_rad = setup_.counts_per_rev / kTwoPi;
+  WheelRecord r;
+  r.command_rad_s = static_cast<double>(o.target_velocity) / per_rad;
+  r.count = static_cast<double>(o.position_actual);
+  r.command_counts = static_cast<double>(o.velocity_demand);
+  r.measured_counts = static_cast<double>(o.velocity_actual);
+  r.output = static_cast<double>(o.torque_demand);
+  r.node = static_cast<std::uint16_t>(axis0 + 1);
+  return r;
+}
+
+nlohmann::json CanDriveNetwork::wire_metrics(SimTime now) const {
+  const BusSample b = bus_sample();
+  const can::TransportStats ts = transport_->stats();
+  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
+  return {{"name", setup_.name},
+          {"bit_rate", s_.bus.can.bit_rate},
+          {"transport", transport_->spec()},
+          {"frames_tx", b.frames_tx},
+          {"frames_rx", b.frames_rx},
+          {"frames", bus_.stats().frames},
+          {"error_frames", bus_.stats().error_frames},
+          {"lost_frames", lost_frames_},
+          {"bus_off_events", bus_off_events_},
+          {"load", bus_.bus_load(now)},
+          {"dropouts", 0},
+          {"errors", b.errors},
+          {"power_cycles", power_cycles_},
+          {"refused_from_transport", refused_from_far_},
+          {"transport_rx_malformed", malformed},
+          {"transport_send_failures", send_failures_},
+          {"pcap_frames", pcap_ ? pcap_->written() : 0}};
+}
+
+}  // namespace omnitwin::twin
