@@ -32,24 +32,25 @@ constexpr std::array<std::string_view, 21> kBusMetrics = {
 // The twin's view (lockstep report, realtime supervision: lost_at_s) and the EtherCAT and
 // M-III masters' own counters (master-stats.json: segment losses and returns among them;
 // M-III: exchanges … int_offset_ns, summed over the slaves where per slave; CANopen: syncs …
-// tpdo_rx, with recoveries = drives brought back to OPERATIONAL).
-constexpr std::array<std::string_view, 33> kMasterMetrics = {
+// tpdo_rx, with recoveries = drives brought back to OPERATIONAL; TML: answers, axes_lost).
+constexpr std::array<std::string_view, 35> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
     "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
     "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s",
     "exchanges",    "retries",          "retry_recovered", "missed",     "late",       "bad",
     "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns",
     "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
-    "tpdo_rx"};
+    "tpdo_rx",      "answers",          "axes_lost"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
-// (tec, bus_off_events and error_code serve CANopen too).
-constexpr std::array<std::string_view, 30> kSlaveMetrics = {
+// (tec, bus_off_events and error_code serve CANopen too), then TML's three.
+constexpr std::array<std::string_view, 33> kSlaveMetrics = {
     "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
     "tec",     "bus_off_events", "stale_samples",   "al_status_code",  "station_address", "error_code",
     "phase",   "responses",      "fcs_errors",      "missed_syncs",    "missed_commands", "wdt_errors",
     "phase_errors", "comm_alarms", "repeated",
     "emcy",    "sdo_aborts",     "rpdo_rx",         "tpdo_tx",         "pdo_length_errors", "syncs",
-    "heartbeats", "faults",      "comm_faults"};
+    "heartbeats", "faults",      "comm_faults",
+    "handled", "take_data2",     "unknown_opcodes"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;

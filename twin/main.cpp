@@ -194,6 +194,13 @@ void print_summary(const RunResult& r) {
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              100.0 * b.value("load_budget", 0.0), b.value("emcy", 0), b.value("sdo_aborts", 0));
+  } else if (m.contains("master") && m["bus"].value("name", "") == "tml") {
+    const auto& ms = m["master"];
+    const auto& b = m["bus"];
+    std::cout << fmt::format("  master {} ({}), {}; {} bus {} frames, {} error frames, load {:.1f} %, answers {}, axes lost {}\n",
+                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             b.value("protocol", "?"), b.value("frames", 0), b.value("error_frames", 0),
+                             100.0 * b.value("load", 0.0), ms.value("answers", 0), ms.value("axes_lost", 0));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
@@ -558,8 +565,8 @@ int main(int argc, char** argv) {
   twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
   twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
-  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, canopen, ethercat or m3)")
-      ->check(CLI::IsMember({"can", "canopen", "ethercat", "m3"}));
+  twin->add_option("--bus", ta.bus, "the bus a master connects to (can, the default, canopen, tml, ethercat or m3)")
+      ->check(CLI::IsMember({"can", "canopen", "tml", "ethercat", "m3"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
   add_output_flags(twin, ta);

@@ -231,4 +231,22 @@ std::string canopen_master_config_yaml(const Scenario& s, const std::string& pla
   return out;
 }
 
+std::string tml_platform_yaml(const Scenario& s) {
+  controller::MasterConfig m = master_config(s);
+  // The platform loop's odometry counts what the drives report: APOS in encoder counts.
+  m.loop.counts_per_rev = s.bus.tml.counts_per_rev;
+  return fmt::format("# platform loop of omni-master --bus tml, written by omnitwin for scenario {}\n", s.name) +
+         controller::dump_master_config(m);
+}
+
+std::string tml_master_config_yaml(const Scenario& s, const std::string& platform_file) {
+  const TmlSpec& t = s.bus.tml;
+  std::string out = fmt::format("# omni-master --bus tml configuration written by omnitwin for scenario {}\n", s.name);
+  out += fmt::format("protocol: {}\ncycle: {}\naxes: [1, 2, 3, 4]\n", t.protocol, t.cycle);
+  out += fmt::format("sample_period: {}\nwheel_counts_per_rev: {}\n", t.drive_period, t.counts_per_rev);
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, t.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
+  out += fmt::format("platform: {}\n", platform_file);
+  return out;
+}
+
 }  // namespace omnitwin::twin

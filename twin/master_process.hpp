@@ -68,5 +68,8 @@ std::string m3_master_config_yaml(const Scenario& s, const std::string& platform
 // configuration file (the drives' EDS, SYNC period, heartbeat times, wheel mode).
 std::string canopen_platform_yaml(const Scenario& s);
 std::string canopen_master_config_yaml(const Scenario& s, const std::string& platform_file);
+// bus tml: the platform loop (odometry on APOS) and the TML master's configuration file.
+std::string tml_platform_yaml(const Scenario& s);
+std::string tml_master_config_yaml(const Scenario& s, const std::string& platform_file);
 
 }  // namespace omnitwin::twin

@@ -26,6 +26,7 @@
 #include "twin/ethercat_network.hpp"
 #include "twin/m3_network.hpp"
 #include "twin/canopen_network.hpp"
+#include "twin/tml_network.hpp"
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
 #include "twin/master_process.hpp"
@@ -152,6 +153,7 @@ class PlatformRun {
   SimTime master_period_ns() const {
     if (s_.bus.kind == BusKind::m3) return seconds_to_ns(s_.bus.m3.cycle);
     if (s_.bus.kind == BusKind::canopen) return seconds_to_ns(s_.bus.canopen.cycle);  // one SYNC per tick
+    if (s_.bus.kind == BusKind::tml) return seconds_to_ns(s_.bus.tml.cycle);
     return seconds_to_ns(s_.controller.period);
   }
   void on_physics_bus(SimTime t);
@@ -249,6 +251,10 @@ void PlatformRun::build_network() {
     master_program_ = find_master_program(s_.bus.can.master);
     handshake_timeout_s_ = s_.bus.can.handshake_timeout;
     net_ = std::make_unique<CanopenNetwork>(s_, sched_, std::move(h));
+  } else if (s_.bus.kind == BusKind::tml) {
+    master_program_ = find_master_program(s_.bus.can.master);
+    handshake_timeout_s_ = s_.bus.can.handshake_timeout;
+    net_ = std::make_unique<TmlNetwork>(s_, sched_, std::move(h));
   } else {
     master_program_ = find_master_program(s_.bus.can.master);
     handshake_timeout_s_ = s_.bus.can.handshake_timeout;
@@ -279,11 +285,16 @@ void PlatformRun::start_master() {
     const std::string platform = (dir / "master-platform.yaml").string();
     write_text_atomic(platform, canopen_platform_yaml(s_));
     write_text_atomic(cfg, canopen_master_config_yaml(s_, platform));
+  } else if (s_.bus.kind == BusKind::tml) {
+    const std::string platform = (dir / "master-platform.yaml").string();
+    write_text_atomic(platform, tml_platform_yaml(s_));
+    write_text_atomic(cfg, tml_master_config_yaml(s_, platform));
   } else {
     write_text_atomic(cfg, master_config_yaml(s_));
   }
   std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
-  if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3 || s_.bus.kind == BusKind::canopen)
+  if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3 || s_.bus.kind == BusKind::canopen ||
+      s_.bus.kind == BusKind::tml)
     args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
   const bool lockstep = s_.clock == ClockMode::lockstep;
   if (lockstep) {
@@ -804,7 +815,7 @@ std::string lockstep_can_spec(const std::string& given) {
 
 Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
   Scenario e = s;
-  const bool on_can = s.bus.kind == BusKind::can || s.bus.kind == BusKind::canopen;
+  const bool on_can = s.bus.kind == BusKind::can || s.bus.kind == BusKind::canopen || s.bus.kind == BusKind::tml;
   if (!on_can || s.clock != ClockMode::lockstep || external_master) return e;
   e.bus.can.transport = lockstep_can_spec(s.bus.can.transport);
   return e;
@@ -820,10 +831,6 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
     throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
   }
   const BusKind bus = scenario.bus.kind;
-  if (bus == BusKind::tml)
-    throw RunSetupError(fmt::format(
-        "bus: the bus '{}' is not available in this build yet; only 'direct', 'can', 'canopen', 'ethercat' and 'm3' are",
-        to_string(bus)));
   // Building the platform (compiling the MJCF, checking its names) is part of validating
   // the input: a model that does not load is bad input, and nothing has been written yet.
   std::unique_ptr<PlatformRun> run;

@@ -425,6 +425,24 @@ void read_canopen(const YamlField& f, CanopenSpec& c, const std::string& scenari
   read_number(f, "startup", c.startup, Bounds::non_negative());
 }
 
+// The `tml` bus's own settings (bus: {type: tml, …}); the wire's are read by read_can_wire.
+void read_tml(const YamlField& f, TmlSpec& t) {
+  if (f["protocol"].exists()) t.protocol = f["protocol"].choice({"tmlcan", "techcan"});
+  read_number(f, "cycle", t.cycle, Bounds::closed(250e-6, 0.1));
+  read_number(f, "drive_period", t.drive_period, Bounds::closed(50e-6, 0.01));
+  read_integer(f, "counts_per_rev", t.counts_per_rev, Bounds::closed(4, 1 << 24));
+  if (const YamlField d = f["drift"]; d.exists()) {
+    const Bounds b{-1e-3, 1e-3};
+    if (d.node().IsSequence()) {
+      const auto v = d.numbers(4, b);
+      std::copy(v.begin(), v.end(), t.drift.begin());
+    } else {
+      t.drift.fill(d.number(b));
+    }
+  }
+  read_number(f, "startup", t.startup, Bounds::non_negative());
+}
+
 // The `m3` bus's settings (bus: {type: m3, …}).
 void read_m3(const YamlField& f, M3Spec& m) {
   if (const YamlField t = f["transport"]; t.exists()) {
@@ -490,6 +508,12 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
                   "eds", "mode", "cycle", "drive_period", "counts_per_rev", "heartbeat_ms", "drift", "startup"});
     read_can_wire(f, bus.can);
     read_canopen(f, bus.canopen, scenario_file);
+    read_supervision(f["supervision"], bus.supervision);
+  } else if (bus.kind == BusKind::tml) {
+    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
+                  "protocol", "cycle", "drive_period", "counts_per_rev", "drift", "startup"});
+    read_can_wire(f, bus.can);
+    read_tml(f, bus.tml);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
@@ -617,10 +641,10 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
   f.line = v.line();
   const std::string& kind = v.name();
   // canopen runs on the same CAN wire as can: the same wire faults.
-  const bool can = bus.kind == BusKind::can || bus.kind == BusKind::canopen, ethercat = bus.kind == BusKind::ethercat,
+  const bool can = bus.kind == BusKind::can || bus.kind == BusKind::canopen || bus.kind == BusKind::tml, ethercat = bus.kind == BusKind::ethercat,
              m3 = bus.kind == BusKind::m3;
-  if (kind != "wheel_slip" && !can && !ethercat && !m3) v.fail("a bus fault needs bus: can, canopen, ethercat or m3");
-  if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can or canopen)");
+  if (kind != "wheel_slip" && !can && !ethercat && !m3) v.fail("a bus fault needs bus: can, canopen, tml, ethercat or m3");
+  if (kind == "bus_off" && !can) v.fail("bus_off is a CAN fault (bus: can, canopen or tml)");
   if (kind == "link_break" && !ethercat && !m3) v.fail("link_break is a fault of a line (bus: ethercat or m3)");
   if (kind == "corruption" && !m3) v.fail("corruption is an M-III fault (bus: m3)");
   if (kind == "second_master" && !m3) v.fail("second_master is an M-III fault (bus: m3)");
@@ -781,6 +805,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   if (s.bus.kind == BusKind::ethercat) s.duration += s.bus.ethercat.startup;
   if (s.bus.kind == BusKind::m3) s.duration += s.bus.m3.startup;
   if (s.bus.kind == BusKind::canopen) s.duration += s.bus.canopen.startup;
+  if (s.bus.kind == BusKind::tml) s.duration += s.bus.tml.startup;
   read_number(root, "duration", s.duration, Bounds::positive());
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   for (const auto& item : root["faults"].elements()) {

@@ -142,6 +142,18 @@ struct CanopenSpec {
   double startup = 1.0;
 };
 
+// Settings of the `tml` bus: four Technosoft IDM drives (seed 003; bus_emulators/tml) on the
+// simulated CAN wire, driven by our TML master over TMLCAN (29-bit) or TechCAN (11-bit)
+// (docs/protocols/tml.md). The wire's own settings are bus.can's, as for canopen.
+struct TmlSpec {
+  std::string protocol = "tmlcan";          // tmlcan | techcan
+  double cycle = 0.002;                     // the master's tick [s]
+  double drive_period = 0.001;              // the drives' period = their IU time base [s]
+  int counts_per_rev = 131072;              // APOS counts per wheel revolution
+  std::array<double, 4> drift{20e-6, -15e-6, 35e-6, -30e-6};  // the drives' oscillators [-]
+  double startup = 0.2;                     // added to the default duration [s]
+};
+
 // Settings of the `m3` bus: four MECHATROLINK-III standard servos (profile 10h), one per
 // wheel, on one line, driven by our C1 master with VELCTRL or INTERPOLATE
 // (docs/protocols/mechatrolink3.md).
@@ -194,6 +206,7 @@ struct BusSpec {
   EthercatSpec ethercat;
   M3Spec m3;
   CanopenSpec canopen;
+  TmlSpec tml;
   SupervisionSpec supervision;
 };
 

@@ -22,6 +22,7 @@
 #include "bus_emulators/canopen/co_eds.hpp"
 #include "controller/canopen/co_config.hpp"
 #include "controller/canopen/co_master.hpp"
+#include "controller/can_master_loop.hpp"
 #include "controller/master_config.hpp"
 #include "controller/platform_loop.hpp"
 #include "controller/program_support.hpp"
@@ -32,15 +33,6 @@ namespace omnitwin::controller::canopen {
 namespace {
 
 constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
-constexpr auto kConnectTimeout = std::chrono::seconds(10);
-constexpr int kGrantTimeoutMs = 60'000;
-constexpr std::int64_t kDrainLimitNs = 5'000'000'000;
-constexpr int kRtPriority = 40;
-constexpr int kDrainBatch = 256;
-
-struct RuntimeFailure {
-  std::string message;
-};
 
 std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t) * 1e-6); }
 
@@ -90,6 +82,7 @@ class Runner {
     }
   }
   void release() { hold_ = false; }
+  void shutdown(SimTime t) { master_.shutdown(t); }
 
   simclock::MasterReport report() const {
     simclock::MasterReport r;
@@ -174,82 +167,6 @@ class Runner {
   SimTime origin_ = -1;
 };
 
-// ---------------------------------------------------------------------------------------
-// Lockstep with the twin (--clock sim)
-
-bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, SimTime t) {
-  const std::int64_t give_up = monotonic_ns() + kDrainLimitNs;
-  while (r.frames_rx < target) {
-    if (auto tf = tr.receive()) {
-      r.on_frame(tf->frame, t);
-      continue;
-    }
-    if (monotonic_ns() >= give_up) return false;
-    can::wait_readable(tr, std::chrono::milliseconds(10));
-  }
-  while (auto tf = tr.receive()) r.on_frame(tf->frame, t);  // anyone else's (python-can, a PC)
-  return true;
-}
-
-int run_sim(const ProgramOptions& o, Runner& r, can::Transport& tr, int sigfd) {
-  simclock::Client client(o.sim_clock, kConnectTimeout);
-  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
-  for (;;) {
-    simclock::Grant g;
-    simclock::End end{kNoEnd};
-    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-    const int p = ::poll(fds, 2, kGrantTimeoutMs);
-    if (p == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
-    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return kExitOk;
-    const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
-    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
-    if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
-    if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
-    if (!drain_until(tr, r, g.frames[0], g.t_ns))
-      throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
-    r.tick(g.t_ns);
-    r.flush();
-    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
-    if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
-  }
-}
-
-// ---------------------------------------------------------------------------------------
-// Real time (--clock wall)
-
-int run_wall(const ProgramOptions& o, Runner& r, can::Transport& tr, int sigfd) {
-  try_realtime(kRtPriority);
-  const std::int64_t period = std::llround(r.master().config().cycle * 1e9);
-  const std::int64_t start = monotonic_ns();
-  const std::int64_t end = o.duration >= 0 ? start + std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
-  std::int64_t deadline = start;
-  std::uint64_t overruns = 0;
-  for (;;) {
-    const std::int64_t now = monotonic_ns();
-    if (now >= end) break;
-    if (now >= deadline) {
-      const std::int64_t late = now - deadline;
-      if (late >= period) ++overruns, deadline += (late / period) * period;
-      r.tick(deadline - start);
-      deadline += period;
-      continue;
-    }
-    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-    const timespec timeout = to_timespec(std::max<std::int64_t>(0, std::min(deadline, end) - now));
-    const int p = ::ppoll(fds, 2, &timeout, nullptr);
-    if (p < 0 && errno != EINTR) throw RuntimeFailure{fmt::format("poll failed: {}", std::strerror(errno))};
-    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) break;
-    for (int i = 0; i < kDrainBatch; ++i) {
-      auto tf = tr.receive();
-      if (!tf) break;
-      r.on_frame(tf->frame, monotonic_ns() - start);
-    }
-  }
-  if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
-  r.master().shutdown(monotonic_ns() - start);
-  return kExitOk;
-}
-
 void write_stats(const std::string& path, const Runner& r) {
   nlohmann::json j = r.stats();
   j["frames_tx"] = r.frames_tx;
@@ -317,8 +234,9 @@ int run_canopen_program(const ProgramOptions& o) {
   const int sigfd = open_signal_fd();
   int code = kExitOk;
   try {
-    code = o.clock == "sim" ? run_sim(o, *runner, *tr, sigfd) : run_wall(o, *runner, *tr, sigfd);
-  } catch (const RuntimeFailure& f) {
+    code = o.clock == "sim" ? run_lockstep(o.sim_clock, *runner, *tr, sigfd)
+                            : run_wall_clock(std::llround(pc.cycle * 1e9), o.duration, *runner, *tr, sigfd);
+  } catch (const LoopFailure& f) {
     spdlog::error("{}", f.message);
     code = kExitRuntime;
   } catch (const simclock::ChannelError& e) {

@@ -37,6 +37,7 @@
 #include "bus_emulators/can/transport.hpp"
 #include "controller/ethercat/ec_program.hpp"
 #include "controller/canopen/co_program.hpp"
+#include "controller/tml/tml_program.hpp"
 #include "controller/mechatrolink3/m3_program.hpp"
 #include "controller/master_config.hpp"
 #include "controller/omni_master.hpp"
@@ -288,12 +289,12 @@ int run_wall(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& 
 // main
 
 void add_options(CLI::App& app, Options& o) {
-  app.add_option("--bus", o.bus, "bus kind: can, canopen, ethercat or m3")->capture_default_str();
+  app.add_option("--bus", o.bus, "bus kind: can, canopen, tml, ethercat or m3")->capture_default_str();
   app.add_option("--iface", o.iface, "transport: udp:GROUP[:PORT], socketcan:IFACE (or IFACE), mem:NAME")
       ->capture_default_str();
   app.add_option("--config", o.config, "the master's configuration file (YAML)");
   app.add_option("--script", o.script, "ethercat: run this Botnana script, exit when its tasks end");
-  app.add_option("--stats", o.stats, "canopen, ethercat, m3: write the master's counters to this JSON file at exit");
+  app.add_option("--stats", o.stats, "canopen, tml, ethercat, m3: write the master's counters to this JSON file at exit");
   app.add_option("--clock", o.clock, "sim: lockstep with the twin; wall: real time")
       ->check(CLI::IsMember({"sim", "wall"}))
       ->capture_default_str();
@@ -309,9 +310,9 @@ void add_options(CLI::App& app, Options& o) {
 // Option combinations CLI11 cannot check; the message of the first problem, or "".
 std::string usage_problem(const Options& o) {
   if (o.config.empty()) return "--config is required";
-  if (o.bus != "can" && o.bus != "canopen" && o.bus != "ethercat" && o.bus != "m3")
-    return fmt::format("--bus {}: not supported (can, canopen, ethercat or m3)", o.bus);
-  if (o.bus == "m3" || o.bus == "canopen") {
+  if (o.bus != "can" && o.bus != "canopen" && o.bus != "tml" && o.bus != "ethercat" && o.bus != "m3")
+    return fmt::format("--bus {}: not supported (can, canopen, tml, ethercat or m3)", o.bus);
+  if (o.bus == "m3" || o.bus == "canopen" || o.bus == "tml") {
     if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
     if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
     return "";
@@ -424,6 +425,10 @@ int main(int argc, char** argv) {
   if (const std::string p = usage_problem(o); !p.empty()) {
     spdlog::error("{}", p);
     return kExitUsage;
+  }
+  if (o.bus == "tml") {
+    controller::tml::ProgramOptions to{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};
+    return controller::tml::run_tml_program(to);
   }
   if (o.bus == "canopen") {
     controller::canopen::ProgramOptions co{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};

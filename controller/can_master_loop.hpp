@@ -1,0 +1,112 @@
+// controller layer — the two clocks a master program on a CAN transport runs under (the
+// CANopen and TML masters; the thesis's Omni master keeps its own in omni_master_main):
+//  * lockstep with the twin's sim clock (docs/protocols/sim-clock.md): each Grant carries the
+//    twin's cumulative frames; they are drained until that many arrived, the tick runs at the
+//    grant's time, the tick's frames go out in one batch, Done carries the cumulative frames
+//    sent and the master's report;
+//  * the wall clock: CLOCK_MONOTONIC absolute deadlines, one tick per period, frames handled
+//    as they arrive, SCHED_FIFO where permitted.
+// A Runner provides: on_frame(frame, t), tick(t), flush(), report(), frames_rx, frames_tx, and
+// shutdown(t) for the end of a wall-clock run. Header-only (templates).
+#pragma once
+
+#include <fmt/format.h>
+#include <poll.h>
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "bus_emulators/can/transport.hpp"
+#include "controller/program_support.hpp"
+#include "controller/sim_clock.hpp"
+
+namespace omnitwin::controller {
+
+// A runtime failure of the loop: the program exits 3 with this message.
+struct LoopFailure {
+  std::string message;
+};
+
+// Frames from the transport until `target` have arrived in all (lockstep); false after 5 s.
+template <class Runner>
+bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64_t t) {
+  const std::int64_t give_up = monotonic_ns() + 5'000'000'000;
+  while (r.frames_rx < target) {
+    if (auto tf = tr.receive()) {
+      r.on_frame(tf->frame, t);
+      continue;
+    }
+    if (monotonic_ns() >= give_up) return false;
+    can::wait_readable(tr, std::chrono::milliseconds(10));
+  }
+  while (auto tf = tr.receive()) r.on_frame(tf->frame, t);  // anyone else's (python-can, a PC)
+  return true;
+}
+
+// Lockstep with the twin until it ends the run (End), a signal, or a failure (throws
+// LoopFailure / simclock::ChannelError). Returns 0.
+template <class Runner>
+int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd) {
+  simclock::Client client(sim_clock, std::chrono::seconds(10));
+  constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  for (;;) {
+    simclock::Grant g;
+    simclock::End end{kNoEnd};
+    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const int p = ::poll(fds, 2, 60'000);
+    if (p == 0) throw LoopFailure{"sim clock: no grant within 60 s"};
+    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return 0;
+    const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return 0;
+    if (w == simclock::WaitStatus::closed) throw LoopFailure{"sim clock: the twin went away (channel closed without End)"};
+    if (w != simclock::WaitStatus::ok) throw LoopFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    if (!drain_until(tr, r, g.frames[0], g.t_ns))
+      throw LoopFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
+    r.tick(g.t_ns);
+    r.flush();
+    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
+    if (!client.done(done)) throw LoopFailure{"sim clock: the twin is gone"};
+  }
+}
+
+// The wall clock: a tick every period_ns until duration_s (< 0: until a signal); then
+// r.shutdown(). Returns 0.
+template <class Runner>
+int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Transport& tr, int sigfd) {
+  try_realtime(40);
+  const std::int64_t start = monotonic_ns();
+  const std::int64_t end = duration_s >= 0 ? start + std::llround(duration_s * 1e9) : std::numeric_limits<std::int64_t>::max();
+  std::int64_t deadline = start;
+  std::uint64_t overruns = 0;
+  for (;;) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= end) break;
+    if (now >= deadline) {
+      const std::int64_t late = now - deadline;
+      if (late >= period_ns) ++overruns, deadline += (late / period_ns) * period_ns;
+      r.tick(deadline - start);
+      deadline += period_ns;
+      continue;
+    }
+    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const timespec timeout = to_timespec(std::max<std::int64_t>(0, std::min(deadline, end) - now));
+    const int p = ::ppoll(fds, 2, &timeout, nullptr);
+    if (p < 0 && errno != EINTR) throw LoopFailure{fmt::format("poll failed: {}", std::strerror(errno))};
+    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) break;
+    for (int i = 0; i < 256; ++i) {
+      auto tf = tr.receive();
+      if (!tf) break;
+      r.on_frame(tf->frame, monotonic_ns() - start);
+    }
+  }
+  if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
+  r.shutdown(monotonic_ns() - start);
+  return 0;
+}
+
+}  // namespace omnitwin::controller

@@ -1,0 +1,105 @@
+// controller/tml — our TML master (seed 003) as a protocol core, on TMLCAN (29-bit) or TechCAN
+// (11-bit): it finds the four wheel drives (a group GiveMeData2 of SRL answered by each), puts
+// them in speed mode with their acceleration (MODE SP, CACC, CSPD = 0, UPD), switches the axes
+// on (AXISON) and waits for SRL.15; then every tick it sends each axis its command speed
+// (CSPD, 32-bit 16.16 counts per sampling period), one UPD to the group and one group
+// GiveMeData2 of APOS, whose TakeData2 answers feed the platform loop's odometry.
+//
+// Frames and time [ns] in (on_frame, on_tick), frames out through a callback; no sockets, no
+// clock. Messages are built and read only through the TML codec (tml_message, tml_can). The
+// group is group 1 (every drive's power-on group). Configuration fixed at construction;
+// on_frame/on_tick do not allocate.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "bus_emulators/can/can_frame.hpp"
+#include "bus_emulators/tml/tml_message.hpp"
+#include "controller/sim_clock.hpp"
+#include "controller/tml/tml_config.hpp"
+
+namespace omnitwin::controller::tml {
+
+using SimTime = std::int64_t;  // [ns]
+
+// Phases (MasterReport: detecting, starting = detecting). Legal in each:
+//  detecting — each tick a group GiveMeData2 of SRL; every axis answering → starting (its
+//              speed-mode set-up and AXISON sent). Legal: all_found, startup_timeout.
+//  starting  — each tick the SRL query; every axis with SRL.15 (axis on) → running.
+//              Legal: all_on, startup_timeout, axis_lost.
+//  running   — each tick CSPD per axis, UPD, the APOS query. Legal: axis_lost, finish, shutdown.
+//  stopped   — an axis stopped answering: every axis gets CSPD 0 and UPD, then holds.
+//  finished  — the application ended: CSPD 0 and UPD; shutdown sends AXISOFF.
+//  failed    — start-up did not complete.
+enum class TmlPhase : std::uint8_t { detecting, starting, running, stopped, finished, failed };
+const char* to_string(TmlPhase p);
+
+struct TmlMasterStats {
+  std::uint64_t ticks = 0, frames_rx = 0, frames_tx = 0, tx_refused = 0, answers = 0, not_tml = 0,
+                axes_lost = 0;
+};
+
+class TmlMaster {
+ public:
+  using SendFn = std::function<bool(const can::Frame& f, SimTime at)>;
+  using EventFn = std::function<void(SimTime t, const std::string& text, bool warning)>;
+
+  TmlMaster(const TmlProgramConfig& config, SendFn send);
+  void set_event_callback(EventFn fn) { event_ = std::move(fn); }
+
+  // A frame from the bus at t. Real-time safe.
+  void on_frame(const can::Frame& f, SimTime t);
+  // One tick at t. Real-time safe (events excepted).
+  void on_tick(SimTime t);
+  // The application: wheel i's speed [counts/s] (sent from the next tick on).
+  void set_speed(int wheel, double counts_per_s) { speed_[static_cast<std::size_t>(wheel)] = counts_per_s; }
+  // Wheel i's last APOS [counts].
+  std::int32_t position(int wheel) const { return axes_[static_cast<std::size_t>(wheel)].apos; }
+  void finish(SimTime t);
+  void shutdown(SimTime t);
+  void note_send_failures(std::uint64_t n) { stats_.tx_refused += n; }
+
+  TmlPhase phase() const { return phase_; }
+  simclock::MasterState report_state() const;
+  simclock::StopReason reason() const { return reason_; }
+  std::uint8_t reason_node() const { return reason_node_; }
+  const TmlMasterStats& stats() const { return stats_; }
+  std::uint16_t srl(int wheel) const { return axes_[static_cast<std::size_t>(wheel)].srl; }
+  const TmlProgramConfig& config() const { return cfg_; }
+  // 16.16 IU (counts per sampling period) of a speed in counts/s. RT-safe.
+  std::int32_t speed_iu(double counts_per_s) const;
+
+ private:
+  struct Axis {
+    std::int32_t apos = 0;
+    std::uint16_t srl = 0;
+    bool found = false;
+    std::uint64_t last_answer_tick = 0;
+  };
+  bool send(const omnitwin::tml::Message& m, SimTime t);
+  void event(SimTime t, const std::string& text, bool warning = false);
+  void enter(TmlPhase p, SimTime t);
+  void stop(simclock::StopReason r, std::uint8_t axis, SimTime t, const std::string& why);
+  void query(std::uint16_t address, bool wide, SimTime t);
+  void set_up(SimTime t);
+  void speeds(SimTime t, bool zero);
+  void check_answers(SimTime t);
+  std::uint16_t group() const;
+  int wheel_of(std::uint8_t axis) const;
+
+  TmlProgramConfig cfg_;
+  SendFn send_;
+  EventFn event_;
+  std::array<Axis, 4> axes_{};
+  std::array<double, 4> speed_{};
+  TmlPhase phase_ = TmlPhase::detecting;
+  simclock::StopReason reason_ = simclock::StopReason::none;
+  std::uint8_t reason_node_ = 0;
+  SimTime start_ = -1;
+  TmlMasterStats stats_;
+};
+
+}  // namespace omnitwin::controller::tml

@@ -1,0 +1,210 @@
+// controller/tml — the `--bus tml` program path (see tml_program.hpp).
+#include "controller/tml/tml_program.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <numbers>
+#include <optional>
+#include <vector>
+
+#include "bus_emulators/can/transport.hpp"
+#include "controller/can_master_loop.hpp"
+#include "controller/master_config.hpp"
+#include "controller/platform_loop.hpp"
+#include "controller/program_support.hpp"
+#include "controller/tml/tml_master.hpp"
+
+namespace omnitwin::controller::tml {
+
+namespace {
+
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
+
+std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t) * 1e-6); }
+
+// The TML master core and the platform loop, one tick at a time.
+class Runner {
+ public:
+  Runner(const TmlProgramConfig& pc, std::optional<MasterConfig> platform, can::Transport& tr, bool hold)
+      : pc_(pc), tr_(tr), hold_(hold), master_(pc, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
+        platform_(std::move(platform)) {
+    master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
+      if (warning) spdlog::warn("{} {}", stamp(t), s);
+      else spdlog::info("{} {}", stamp(t), s);
+    });
+    if (platform_) {
+      PlatformLoopConfig lc = platform_->loop;
+      lc.counts_per_rev = static_cast<int>(std::lround(pc_.wheel_counts_per_rev));
+      loop_.emplace(lc, build_path(platform_->path));
+      every_ = std::max<std::int64_t>(1, std::llround(lc.period / pc_.cycle));
+    }
+    outbox_.reserve(64);
+  }
+
+  const TmlMaster& master() const { return master_; }
+  void on_frame(const can::Frame& f, SimTime t) {
+    ++frames_rx;
+    master_.on_frame(f, t);
+  }
+  void tick(SimTime t) {
+    platform(t);
+    master_.on_tick(t);
+  }
+  void flush() {
+    while (!outbox_.empty()) {
+      const std::size_t sent = tr_.send_many(outbox_);
+      frames_tx += sent;
+      master_.note_send_failures(outbox_.size() - sent);
+      outbox_.clear();
+    }
+  }
+  void release() { hold_ = false; }
+  void shutdown(SimTime t) { master_.shutdown(t); }
+
+  simclock::MasterReport report() const {
+    simclock::MasterReport r;
+    r.state = master_.report_state();
+    r.reason = master_.reason();
+    r.node = master_.reason_node();
+    r.path_origin_ns = started_ ? origin_ : -1;
+    if (loop_) {
+      const Pose2& ref = out_.reference.pose;
+      const Pose2& odo = loop_->odometry().pose();
+      r.reference = {ref.x, ref.y, ref.phi};
+      r.odometry = {odo.x, odo.y, odo.phi};
+    }
+    return r;
+  }
+  nlohmann::json stats() const {
+    const TmlMasterStats& s = master_.stats();
+    nlohmann::json axes = nlohmann::json::array();
+    for (int i = 0; i < 4; ++i) axes.push_back({{"axis", pc_.axes[static_cast<std::size_t>(i)]}, {"srl", master_.srl(i)},
+                                                {"apos", master_.position(i)}});
+    return {{"phase", to_string(master_.phase())}, {"cycles", s.ticks}, {"answers", s.answers},
+            {"axes_lost", s.axes_lost}, {"not_tml", s.not_tml}, {"send_failures", s.tx_refused},
+            {"frames_tx", frames_tx}, {"frames_rx", frames_rx}, {"axes", axes}};
+  }
+  bool failed() const { return master_.phase() == TmlPhase::failed; }
+  std::uint64_t frames_tx = 0, frames_rx = 0;
+
+ private:
+  bool out(const can::Frame& f, SimTime t) {
+    if (hold_) {
+      outbox_.push_back(can::TimedFrame{f, t});
+      return true;
+    }
+    const bool ok = tr_.send(f, t);
+    frames_tx += ok ? 1 : 0;
+    return ok;
+  }
+  WheelCounts counts() const {
+    WheelCounts c{};
+    for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
+    return c;
+  }
+  void platform(SimTime t) {
+    if (!loop_ || master_.phase() != TmlPhase::running) return;
+    if (!started_) {
+      loop_->reset(loop_->path().start_pose(), counts());
+      origin_ = t;
+      started_ = true;
+      n_ = 0;
+      spdlog::info("{} axes on: platform loop running", stamp(t));
+    }
+    const double ts = static_cast<double>(t - origin_) * 1e-9;
+    if (n_++ % every_ == 0) {
+      out_ = loop_->step(ts, counts());
+      const double k = pc_.wheel_counts_per_rev / (2 * std::numbers::pi);
+      for (int i = 0; i < 4; ++i) master_.set_speed(i, out_.wheel_rad_s[i] * k);
+    }
+    if (platform_->settle >= 0 && ts >= loop_->path().duration() + platform_->settle) {
+      master_.finish(t);
+      spdlog::info("{} path done", stamp(t));
+    }
+  }
+
+  const TmlProgramConfig& pc_;
+  can::Transport& tr_;
+  bool hold_;
+  std::vector<can::TimedFrame> outbox_;
+  TmlMaster master_;
+  std::optional<MasterConfig> platform_;
+  std::optional<PlatformLoop> loop_;
+  PlatformLoopOutput out_;
+  std::int64_t every_ = 1, n_ = 0;
+  bool started_ = false;
+  SimTime origin_ = -1;
+};
+
+void write_stats(const std::string& path, const Runner& r) {
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp);
+  f << r.stats().dump() << "\n";
+  f.close();
+  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+}
+
+}  // namespace
+
+int run_tml_program(const ProgramOptions& o) {
+  TmlProgramConfig pc;
+  std::optional<MasterConfig> platform;
+  try {
+    pc = load_tml_config(o.config);
+    if (!pc.platform_file.empty()) platform = load_master_config(pc.platform_file);
+    else if (!pc.platform_yaml.empty()) platform = parse_master_config(pc.platform_yaml, o.config + " (platform)");
+  } catch (const TmlConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  } catch (const MasterConfigError& e) {
+    spdlog::error("{}", e.what());
+    return kExitUsage;
+  }
+  if (o.print_config) {
+    std::cout << dump_tml_config(pc);
+    if (platform) std::cout << dump_master_config(*platform);
+    return kExitOk;
+  }
+  std::unique_ptr<can::Transport> tr;
+  try {
+    tr = can::open_transport(normalize_iface(o.iface));
+  } catch (const can::TransportError& e) {
+    spdlog::error("--iface {}: {}", o.iface, e.what());
+    return kExitUsage;
+  }
+  Runner runner(pc, platform, *tr, o.clock == "sim");
+  spdlog::info("TML master on {} ({}, clock {}, tick {} µs, axes {} {} {} {}, host axis {})", tr->spec(),
+               pc.techcan ? "TechCAN" : "TMLCAN", o.clock, std::llround(pc.cycle * 1e6), pc.axes[0], pc.axes[1], pc.axes[2],
+               pc.axes[3], pc.host_axis);
+  const int sigfd = open_signal_fd();
+  int code = kExitOk;
+  try {
+    code = o.clock == "sim" ? run_lockstep(o.sim_clock, runner, *tr, sigfd)
+                            : run_wall_clock(std::llround(pc.cycle * 1e9), o.duration, runner, *tr, sigfd);
+  } catch (const LoopFailure& f) {
+    spdlog::error("{}", f.message);
+    code = kExitRuntime;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = kExitRuntime;
+  }
+  runner.flush();
+  runner.release();
+  if (runner.failed()) code = kExitRuntime;
+  const TmlMasterStats& s = runner.master().stats();
+  spdlog::info("end: phase {}, reason {}, ticks {}, answers {}, axes lost {}, frames tx {} rx {}",
+               to_string(runner.master().phase()), simclock::to_string(runner.master().reason()), s.ticks, s.answers,
+               s.axes_lost, runner.frames_tx, runner.frames_rx);
+  if (!o.stats.empty()) write_stats(o.stats, runner);
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
+}
+
+}  // namespace omnitwin::controller::tml
