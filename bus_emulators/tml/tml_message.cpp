@@ -13,14 +13,19 @@ namespace {
 
 constexpr std::uint16_t kPage200 = 0x0200, kPage800 = 0x0800, kPageSpan = 0x0200;
 
-// The seed's symbols (facts/tml.md); SRH's address is inferred, see origin.
-constexpr std::array<Symbol, 6> kSymbols{{
+// The seed's symbols (facts/tml.md) and the motion variables Technosoft's public TML_lib_light
+// names (SRH's address is confirmed there too).
+constexpr std::array<Symbol, 10> kSymbols{{
     {"KPP", 0x025E, false, "seed ch. 3 example 2"},
     {"POSERR", 0x022A, false, "seed ch. 4 example 2"},
     {"SRL", 0x090E, false, "seed ch. 3 example 3"},
-    {"SRH", 0x090F, false, "OUR INFERENCE: high word of SR32 (seed gives no address)"},
+    {"SRH", 0x090F, false, "high word of SR32 (seed: none; TML_lib_light: 0x090F)"},
     {"SR32", 0x090E, true, "seed ch. 3: SRL and SRH read as one 32-bit SR32 at SRL's address"},
     {"MER", 0x08FC, false, "seed ch. 5 example 5"},
+    {"APOS", 0x0228, true, "TML_lib_light: actual position"},
+    {"CPOS", 0x029E, true, "TML_lib_light: command position"},
+    {"CSPD", 0x02A0, true, "TML_lib_light: command speed (16.16)"},
+    {"CACC", 0x02A2, true, "TML_lib_light: command acceleration (16.16)"},
 }};
 
 std::uint32_t wide_value(std::uint16_t low, std::uint16_t high) { return static_cast<std::uint32_t>(high) << 16 | low; }
@@ -126,7 +131,7 @@ std::string parse_name(std::string_view name, TextInstruction& out) {
   }
   std::int64_t a = 0;
   if (addr.size() < 3 || addr[0] != '0' || (addr[1] != 'x' && addr[1] != 'X') || !parse_int(addr, a) || a > 0xFFFF)
-    return fmt::format("unknown variable '{}' (known: KPP POSERR SRL SRH SR32 MER, or an address 0xNNNN[:32])", name);
+    return fmt::format("unknown variable '{}' (known: KPP POSERR SRL SRH SR32 MER APOS CPOS CSPD CACC, or an address 0xNNNN[:32])", name);
   out.address = static_cast<std::uint16_t>(a);
   return "";
 }

@@ -10,20 +10,42 @@
 //   omni-tml decode --protocol P INPUT...
 //     serial: hex bytes (packets, 'O' 4F, SYNC 0D); CAN: ID#DATA as can-utils' cansend writes
 //     it (3 hex digits: 11-bit, 8: 29-bit); raw: hex words, opcode first.
-// Pure text in, text out: nothing is sent anywhere. Exit codes: 0 ok; 2 bad usage or input
-// (a one-line message on stderr naming what is wrong).
+//   omni-tml send --protocol rs232|rs485 --port PATH [--baud B] | --protocol tmlcan|techcan
+//                 --iface SPEC, then the instruction as for encode
+//     sends it to a drive and prints what came back: 'O' and the answer on a serial line (with
+//     the seed's SYNC-byte recovery when the 'O' is lost), the answering frames on CAN.
+//   omni-tml drive --protocol rs232|rs485 [--axis N] [--host N] [--baud B] [--duration S]
+//     runs one emulated IDM drive (bus_emulators/tml, on the shared drive core with a model
+//     shaft) on a pseudo-terminal and prints its path: any serial program can talk TML to it.
+// encode and decode are pure text: nothing is sent anywhere. Exit codes: 0 ok; 2 bad usage or
+// input (a one-line message on stderr naming what is wrong); 3 no answer / link broken.
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
 #include <cctype>
+#include <cerrno>
+#include <cstring>
+#include <memory>
 #include <charconv>
 #include <iostream>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+#include <poll.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+
+#include "bus_emulators/can/transport.hpp"
+#include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/tml/tml_can.hpp"
+#include "bus_emulators/tml/tml_drive.hpp"
 #include "bus_emulators/tml/tml_message.hpp"
+#include "bus_emulators/tml/tml_pty.hpp"
 #include "bus_emulators/tml/tml_serial.hpp"
 
 using namespace omnitwin;
@@ -31,7 +53,7 @@ using namespace omnitwin::tml;
 
 namespace {
 
-constexpr int kExitOk = 0, kExitUsage = 2;
+constexpr int kExitOk = 0, kExitUsage = 2, kExitNoAnswer = 3;
 
 // A bad-input failure: main prints it and exits 2.
 struct InputError {
@@ -47,6 +69,11 @@ struct Options {
   std::string value;  // hex; empty: unknown
   int from = -1;      // the answering axis of a group query
   std::vector<std::string> input;
+  std::string port;             // send: the serial device
+  std::string iface;            // send: the CAN transport spec
+  std::uint32_t baud = 9600;
+  double timeout_ms = 500;      // send: how long to wait for answers
+  double duration = -1;         // drive: seconds, < 0 = until Ctrl-C
 };
 
 // ---- Text helpers ------------------------------------------------------------------------------
@@ -272,6 +299,148 @@ int run_decode(const Options& o) {
   return decode_can(o);
 }
 
+// ---- Sending -----------------------------------------------------------------------------------
+
+std::int64_t now_ns() { return TmlPty::monotonic_ns(); }
+
+// The serial device raw, 8N2 at the baud rate (a plain serial program's set-up).
+int open_serial(const std::string& path, std::uint32_t baud) {
+  const int fd = ::open(path.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK);
+  if (fd < 0) throw InputError{fmt::format("--port {}: {}", path, std::strerror(errno))};
+  termios tio{};
+  ::tcgetattr(fd, &tio);
+  ::cfmakeraw(&tio);
+  tio.c_cflag |= CSTOPB | CLOCAL | CREAD;
+  tio.c_cflag &= ~PARENB;
+  const speed_t sp = baud == 115200 ? B115200 : baud == 57600 ? B57600 : baud == 38400 ? B38400 : baud == 19200 ? B19200 : B9600;
+  ::cfsetispeed(&tio, sp);
+  ::cfsetospeed(&tio, sp);
+  ::tcsetattr(fd, TCSANOW, &tio);
+  return fd;
+}
+
+int send_serial(const Options& o, const Message& m) {
+  const int fd = open_serial(o.port, o.baud);
+  HostLinkConfig cfg;
+  cfg.link = o.protocol == "rs485" ? Link::rs485 : Link::rs232;
+  cfg.baud = o.baud;
+  // Across processes and a pseudo-terminal the 'O' takes longer than on a wire: OUR CHOICE.
+  cfg.ack_timeout_ns = cfg.sync_timeout_ns = 20'000'000;
+  cfg.answer_timeout_ns = static_cast<std::int64_t>(o.timeout_ms * 1e6);
+  bool done = false;
+  int code = kExitOk;
+  SerialHostLink link(cfg, [fd](std::uint8_t b, std::int64_t) { (void)!::write(fd, &b, 1); }, [&](const HostEvent& e) {
+    switch (e.kind) {
+      case HostEventKind::acked: fmt::print("received:  4F ('O')\n"), done = true; break;
+      case HostEventKind::sent_unacknowledged: fmt::print("sent (no acknowledgement on RS-485 for a group)\n"), done = true; break;
+      case HostEventKind::answer: fmt::print("received:  4F ('O') and {}\n           {}\n", hex_bytes(encode_packet(e.message).view()), describe(e.message)), done = true; break;
+      case HostEventKind::answer_timeout: fmt::print("received:  4F ('O'), then no answer\n"), done = true, code = kExitNoAnswer; break;
+      case HostEventKind::resent: fmt::print("no 'O': SYNC bytes echoed, command sent again\n"); break;
+      case HostEventKind::link_broken: fmt::print("link broken: no 'O' and no SYNC echo\n"), done = true, code = kExitNoAnswer; break;
+      case HostEventKind::unsolicited: fmt::print("unsolicited: {}\n", describe(e.message)); break;
+    }
+  });
+  fmt::print("send:      {}\n", hex_bytes(encode_packet(m).view()));
+  if (link.send(m, now_ns()) != SendStatus::ok) throw InputError{"the link refuses this message"};
+  const std::int64_t give_up = now_ns() + static_cast<std::int64_t>((o.timeout_ms + 500) * 1e6);
+  while (!done && now_ns() < give_up) {
+    pollfd p{fd, POLLIN, 0};
+    const std::int64_t wait = std::min<std::int64_t>(link.next_deadline() - now_ns(), 10'000'000);
+    ::poll(&p, 1, static_cast<int>(std::max<std::int64_t>(0, wait) / 1'000'000));
+    std::uint8_t buf[64];
+    for (ssize_t n; (n = ::read(fd, buf, sizeof buf)) > 0;)
+      for (ssize_t i = 0; i < n; ++i) link.on_byte(buf[i], now_ns());
+    link.poll(now_ns());
+  }
+  ::close(fd);
+  if (!done) fmt::print("no answer within {} ms\n", o.timeout_ms), code = kExitNoAnswer;
+  return code;
+}
+
+int send_can(const Options& o, const Message& m) {
+  std::unique_ptr<can::Transport> tr;
+  try {
+    tr = can::open_transport(o.iface);
+  } catch (const can::TransportError& e) {
+    throw InputError{fmt::format("--iface {}: {}", o.iface, e.what())};
+  }
+  can::Frame f;
+  const CanStatus st = o.protocol == "tmlcan" ? encode_tmlcan(m, f) : encode_techcan(m, f);
+  if (st != CanStatus::ok) throw InputError{to_string(st)};
+  fmt::print("send:      {}\n", cansend(f));
+  if (!tr->send(f, 0)) return fmt::print("the transport refused the frame\n"), kExitNoAnswer;
+  const bool query = classify(m).kind == Kind::give_me_data || classify(m).kind == Kind::give_me_data2;
+  int answers = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::microseconds(static_cast<std::int64_t>(o.timeout_ms * 1e3));
+  while (std::chrono::steady_clock::now() < end) {
+    auto r = tr->receive();
+    if (!r) {
+      can::wait_readable(*tr, std::chrono::milliseconds(10));
+      continue;
+    }
+    Message a;
+    TechCanMessage t;
+    const bool ok = o.protocol == "tmlcan" ? decode_tmlcan(r->frame, a) == CanStatus::ok
+                                           : (decode_techcan(r->frame, t) == CanStatus::ok && (a = t.message, true));
+    const Kind k = ok ? classify(a).kind : Kind::generic;
+    if (!ok || (k != Kind::take_data && k != Kind::take_data2)) continue;  // other traffic on the bus
+    fmt::print("received:  {}\n           {}\n", cansend(r->frame), describe(a, o.protocol == "tmlcan"));
+    ++answers;
+  }
+  if (query && answers == 0) return fmt::print("no answer within {} ms\n", o.timeout_ms), kExitNoAnswer;
+  return kExitOk;
+}
+
+int run_send(const Options& o) {
+  const bool serial = o.protocol == "rs232" || o.protocol == "rs485";
+  if (o.protocol == "raw") throw InputError{"send needs a line protocol: rs232, rs485, tmlcan or techcan"};
+  if (serial ? o.port.empty() : o.iface.empty()) throw InputError{serial ? "send on a serial line needs --port PATH" : "send on CAN needs --iface SPEC"};
+  if (o.axis < 0 || o.axis > 255 || o.host < 0 || o.host > 255) throw InputError{"--axis and --host take 0-255"};
+  const std::uint16_t dest = o.group ? group_id_code(group_mask(o.axis)) : axis_id_code(static_cast<std::uint8_t>(o.axis));
+  const auto host_axis = static_cast<std::uint8_t>(o.host);
+  const Message m = build_message(o, dest, o.protocol == "rs232" ? host_id_code(host_axis) : axis_id_code(host_axis));
+  fmt::print("message:   {}\n", describe(m));
+  return serial ? send_serial(o, m) : send_can(o, m);
+}
+
+// ---- An emulated drive on a pseudo-terminal ----------------------------------------------------------
+
+volatile std::sig_atomic_t g_stop = 0;
+
+int run_drive(const Options& o) {
+  if (o.protocol != "rs232" && o.protocol != "rs485") throw InputError{"drive runs on a serial line: rs232 or rs485"};
+  if (o.axis < 1 || o.axis > 255 || o.host < 1 || o.host > 255) throw InputError{"--axis and --host take 1-255"};
+  DriveSetup ds;
+  ds.axis = static_cast<std::uint8_t>(o.axis);
+  ds.host_axis = static_cast<std::uint8_t>(o.host);
+  ds.protocol = o.protocol == "rs485" ? Protocol::rs485 : Protocol::rs232;
+  TmlDrive drive(ds, nullptr);
+  TmlPty pty(drive, o.baud);
+  drive::AxisModel shaft;  // the drive turns a model shaft (no MuJoCo here)
+  std::signal(SIGINT, [](int) { g_stop = 1; });
+  std::signal(SIGTERM, [](int) { g_stop = 1; });
+  const std::int64_t t0 = now_ns(), period = static_cast<std::int64_t>(ds.sample_period_s * 1e9);
+  drive.power_on(0);
+  fmt::print("omni-tml: drive axis {} ({}, 8N2 at {} bit/s) on {} (Ctrl-C ends)\n", o.axis, o.protocol, o.baud, pty.slave_path());
+  std::fflush(stdout);
+  std::int64_t next = t0;
+  while (!g_stop && (o.duration < 0 || now_ns() - t0 < static_cast<std::int64_t>(o.duration * 1e9))) {
+    const std::int64_t now = now_ns();
+    pty.service(now);
+    if (now >= next) {
+      const drive::Command c = drive.step(now - t0, shaft.feedback());
+      shaft.step(c, ds.sample_period_s);
+      next += period;
+      continue;
+    }
+    pty.wait(now, std::min(next, pty.next_due()) - now);
+  }
+  const DriveStats& s = drive.stats();
+  fmt::print("omni-tml: drive end: {} messages handled, {} answers, {} checksum errors\n", s.handled, s.answers_sent,
+             pty.checksum_errors());
+  return kExitOk;
+}
+
 void add_common(CLI::App* sub, Options& o) {
   sub->add_option("--protocol,-p", o.protocol, "rs232, rs485, tmlcan, techcan or raw")
       ->check(CLI::IsMember({"rs232", "rs485", "tmlcan", "techcan", "raw"}))
@@ -296,6 +465,23 @@ int main(int argc, char** argv) {
   CLI::App* dec = app.add_subcommand("decode", "a received packet or frame in words");
   add_common(dec, o);
   dec->add_option("INPUT", o.input, "serial: hex bytes; tmlcan/techcan: ID#DATA; raw: hex words")->required();
+  CLI::App* send = app.add_subcommand("send", "send an instruction to a drive and print its answer");
+  add_common(send, o);
+  send->add_option("--port", o.port, "rs232/rs485: the serial device (e.g. the path omni-tml drive prints)");
+  send->add_option("--iface", o.iface, "tmlcan/techcan: the CAN transport (udp:GROUP:PORT, socketcan:IFACE)");
+  send->add_option("--baud", o.baud, "serial bit rate (9600, 19200, 38400, 57600, 115200)")->capture_default_str();
+  send->add_option("--axis,-a", o.axis, "destination axis ID (with --group: group number)")->capture_default_str();
+  send->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
+  send->add_flag("--group,-g", o.group, "--axis is a group number");
+  send->add_flag("--raw", o.raw, "the instruction is OPCODE [DATA...] in hex");
+  send->add_option("--timeout-ms", o.timeout_ms, "how long to wait for answers")->capture_default_str();
+  send->add_option("INSTRUCTION", o.input, "'NAME=VALUE', '?NAME', '??NAME' (or with --raw: OPCODE DATA...)")->required();
+  CLI::App* drv = app.add_subcommand("drive", "run one emulated IDM drive on a pseudo-terminal");
+  add_common(drv, o);
+  drv->add_option("--axis,-a", o.axis, "the drive's axis ID")->capture_default_str();
+  drv->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
+  drv->add_option("--baud", o.baud, "serial bit rate")->capture_default_str();
+  drv->add_option("--duration", o.duration, "seconds (default: until Ctrl-C)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -305,6 +491,8 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
   try {
+    if (send->parsed()) return run_send(o);
+    if (drv->parsed()) return run_drive(o);
     return enc->parsed() ? run_encode(o) : run_decode(o);
   } catch (const InputError& e) {
     std::cerr << "omni-tml: " << e.what << "\n";

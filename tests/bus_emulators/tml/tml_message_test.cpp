@@ -145,7 +145,12 @@ TEST(TmlSymbols, SeedAddresses) {
   EXPECT_EQ(find_symbol("SRL")->address, 0x090E);
   EXPECT_EQ(find_symbol("MER")->address, 0x08FC);
   EXPECT_TRUE(find_symbol("SR32")->wide);
-  EXPECT_EQ(find_symbol("apos"), nullptr);  // the seed names it but gives no address
+  // The seed names APOS without an address; Technosoft's public TML_lib_light gives it.
+  ASSERT_NE(find_symbol("apos"), nullptr);
+  EXPECT_EQ(find_symbol("APOS")->address, 0x0228);
+  EXPECT_TRUE(find_symbol("APOS")->wide);
+  EXPECT_EQ(find_symbol("CSPD")->address, 0x02A0);
+  EXPECT_EQ(find_symbol("nosuch"), nullptr);
   EXPECT_EQ(find_symbol(0x090E, true)->name, "SR32");
   EXPECT_EQ(find_symbol(0x090E, false)->name, "SRL");
 }
