@@ -1,5 +1,5 @@
 // Benchmarks whole bus runs through the real programs: `omnitwin run` (built beside this
-// benchmark) with `--bus ethercat`, `--bus m3` or `--bus canopen`, which starts `omni-master --bus …` as its own
+// benchmark) with `--bus ethercat`, `--bus m3`, `--bus canopen` or `--bus tml`, which starts `omni-master --bus …` as its own
 // process.
 // Every figure is read from the run's metrics.json; the baseline is the same scenario with
 // `--bus direct`, run in the same benchmark (DESIGN §11).
@@ -49,6 +49,11 @@
 //                    fraction over the run) and the master's SDO transfers, EMCYs and heartbeat
 //                    timeouts per run; passed says whether the run met the scenario's
 //                    expectations (500 kbit/s at 1 ms does not fit: the wire saturates).
+//   BM_TmlLockstep/P       the thesis line in lockstep over TML: our TML master and four IDM
+//                    drives on the simulated 1 Mbit/s CAN wire, P = 0 TMLCAN, 1 TechCAN, a 2 ms
+//                    tick (CSPD to each axis, UPD, a group GiveMeData2 of APOS). Baseline: --bus
+//                    direct at a 2 ms control period, same iteration. Counters as
+//                    BM_CanopenLockstep (the master's answers and lost axes per run).
 // The exact command of every run is printed on stderr. A run that cannot start (exit 2 or 3)
 // skips with the tail of its log.
 #include <benchmark/benchmark.h>
@@ -257,6 +262,12 @@ void BM_CanopenLockstep(benchmark::State& state) {
                      {"sdo_done", "emcy", "heartbeat_timeouts", "cycles"});
 }
 
+void BM_TmlLockstep(benchmark::State& state) {
+  const std::vector<std::string> tml{"--bus", "tml", "--set", std::string("bus.protocol=") + (state.range(0) ? "techcan" : "tmlcan")};
+  const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.002"};
+  lockstep_vs_direct(state, "tml", tml, direct, 0.002, {"answers", "axes_lost", "cycles"});
+}
+
 void BM_EthercatRealtime(benchmark::State& state) { realtime(state, "ethercat"); }
 void BM_M3Realtime(benchmark::State& state) { realtime(state, "m3"); }
 void BM_DirectRealtime(benchmark::State& state) { realtime(state, "direct"); }
@@ -287,6 +298,7 @@ BENCHMARK(BM_CanopenLockstep)
     ->Unit(benchmark::kSecond)
     ->Iterations(3)
     ->UseRealTime();
+BENCHMARK(BM_TmlLockstep)->Arg(0)->Arg(1)->ArgName("techcan")->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK(BM_M3Realtime)->Arg(4)->Arg(62)->ArgName("stations")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_EthercatRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_DirectRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
