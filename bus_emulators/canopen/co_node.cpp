@@ -37,6 +37,7 @@ Node::Node(ObjectDictionary& od, std::uint8_t node_id, SendFn send, NodeHooks ho
   life_factor_ = od_.entry(0x100D, 0);
   sync_cob_ = od_.entry(0x1005, 0);
   sync_overflow_ = od_.entry(0x1019, 0);
+  sync_period_ = od_.entry(0x1006, 0);
   time_cob_ = od_.entry(0x1012, 0);
   error_behaviour_ = od_.entry(0x1029, 1);
   pdo_.attach();
@@ -105,6 +106,7 @@ void Node::apply(NmtTransition tr, SimTime now) {
 // Communication objects to their defaults, every layer restarted, then the boot-up message.
 void Node::reset_communication(SimTime now) {
   restore_defaults(od_, 0x1000, 0x1FFF);
+  sync_producer_.stop();
   if (OdEntry* r = od_.entry(0x1001, 0)) r->set_int(emcy_.error_register());
   pdo_.resolve_all();
   sdo_.reset();
@@ -160,9 +162,7 @@ void Node::on_frame(const can::Frame& f, SimTime now) {
   const auto overflow = static_cast<std::uint8_t>(sync_overflow_ ? sync_overflow_->as_int() : 0);
   switch (decode_sync(f, sync_id, overflow, counter)) {
     case SyncDecode::ok:
-      ++stats_.syncs;
-      pdo_.on_sync(counter, now, nmt_.state(), send_counted_);
-      if (hooks_.on_sync) hooks_.on_sync(counter, now);
+      on_sync(counter, now);
       return;
     case SyncDecode::bad_length:
       ++stats_.sync_length_errors;
@@ -184,8 +184,38 @@ void Node::on_frame(const can::Frame& f, SimTime now) {
   pdo_.on_frame(f, now, nmt_.state(), send_counted_);
 }
 
+void Node::on_sync(std::uint8_t counter, SimTime now) {
+  ++stats_.syncs;
+  pdo_.on_sync(counter, now, nmt_.state(), send_counted_);
+  if (hooks_.on_sync) hooks_.on_sync(counter, now);
+}
+
+// The node as SYNC producer (0x1005 bit 30): its SYNCs go out and are acted on here.
+void Node::produce_sync(SimTime now) {
+  const std::uint32_t cob_id = cob_of(sync_cob_, cob::sync);
+  const SimTime period = sync_period_ ? sync_period_->as_int() * 1000 : 0;  // [µs] → ns
+  if (!(cob_id & cob::gen) || period <= 0 || nmt_.state() == NmtState::stopped) {
+    sync_producer_.stop();
+    return;
+  }
+  const auto overflow = static_cast<std::uint8_t>(sync_overflow_ ? sync_overflow_->as_int() : 0);
+  const SyncProducerConfig want{cob_id & cob::id_mask_11, period, overflow};
+  if (!sync_producer_.running() || sync_producer_.config().period_ns != want.period_ns ||
+      sync_producer_.config().cob_id != want.cob_id || sync_producer_.config().counter_overflow != want.counter_overflow) {
+    sync_producer_.configure(want);
+    sync_producer_.start(now + period);
+    return;
+  }
+  sync_producer_.on_time(now, [this](const can::Frame& f, SimTime at) {
+    const bool ok = send(f, at);
+    on_sync(f.dlc == 1 ? f.data[0] : 0, at);
+    return ok;
+  });
+}
+
 void Node::on_time(SimTime now) {
   if (nmt_.state() == NmtState::initialising) return;
+  produce_sync(now);
   if (ec_.on_time(now, ec_params(), nmt_.state(), send_counted_) == LifeGuardEvent::lost)
     communication_error(emcy_code::life_guard, now);
   consumer_.on_time(now);

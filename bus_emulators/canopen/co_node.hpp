@@ -10,6 +10,9 @@
 // as on a real device. The application hears SYNCs, NMT transitions and communication errors
 // through NodeHooks.
 //
+// SYNC producer: with bit 30 (gen) of 0x1005 set and 0x1006 > 0 [µs] the node sends SYNC itself
+// every 0x1006 µs (with a counter when 0x1019 is 2..240) and acts on it as on one received (a
+// CAN controller does not receive its own frames).
 // Communication errors (heartbeat consumer timeout, life guarding, bus-off recovery) raise an
 // EMCY and take the NMT state given by 0x1029:1 (0 → pre-operational if operational, 1 → no
 // change, 2 → stopped; 0 when the object is absent), as CiA 301 §7.2.8.3.
@@ -91,6 +94,8 @@ class Node {
     return e ? static_cast<std::uint32_t>(e->as_int()) : dflt;
   }
   static void pdo_error(void* ctx, std::uint16_t code, SimTime now);
+  void on_sync(std::uint8_t counter, SimTime now);
+  void produce_sync(SimTime now);
 
   ObjectDictionary& od_;
   SendFn send_;
@@ -108,6 +113,8 @@ class Node {
   const OdEntry* life_factor_ = nullptr;   // 0x100D
   const OdEntry* sync_cob_ = nullptr;      // 0x1005
   const OdEntry* sync_overflow_ = nullptr; // 0x1019
+  const OdEntry* sync_period_ = nullptr;   // 0x1006 [µs]
+  SyncProducer sync_producer_;
   const OdEntry* time_cob_ = nullptr;      // 0x1012
   const OdEntry* error_behaviour_ = nullptr;  // 0x1029:1
   std::optional<TimeOfDay> last_time_;

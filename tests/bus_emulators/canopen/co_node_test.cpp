@@ -124,5 +124,27 @@ TEST_F(NodeTest, WrongSyncLengthIsSignalled) {
   EXPECT_EQ(node->stats().sync_length_errors, 1u);
 }
 
+TEST_F(NodeTest, ProducesSyncWhenTheGenBitIsSet) {
+  nmt(0x01);
+  take();
+  ASSERT_EQ(od.write(0x1019, 0, OdState::op, test::le(3, 1)), SdoAbort::none);
+  ASSERT_EQ(od.write(0x1006, 0, OdState::op, test::le(2000, 4)), SdoAbort::none);  // 2 ms
+  ASSERT_EQ(od.write(0x1005, 0, OdState::op, test::le(0x40000080, 4)), SdoAbort::none);
+  od.entry(0x2002, 0)->set_int(0x0101);
+  for (SimTime t = 0; t <= 9 * kMs; t += kMs) node->on_time(t);
+  std::vector<int> counters;
+  int tpdos = 0;
+  for (const can::Frame& f : take()) {
+    if (f.id == 0x80) counters.push_back(f.data[0]);
+    if (f.id == 0x185) ++tpdos;
+  }
+  EXPECT_EQ(counters, (std::vector<int>{1, 2, 3, 1}));  // at 2, 4, 6, 8 ms
+  EXPECT_EQ(tpdos, 4);  // its own SYNCs drive its synchronous TPDO
+  EXPECT_EQ(syncs, 4);
+  ASSERT_EQ(od.write(0x1005, 0, OdState::op, test::le(0x80, 4)), SdoAbort::none);  // gen off
+  for (SimTime t = 10 * kMs; t <= 20 * kMs; t += kMs) node->on_time(t);
+  EXPECT_TRUE(take().empty());
+}
+
 }  // namespace
 }  // namespace omnitwin::canopen

@@ -72,6 +72,7 @@ inline void build_node_od(ObjectDictionary& od, std::uint8_t id = 5) {
   for (std::uint8_t s = 1; s <= 4; ++s) h.push_back(entry(s, kU32, 32, kRo, 0));
   add_record(od, 0x1003, h);
   add_var(od, 0x1005, kU32, 32, kRw, 0x80);
+  add_var(od, 0x1006, kU32, 32, kRw, 0);
   add_var(od, 0x100C, kU16, 16, kRw, 0);
   add_var(od, 0x100D, kU8, 8, kRw, 0);
   add_var(od, 0x1012, kU32, 32, kRw, 0x80000100);
