@@ -108,15 +108,15 @@ TEST_F(CliBadInput, BadSetNamesSet) {
   }
 }
 
-// `--bus can` (not built yet) exits 2 saying the bus is not available, naming the
-// scenario, before anything is written.
-TEST_F(CliBadInput, UnbuiltBusIsRefused) {
+// `--bus canopen` with a malformed EDS exits 2 with one line naming the EDS file, before
+// anything is written.
+TEST_F(CliBadInput, MalformedEdsIsRefusedBeforeWriting) {
   const std::string file = test_scenario("run_short_line.yaml");
-  const Finished f = run({"run", file, "--bus", "canopen", "--out", (dir_ / "never").string()});
+  const std::string eds = source_path("tests/data/canopen/bad_datatype.eds");
+  const Finished f = run({"run", file, "--bus", "canopen", "--set", "bus.eds=" + eds, "--out", (dir_ / "never").string()});
   EXPECT_EQ(f.code, 2);
   EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
-  EXPECT_TRUE(contains(f.err, file)) << f.err;
-  EXPECT_TRUE(contains(f.err, "bus 'canopen' is not available")) << f.err;
+  EXPECT_TRUE(contains(f.err, "bad_datatype.eds:")) << f.err;
   EXPECT_FALSE(fs::exists(dir_ / "never"));
 }
 

@@ -455,9 +455,11 @@ TEST_F(RunShort, RealtimePacesWithoutChangingResults) {
   EXPECT_TRUE(rt.passed);
 }
 
-// A bus that is not built yet is refused before anything runs or is written.
-TEST_F(RunShort, UnbuiltBusRefusedBeforeWriting) {
-  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"), {{"bus", "canopen"}});
+// A bus whose device description (the CANopen EDS) is malformed is refused before anything
+// runs or is written.
+TEST_F(RunShort, MalformedEdsRefusedBeforeWriting) {
+  const Scenario s = load_scenario(test_scenario("run_short_line.yaml"),
+                                   {{"bus", "canopen"}, {"bus.eds", source_path("tests/data/canopen/truncated.eds")}});
   RunOptions o;
   o.out_dir = (dir_ / "canopen").string();
   EXPECT_THROW(run_scenario(s, o), RunSetupError);
