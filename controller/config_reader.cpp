@@ -35,6 +35,18 @@ std::int64_t integer_text(const std::string& file, int line, const std::string& 
   }
 }
 
+double bounded(const std::string& file, const Val& v, const std::string& key, double lo, double hi) {
+  const double d = number(file, v, key);
+  if (d < lo || d > hi) fail(file, v, key, fmt::format("must be in [{}, {}]", lo, hi));
+  return d;
+}
+
+std::int64_t bounded_int(const std::string& file, const Val& v, const std::string& key, std::int64_t lo, std::int64_t hi) {
+  const std::int64_t i = integer(file, v, key);
+  if (i < lo || i > hi) fail(file, v, key, fmt::format("must be in {}..{}", lo, hi));
+  return i;
+}
+
 std::int64_t integer(const std::string& file, const Val& v, const std::string& key) {
   if (!v.node.IsScalar()) fail(file, v, key, "expected an integer");
   return integer_text(file, v.line, key, v.node.Scalar());

@@ -40,6 +40,9 @@ int line_of(const YAML::Node& n, int fallback);
 std::int64_t integer_text(const std::string& file, int line, const std::string& key, const std::string& s);
 std::int64_t integer(const std::string& file, const Val& v, const std::string& key);
 double number(const std::string& file, const Val& v, const std::string& key);
+// A number or integer within [lo, hi] ("must be in [lo, hi]" / "must be in lo..hi" otherwise).
+double bounded(const std::string& file, const Val& v, const std::string& key, double lo, double hi);
+std::int64_t bounded_int(const std::string& file, const Val& v, const std::string& key, std::int64_t lo, std::int64_t hi);
 bool boolean(const std::string& file, const Val& v, const std::string& key);
 
 // The members of a mapping, in file order; anything but a mapping, an unknown key or a

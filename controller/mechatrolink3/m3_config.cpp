@@ -13,18 +13,6 @@ using namespace controller::config;
 
 namespace {
 
-double bounded(const std::string& file, const Val& v, const std::string& key, double lo, double hi) {
-  const double d = number(file, v, key);
-  if (d < lo || d > hi) fail(file, v, key, fmt::format("must be in [{}, {}]", lo, hi));
-  return d;
-}
-
-std::int64_t bounded_int(const std::string& file, const Val& v, const std::string& key, std::int64_t lo, std::int64_t hi) {
-  const std::int64_t i = integer(file, v, key);
-  if (i < lo || i > hi) fail(file, v, key, fmt::format("must be in {}..{}", lo, hi));
-  return i;
-}
-
 void read_wheels(const std::string& file, const Val& n, M3ProgramConfig& c) {
   if (!n.node.IsSequence() || n.node.size() != 4) fail(file, n, "wheels", "expected four station addresses (wheel 1..4)");
   const std::vector<Val> ws = elements(n);

@@ -9,22 +9,6 @@ namespace omnitwin::controller::tml {
 
 using namespace controller::config;
 
-namespace {
-
-double bounded(const std::string& file, const Val& v, const std::string& key, double lo, double hi) {
-  const double d = number(file, v, key);
-  if (d < lo || d > hi) fail(file, v, key, fmt::format("must be in [{}, {}]", lo, hi));
-  return d;
-}
-
-std::int64_t bounded_int(const std::string& file, const Val& v, const std::string& key, std::int64_t lo, std::int64_t hi) {
-  const std::int64_t i = integer(file, v, key);
-  if (i < lo || i > hi) fail(file, v, key, fmt::format("must be in {}..{}", lo, hi));
-  return i;
-}
-
-}  // namespace
-
 TmlProgramConfig parse_tml_config(std::string_view yaml, const std::string& file, const std::string& base_dir) {
   const YAML::Node doc = load_document(yaml, file);
   const Val root(doc, line_of(doc, 1));

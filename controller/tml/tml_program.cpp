@@ -17,7 +17,7 @@
 #include "bus_emulators/can/transport.hpp"
 #include "controller/can_master_loop.hpp"
 #include "controller/master_config.hpp"
-#include "controller/platform_loop.hpp"
+#include "controller/platform_driver.hpp"
 #include "controller/program_support.hpp"
 #include "controller/tml/tml_master.hpp"
 
@@ -34,17 +34,11 @@ class Runner {
  public:
   Runner(const TmlProgramConfig& pc, std::optional<MasterConfig> platform, can::Transport& tr, bool hold)
       : pc_(pc), tr_(tr), hold_(hold), master_(pc, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
-        platform_(std::move(platform)) {
+        platform_(platform, pc.cycle, pc.wheel_counts_per_rev) {
     master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
       if (warning) spdlog::warn("{} {}", stamp(t), s);
       else spdlog::info("{} {}", stamp(t), s);
     });
-    if (platform_) {
-      PlatformLoopConfig lc = platform_->loop;
-      lc.counts_per_rev = static_cast<int>(std::lround(pc_.wheel_counts_per_rev));
-      loop_.emplace(lc, build_path(platform_->path));
-      every_ = std::max<std::int64_t>(1, std::llround(lc.period / pc_.cycle));
-    }
     outbox_.reserve(64);
   }
 
@@ -73,13 +67,7 @@ class Runner {
     r.state = master_.report_state();
     r.reason = master_.reason();
     r.node = master_.reason_node();
-    r.path_origin_ns = started_ ? origin_ : -1;
-    if (loop_) {
-      const Pose2& ref = out_.reference.pose;
-      const Pose2& odo = loop_->odometry().pose();
-      r.reference = {ref.x, ref.y, ref.phi};
-      r.odometry = {odo.x, odo.y, odo.phi};
-    }
+    platform_.fill(r);
     return r;
   }
   nlohmann::json stats() const {
@@ -110,21 +98,11 @@ class Runner {
     return c;
   }
   void platform(SimTime t) {
-    if (!loop_ || master_.phase() != TmlPhase::running) return;
-    if (!started_) {
-      loop_->reset(loop_->path().start_pose(), counts());
-      origin_ = t;
-      started_ = true;
-      n_ = 0;
-      spdlog::info("{} axes on: platform loop running", stamp(t));
-    }
-    const double ts = static_cast<double>(t - origin_) * 1e-9;
-    if (n_++ % every_ == 0) {
-      out_ = loop_->step(ts, counts());
-      const double k = pc_.wheel_counts_per_rev / (2 * std::numbers::pi);
-      for (int i = 0; i < 4; ++i) master_.set_speed(i, out_.wheel_rad_s[i] * k);
-    }
-    if (platform_->settle >= 0 && ts >= loop_->path().duration() + platform_->settle) {
+    const PlatformDriver::Step st = platform_.tick(t, master_.phase() == TmlPhase::running, counts());
+    if (st.started) spdlog::info("{} axes on: platform loop running", stamp(t));
+    if (st.command)
+      for (int i = 0; i < 4; ++i) master_.set_speed(i, st.wheel_counts_per_s[static_cast<std::size_t>(i)]);
+    if (st.finished) {
       master_.finish(t);
       spdlog::info("{} path done", stamp(t));
     }
@@ -135,12 +113,7 @@ class Runner {
   bool hold_;
   std::vector<can::TimedFrame> outbox_;
   TmlMaster master_;
-  std::optional<MasterConfig> platform_;
-  std::optional<PlatformLoop> loop_;
-  PlatformLoopOutput out_;
-  std::int64_t every_ = 1, n_ = 0;
-  bool started_ = false;
-  SimTime origin_ = -1;
+  PlatformDriver platform_;
 };
 
 void write_stats(const std::string& path, const Runner& r) {
