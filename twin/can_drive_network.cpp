@@ -118,6 +118,11 @@ int CanDriveNetwork::poll_transport(SimTime t) {
   return n;
 }
 
+void CanDriveNetwork::on_wake(SimTime t) {
+  bus_.advance(t);
+  poll_transport(t);
+}
+
 // ---------------------------------------------------------------------------------------
 // Wire callbacks
 

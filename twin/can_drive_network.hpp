@@ -62,6 +62,10 @@ class CanDriveNetwork : public BusNetwork {
   void advance(SimTime t) override { bus_.advance(t); }
   bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
   int poll_transport(SimTime t) override;
+  // Realtime: the transport's descriptor; a master's frames enter the wire the moment they
+  // arrive (between the run's own events), not at the next master tick.
+  int wake_fd() const override { return batch_ ? -1 : transport_->poll_fd(); }
+  void on_wake(SimTime t) override;
   void observe_wheels() override {}
   void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;
   std::uint64_t frames_to_transport() const override { return to_transport_; }
