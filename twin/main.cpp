@@ -249,6 +249,13 @@ int cmd_run(const RunArgs& a) {
                                  s.name, iface, s.bus.can.bit_rate)
                   << std::flush;
       };
+    } else if (a.external_master && s.bus.kind == BusKind::tml) {
+      o.on_bus_ready = [&s](const std::string& iface) {
+        std::cout << fmt::format("twin {}: {} bus of 4 IDM drives (axes 1-4) on {} at {} bit/s, waiting for a master "
+                                 "(Ctrl-C ends)\n",
+                                 s.name, s.bus.tml.protocol == "techcan" ? "TechCAN" : "TMLCAN", iface, s.bus.can.bit_rate)
+                  << std::flush;
+      };
     } else if (a.external_master) {
       o.on_bus_ready = [&s](const std::string& iface) {
         std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,

@@ -54,7 +54,10 @@ void make_raw(int fd, std::uint32_t baud) {
 TmlPty::TmlPty(TmlDrive& drive, std::uint32_t baud)
     : drive_(drive),
       link_(link_config(drive, baud), [this](std::uint8_t b, std::int64_t end_ns) { queue(b, end_ns); },
-            [this](const Message& m, std::int64_t t) { drive_.on_message(m, t); }) {
+            [this](const Message& m, std::int64_t t) {
+              if (from_host_) from_host_(m, t);
+              else drive_.on_message(m, t);
+            }) {
   // Open the pair, unlock the slave, keep one slave descriptor so the line stays up.
   master_ = posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK);
   if (master_ < 0) fail("posix_openpt");

@@ -15,6 +15,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "bus_emulators/tml/tml_drive.hpp"
@@ -35,6 +36,12 @@ class TmlPty {
   TmlPty(const TmlPty&) = delete;
   TmlPty& operator=(const TmlPty&) = delete;
 
+  // A relay axis (tml_relay): messages from the host go to `from_host` instead of the drive
+  // (the relay hands its own axis's to the drive). Set-up.
+  void set_host_sink(std::function<void(const Message&, std::int64_t)> from_host) { from_host_ = std::move(from_host); }
+  // A message for the host onto the line (the relay's answers from CAN). Real-time safe.
+  void to_host(const Message& m, std::int64_t now_ns) { link_.send(m, now_ns); }
+
   // The path a serial program opens (e.g. /dev/pts/7).
   const std::string& slave_path() const { return slave_path_; }
   // Reads what the host wrote (each byte received at now_ns), feeds the link, and writes every
@@ -53,6 +60,7 @@ class TmlPty {
 
  private:
   struct Out { std::uint8_t byte; std::int64_t due_ns; };
+  std::function<void(const Message&, std::int64_t)> from_host_;  // empty: straight to the drive
   static constexpr std::size_t kQueue = 4096;
   void queue(std::uint8_t b, std::int64_t due_ns);
   void flush(std::int64_t now_ns);

@@ -15,8 +15,11 @@
 //     sends it to a drive and prints what came back: 'O' and the answer on a serial line (with
 //     the seed's SYNC-byte recovery when the 'O' is lost), the answering frames on CAN.
 //   omni-tml drive --protocol rs232|rs485 [--axis N] [--host N] [--baud B] [--duration S]
+//                  [--relay SPEC [--relay-protocol tmlcan|techcan]]
 //     runs one emulated IDM drive (bus_emulators/tml, on the shared drive core with a model
 //     shaft) on a pseudo-terminal and prints its path: any serial program can talk TML to it.
+//     With --relay it is the relay axis: the host's messages for other axes go onto that CAN
+//     bus and their answers come back over the line.
 // encode and decode are pure text: nothing is sent anywhere. Exit codes: 0 ok; 2 bad usage or
 // input (a one-line message on stderr naming what is wrong); 3 no answer / link broken.
 #include <CLI/CLI.hpp>
@@ -46,6 +49,7 @@
 #include "bus_emulators/tml/tml_drive.hpp"
 #include "bus_emulators/tml/tml_message.hpp"
 #include "bus_emulators/tml/tml_pty.hpp"
+#include "bus_emulators/tml/tml_relay.hpp"
 #include "bus_emulators/tml/tml_serial.hpp"
 
 using namespace omnitwin;
@@ -74,6 +78,8 @@ struct Options {
   std::uint32_t baud = 9600;
   double timeout_ms = 500;      // send: how long to wait for answers
   double duration = -1;         // drive: seconds, < 0 = until Ctrl-C
+  std::string relay;            // drive: the CAN transport the relay axis forwards to ("" = none)
+  std::string relay_protocol = "tmlcan";
 };
 
 // ---- Text helpers ------------------------------------------------------------------------------
@@ -417,23 +423,41 @@ int run_drive(const Options& o) {
   TmlDrive drive(ds, nullptr);
   TmlPty pty(drive, o.baud);
   drive::AxisModel shaft;  // the drive turns a model shaft (no MuJoCo here)
+  // The relay axis: messages for other axes onto CAN, the answers for the host back.
+  std::unique_ptr<can::Transport> bus;
+  std::unique_ptr<TmlRelay> relay;
+  if (!o.relay.empty()) {
+    try {
+      bus = can::open_transport(o.relay);
+    } catch (const can::TransportError& e) {
+      throw InputError{fmt::format("--relay {}: {}", o.relay, e.what())};
+    }
+    relay = std::make_unique<TmlRelay>(
+        drive, o.relay_protocol == "techcan" ? Protocol::techcan : Protocol::tmlcan,
+        [&bus](const can::Frame& f, SimTime) { return bus->send(f, 0); },
+        [&pty](const Message& m, SimTime t) { pty.to_host(m, t); });
+    pty.set_host_sink([&relay](const Message& m, std::int64_t t) { relay->from_host(m, t); });
+  }
   std::signal(SIGINT, [](int) { g_stop = 1; });
   std::signal(SIGTERM, [](int) { g_stop = 1; });
   const std::int64_t t0 = now_ns(), period = static_cast<std::int64_t>(ds.sample_period_s * 1e9);
   drive.power_on(0);
-  fmt::print("omni-tml: drive axis {} ({}, 8N2 at {} bit/s) on {} (Ctrl-C ends)\n", o.axis, o.protocol, o.baud, pty.slave_path());
+  fmt::print("omni-tml: drive axis {} ({}, 8N2 at {} bit/s) on {}{} (Ctrl-C ends)\n", o.axis, o.protocol, o.baud,
+             pty.slave_path(), bus ? fmt::format(", relay axis to {} on {}", o.relay_protocol, bus->spec()) : "");
   std::fflush(stdout);
   std::int64_t next = t0;
   while (!g_stop && (o.duration < 0 || now_ns() - t0 < static_cast<std::int64_t>(o.duration * 1e9))) {
     const std::int64_t now = now_ns();
     pty.service(now);
+    if (bus)
+      while (auto r = bus->receive()) relay->from_can(r->frame, now - t0);
     if (now >= next) {
       const drive::Command c = drive.step(now - t0, shaft.feedback());
       shaft.step(c, ds.sample_period_s);
       next += period;
       continue;
     }
-    pty.wait(now, std::min(next, pty.next_due()) - now);
+    pty.wait(now, std::min({next, pty.next_due(), bus ? now + 200'000 : next}) - now);  // the CAN side: polled every 0.2 ms
   }
   const DriveStats& s = drive.stats();
   fmt::print("omni-tml: drive end: {} messages handled, {} answers, {} checksum errors\n", s.handled, s.answers_sent,
@@ -482,6 +506,10 @@ int main(int argc, char** argv) {
   drv->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
   drv->add_option("--baud", o.baud, "serial bit rate")->capture_default_str();
   drv->add_option("--duration", o.duration, "seconds (default: until Ctrl-C)");
+  drv->add_option("--relay", o.relay, "be the relay axis: forward other axes' messages to this CAN transport");
+  drv->add_option("--relay-protocol", o.relay_protocol, "the relay's CAN protocol: tmlcan or techcan")
+      ->check(CLI::IsMember({"tmlcan", "techcan"}))
+      ->capture_default_str();
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
