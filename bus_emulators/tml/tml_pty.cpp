@@ -53,6 +53,7 @@ void make_raw(int fd, std::uint32_t baud) {
 
 TmlPty::TmlPty(TmlDrive& drive, std::uint32_t baud)
     : drive_(drive),
+      baud_(baud),
       link_(link_config(drive, baud), [this](std::uint8_t b, std::int64_t end_ns) { queue(b, end_ns); },
             [this](const Message& m, std::int64_t t) {
               if (from_host_) from_host_(m, t);
@@ -72,8 +73,21 @@ TmlPty::TmlPty(TmlDrive& drive, std::uint32_t baud)
   drive_.set_sender([this](const Message& m, SimTime t) { link_.send(m, t); });
 }
 
+void TmlPty::add_drop(TmlDrive& drive) {
+  if (drive_.setup().protocol != Protocol::rs485 || drive.setup().protocol != Protocol::rs485)
+    throw std::invalid_argument("tml::TmlPty: several drives share a line only on RS-485");
+  auto link = std::make_unique<SerialDriveLink>(
+      link_config(drive, baud_), [this](std::uint8_t b, std::int64_t end_ns) { queue(b, end_ns); },
+      [&drive](const Message& m, std::int64_t t) { drive.on_message(m, t); });
+  SerialDriveLink* l = link.get();
+  drive.set_sender([l](const Message& m, SimTime t) { l->send(m, t); });
+  drops_.push_back(std::move(link));
+  drop_drives_.push_back(&drive);
+}
+
 TmlPty::~TmlPty() {
   drive_.set_sender(nullptr);
+  for (TmlDrive* d : drop_drives_) d->set_sender(nullptr);
   if (slave_keep_ >= 0) close(slave_keep_);
   if (master_ >= 0) close(master_);
 }
@@ -118,7 +132,10 @@ void TmlPty::service(std::int64_t now_ns) {
     const ssize_t r = read(master_, buf.data(), buf.size());
     if (r <= 0) break;  // EAGAIN: nothing more; EIO: no host has the line open
     stats_.bytes_in += static_cast<std::uint64_t>(r);
-    for (ssize_t i = 0; i < r; ++i) link_.on_byte(buf[static_cast<std::size_t>(i)], now_ns);
+    for (ssize_t i = 0; i < r; ++i) {
+      link_.on_byte(buf[static_cast<std::size_t>(i)], now_ns);
+      for (auto& d : drops_) d->on_byte(buf[static_cast<std::size_t>(i)], now_ns);
+    }
   }
   // Drive → host: the bytes that are due.
   flush(now_ns);

@@ -16,7 +16,9 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
+#include <vector>
 
 #include "bus_emulators/tml/tml_drive.hpp"
 #include "bus_emulators/tml/tml_serial.hpp"
@@ -35,6 +37,14 @@ class TmlPty {
   ~TmlPty();
   TmlPty(const TmlPty&) = delete;
   TmlPty& operator=(const TmlPty&) = delete;
+
+  // RS-485 multi-drop: another drive on the same line (the first drive's and this one's
+  // protocol must be rs485; std::invalid_argument otherwise). Every drive's link hears every
+  // byte; only the addressed drive acknowledges and answers, group messages are acknowledged
+  // by nobody (tml_serial). The line is half duplex: the host sends one command at a time and
+  // type B never goes to a group on RS-485, so two drives never talk at once; if a host breaks
+  // that rule their bytes interleave, as they would collide on a real line. Set-up.
+  void add_drop(TmlDrive& drive);
 
   // A relay axis (tml_relay): messages from the host go to `from_host` instead of the drive
   // (the relay hands its own axis's to the drive). Set-up.
@@ -66,9 +76,12 @@ class TmlPty {
   void flush(std::int64_t now_ns);
 
   TmlDrive& drive_;
+  std::uint32_t baud_;
   int master_ = -1, slave_keep_ = -1;  // slave_keep_: keeps the line open between host sessions
   std::string slave_path_;
   SerialDriveLink link_;
+  std::vector<std::unique_ptr<SerialDriveLink>> drops_;  // RS-485: the other drives' links
+  std::vector<TmlDrive*> drop_drives_;
   std::array<Out, kQueue> out_{};
   std::size_t head_ = 0, size_ = 0;
   PtyStats stats_;

@@ -15,10 +15,10 @@
 //     sends it to a drive and prints what came back: 'O' and the answer on a serial line (with
 //     the seed's SYNC-byte recovery when the 'O' is lost), the answering frames on CAN.
 //   omni-tml drive --protocol rs232|rs485 [--axis N] [--host N] [--baud B] [--duration S]
-//                  [--relay SPEC [--relay-protocol tmlcan|techcan]]
+//                  [--drop AXIS ...] [--relay SPEC [--relay-protocol tmlcan|techcan]]
 //     runs one emulated IDM drive (bus_emulators/tml, on the shared drive core with a model
 //     shaft) on a pseudo-terminal and prints its path: any serial program can talk TML to it.
-//     With --relay it is the relay axis: the host's messages for other axes go onto that CAN
+//     With --drop (RS-485) more drives share the line (multi-drop). With --relay it is the relay axis: the host's messages for other axes go onto that CAN
 //     bus and their answers come back over the line.
 // encode and decode are pure text: nothing is sent anywhere. Exit codes: 0 ok; 2 bad usage or
 // input (a one-line message on stderr naming what is wrong); 3 no answer / link broken.
@@ -80,6 +80,7 @@ struct Options {
   double duration = -1;         // drive: seconds, < 0 = until Ctrl-C
   std::string relay;            // drive: the CAN transport the relay axis forwards to ("" = none)
   std::string relay_protocol = "tmlcan";
+  std::vector<int> drops;       // drive, RS-485: more drives on the same line (axis IDs)
 };
 
 // ---- Text helpers ------------------------------------------------------------------------------
@@ -423,6 +424,18 @@ int run_drive(const Options& o) {
   TmlDrive drive(ds, nullptr);
   TmlPty pty(drive, o.baud);
   drive::AxisModel shaft;  // the drive turns a model shaft (no MuJoCo here)
+  // RS-485 multi-drop: more drives on the same line, each with its own shaft.
+  if (!o.drops.empty() && o.protocol != "rs485") throw InputError{"--drop needs --protocol rs485 (a multi-drop line)"};
+  std::vector<std::unique_ptr<TmlDrive>> drops;
+  std::vector<drive::AxisModel> drop_shafts(o.drops.size());
+  for (const int a : o.drops) {
+    if (a < 1 || a > 255 || a == o.axis) throw InputError{fmt::format("--drop {}: an axis ID 1-255 other than --axis", a)};
+    DriveSetup d = ds;
+    d.axis = static_cast<std::uint8_t>(a);
+    drops.push_back(std::make_unique<TmlDrive>(d, nullptr));
+    pty.add_drop(*drops.back());
+    drops.back()->power_on(0);
+  }
   // The relay axis: messages for other axes onto CAN, the answers for the host back.
   std::unique_ptr<can::Transport> bus;
   std::unique_ptr<TmlRelay> relay;
@@ -442,7 +455,9 @@ int run_drive(const Options& o) {
   std::signal(SIGTERM, [](int) { g_stop = 1; });
   const std::int64_t t0 = now_ns(), period = static_cast<std::int64_t>(ds.sample_period_s * 1e9);
   drive.power_on(0);
-  fmt::print("omni-tml: drive axis {} ({}, 8N2 at {} bit/s) on {}{} (Ctrl-C ends)\n", o.axis, o.protocol, o.baud,
+  std::string more;
+  for (const int a : o.drops) more += fmt::format(", {}", a);
+  fmt::print("omni-tml: drive axis {}{} ({}, 8N2 at {} bit/s) on {}{} (Ctrl-C ends)\n", o.axis, more, o.protocol, o.baud,
              pty.slave_path(), bus ? fmt::format(", relay axis to {} on {}", o.relay_protocol, bus->spec()) : "");
   std::fflush(stdout);
   std::int64_t next = t0;
@@ -454,6 +469,8 @@ int run_drive(const Options& o) {
     if (now >= next) {
       const drive::Command c = drive.step(now - t0, shaft.feedback());
       shaft.step(c, ds.sample_period_s);
+      for (std::size_t k = 0; k < drops.size(); ++k)
+        drop_shafts[k].step(drops[k]->step(now - t0, drop_shafts[k].feedback()), ds.sample_period_s);
       next += period;
       continue;
     }
@@ -506,6 +523,7 @@ int main(int argc, char** argv) {
   drv->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
   drv->add_option("--baud", o.baud, "serial bit rate")->capture_default_str();
   drv->add_option("--duration", o.duration, "seconds (default: until Ctrl-C)");
+  drv->add_option("--drop", o.drops, "RS-485: more drives on the same line (axis IDs)");
   drv->add_option("--relay", o.relay, "be the relay axis: forward other axes' messages to this CAN transport");
   drv->add_option("--relay-protocol", o.relay_protocol, "the relay's CAN protocol: tmlcan or techcan")
       ->check(CLI::IsMember({"tmlcan", "techcan"}))
