@@ -121,18 +121,34 @@ BitBuffer stuffed_bits(const Frame& f, Intermission ifs) {
   return out;
 }
 
+// The stuff bits a region needs, counted without building the stuffed copy (the same rule as
+// stuff_into: after five equal bits a complement, which starts the next run).
+static int count_stuff(const BitBuffer& in) {
+  std::uint8_t last = 2;
+  int run = 0, stuff = 0;
+  for (int i = 0; i < in.size; ++i) {
+    const std::uint8_t b = in[i];
+    run = (b == last) ? run + 1 : 1;
+    last = b;
+    if (run == 5) {
+      ++stuff;
+      last = b ^ 1u;
+      run = 1;
+    }
+  }
+  return stuff;
+}
+
 int stuff_bit_count(const Frame& f) {
   if (f.kind == FrameKind::error) return 0;
-  const BitBuffer region = stuffable_region(f);
-  BitBuffer out;
-  int stuff = 0;
-  stuff_into(region, out, stuff);
-  return stuff;
+  return count_stuff(stuffable_region(f));
 }
 
 int stuffed_region_bits(const Frame& f) {
   if (f.kind == FrameKind::error) return 0;
-  return crc_input_bits(f).size + kCrcBits + stuff_bit_count(f);
+  // One pass: the region (SOF … CRC) built once, its stuff bits counted in place.
+  const BitBuffer region = stuffable_region(f);
+  return region.size + count_stuff(region);
 }
 
 int frame_bits(const Frame& f) {
