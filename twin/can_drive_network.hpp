@@ -16,6 +16,7 @@
 // drain_transport()'s timeout. Set-up allocates; per-event paths do not.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
@@ -59,7 +60,10 @@ class CanDriveNetwork : public BusNetwork {
   std::string close_pcap() override;
   std::string pcap_error() const override;
   void flush_transport() override;
-  void advance(SimTime t) override { bus_.advance(t); }
+  void advance(SimTime t) override {
+    bus_.advance(t);
+    now_ = std::max(now_, t);
+  }
   bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
   int poll_transport(SimTime t) override;
   // Realtime: the transport's descriptor; a master's frames enter the wire the moment they
@@ -110,6 +114,8 @@ class CanDriveNetwork : public BusNetwork {
     if (master_start_ns_ < 0) master_start_ns_ = end;
   }
   bool powered(int axis0) const { return powered_[static_cast<std::size_t>(axis0)]; }
+  // The latest instant the network was run to [ns] (rates in the metrics).
+  SimTime now() const { return now_; }
   const Scenario& scenario() const { return s_; }
   Hooks& hooks() { return hooks_; }
 
@@ -154,6 +160,7 @@ class CanDriveNetwork : public BusNetwork {
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t power_cycles_ = 0;
   SimTime master_start_ns_ = -1;
+  SimTime now_ = 0;
 };
 
 }  // namespace omnitwin::twin

@@ -105,6 +105,8 @@ nlohmann::json CanopenNetwork::drive_json(int axis0) const {
           {"sdo_aborts", node.sdo().stats().aborts_sent},
           {"rpdo_rx", p.rpdo_rx},
           {"tpdo_tx", p.tpdo_tx},
+          {"rpdo_per_s", now() > 0 ? static_cast<double>(p.rpdo_rx) * 1e9 / static_cast<double>(now()) : 0.0},
+          {"tpdo_per_s", now() > 0 ? static_cast<double>(p.tpdo_tx) * 1e9 / static_cast<double>(now()) : 0.0},
           {"pdo_length_errors", p.length_errors},
           {"syncs", node.stats().syncs},
           {"heartbeats", node.error_control().heartbeats_sent()},

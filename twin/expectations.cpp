@@ -43,14 +43,14 @@ constexpr std::array<std::string_view, 35> kMasterMetrics = {
     "tpdo_rx",      "answers",          "axes_lost"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
 // (tec, bus_off_events and error_code serve CANopen too), then TML's three.
-constexpr std::array<std::string_view, 33> kSlaveMetrics = {
+constexpr std::array<std::string_view, 35> kSlaveMetrics = {
     "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
     "tec",     "bus_off_events", "stale_samples",   "al_status_code",  "station_address", "error_code",
     "phase",   "responses",      "fcs_errors",      "missed_syncs",    "missed_commands", "wdt_errors",
     "phase_errors", "comm_alarms", "repeated",
     "emcy",    "sdo_aborts",     "rpdo_rx",         "tpdo_tx",         "pdo_length_errors", "syncs",
     "heartbeats", "faults",      "comm_faults",
-    "handled", "take_data2",     "unknown_opcodes"};
+    "handled", "take_data2",     "unknown_opcodes", "rpdo_per_s", "tpdo_per_s"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;
