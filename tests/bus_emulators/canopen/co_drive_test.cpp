@@ -145,6 +145,28 @@ TEST_F(DriveNodeTest, DriveFaultRaisesEmcyAndTheResetClearsIt) {
   EXPECT_EQ(d->drive().state(), drive::State::switch_on_disabled);
 }
 
+// A real following error: in CSP the target position runs away from a shaft that does not
+// move; the core's supervision (0x6065 window, 0x6066 time) faults the drive, and the node
+// signals EMCY 0x8611 with the device-profile bit in the error register.
+TEST_F(DriveNodeTest, AFollowingErrorRaisesEmcy8611) {
+  ASSERT_EQ(sdo({0x2F, 0x60, 0x60, 0x00, 8, 0, 0, 0}).data[0], 0x60);  // CSP
+  d->on_frame(can::make_data(0, {0x01, 3}), now);
+  for (std::uint16_t cw : {0x06, 0x07, 0x0F}) period(cw, 0), period(cw, 0);
+  ASSERT_EQ(d->drive().state(), drive::State::operation_enabled);
+  bool emcy = false;
+  for (int k = 1; k <= 60 && !emcy; ++k) {
+    const auto target = static_cast<std::uint32_t>(k * 2000);  // 2000 counts per ms; the shaft stays at 0
+    sdo({0x23, 0x7A, 0x60, 0x00, static_cast<std::uint8_t>(target), static_cast<std::uint8_t>(target >> 8),
+         static_cast<std::uint8_t>(target >> 16), static_cast<std::uint8_t>(target >> 24)});
+    period(0x0F, 0);
+    for (const can::Frame& f : take())
+      if (f.id == 0x83 && get_u16(f.data.data()) == 0x8611) emcy = (f.data[2] & 0x21) == 0x21;
+  }
+  EXPECT_TRUE(emcy);
+  EXPECT_EQ(d->drive().objects().error_code, 0x8611);
+  EXPECT_EQ(d->stats().faults, 1u);
+}
+
 TEST_F(DriveNodeTest, LosingTheMastersHeartbeatWhileEnabledFaultsTheDrive) {
   sdo({0x23, 0x16, 0x10, 0x01, 0x96, 0x00, 0x7F, 0x00});  // consume node 127, 150 ms
   d->on_frame(can::make_data(0, {0x01, 3}), now);
