@@ -5,14 +5,17 @@
 // segmented SDO, configuration, NMT and CiA 402 phases); tshark decodes the capture as
 // CANopen with no malformed frame; the per-node metrics are filled; profile velocity mode
 // drives the platform too; a drive losing power stops the platform and is brought back; a
-// malformed EDS is bad input naming the file, line and key.
+// malformed EDS is bad input naming the file, line and key; our master on its own wall clock
+// drives the drives of `omnitwin twin --bus canopen`.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <thread>
 
 #include "tests/twin/cli_support.hpp"
 
@@ -107,6 +110,35 @@ TEST_F(CliCanopen, ADriveLosingPowerStopsThePlatformAndComesBack) {
   EXPECT_EQ(ms.at("recoveries"), 1);
   EXPECT_EQ(m.at("slaves")[1].at("nmt_state"), "operational");
   EXPECT_NE(read_bytes(a / "master.log").find("node 2 back in OPERATIONAL"), std::string::npos);
+}
+
+// `omnitwin twin --bus canopen` for a master started by hand: our master on its own wall clock
+// configures, starts and powers up the twin's four drives and holds them.
+TEST_F(CliCanopen, AnExternalMasterOnTheWallClockRunsTheTwinsDrives) {
+  const std::string iface = "udp:239.74.163.2:47712";
+  Child twin({"twin", test_scenario("canopen_short.yaml"), "--bus", "canopen", "--set", "bus.transport=" + iface, "--set",
+              "duration=30", "--out", (dir_ / "twin").string(), "--no-progress"},
+             work(), io());
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "CANopen bus of 4 CiA 402 drives (nodes 1-4) on " + iface)) << twin.out() << twin.err();
+  const fs::path stats = dir_ / "master-stats.json";
+  Child master(binary_path("controller/omni-master"),
+               {"--bus", "canopen", "--iface", iface, "--config", source_path("tests/data/canopen/drives_only.yaml"),
+                "--duration", "2", "--stats", stats.string()},
+               work(), io(), "master-");
+  EXPECT_EQ(master.wait(30s), 0) << master.out() << master.err();
+  twin.signal(SIGINT);
+  EXPECT_NE(twin.wait(30s), -1);
+  const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
+  EXPECT_EQ(s.at("phase"), "finished") << s.dump(2);
+  EXPECT_EQ(s.at("sdo_aborts"), 0);
+  EXPECT_EQ(s.at("heartbeat_timeouts"), 0);
+  EXPECT_GT(s.at("syncs").get<int>(), 1500);
+  for (const auto& n : s.at("nodes")) EXPECT_TRUE(n.at("configured").get<bool>()) << n.dump();
+  const nlohmann::json m = metrics(dir_ / "twin");
+  for (const auto& sl : m.at("slaves")) EXPECT_GT(sl.at("rpdo_rx").get<int>(), 1500);
 }
 
 TEST_F(CliCanopen, AMalformedEdsIsBadInputNamingFileLineAndKey) {
