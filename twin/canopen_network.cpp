@@ -32,7 +32,9 @@ LoadBudget canopen_load_budget(const Scenario& s) {
       return static_cast<double>(can::frame_bits_with_intermission(canopen::frame11(id, static_cast<std::uint8_t>(bytes))));
     };
     const double per_s = 1.0 / c.cycle;
-    double b = per_s * (bits(0x80, 0) + 4 * bits(0x201, 6) + 4 * bits(0x181, 6));  // SYNC, RPDO1, TPDO1
+    // RPDO1 every SYNC from a master producing SYNC, every control period otherwise.
+    const double rpdo_per_s = c.sync_producer == "drive" ? 1.0 / s.controller.period : per_s;
+    double b = per_s * (bits(0x80, 0) + 4 * bits(0x181, 6)) + rpdo_per_s * 4 * bits(0x201, 6);  // SYNC, TPDO1, RPDO1
     b += 4 * bits(0x281, 6) * per_s / 10;                                          // TPDO2, inhibit 10 SYNCs
     b += 5 * bits(0x701, 1) * 1000.0 / c.heartbeat_ms;                             // four drives and the master
     (worst ? out.worst : out.nominal) = b / static_cast<double>(s.bus.can.bit_rate);

@@ -221,6 +221,7 @@ std::string canopen_master_config_yaml(const Scenario& s, const std::string& pla
   std::string out = fmt::format("# omni-master --bus canopen configuration written by omnitwin for scenario {}\n", s.name);
   out += fmt::format("eds: {}\n", canopen_eds_path(c));
   out += fmt::format("cycle: {}\n", c.cycle);
+  if (c.sync_producer == "drive") out += fmt::format("sync_producer: 1\ntick: {}\n", s.controller.period);
   out += "nodes: [1, 2, 3, 4]\n";
   out += fmt::format("master_heartbeat_ms: {}\nnode_heartbeat_ms: {}\nheartbeat_timeout_ms: {}\n", c.heartbeat_ms,
                      c.heartbeat_ms, 3 * c.heartbeat_ms);

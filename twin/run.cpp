@@ -152,7 +152,8 @@ class PlatformRun {
   // every slave each cycle) and CANopen (one SYNC per tick), else the control period.
   SimTime master_period_ns() const {
     if (s_.bus.kind == BusKind::m3) return seconds_to_ns(s_.bus.m3.cycle);
-    if (s_.bus.kind == BusKind::canopen) return seconds_to_ns(s_.bus.canopen.cycle);  // one SYNC per tick
+    if (s_.bus.kind == BusKind::canopen)  // one SYNC per tick, unless a drive produces SYNC
+      return seconds_to_ns(s_.bus.canopen.sync_producer == "drive" ? s_.controller.period : s_.bus.canopen.cycle);
     if (s_.bus.kind == BusKind::tml) return seconds_to_ns(s_.bus.tml.cycle);
     return seconds_to_ns(s_.controller.period);
   }

@@ -410,6 +410,7 @@ void read_canopen(const YamlField& f, CanopenSpec& c, const std::string& scenari
   }
   if (f["mode"].exists()) c.mode = f["mode"].choice({"csv", "pv"});
   read_number(f, "cycle", c.cycle, Bounds::closed(250e-6, 0.1));
+  if (f["sync_producer"].exists()) c.sync_producer = f["sync_producer"].choice({"master", "drive"});
   read_number(f, "drive_period", c.drive_period, Bounds::closed(50e-6, 0.01));
   read_integer(f, "counts_per_rev", c.counts_per_rev, Bounds::closed(4, 1 << 24));
   read_integer(f, "heartbeat_ms", c.heartbeat_ms, Bounds::closed(1, 10000));
@@ -505,7 +506,8 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::canopen) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
-                  "eds", "mode", "cycle", "drive_period", "counts_per_rev", "heartbeat_ms", "drift", "startup"});
+                  "eds", "mode", "cycle", "sync_producer", "drive_period", "counts_per_rev", "heartbeat_ms", "drift",
+                  "startup"});
     read_can_wire(f, bus.can);
     read_canopen(f, bus.canopen, scenario_file);
     read_supervision(f["supervision"], bus.supervision);

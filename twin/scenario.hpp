@@ -132,7 +132,10 @@ struct EthercatSpec {
 struct CanopenSpec {
   std::string eds;                          // device description; "" = models/canopen/omnitwin_drive.eds
   std::string mode = "csv";                 // csv | pv: how the master commands the wheels
-  double cycle = 0.001;                     // the master's SYNC period [s]
+  double cycle = 0.001;                     // the SYNC period [s]
+  // Who produces SYNC: "master" (one master tick per SYNC) or "drive" (drive 1, 0x1005 gen
+  // bit; the master then ticks at the control period and its RPDOs take effect at the next SYNC).
+  std::string sync_producer = "master";
   double drive_period = 0.001;              // the drives' own update period [s]
   int counts_per_rev = 131072;              // the drives' motor encoder (17 bit) [counts/rev]
   int heartbeat_ms = 50;                    // the nodes' (and the master's) heartbeat period

@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <filesystem>
 
 namespace omnitwin::controller::canopen {
@@ -29,7 +30,7 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
   CoProgramConfig c;
   c.file = file;
   const Members top(file, root, "",
-                    {"eds", "cycle", "nodes", "master_node_id", "master_heartbeat_ms", "node_heartbeat_ms",
+                    {"eds", "cycle", "sync_producer", "tick", "nodes", "master_node_id", "master_heartbeat_ms", "node_heartbeat_ms",
                      "heartbeat_timeout_ms", "sync_counter", "wheel_mode", "wheel_counts_per_rev", "sdo_timeout_ms",
                      "startup_timeout", "platform"});
   const Val* eds = top.get("eds");
@@ -37,6 +38,16 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
   c.eds = resolve(base_dir, eds->node.Scalar());
   if (const Val* n = top.get("cycle")) c.cycle = bounded(file, *n, "cycle", 1e-4, 1.0);
   if (const Val* n = top.get("nodes")) read_nodes(file, *n, c);
+  if (const Val* n = top.get("sync_producer")) {
+    if (n->node.IsScalar() && n->node.Scalar() == "master") {
+      c.sync_producer = 0;
+    } else {
+      c.sync_producer = static_cast<std::uint8_t>(bounded_int(file, *n, "sync_producer", 1, 127));
+      if (std::find(c.nodes.begin(), c.nodes.end(), c.sync_producer) == c.nodes.end())
+        fail(file, *n, "sync_producer", "master, or the node ID of one of the wheels' drives");
+    }
+  }
+  if (const Val* n = top.get("tick")) c.tick = bounded(file, *n, "tick", 1e-4, 1.0);
   if (const Val* n = top.get("master_node_id")) c.master_node_id = static_cast<std::uint8_t>(bounded_int(file, *n, "master_node_id", 0, 127));
   for (auto [key, field] : {std::pair{"master_heartbeat_ms", &c.master_heartbeat_ms}, std::pair{"node_heartbeat_ms", &c.node_heartbeat_ms},
                             std::pair{"heartbeat_timeout_ms", &c.heartbeat_timeout_ms}})
@@ -61,6 +72,8 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
   return c;
 }
 
+double master_tick(const CoProgramConfig& c) { return c.sync_producer != 0 && c.tick > 0 ? c.tick : c.cycle; }
+
 CoProgramConfig load_co_config(const std::string& path) {
   return parse_co_config(read_file(path), path, std::filesystem::path(path).parent_path().string());
 }
@@ -68,6 +81,7 @@ CoProgramConfig load_co_config(const std::string& path) {
 std::string dump_co_config(const CoProgramConfig& c) {
   std::string out = fmt::format("eds: {}\ncycle: {}\nnodes: [{}, {}, {}, {}]\n", c.eds, c.cycle, c.nodes[0], c.nodes[1],
                                 c.nodes[2], c.nodes[3]);
+  if (c.sync_producer != 0) out += fmt::format("sync_producer: {}\ntick: {}\n", c.sync_producer, master_tick(c));
   out += fmt::format("master_node_id: {}\nmaster_heartbeat_ms: {}\nnode_heartbeat_ms: {}\nheartbeat_timeout_ms: {}\n",
                      c.master_node_id, c.master_heartbeat_ms, c.node_heartbeat_ms, c.heartbeat_timeout_ms);
   out += fmt::format("sync_counter: {}\nwheel_mode: {}\nwheel_counts_per_rev: {}\nsdo_timeout_ms: {}\nstartup_timeout: {}\n",

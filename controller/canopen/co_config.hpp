@@ -27,7 +27,12 @@ enum class WheelMode : std::uint8_t { csv, pv };
 
 struct CoProgramConfig {
   std::string eds;                        // resolved against the file's folder
-  double cycle = 0.001;                   // SYNC period = the master's tick [s]
+  double cycle = 0.001;                   // SYNC period [s]
+  // Who produces SYNC: 0 = the master, every tick (tick = cycle); a wheel's node ID = that drive
+  // (0x1005 gen bit, 0x1006 = cycle), and the master ticks every `tick` (its control period),
+  // its RPDOs taking effect at the drive's next SYNC.
+  std::uint8_t sync_producer = 0;
+  double tick = 0;                        // the master's tick [s] with a node producing SYNC (0: cycle)
   std::array<std::uint8_t, 4> nodes{1, 2, 3, 4};  // node ID of wheel 1..4
   std::uint8_t master_node_id = 0x7F;     // the master's heartbeat COB-ID 0x700 + this (0: none)
   std::uint16_t master_heartbeat_ms = 50; // the master's heartbeat period (0: none)
@@ -44,6 +49,8 @@ struct CoProgramConfig {
 
 CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, const std::string& base_dir);
 CoProgramConfig load_co_config(const std::string& path);
+// The master's tick [s]: the SYNC period when it produces SYNC, else `tick`.
+double master_tick(const CoProgramConfig& c);
 // The configuration as YAML (what omni-master --print-config shows).
 std::string dump_co_config(const CoProgramConfig& c);
 

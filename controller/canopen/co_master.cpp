@@ -91,6 +91,10 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const co::EdsDevic
                 inhibit, event_ms);
   for (int n = 2; n < 4; ++n) configure_pdo(s, true, n, static_cast<std::uint32_t>(0x180 + 0x100 * n + id), 0, {});
   s.push_back(dl(0x6060, 0, 1, c.mode == WheelMode::csv ? 9 : 3, "modes of operation"));
+  if (c.sync_producer == id) {  // this drive produces SYNC: period, then the gen bit
+    s.push_back(dl(0x1006, 0, 4, static_cast<std::uint32_t>(std::llround(c.cycle * 1e6)), "communication cycle period"));
+    s.push_back(dl(0x1005, 0, 4, co::cob::gen | co::cob::sync, "COB-ID SYNC: this node produces SYNC"));
+  }
   return s;
 }
 
@@ -252,7 +256,9 @@ void CoMaster::on_tick(SimTime t) {
   sdo_.on_time(t);
   const bool cyclic = phase_ != CoPhase::resetting && phase_ != CoPhase::configuring && phase_ != CoPhase::failed;
   if (cyclic) {
-    if (sync_.send_one(t, [this](const can::Frame& f, SimTime at) { return send(f, at); })) ++stats_.syncs;
+    // SYNC from the master unless a drive produces it (then the RPDOs wait for the drive's).
+    if (cfg_.sync_producer == 0 && sync_.send_one(t, [this](const can::Frame& f, SimTime at) { return send(f, at); }))
+      ++stats_.syncs;
     send_rpdos(t);
   }
   // The master's own heartbeat.

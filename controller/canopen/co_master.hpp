@@ -8,7 +8,8 @@
 // Frames and time [ns] in (on_frame, on_tick), frames out through SendFn; no sockets, no
 // clock, so that the program can run it on the wall clock or in lockstep with the twin.
 // One tick = one SYNC period: SYNC first, then the RPDOs (CiA 301: a synchronous RPDO takes
-// effect at the next SYNC), then SDO requests and NMT commands.
+// effect at the next SYNC), then SDO requests and NMT commands. With a drive as SYNC producer
+// (config sync_producer) the master sends no SYNC and ticks at its own period.
 // Configuration is fixed at construction; on_frame/on_tick do not allocate.
 #pragma once
 
@@ -50,7 +51,8 @@ struct SdoStep {
 // matches the EDS), heartbeat 0x1017 and consumer 0x1016, SYNC counter 0x1019, RPDO1 =
 // controlword + target velocity (synchronous), TPDO1 = statusword + position actual
 // (synchronous), TPDO2 = statusword + velocity actual (event-driven, inhibit time 10 SYNC
-// periods, event timer 100), the other PDOs off, modes of operation 0x6060. Mapping entries carry the bit
+// periods, event timer 100), and for the SYNC-producing drive (sync_producer) 0x1006 and 0x1005
+// with the gen bit, the other PDOs off, modes of operation 0x6060. Mapping entries carry the bit
 // sizes of the EDS; throws std::runtime_error when the EDS lacks an object or does not allow
 // it in that PDO (set-up).
 std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::canopen::EdsDevice& eds, std::uint8_t node);

@@ -46,7 +46,7 @@ class Runner {
         tr_(tr),
         hold_(hold),
         master_(pc, eds, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
-        platform_(platform, pc.cycle, pc.wheel_counts_per_rev) {
+        platform_(platform, master_tick(pc), pc.wheel_counts_per_rev) {
     master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
       if (warning) spdlog::warn("{} {}", stamp(t), s);
       else spdlog::info("{} {}", stamp(t), s);
@@ -201,14 +201,16 @@ int run_canopen_program(const ProgramOptions& o) {
     spdlog::error("{}", e.what());
     return kExitUsage;
   }
-  spdlog::info("CANopen master on {} (clock {}, SYNC every {} µs, nodes {} {} {} {}, {})", tr->spec(), o.clock,
-               std::llround(pc.cycle * 1e6), pc.nodes[0], pc.nodes[1], pc.nodes[2], pc.nodes[3],
+  spdlog::info("CANopen master on {} (clock {}, SYNC every {} µs from {}, tick {} µs, nodes {} {} {} {}, {})", tr->spec(),
+               o.clock, std::llround(pc.cycle * 1e6),
+               pc.sync_producer ? fmt::format("node {}", pc.sync_producer) : std::string("the master"),
+               std::llround(master_tick(pc) * 1e6), pc.nodes[0], pc.nodes[1], pc.nodes[2], pc.nodes[3],
                pc.mode == WheelMode::csv ? "CSV" : "PV");
   const int sigfd = open_signal_fd();
   int code = kExitOk;
   try {
     code = o.clock == "sim" ? run_lockstep(o.sim_clock, *runner, *tr, sigfd)
-                            : run_wall_clock(std::llround(pc.cycle * 1e9), o.duration, *runner, *tr, sigfd);
+                            : run_wall_clock(std::llround(master_tick(pc) * 1e9), o.duration, *runner, *tr, sigfd);
   } catch (const LoopFailure& f) {
     spdlog::error("{}", f.message);
     code = kExitRuntime;

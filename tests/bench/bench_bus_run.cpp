@@ -49,6 +49,9 @@
 //                    fraction over the run) and the master's SDO transfers, EMCYs and heartbeat
 //                    timeouts per run; passed says whether the run met the scenario's
 //                    expectations (500 kbit/s at 1 ms does not fit: the wire saturates).
+//   BM_CanopenDriveSync    the same at 1 Mbit/s with a 1 ms SYNC produced by drive 1 (0x1005 gen
+//                    bit) and the master ticking at the 10 ms control period (RPDOs taking
+//                    effect at the drive's next SYNC). Baseline: --bus direct at 10 ms.
 //   BM_TmlLockstep/P       the thesis line in lockstep over TML: our TML master and four IDM
 //                    drives on the simulated 1 Mbit/s CAN wire, P = 0 TMLCAN, 1 TechCAN, a 2 ms
 //                    tick (CSPD to each axis, UPD, a group GiveMeData2 of APOS). Baseline: --bus
@@ -262,6 +265,12 @@ void BM_CanopenLockstep(benchmark::State& state) {
                      {"sdo_done", "emcy", "heartbeat_timeouts", "cycles"});
 }
 
+void BM_CanopenDriveSync(benchmark::State& state) {
+  const std::vector<std::string> co{"--bus", "canopen", "--set", "bus.sync_producer=drive"};
+  const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.01"};
+  lockstep_vs_direct(state, "canopen", co, direct, 0.01, {"sdo_done", "emcy", "heartbeat_timeouts", "cycles"});
+}
+
 void BM_TmlLockstep(benchmark::State& state) {
   const std::vector<std::string> tml{"--bus", "tml", "--set", std::string("bus.protocol=") + (state.range(0) ? "techcan" : "tmlcan")};
   const std::vector<std::string> direct{"--bus", "direct", "--set", "controller.period=0.002"};
@@ -298,6 +307,7 @@ BENCHMARK(BM_CanopenLockstep)
     ->Unit(benchmark::kSecond)
     ->Iterations(3)
     ->UseRealTime();
+BENCHMARK(BM_CanopenDriveSync)->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK(BM_TmlLockstep)->Arg(0)->Arg(1)->ArgName("techcan")->Unit(benchmark::kSecond)->Iterations(3)->UseRealTime();
 BENCHMARK(BM_M3Realtime)->Arg(4)->Arg(62)->ArgName("stations")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 BENCHMARK(BM_EthercatRealtime)->Arg(1)->ArgName("period_ms")->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
