@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -161,6 +162,23 @@ TEST(StartupScript, FollowsTheCia301MappingProcedureWithEdsSizes) {
   EXPECT_LT(enabled, on);
   EXPECT_GE(find(0x1A00, 2, 0x60640020), 0);
   EXPECT_GE(find(0x6060, 0, 9), 0);
+}
+
+TEST(StartupScript, TheSyncProducingDriveGetsItsPeriodAndTheGenBit) {
+  CoProgramConfig c;
+  c.sync_producer = 1;
+  auto has = [](const std::vector<SdoStep>& s, std::uint16_t idx, std::uint32_t v) {
+    return std::any_of(s.begin(), s.end(), [&](const SdoStep& x) { return !x.upload && x.index == idx && x.value == v; });
+  };
+  const auto s1 = startup_script(c, shipped_eds(), 1), s2 = startup_script(c, shipped_eds(), 2);
+  EXPECT_TRUE(has(s1, 0x1006, 1000));
+  EXPECT_TRUE(has(s1, 0x1005, 0x40000080));
+  EXPECT_FALSE(has(s2, 0x1005, 0x40000080));
+  EXPECT_THROW(parse_co_config("eds: x.eds\nsync_producer: 9\n", "c.yaml", ""), CoConfigError);  // not a wheel
+  const CoProgramConfig p = parse_co_config("eds: x.eds\nsync_producer: 2\ntick: 0.01\n", "c.yaml", "");
+  EXPECT_EQ(p.sync_producer, 2);
+  EXPECT_DOUBLE_EQ(master_tick(p), 0.01);
+  EXPECT_DOUBLE_EQ(master_tick(CoProgramConfig{}), 0.001);
 }
 
 TEST(StartupScript, RefusesAnEdsThatLacksTheObjects) {
