@@ -2,8 +2,8 @@
 // drives on the simulated CAN wire and our TML master (`omni-master --bus tml`) as two
 // processes over UDP multicast in lockstep, over TMLCAN and TechCAN. Lockstep runs are
 // byte-identical (trajectory, bus records, capture); master.log tells the start-up; every
-// drive answered and none saw an unknown opcode; tshark reads the capture (as plain CAN: it
-// has no TML dissector) with no malformed frame.
+// drive answered and none saw an unknown opcode; tshark reads the capture with no malformed
+// frame, as plain CAN and with the project's TML dissector (tools/wireshark/tml.lua).
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -69,6 +69,12 @@ TEST_F(CliTml, TmlcanLockstepIsByteIdentical) {
   const std::string base = "tshark -r " + (a / "bus-can.pcap").string();
   EXPECT_EQ(std::stoll(shell(base + " 2>/dev/null | wc -l")), m.at("bus").at("frames").get<long long>());
   EXPECT_EQ(shell(base + " 2>/dev/null | grep -ci malformed"), "0\n");
+  // With the project's TML dissector every frame decodes as TML, none malformed.
+  const std::string lua = "tshark -X lua_script:" + source_path("tools/wireshark/tml.lua") +
+                          " -d can.subdissector,tml -r " + (a / "bus-can.pcap").string();
+  EXPECT_EQ(std::stoll(shell(lua + " 2>/dev/null | grep -c ' TML '")), m.at("bus").at("frames").get<long long>());
+  EXPECT_EQ(shell(lua + " 2>&1 | grep -ci 'malformed\\|lua error'"), "0\n");
+  EXPECT_NE(shell(lua + " 2>/dev/null | head -3").find("GiveMeData2 16-bit to group mask 0x01"), std::string::npos);
 }
 
 TEST_F(CliTml, TechcanDrivesThePlatform) {
