@@ -6,8 +6,9 @@
 //    sent and the master's report;
 //  * the wall clock: CLOCK_MONOTONIC absolute deadlines, one tick per period, frames handled
 //    as they arrive, SCHED_FIFO where permitted.
-// A Runner provides: on_frame(frame, t), tick(t), flush(), report(), frames_rx, frames_tx, and
-// shutdown(t) for the end of a wall-clock run. Header-only (templates).
+// A Runner provides: on_frame(frame, t), tick(t), flush(), report(), frames_rx, frames_tx(), and
+// shutdown(t) for the end of a wall-clock run; CanOutbox is what its master core sends through.
+// Header-only (templates).
 #pragma once
 
 #include <fmt/format.h>
@@ -20,12 +21,50 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/program_support.hpp"
 #include "controller/sim_clock.hpp"
 
 namespace omnitwin::controller {
+
+// What a master core sends: held and sent in one batch after each tick in lockstep (the twin
+// reads them only after Done), straight to the transport on the wall clock.
+class CanOutbox {
+ public:
+  CanOutbox(can::Transport& tr, bool hold) : tr_(tr), hold_(hold) { frames_.reserve(64); }
+  // The core's send callback. Real-time safe while holding (capacity kept), else a send.
+  bool send(const can::Frame& f, std::int64_t t) {
+    if (hold_) {
+      frames_.push_back(can::TimedFrame{f, t});
+      return true;
+    }
+    const bool ok = tr_.send(f, t);
+    sent_ += ok ? 1 : 0;
+    return ok;
+  }
+  // Sends what is held; returns how many frames the transport refused.
+  std::uint64_t flush() {
+    std::uint64_t refused = 0;
+    while (!frames_.empty()) {
+      const std::size_t n = tr_.send_many(frames_);
+      sent_ += n;
+      refused += frames_.size() - n;
+      frames_.clear();
+    }
+    return refused;
+  }
+  // The end of the run: whatever comes now (the shutdown) goes straight out.
+  void release() { hold_ = false; }
+  std::uint64_t frames_tx() const { return sent_; }
+
+ private:
+  can::Transport& tr_;
+  bool hold_;
+  std::vector<can::TimedFrame> frames_;
+  std::uint64_t sent_ = 0;
+};
 
 // A runtime failure of the loop: the program exits 3 with this message.
 struct LoopFailure {
@@ -69,7 +108,7 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
       throw LoopFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
     r.tick(g.t_ns);
     r.flush();
-    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
+    const simclock::Done done{g.tick, {r.frames_tx(), 0, 0, 0}, r.report()};
     if (!client.done(done)) throw LoopFailure{"sim clock: the twin is gone"};
   }
 }

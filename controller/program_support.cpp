@@ -9,6 +9,8 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
+#include <fstream>
 #include <cstring>
 
 namespace omnitwin::controller {
@@ -53,6 +55,14 @@ void try_realtime(int priority) {
   if (::sched_setscheduler(0, SCHED_FIFO, &sp) != 0)
     spdlog::debug("SCHED_FIFO {} not permitted ({}); running with normal priority", priority, std::strerror(errno));
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0) spdlog::debug("mlockall not permitted ({})", std::strerror(errno));
+}
+
+void write_stats_file(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp);
+  f << text << "\n";
+  f.close();
+  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
 }
 
 }  // namespace omnitwin::controller

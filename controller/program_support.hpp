@@ -25,6 +25,9 @@ std::int64_t monotonic_ns();
 std::int64_t realtime_ns();
 timespec to_timespec(std::int64_t ns);
 
+// --stats: writes `text` to path.tmp and renames it to `path`, so a reader never sees half a
+// file; logs an error when it cannot. Not real-time safe (the program's end).
+void write_stats_file(const std::string& path, const std::string& text);
 // SCHED_FIFO at `priority` and locked memory where permitted; a debug line where not. Set-up.
 void try_realtime(int priority);
 

@@ -43,15 +43,13 @@ class Runner {
   Runner(const CoProgramConfig& pc, const omnitwin::canopen::EdsDevice& eds, std::optional<MasterConfig> platform,
          can::Transport& tr, bool hold)
       : pc_(pc),
-        tr_(tr),
-        hold_(hold),
-        master_(pc, eds, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
+        out_(tr, hold),
+        master_(pc, eds, [this](const can::Frame& f, SimTime t) { return out_.send(f, t); }),
         platform_(platform, master_tick(pc), pc.wheel_counts_per_rev) {
     master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
       if (warning) spdlog::warn("{} {}", stamp(t), s);
       else spdlog::info("{} {}", stamp(t), s);
     });
-    outbox_.reserve(64);
   }
 
   CoMaster& master() { return master_; }
@@ -67,15 +65,8 @@ class Runner {
     master_.on_tick(t);
   }
   // Lockstep: the tick's frames in one batch. Refusals reach the core.
-  void flush() {
-    while (!outbox_.empty()) {
-      const std::size_t sent = tr_.send_many(outbox_);
-      frames_tx += sent;
-      master_.note_send_failures(outbox_.size() - sent);
-      outbox_.clear();
-    }
-  }
-  void release() { hold_ = false; }
+  void flush() { master_.note_send_failures(out_.flush()); }
+  void release() { out_.release(); }
   void shutdown(SimTime t) { master_.shutdown(t); }
 
   simclock::MasterReport report() const {
@@ -104,18 +95,10 @@ class Runner {
   }
 
   bool failed() const { return master_.phase() == CoPhase::failed; }
-  std::uint64_t frames_tx = 0, frames_rx = 0;
+  std::uint64_t frames_tx() const { return out_.frames_tx(); }
+  std::uint64_t frames_rx = 0;
 
  private:
-  bool out(const can::Frame& f, SimTime t) {
-    if (hold_) {
-      outbox_.push_back(can::TimedFrame{f, t});
-      return true;
-    }
-    const bool ok = tr_.send(f, t);
-    frames_tx += ok ? 1 : 0;
-    return ok;
-  }
   WheelCounts counts() const {
     WheelCounts c{};
     for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
@@ -133,22 +116,16 @@ class Runner {
   }
 
   const CoProgramConfig& pc_;
-  can::Transport& tr_;
-  bool hold_;
-  std::vector<can::TimedFrame> outbox_;
+  CanOutbox out_;  // before the core: its send callback
   CoMaster master_;
   PlatformDriver platform_;
 };
 
 void write_stats(const std::string& path, const Runner& r) {
   nlohmann::json j = r.stats();
-  j["frames_tx"] = r.frames_tx;
+  j["frames_tx"] = r.frames_tx();
   j["frames_rx"] = r.frames_rx;
-  const std::string tmp = path + ".tmp";
-  std::ofstream f(tmp);
-  f << j.dump() << "\n";
-  f.close();
-  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+  write_stats_file(path, j.dump());
 }
 
 void log_end(const Runner& r) {
@@ -158,7 +135,7 @@ void log_end(const Runner& r) {
                "recoveries {}, frames tx {} rx {}",
                to_string(m.phase()), simclock::to_string(m.reason()),
                m.reason_node() ? fmt::format(" (node {})", m.reason_node()) : "", s.ticks, s.syncs, s.sdo_done, s.sdo_aborts,
-               s.emcy, s.heartbeat_timeouts, s.recoveries, r.frames_tx, r.frames_rx);
+               s.emcy, s.heartbeat_timeouts, s.recoveries, r.frames_tx(), r.frames_rx);
 }
 
 }  // namespace

@@ -465,8 +465,6 @@ int run_ethercat_program(const ProgramOptions& o) {
                s.sdo_failed, s.slaves_lost, s.recoveries, s.segment_losses, s.segment_returns);
   if (!m.stop_reason().empty()) spdlog::warn("stop reason: {}", m.stop_reason());
   if (!o.stats.empty()) {
-    const std::string tmp = o.stats + ".tmp";
-    std::ofstream f(tmp);
     const nlohmann::json j = {{"ecat_phase", to_string(m.phase())}, {"state", runner.state()},
                               {"slaves", m.slave_count()}, {"operational", m.operational()},
                               {"segment_lost", m.segment_lost()}, {"stop_reason", m.stop_reason()},
@@ -478,9 +476,7 @@ int run_ethercat_program(const ProgramOptions& o) {
                               {"timeouts", s.timeouts}, {"sdo_done", s.sdo_done}, {"sdo_failed", s.sdo_failed},
                               {"slaves_lost", s.slaves_lost}, {"recoveries", s.recoveries},
                               {"master_error", m.error()}};
-    f << j.dump() << "\n";
-    f.close();
-    if (!f || std::rename(tmp.c_str(), o.stats.c_str()) != 0) spdlog::error("--stats {}: cannot write", o.stats);
+    write_stats_file(o.stats, j.dump());
   }
   for (int i = 0; i < m.slave_count(); ++i) {
     const SlaveStatus& sl = m.slave(i);

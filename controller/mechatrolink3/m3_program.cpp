@@ -328,11 +328,7 @@ void write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std
   nlohmann::json j = r.stats();
   j["frames_tx"] = tx;
   j["frames_rx"] = rx;
-  const std::string tmp = path + ".tmp";
-  std::ofstream f(tmp);
-  f << j.dump() << "\n";
-  f.close();
-  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+  controller::write_stats_file(path, j.dump());
 }
 
 void log_end(const Runner& r) {

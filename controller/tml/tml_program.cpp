@@ -33,13 +33,12 @@ std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<d
 class Runner {
  public:
   Runner(const TmlProgramConfig& pc, std::optional<MasterConfig> platform, can::Transport& tr, bool hold)
-      : pc_(pc), tr_(tr), hold_(hold), master_(pc, [this](const can::Frame& f, SimTime t) { return out(f, t); }),
+      : pc_(pc), out_(tr, hold), master_(pc, [this](const can::Frame& f, SimTime t) { return out_.send(f, t); }),
         platform_(platform, pc.cycle, pc.wheel_counts_per_rev) {
     master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
       if (warning) spdlog::warn("{} {}", stamp(t), s);
       else spdlog::info("{} {}", stamp(t), s);
     });
-    outbox_.reserve(64);
   }
 
   const TmlMaster& master() const { return master_; }
@@ -51,15 +50,8 @@ class Runner {
     platform(t);
     master_.on_tick(t);
   }
-  void flush() {
-    while (!outbox_.empty()) {
-      const std::size_t sent = tr_.send_many(outbox_);
-      frames_tx += sent;
-      master_.note_send_failures(outbox_.size() - sent);
-      outbox_.clear();
-    }
-  }
-  void release() { hold_ = false; }
+  void flush() { master_.note_send_failures(out_.flush()); }
+  void release() { out_.release(); }
   void shutdown(SimTime t) { master_.shutdown(t); }
 
   simclock::MasterReport report() const {
@@ -77,21 +69,13 @@ class Runner {
                                                 {"apos", master_.position(i)}});
     return {{"phase", to_string(master_.phase())}, {"cycles", s.ticks}, {"answers", s.answers},
             {"axes_lost", s.axes_lost}, {"not_tml", s.not_tml}, {"send_failures", s.tx_refused},
-            {"frames_tx", frames_tx}, {"frames_rx", frames_rx}, {"axes", axes}};
+            {"frames_tx", frames_tx()}, {"frames_rx", frames_rx}, {"axes", axes}};
   }
   bool failed() const { return master_.phase() == TmlPhase::failed; }
-  std::uint64_t frames_tx = 0, frames_rx = 0;
+  std::uint64_t frames_tx() const { return out_.frames_tx(); }
+  std::uint64_t frames_rx = 0;
 
  private:
-  bool out(const can::Frame& f, SimTime t) {
-    if (hold_) {
-      outbox_.push_back(can::TimedFrame{f, t});
-      return true;
-    }
-    const bool ok = tr_.send(f, t);
-    frames_tx += ok ? 1 : 0;
-    return ok;
-  }
   WheelCounts counts() const {
     WheelCounts c{};
     for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
@@ -109,20 +93,12 @@ class Runner {
   }
 
   const TmlProgramConfig& pc_;
-  can::Transport& tr_;
-  bool hold_;
-  std::vector<can::TimedFrame> outbox_;
+  CanOutbox out_;  // before the core: its send callback
   TmlMaster master_;
   PlatformDriver platform_;
 };
 
-void write_stats(const std::string& path, const Runner& r) {
-  const std::string tmp = path + ".tmp";
-  std::ofstream f(tmp);
-  f << r.stats().dump() << "\n";
-  f.close();
-  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
-}
+void write_stats(const std::string& path, const Runner& r) { write_stats_file(path, r.stats().dump()); }
 
 }  // namespace
 
@@ -174,7 +150,7 @@ int run_tml_program(const ProgramOptions& o) {
   const TmlMasterStats& s = runner.master().stats();
   spdlog::info("end: phase {}, reason {}, ticks {}, answers {}, axes lost {}, frames tx {} rx {}",
                to_string(runner.master().phase()), simclock::to_string(runner.master().reason()), s.ticks, s.answers,
-               s.axes_lost, runner.frames_tx, runner.frames_rx);
+               s.axes_lost, runner.frames_tx(), runner.frames_rx);
   if (!o.stats.empty()) write_stats(o.stats, runner);
   if (sigfd >= 0) ::close(sigfd);
   return code;
