@@ -1,6 +1,8 @@
 // bus_emulators/canopen — NMT and error control (see co_nmt.hpp).
 #include "bus_emulators/canopen/co_nmt.hpp"
 
+#include <algorithm>
+
 namespace omnitwin::canopen {
 
 namespace {
@@ -159,6 +161,11 @@ LifeGuardEvent ErrorControlProducer::on_guard_request(SimTime now, const ErrorCo
 
 void HeartbeatConsumer::set(std::uint8_t node, std::uint16_t time_ms) {
   if (!valid_node_id(node)) return;
+  // The list on_time walks: configured producers only.
+  auto* end = watched_.begin() + watched_n_;
+  auto* it = std::find(watched_.begin(), end, node);
+  if (time_ms != 0 && it == end) watched_[static_cast<std::size_t>(watched_n_++)] = node;
+  if (time_ms == 0 && it != end) std::copy(it + 1, end, it), --watched_n_;
   Slot& s = slots_[node];
   s.time_ms = time_ms;
   s.active = time_ms != 0 && s.heard;
@@ -176,6 +183,7 @@ bool HeartbeatConsumer::set_from_entry(std::uint32_t entry) {
 
 void HeartbeatConsumer::clear() {
   for (Slot& s : slots_) s = Slot{};
+  watched_n_ = 0;
 }
 
 void HeartbeatConsumer::on_frame(const can::Frame& f, SimTime now) {
@@ -201,13 +209,14 @@ void HeartbeatConsumer::on_frame(const can::Frame& f, SimTime now) {
 }
 
 void HeartbeatConsumer::on_time(SimTime now) {
-  for (std::size_t n = 1; n < slots_.size(); ++n) {
+  for (int k = 0; k < watched_n_; ++k) {
+    const std::uint8_t n = watched_[static_cast<std::size_t>(k)];
     Slot& s = slots_[n];
     if (!s.active || s.timed_out) continue;
     if (now - s.last <= static_cast<SimTime>(s.time_ms) * kMs) continue;
     s.timed_out = true;
     ++timeouts_;
-    if (on_event_) on_event_({HeartbeatEvent::timeout, static_cast<std::uint8_t>(n), s.state, now});
+    if (on_event_) on_event_({HeartbeatEvent::timeout, n, s.state, now});
   }
 }
 

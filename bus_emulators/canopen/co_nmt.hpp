@@ -143,6 +143,8 @@ class HeartbeatConsumer {
   };
   EventFn on_event_;
   std::array<Slot, 128> slots_{};
+  std::array<std::uint8_t, kMaxConsumed> watched_{};  // the configured producers, for on_time
+  int watched_n_ = 0;
   std::uint64_t timeouts_ = 0;
 };
 
