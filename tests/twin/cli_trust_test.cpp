@@ -26,6 +26,11 @@ using omnitwin::testing::SmallTmpfs;
 
 nlohmann::json metrics_of(const fs::path& run_dir) { return nlohmann::json::parse(read_bytes(run_dir / "metrics.json")); }
 
+// A realtime CAN run keeps the scenario's bus (python-can's group and port, for anyone to
+// join); tests that run side by side under ctest -j take a free port each instead, or one
+// run's master keeps the other's supervision content.
+const char* const kOwnCanBus = "bus.transport=udp:239.74.163.2:0";
+
 // No file of the run directory is left under a temporary name only... unless named.
 std::vector<std::string> part_files(const fs::path& dir) {
   std::vector<std::string> parts;
@@ -124,9 +129,10 @@ TEST_F(CliTrust, ParallelCheckGivesTheVerdictsAndTrajectoriesOfASerialOne) {
 
 void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, double limit_s) {
   const fs::path out = dir_ / "rt";
-  Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", bus, "--clock", "realtime", "--no-video",
-           "--no-report", "--no-progress", "--out", out.string()},
-          work(), io());
+  std::vector<std::string> args{"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", bus, "--clock",
+                                "realtime", "--no-video", "--no-report", "--no-progress", "--out", out.string()};
+  if (bus == "can") args.insert(args.end(), {"--set", kOwnCanBus});
+  Child c(args, work(), io());
   const pid_t pid = master_pid(out, c);
   ASSERT_GT(pid, 0) << c.out() << c.err();
   std::this_thread::sleep_for(1500ms);
@@ -160,7 +166,7 @@ TEST_F(CliTrust, StoppedEthercatMasterInRealtimeEndsTheRunWithExit3) {
 TEST_F(CliTrust, ARecordedMasterLossLetsTheScenarioJudgeTheReaction) {
   const fs::path out = dir_ / "rec";
   Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "can", "--clock", "realtime",
-           "--set", "duration=4", "--set", "bus.supervision.on_master_loss=record", "--set",
+           "--set", kOwnCanBus, "--set", "duration=4", "--set", "bus.supervision.on_master_loss=record", "--set",
            "bus.supervision.silent_periods=20", "--no-video", "--no-report", "--no-progress", "--out", out.string()},
           work(), io());
   const pid_t pid = master_pid(out, c);
@@ -241,7 +247,7 @@ TEST_F(CliTrust, SigintWhileReportingGivesExit3) {
 TEST_F(CliTrust, SigintInACanRunLeavesRecordsThatOpen) {
   const fs::path out = dir_ / "can";
   Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "can", "--clock", "realtime",
-           "--no-video", "--no-report", "--no-progress", "--out", out.string()},
+           "--set", kOwnCanBus, "--no-video", "--no-report", "--no-progress", "--out", out.string()},
           work(), io());
   ASSERT_GT(master_pid(out, c), 0) << c.out() << c.err();
   std::this_thread::sleep_for(1000ms);
