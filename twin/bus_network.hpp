@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -91,6 +92,13 @@ class BusNetwork {
     h.tick = s.tick;
     return h;
   }
+
+  // A master on the virtual clock (twin/master_vtime.hpp): the earliest instant at which the
+  // network does something of its own between the run's events — a frame entering it,
+  // completing, or due back at the master [ns]; INT64_MAX when nothing is pending. Real-time safe.
+  virtual SimTime next_master_event() const { return std::numeric_limits<SimTime>::max(); }
+  // ... and puts on the transport the frames for the master that are due by t. Real-time safe.
+  virtual void release_due(SimTime /*t*/) {}
 
   // Runs the network to t [ns]. Real-time safe.
   virtual void advance(SimTime t) = 0;

@@ -76,7 +76,9 @@ OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
     sched_.cancel(timers_[static_cast<std::size_t>(i)]);
   }
   transport_ = can::open_transport(s.bus.can.transport);
-  batch_ = s.clock == ClockMode::lockstep;
+  // Lockstep batches the slaves' frames until omni-master's next grant; a master on the
+  // virtual clock gets each when it completes (the pacer runs the bus to that instant).
+  batch_ = s.clock == ClockMode::lockstep && !s.virtual_time_master();
   pending_.reserve(kPendingCapacity);
 }
 

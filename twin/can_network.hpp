@@ -69,6 +69,7 @@ class OmniCanNetwork final : public BusNetwork {
   // frames_to_transport() goes into a grant (the run calls it just before); nothing is
   // batched in realtime.
   void flush_transport() override;
+  SimTime next_master_event() const override { return bus_.next_event_ns(); }
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
   void advance(SimTime t) override;

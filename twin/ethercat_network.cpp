@@ -93,6 +93,8 @@ EthercatNetwork::~EthercatNetwork() = default;
 void EthercatNetwork::open_transport(const Scenario& s) {
   std::string spec = spec_.transport;
   const bool lockstep = s.clock == ClockMode::lockstep;
+  // Lockstep holds the replies: for omni-master until the next grant, for a master on the
+  // virtual clock until they are due back (release_due).
   batch_ = lockstep;
   // auto: veth as root, else UDP on loopback (lockstep: a free port; realtime: the documented one).
   LineTransport line = choose_line_transport(spec, spec_.master_iface, lockstep, "udp:127.0.0.1:34980");
@@ -200,6 +202,12 @@ void EthercatNetwork::flush_transport() {
   // Lockstep: everything that returned by now goes before the grant; a delayed reply that is
   // not back yet waits for a later grant (the master sees a lost frame meanwhile).
   release_replies(batch_ && delay_ns_ <= 0 ? std::numeric_limits<SimTime>::max() : sched_.now());
+}
+
+SimTime EthercatNetwork::next_master_event() const {
+  SimTime next = pending_count_ > 0 ? pending_[pending_head_].at : std::numeric_limits<SimTime>::max();
+  for (std::size_t i = 0; i < replies_count_; ++i) next = std::min(next, replies_[i].at);
+  return next;
 }
 
 void EthercatNetwork::advance(SimTime t) {

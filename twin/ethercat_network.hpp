@@ -65,6 +65,8 @@ class EthercatNetwork final : public BusNetwork {
   std::string close_pcap() override;
   std::string pcap_error() const override;
   void flush_transport() override;
+  SimTime next_master_event() const override;
+  void release_due(SimTime t) override { release_replies(t); }
 
   void advance(SimTime t) override;
   bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;

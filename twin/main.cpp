@@ -90,6 +90,7 @@ struct RunArgs {
   bool no_video = false;
   bool no_report = false;
   bool dds = false;
+  std::string master_cmd;        // --master-cmd "PROGRAM ARGS…"
 };
 
 // The run's outputs: the scenario's outputs section, overridden by the command line.
@@ -143,6 +144,15 @@ std::vector<Override> collect_overrides(const RunArgs& a) {
   std::vector<Override> o;
   if (!a.bus.empty()) o.push_back({"bus", a.bus});
   if (!a.clock.empty()) o.push_back({"clock", a.clock});
+  if (!a.master_cmd.empty()) {
+    // As a YAML double-quoted string, so that braces, colons and quotes stay text.
+    std::string quoted = "\"";
+    for (const char c : a.master_cmd) {
+      if (c == '"' || c == '\\') quoted += '\\';
+      quoted += c;
+    }
+    o.push_back({"master.command", quoted + "\""});
+  }
   for (const auto& s : a.sets) o.push_back(parse_override(s));
   return o;
 }
@@ -563,6 +573,10 @@ int main(int argc, char** argv) {
   run->add_option("--clock", ra.clock, "clock mode")->check(CLI::IsMember({"lockstep", "realtime"}));
   run->add_option("--set", ra.sets, "override a scenario key, e.g. --set controller.period=0.005")
       ->type_name("KEY=VALUE");
+  run->add_option("--master-cmd", ra.master_cmd,
+                  "run this master program instead of omni-master ({iface}, {out} are filled in); in lockstep "
+                  "it lives on the twin's virtual clock (libomnitwin_vtime.so)")
+      ->type_name("\"PROGRAM ARGS…\"");
   run->add_flag("--no-progress", ra.no_progress, "never draw the progress bar");
   add_output_flags(run, ra);
 

@@ -25,7 +25,7 @@ namespace omnitwin::twin {
 namespace fs = std::filesystem;
 
 MasterProcess::MasterProcess(const std::string& program, const std::vector<std::string>& args,
-                             const std::string& log_path) {
+                             const std::string& log_path, const std::vector<std::string>& env) {
   std::vector<std::string> argv_s{program};
   argv_s.insert(argv_s.end(), args.begin(), args.end());
   std::vector<char*> argv;
@@ -37,7 +37,22 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
   posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
   posix_spawn_file_actions_addopen(&fa, 1, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  const int rc = posix_spawn(&pid_, program.c_str(), &fa, nullptr, argv.data(), environ);
+  // The environment: ours, with `env`'s names replaced.
+  std::vector<std::string> env_s;
+  for (char** e = environ; *e; ++e) {
+    const std::string_view v(*e);
+    const std::string_view name = v.substr(0, v.find('='));
+    bool replaced = false;
+    for (const std::string& x : env) replaced = replaced || x.substr(0, x.find('=')) == name;
+    if (!replaced) env_s.emplace_back(v);
+  }
+  env_s.insert(env_s.end(), env.begin(), env.end());
+  std::vector<char*> envp;
+  for (std::string& e : env_s) envp.push_back(e.data());
+  envp.push_back(nullptr);
+  const int rc = program.find('/') == std::string::npos
+                     ? posix_spawnp(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data())
+                     : posix_spawn(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data());
   posix_spawn_file_actions_destroy(&fa);
   if (rc != 0) {
     pid_ = -1;

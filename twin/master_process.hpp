@@ -23,7 +23,10 @@ class MasterProcess {
  public:
   // Starts `program` with `args` (argv[1…]); stdout and stderr go to `log_path`. Throws
   // std::runtime_error when it cannot be started. Not real-time safe.
-  MasterProcess(const std::string& program, const std::vector<std::string>& args, const std::string& log_path);
+  // `env` adds or replaces NAME=VALUE entries of this process's environment for the child. A
+  // program named without a '/' is looked up on PATH.
+  MasterProcess(const std::string& program, const std::vector<std::string>& args, const std::string& log_path,
+                const std::vector<std::string>& env = {});
   ~MasterProcess();  // stops it if still running
   MasterProcess(const MasterProcess&) = delete;
   MasterProcess& operator=(const MasterProcess&) = delete;

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <fstream>
 #include <limits>
+#include <csignal>
 #include <sched.h>
 #include <unistd.h>
 #include <cmath>
@@ -30,6 +31,7 @@
 #include "twin/clock.hpp"
 #include "twin/expectations.hpp"
 #include "twin/master_process.hpp"
+#include "twin/master_vtime.hpp"
 #include "twin/metrics.hpp"
 #include "twin/progress.hpp"
 #include "twin/records.hpp"
@@ -145,6 +147,7 @@ class PlatformRun {
   // A bus network: the master process, the sim-clock tick, the master's report.
   bool on_bus() const { return net_ != nullptr; }
   void start_master();
+  void start_own_master(const std::string& dir);
   void stop_master();
   void on_master_bus(SimTime t);
   static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
@@ -209,6 +212,10 @@ class PlatformRun {
   // a bus network (`can`, `ethercat`)
   std::unique_ptr<BusNetwork> net_;
   std::unique_ptr<simclock::Server> clock_server_;
+  // a master of the user's own (master.command): on the virtual clock in lockstep
+  std::unique_ptr<VtimeServer> vtime_server_;
+  std::unique_ptr<VtimePacer> vtime_pacer_;
+  std::string master_command_;  // as run, {iface} and {out} substituted
   std::unique_ptr<MasterProcess> master_;
   std::string master_program_;
   simclock::MasterReport report_{};
@@ -293,6 +300,8 @@ void PlatformRun::start_master() {
   } else {
     write_text_atomic(cfg, master_config_yaml(s_));
   }
+  // A master of the user's own may read them too ({out}/master.yaml).
+  if (!s_.master.command.empty()) return start_own_master(dir.string());
   std::vector<std::string> args{"--bus", net_->name(), "--iface", net_->master_iface(), "--config", cfg};
   if (s_.bus.kind == BusKind::ethercat || s_.bus.kind == BusKind::m3 || s_.bus.kind == BusKind::canopen ||
       s_.bus.kind == BusKind::tml)
@@ -327,14 +336,63 @@ void PlatformRun::start_master() {
                                      lockstep ? "sim" : "wall"));
 }
 
+// A master the user brings: its command line with {iface} and {out} filled in, started under
+// the virtual-time library (lockstep) or plainly (realtime). Throws std::runtime_error when it
+// cannot start or, in lockstep, never joins the virtual clock.
+void PlatformRun::start_own_master(const std::string& dir) {
+  std::vector<std::string> words;
+  try {
+    words = split_command(s_.master.command);
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(fmt::format("master.command: {}", e.what()));
+  }
+  if (words.empty()) throw std::runtime_error("master.command: empty");
+  for (std::string& w : words) {
+    for (std::size_t at; (at = w.find("{iface}")) != std::string::npos;) w.replace(at, 7, net_->master_iface());
+    for (std::size_t at; (at = w.find("{out}")) != std::string::npos;) w.replace(at, 5, dir);
+  }
+  master_program_ = words[0];
+  for (const std::string& w : words) master_command_ += (master_command_.empty() ? "" : " ") + w;
+  const std::vector<std::string> args(words.begin() + 1, words.end());
+  const std::string log = (fs::path(dir) / ".master.log.part").string();
+  const bool vtime = s_.virtual_time_master();
+  if (!vtime) {
+    master_ = std::make_unique<MasterProcess>(master_program_, args, log);
+    log_event(0, "master", fmt::format("{} started (pid {}, clock wall)", master_command_, master_->pid()));
+    return;
+  }
+  if (const std::string why = preload_obstacle(master_program_); !why.empty())
+    throw std::runtime_error(fmt::format("master: {} is {}: it cannot run on the virtual clock (lockstep); run it "
+                                         "with --clock realtime, or set master.on_static: realtime",
+                                         master_program_, why));
+  vtime_server_ = std::make_unique<VtimeServer>();
+  master_ = std::make_unique<MasterProcess>(master_program_, args, log,
+                                            vtime_server_->environment(find_vtime_library(), net_->master_iface()));
+  share_cpu_with(master_->pid());  // the two take turns: a context switch, not a cross-CPU wake-up
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(std::llround(s_.master.watchdog * 1e3));
+  VtimeServer::Status st = VtimeServer::Status::timeout;
+  while (st == VtimeServer::Status::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
+    st = vtime_server_->accept(std::chrono::milliseconds(100), 0);
+  if (st != VtimeServer::Status::ok)
+    throw std::runtime_error(fmt::format("master: {} did not join the virtual clock ({}; {}; see master.log)",
+                                         master_program_, to_string(st), master_->describe_exit()));
+  log_event(0, "master", fmt::format("{} started (pid {}, clock virtual)", master_command_, master_->pid()));
+}
+
 void PlatformRun::stop_master() {
   if (!master_) return;
   if (clock_server_) clock_server_->end(sched_.now());
-  // The master exits on End (lockstep); in realtime it is told by SIGTERM.
+  if (vtime_server_) vtime_server_->end(vtime_pacer_ ? vtime_pacer_->master_now() : sched_.now());
+  // The master exits on End (lockstep); in realtime, and a master of the user's, by SIGTERM.
   // A master already found lost gets a short grace: the run's end is not kept waiting on it.
-  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 ? 300 : 3000);
+  const bool own = !s_.master.command.empty();
+  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 ? 300 : own ? std::llround(s_.master.stop_grace * 1e3) : 3000);
+  const bool was_running = master_->running();
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
+  if (own && was_running && master_->exit_code() == 128 + SIGKILL && error_.empty())
+    error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: killed", master_program_,
+                         s_.master.stop_grace);
   const fs::path dir(o_.out_dir);
   std::error_code ec;
   fs::rename(dir / ".master.log.part", dir / "master.log", ec);
@@ -347,9 +405,10 @@ void PlatformRun::stop_master() {
 void PlatformRun::on_master_bus(SimTime t) {
   pacer_->tick(t);
   net_->advance(t);
-  net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
+  if (!vtime_pacer_) net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
   net_->flush_pcap();  // once per tick: a kill loses at most one tick of capture
   if (std::string why = net_->pcap_error(); !why.empty()) return fail(why);  // a full disk
+  if (vtime_pacer_) return;  // the master's waits pace the run (VtimePacer)
   if (!clock_server_) return supervise_master(t);  // realtime: the master keeps its own time
   const auto timeout = std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
   simclock::Grant g;
@@ -424,7 +483,7 @@ void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
 
 void PlatformRun::on_physics_bus(SimTime t) {
   net_->advance(t);
-  if (!clock_server_) net_->poll_transport(t);  // realtime: frames as they come
+  if (!clock_server_ && !vtime_server_) net_->poll_transport(t);  // realtime: frames as they come
   sim_.step();
   ++physics_steps_;
   net_->observe_wheels();
@@ -638,11 +697,16 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"stopped_at_s", master_stop_ns_ < 0 ? -1.0 : ns_to_seconds(master_stop_ns_)},
                    {"path_origin_s", report_.path_origin_ns < 0 ? -1.0 : ns_to_seconds(report_.path_origin_ns)},
                    {"ticks", tick_},
-                   {"clock", clock_server_ ? "sim" : "wall"},
+                   {"clock", clock_server_ ? "sim" : vtime_server_ ? "virtual" : "wall"},
+                   {"command", master_command_},
                    {"exit", master_ ? master_->describe_exit() : "not started"},
                    {"lost", master_lost_ns_ >= 0},
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
                    {"lost_reason", master_lost_why_}};
+    if (vtime_pacer_)
+      m["master"]["virtual_time"] = {{"waits", vtime_server_->waits()}, {"wakes", vtime_pacer_->wakes()},
+                                     {"frame_wakes", vtime_pacer_->frame_wakes()},
+                                     {"now_s", ns_to_seconds(vtime_pacer_->master_now())}};
     // A master that keeps its own counters (bus ethercat) leaves them in master-stats.json.
     const fs::path stats = fs::path(o_.out_dir) / "master-stats.json";
     if (std::ifstream f(stats); f) {
@@ -698,6 +762,13 @@ RunResult PlatformRun::execute() {
     pacer_ = realtime.get();
     // A master on its own wall clock waits for its frames: answer them as they arrive.
     if (net_ && net_->wake_fd() >= 0) realtime->set_wake(net_->wake_fd(), [this](SimTime t) { net_->on_wake(t); });
+  } else if (vtime_server_) {
+    vtime_pacer_ = std::make_unique<VtimePacer>(
+        *vtime_server_, *net_, sched_, std::chrono::milliseconds(std::llround(s_.master.watchdog * 1e3)),
+        [this](std::string why) { fail(std::move(why)); },
+        [this] { return master_ ? (master_->running() ? std::string("still running") : master_->describe_exit())
+                                : std::string("not started"); });
+    pacer_ = vtime_pacer_.get();
   } else {
     pacer_ = &lockstep;
   }
@@ -827,7 +898,18 @@ Scenario with_lockstep_transport(const Scenario& s, bool external_master) {
 RunResult run_scenario(const Scenario& given, const RunOptions& options) {
   Scenario scenario;
   try {
-    scenario = with_lockstep_transport(given, options.external_master);
+    Scenario chosen = given;
+    // A static master cannot live on the virtual clock; asked to, it runs on the wall clock.
+    if (chosen.virtual_time_master() && chosen.master.on_static == MasterSpec::OnStatic::realtime) {
+      const std::vector<std::string> words = split_command(chosen.master.command);
+      if (!words.empty() && preload_obstacle(words[0]).starts_with("statically")) {
+        spdlog::warn("master: {} is statically linked: it runs on the wall clock (master.on_static: realtime)", words[0]);
+        chosen.clock = ClockMode::realtime;
+      }
+    }
+    scenario = with_lockstep_transport(chosen, options.external_master);
+  } catch (const std::invalid_argument& e) {
+    throw RunSetupError(fmt::format("master.command: {}", e.what()));
   } catch (const can::TransportError& e) {
     throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
   }

@@ -776,12 +776,28 @@ OutputsSpec read_outputs(const YamlField& f, double control_period) {
   return o;
 }
 
+// master: a program the user brings instead of omni-master (bus ethercat or can).
+MasterSpec read_master(const YamlField& f, const BusSpec& bus) {
+  MasterSpec m;
+  if (!f.exists()) return m;
+  f.allow_keys({"command", "on_static", "watchdog", "stop_grace"});
+  if (f["command"].exists()) m.command = f["command"].string();
+  if (!m.command.empty() && bus.kind != BusKind::ethercat && bus.kind != BusKind::can)
+    f["command"].fail("a master program of your own runs on bus ethercat or can");
+  if (f["on_static"].exists())
+    m.on_static = f["on_static"].choice({"fail", "realtime"}) == "realtime" ? MasterSpec::OnStatic::realtime
+                                                                           : MasterSpec::OnStatic::fail;
+  read_number(f, "watchdog", m.watchdog, Bounds::positive());
+  read_number(f, "stop_grace", m.stop_grace, Bounds::positive());
+  return m;
+}
+
 // ---------------------------------------------------------------------------------------
 // The whole scenario
 
 Scenario read_scenario(const YamlField& root, const std::string& file) {
   root.allow_keys({"name", "description", "platform", "bus", "clock", "controller", "path",
-                   "settle", "duration", "faults", "expect", "outputs"});
+                   "settle", "duration", "faults", "expect", "outputs", "master"});
   Scenario s;
   s.file = file;
   s.name = root["name"].exists() ? root["name"].string() : fs::path(file).stem().string();
@@ -816,6 +832,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   }
   for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
   s.outputs = read_outputs(root["outputs"], s.controller.period);
+  s.master = read_master(root["master"], s.bus);
   return s;
 }
 

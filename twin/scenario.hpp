@@ -277,6 +277,18 @@ struct OutputsSpec {
   bool report = true;
 };
 
+// A master program the user brings (`master:`, or `omnitwin run --master-cmd`): it replaces
+// omni-master. In lockstep it runs under the virtual-time library (twin/master_vtime.hpp,
+// docs/protocols/vtime.md); in realtime it runs plainly on the wall clock.
+struct MasterSpec {
+  std::string command;   // "PROGRAM ARGS…" with {iface} and {out} substituted; "" = omni-master
+  // A statically linked program cannot load the library: fail the run (exit 3), or, when
+  // asked, run it on the wall clock (realtime) instead.
+  enum class OnStatic { fail, realtime } on_static = OnStatic::fail;
+  double watchdog = 10;   // wall seconds the master may take between two waits (lockstep) [s]
+  double stop_grace = 3;  // wall seconds between SIGTERM and SIGKILL at the end [s]
+};
+
 struct Scenario {
   std::string name;            // default: the file's stem
   std::string description;
@@ -292,6 +304,9 @@ struct Scenario {
   std::vector<FaultSpec> faults;
   std::vector<Expectation> expectations;
   OutputsSpec outputs;
+  MasterSpec master;
+  // Lockstep with a master we did not write: it lives on the virtual clock.
+  bool virtual_time_master() const { return !master.command.empty() && clock == ClockMode::lockstep; }
 };
 
 // "key=value" overrides from the command line, applied to the YAML tree before

@@ -1,0 +1,362 @@
+// twin layer — the twin's end of the virtual-time channel and its pacer; see master_vtime.hpp.
+#include "twin/master_vtime.hpp"
+
+#include <elf.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+#include <fmt/format.h>
+
+#include "twin/bus_network.hpp"
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+using vtime::Record;
+using vtime::Type;
+
+namespace {
+
+std::int64_t wall_ms_left(std::chrono::steady_clock::time_point deadline) {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()).count();
+}
+
+// One record from `fd` within the deadline; closed on end of stream, protocol on garbage.
+VtimeServer::Status read_record(int fd, Record& r, std::chrono::steady_clock::time_point deadline) {
+  for (;;) {
+    pollfd p{fd, POLLIN, 0};
+    const std::int64_t left = wall_ms_left(deadline);
+    if (left < 0) return VtimeServer::Status::timeout;
+    const int pr = ::poll(&p, 1, static_cast<int>(left));
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr == 0) return VtimeServer::Status::timeout;
+    std::uint8_t b[vtime::kRecordSize + 1];
+    const ssize_t n = ::recv(fd, b, sizeof b, MSG_DONTWAIT);
+    if (n < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+    if (n <= 0) return VtimeServer::Status::closed;
+    const auto rec = vtime::decode(b, static_cast<std::size_t>(n));
+    if (!rec) return VtimeServer::Status::protocol;
+    r = *rec;
+    return VtimeServer::Status::ok;
+  }
+}
+
+}  // namespace
+
+const char* to_string(VtimeServer::Status s) {
+  switch (s) {
+    case VtimeServer::Status::ok: return "ok";
+    case VtimeServer::Status::timeout: return "timeout";
+    case VtimeServer::Status::closed: return "closed";
+    case VtimeServer::Status::protocol: return "protocol error";
+    case VtimeServer::Status::second_process: return "a second process";
+  }
+  return "?";
+}
+
+VtimeServer::VtimeServer() {
+  static std::atomic<int> serial{0};
+  name_ = fmt::format("@omnitwin-vtime-{}-{}", ::getpid(), serial++);
+  listen_fd_ = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+  if (listen_fd_ < 0) throw std::runtime_error(fmt::format("vtime channel: socket: {}", std::strerror(errno)));
+  sockaddr_un a{};
+  a.sun_family = AF_UNIX;
+  std::memcpy(a.sun_path, name_.data(), name_.size());
+  a.sun_path[0] = '\0';  // abstract: no file, nothing to clean up, no /tmp needed
+  const auto len = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + name_.size());
+  if (::bind(listen_fd_, reinterpret_cast<sockaddr*>(&a), len) != 0 || ::listen(listen_fd_, 4) != 0) {
+    const std::string why = std::strerror(errno);
+    ::close(listen_fd_);
+    throw std::runtime_error(fmt::format("vtime channel: cannot listen on {}: {}", name_, why));
+  }
+}
+
+VtimeServer::~VtimeServer() {
+  if (conn_fd_ >= 0) ::close(conn_fd_);
+  if (listen_fd_ >= 0) ::close(listen_fd_);
+}
+
+std::vector<std::string> VtimeServer::environment(const std::string& library, const std::string& bus) const {
+  return {"LD_PRELOAD=" + library, fmt::format("{}={}", vtime::kEnvChannel, name_),
+          fmt::format("{}={}", vtime::kEnvBus, bus), fmt::format("{}=1767225600", vtime::kEnvEpoch)};
+}
+
+bool VtimeServer::send(const Record& r) {
+  const auto b = vtime::encode(r);
+  return conn_fd_ >= 0 && ::send(conn_fd_, b.data(), b.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(b.size());
+}
+
+// A connection waiting on the listening socket: the master (first, or the same pid after an
+// exec) is welcomed; anyone else is refused.
+VtimeServer::Status VtimeServer::take_connection(SimTime now, bool first) {
+  const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
+  if (fd < 0) return Status::timeout;
+  Record h;
+  const Status st = read_record(fd, h, std::chrono::steady_clock::now() + std::chrono::seconds(5));
+  if (st != Status::ok || h.type != Type::hello) {
+    ::close(fd);
+    return st == Status::ok ? Status::protocol : st;
+  }
+  const auto pid = static_cast<pid_t>(h.pid);
+  if (!first && (pid != pid_ || conn_fd_ >= 0)) {
+    Record no;
+    no.type = Type::refuse;
+    no.code = 1;
+    const auto b = vtime::encode(no);
+    (void)!::send(fd, b.data(), b.size(), MSG_NOSIGNAL);
+    ::close(fd);
+    other_pid_ = pid;
+    return Status::second_process;
+  }
+  if (conn_fd_ >= 0) ::close(conn_fd_);
+  conn_fd_ = fd;
+  pid_ = pid;
+  Record w;
+  w.type = Type::welcome;
+  w.now = now;
+  return send(w) ? Status::ok : Status::closed;
+}
+
+VtimeServer::Status VtimeServer::accept(std::chrono::milliseconds timeout, SimTime now) {
+  pollfd p{listen_fd_, POLLIN, 0};
+  const int pr = ::poll(&p, 1, static_cast<int>(timeout.count()));
+  if (pr <= 0) return Status::timeout;
+  return take_connection(now, true);
+}
+
+VtimeServer::Status VtimeServer::next_wait(Record& w, std::chrono::milliseconds timeout, SimTime now) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    pollfd p[2] = {{conn_fd_, POLLIN, 0}, {listen_fd_, POLLIN, 0}};
+    const std::int64_t left = wall_ms_left(deadline);
+    if (left < 0) return Status::timeout;
+    const int pr = ::poll(p, 2, static_cast<int>(left));
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr == 0) return Status::timeout;
+    if (p[1].revents & POLLIN) {
+      const Status st = take_connection(now, false);
+      if (st == Status::second_process) return st;
+      continue;
+    }
+    if (conn_fd_ < 0) continue;  // between an exec's close and its new connection
+    const Status st = read_record(conn_fd_, w, deadline);
+    if (st == Status::closed) {
+      // The process ended, or exec()ed: its new image connects again within the watchdog.
+      ::close(conn_fd_);
+      conn_fd_ = -1;
+      pollfd l{listen_fd_, POLLIN, 0};
+      if (::poll(&l, 1, 200) <= 0) return Status::closed;
+      continue;
+    }
+    if (st != Status::ok) return st;
+    if (w.type != Type::wait) return Status::protocol;
+    ++waits_;
+    return Status::ok;
+  }
+}
+
+bool VtimeServer::wake(std::uint64_t seq, SimTime now, std::uint64_t frames) {
+  Record r;
+  r.type = Type::wake;
+  r.seq = seq;
+  r.now = now;
+  r.frames = frames;
+  return send(r);
+}
+
+void VtimeServer::end(SimTime now) {
+  Record r;
+  r.type = Type::end;
+  r.now = now;
+  send(r);
+}
+
+// ---- the pacer ----------------------------------------------------------------------------
+
+VtimePacer::VtimePacer(VtimeServer& server, BusNetwork& net, Scheduler& sched, std::chrono::milliseconds watchdog,
+                       std::function<void(std::string)> fail, std::function<std::string()> master_status)
+    : server_(server),
+      net_(net),
+      sched_(sched),
+      watchdog_(watchdog),
+      fail_(std::move(fail)),
+      master_status_(std::move(master_status)) {}
+
+void VtimePacer::failure(std::string why) {
+  failed_ = true;
+  fail_(std::move(why));
+}
+
+// The master's next wait: its frames enter the network at the wait's instant.
+bool VtimePacer::take_wait() {
+  const VtimeServer::Status st = server_.next_wait(wait_, watchdog_, now_);
+  if (st != VtimeServer::Status::ok) {
+    if (st == VtimeServer::Status::second_process)
+      failure(fmt::format("master: a second process (pid {}) started under the virtual clock: it serves one "
+                          "process (a master that forks or runs other programs needs --clock realtime)",
+                          server_.other_pid()));
+    else if (st == VtimeServer::Status::timeout)
+      failure(fmt::format("master: it neither waited nor ended for {:.0f} s of wall time at t = {:.6f} s (a loop "
+                          "without any clock read, sleep, poll or receive the virtual clock sees?); {}",
+                          watchdog_.count() / 1e3, ns_to_seconds(now_), master_status_()));
+    else
+      failure(fmt::format("master: it left the virtual clock at t = {:.6f} s ({}; {})", ns_to_seconds(now_),
+                          to_string(st), master_status_()));
+    return false;
+  }
+  if (wait_.now != now_) {
+    failure(fmt::format("master: a wait at {} ns while the clock is at {} ns", wait_.now, now_));
+    return false;
+  }
+  if (!net_.drain_transport(wait_.frames, now_, watchdog_)) {
+    failure(fmt::format("master: said {} frames sent, {} arrived on {}", wait_.frames, net_.frames_from_transport(),
+                        net_.master_iface()));
+    return false;
+  }
+  have_wait_ = true;
+  delivered_at_wait_ = net_.frames_to_transport();
+  return true;
+}
+
+bool VtimePacer::wake_at(SimTime t) {
+  now_ = t;
+  have_wait_ = false;
+  ++wakes_;
+  if (!server_.wake(wait_.seq, now_, net_.frames_to_transport())) {
+    failure(fmt::format("master: gone at t = {:.6f} s ({})", ns_to_seconds(now_), master_status_()));
+    return false;
+  }
+  return true;
+}
+
+void VtimePacer::wait_until(SimTime t) {
+  while (!failed_) {
+    if (!have_wait_) {
+      if (!take_wait()) break;
+      continue;
+    }
+    const SimTime deadline = std::max(wait_.deadline, now_);
+    // A frame the last instant's events put on the master's transport wakes it then.
+    if (wait_.wake_on_frame && net_.frames_to_transport() != delivered_at_wait_) {
+      ++frame_wakes_;
+      if (!wake_at(std::max(sched_.now(), now_))) break;
+      continue;
+    }
+    // The network's own next step (a frame entering, completing or due back) before t and
+    // before the deadline: run it, and wake the master if it put a frame on its transport.
+    const SimTime x = std::max(net_.next_master_event(), now_);
+    if (x <= t && x <= deadline) {
+      net_.advance(x);
+      net_.release_due(x);
+      if (wait_.wake_on_frame && net_.frames_to_transport() != delivered_at_wait_) {
+        ++frame_wakes_;
+        if (!wake_at(x)) break;
+        continue;
+      }
+      if (std::max(net_.next_master_event(), now_) > x) continue;  // else: nothing more there
+    }
+    if (deadline <= t) {
+      net_.advance(deadline);
+      net_.release_due(deadline);
+      if (!wake_at(deadline)) break;
+      continue;
+    }
+    return;  // instant t comes first
+  }
+  if (failed_) sched_.stop();
+}
+
+// ---- finding things -------------------------------------------------------------------------
+
+std::string find_vtime_library() {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  const fs::path dir = ec ? fs::current_path() : self.parent_path();
+  for (const fs::path& p : {dir / "vtime" / "libomnitwin_vtime.so", dir / "libomnitwin_vtime.so",
+                            dir / ".." / "lib" / "libomnitwin_vtime.so",
+                            fs::path(OMNITWIN_BINARY_DIR) / "twin" / "vtime" / "libomnitwin_vtime.so"}) {
+    if (access(p.c_str(), R_OK) == 0) return fs::absolute(p).lexically_normal().string();
+  }
+  throw std::runtime_error(fmt::format("libomnitwin_vtime.so was not found beside {} (build target omnitwin_vtime)",
+                                       dir.string()));
+}
+
+std::string preload_obstacle(const std::string& program) {
+  std::string path = program;
+  if (program.find('/') == std::string::npos) {
+    path.clear();
+    const char* env = std::getenv("PATH");
+    std::string dirs = env ? env : "/usr/bin:/bin";
+    for (std::size_t b = 0; b <= dirs.size();) {
+      const std::size_t e = std::min(dirs.find(':', b), dirs.size());
+      const fs::path p = fs::path(dirs.substr(b, e - b)) / program;
+      if (access(p.c_str(), X_OK) == 0) {
+        path = p.string();
+        break;
+      }
+      b = e + 1;
+    }
+    if (path.empty()) return "not found on PATH";
+  }
+  if (access(path.c_str(), X_OK) != 0) return "not an executable file";
+  std::ifstream f(path, std::ios::binary);
+  Elf64_Ehdr eh{};
+  if (!f.read(reinterpret_cast<char*>(&eh), sizeof eh) || std::memcmp(eh.e_ident, ELFMAG, SELFMAG) != 0)
+    return "not an ELF program (a script? name its interpreter's program, or the binary itself)";
+  if (eh.e_ident[EI_CLASS] != ELFCLASS64) return "not a 64-bit ELF program";
+  for (int i = 0; i < eh.e_phnum; ++i) {
+    Elf64_Phdr ph{};
+    f.seekg(static_cast<std::streamoff>(eh.e_phoff + static_cast<std::uint64_t>(i) * eh.e_phentsize));
+    if (!f.read(reinterpret_cast<char*>(&ph), sizeof ph)) break;
+    if (ph.p_type == PT_INTERP) return "";
+  }
+  return "statically linked (LD_PRELOAD cannot reach it)";
+}
+
+std::vector<std::string> split_command(const std::string& command) {
+  std::vector<std::string> words;
+  std::string cur;
+  bool in_word = false;
+  char quote = 0;
+  for (std::size_t i = 0; i < command.size(); ++i) {
+    const char c = command[i];
+    if (quote == '\'') {
+      if (c == '\'') quote = 0; else cur += c;
+      continue;
+    }
+    if (quote == '"') {
+      if (c == '"') quote = 0;
+      else if (c == '\\' && i + 1 < command.size() && std::strchr("\"\\$`", command[i + 1])) cur += command[++i];
+      else cur += c;
+      continue;
+    }
+    if (c == '\'' || c == '"') {
+      quote = c;
+      in_word = true;
+    } else if (c == '\\' && i + 1 < command.size()) {
+      cur += command[++i];
+      in_word = true;
+    } else if (c == ' ' || c == '\t' || c == '\n') {
+      if (in_word) words.push_back(cur);
+      cur.clear();
+      in_word = false;
+    } else {
+      cur += c;
+      in_word = true;
+    }
+  }
+  if (quote) throw std::invalid_argument("an unbalanced quote in the master command");
+  if (in_word) words.push_back(cur);
+  return words;
+}
+
+}  // namespace omnitwin::twin

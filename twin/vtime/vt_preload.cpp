@@ -1,0 +1,1198 @@
+// twin layer — libomnitwin_vtime.so: the twin's simulated clock inside a master program we did
+// not write (LD_PRELOAD). docs/protocols/vtime.md is the reference; in short:
+//
+//  - Clock reads (clock_gettime on the monotonic, boot and realtime clocks, gettimeofday, time,
+//    timespec_get) answer simulated time: monotonic = 1000 s + t, realtime = EPOCH + t.
+//  - Every wait (sleeps, poll/select/epoll, blocking receives, timerfds, condition variables,
+//    pthread_join) becomes a wait on the twin. Simulated time moves only when every thread of
+//    the process waits: then the last thread to wait (the leader) sends Wait{earliest deadline,
+//    wake on a frame?, bus frames sent} and the twin runs to the earlier of that deadline and
+//    the next frame reaching the master's socket, and answers Wake{now}. The leader then wakes
+//    every waiter whose deadline passed, whose descriptors became ready, or that was signalled.
+//  - Busy polling: a thread that makes kSpinLimit calls in a row that neither wait nor find
+//    anything (clock reads, empty non-blocking receives, zero-timeout polls) waits one quantum
+//    (1 µs) of simulated time, woken early by a frame. So a spinning master advances, and
+//    deterministically: the count of its own calls decides, never the wall clock.
+//  - Every wait on the twin has a wall-clock watchdog (OMNITWIN_VTIME_WATCHDOG, default 60 s).
+//  - After the twin's End (or if the twin disappears) time continues on the wall clock from
+//    where it stopped and every call goes to the kernel.
+// Without OMNITWIN_VTIME in the environment the library passes every call straight through.
+//
+// Shape: one process-wide state under one mutex; waiters live on their threads' stacks in a
+// list. The real functions come from dlsym(RTLD_NEXT); the library never calls an intercepted
+// name for its own work. Written without exceptions or iostreams: it runs inside foreign code.
+#include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/select.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <sys/time.h>
+#include <sys/timerfd.h>
+#include <sys/un.h>
+#include <netinet/in.h>
+#include <netinet/udp.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <cstdint>
+
+#include "twin/vtime/vt_protocol.hpp"
+
+#ifndef UDP_SEGMENT
+#define UDP_SEGMENT 103
+#endif
+
+namespace {
+
+using ns_t = std::int64_t;
+namespace vt = omnitwin::vtime;
+
+constexpr ns_t kNs = 1'000'000'000;
+constexpr ns_t kMonoBase = 1000 * kNs;     // CLOCK_MONOTONIC at t = 0 (a machine up 1000 s)
+constexpr ns_t kQuantum = 1000;            // the busy-poll rule's step [ns]
+constexpr int kSpinLimit = 64;             // calls in a row that find nothing before a quantum passes
+constexpr ns_t kGraceNs = 20'000'000;      // how long a woken reader waits for the kernel to deliver [wall ns]
+constexpr int kMaxFd = 4096;               // timerfd table
+
+// ---- the real functions ----------------------------------------------------------------
+template <class F>
+F real(const char* name) {
+  return reinterpret_cast<F>(dlsym(RTLD_NEXT, name));
+}
+#define REAL(name) static auto real_##name = real<decltype(&::name)>(#name)
+
+using cond_wait_fn = int (*)(pthread_cond_t*, pthread_mutex_t*);
+using cond_timedwait_fn = int (*)(pthread_cond_t*, pthread_mutex_t*, const timespec*);
+using cond_signal_fn = int (*)(pthread_cond_t*);
+
+// The library's own condition variable goes to glibc directly: the names are intercepted below.
+void cv_broadcast(pthread_cond_t* c) {
+  static auto f = real<cond_signal_fn>("pthread_cond_broadcast");
+  f(c);
+}
+int cv_timedwait(pthread_cond_t* c, pthread_mutex_t* m, const timespec* until) {
+  static auto f = real<cond_timedwait_fn>("pthread_cond_timedwait");
+  return f(c, m, until);
+}
+
+ns_t ts_ns(const timespec& t) { return static_cast<ns_t>(t.tv_sec) * kNs + t.tv_nsec; }
+timespec ns_ts(ns_t v) {
+  timespec t;
+  t.tv_sec = static_cast<time_t>(v / kNs);
+  t.tv_nsec = static_cast<long>(v % kNs);
+  if (t.tv_nsec < 0) {
+    t.tv_nsec += kNs;
+    --t.tv_sec;
+  }
+  return t;
+}
+ns_t wall_ns() {
+  timespec t;
+  syscall(SYS_clock_gettime, CLOCK_MONOTONIC, &t);
+  return ts_ns(t);
+}
+ns_t add_sat(ns_t a, ns_t b) { return (b > 0 && a > vt::kNever - b) ? vt::kNever : a + b; }
+
+void say(const char* fmt, ...) {
+  char buf[512];
+  va_list ap;
+  va_start(ap, fmt);
+  int n = vsnprintf(buf, sizeof buf, fmt, ap);
+  va_end(ap);
+  if (n < 0) return;
+  if (n > static_cast<int>(sizeof buf) - 1) n = sizeof buf - 1;
+  ssize_t w = syscall(SYS_write, 2, buf, static_cast<size_t>(n));
+  (void)w;
+}
+
+// ---- state ----------------------------------------------------------------------------------
+struct Waiter {
+  ns_t deadline = vt::kNever;
+  pollfd* fds = nullptr;      // descriptors whose readiness ends the wait
+  nfds_t nfds = 0;
+  bool any_frame = false;     // a frame reaching the master ends the wait (busy-poll quantum)
+  const void* cond = nullptr; // a condition variable's signal ends the wait
+  pthread_t join = 0;         // this thread's end ends the wait
+  bool joining = false;
+  bool satisfied = false;
+  bool timed_out = false;
+  Waiter* next = nullptr;
+};
+
+struct Timer {  // a timerfd, simulated: an eventfd the leader writes expirations into
+  bool used = false;
+  ns_t expiry = vt::kNever;  // simulated time [ns]
+  ns_t interval = 0;
+};
+
+struct Exited {
+  pthread_t id;
+  Exited* next;
+};
+
+struct State {
+  pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+  pthread_cond_t cv = PTHREAD_COND_INITIALIZER;  // waiters wait here (monotonic clock, for the watchdog)
+  bool active = false;   // connected and the run not over
+  bool ended = false;    // End received (or the twin gone): wall time from end_now on
+  int fd = -1;
+  ns_t now = 0;          // simulated time [ns]
+  ns_t epoch = 1767225600LL * kNs;  // CLOCK_REALTIME at t = 0: 2026-01-01T00:00:00Z
+  ns_t end_now = 0, end_wall = 0;
+  ns_t watchdog = 60 * kNs;
+  std::uint64_t sent = 0;       // bus frames the master sent
+  std::uint64_t delivered = 0;  // frames the twin put on the master's transport
+  std::uint64_t seq = 0;
+  int running = 1;              // threads not waiting (the main thread to begin with)
+  bool leading = false;
+  std::uint64_t generation = 0;
+  Waiter* waiters = nullptr;
+  Exited* exited = nullptr;
+  Timer timers[kMaxFd];
+  bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
+  int bus_port = -1;            // udp:HOST:PORT : datagrams to PORT carry the bus
+  std::uint64_t late = 0;       // wakes where the kernel had not yet delivered the frame
+};
+constinit State g;  // constant-initialised: ready before any constructor runs
+constinit thread_local int t_spin = 0;
+constinit thread_local bool t_inside = false;  // the library's own calls on this thread
+
+struct Lock {
+  Lock() { pthread_mutex_lock(&g.mu); }
+  ~Lock() { pthread_mutex_unlock(&g.mu); }
+};
+
+bool on() { return g.active && !g.ended && !t_inside; }
+// Clock reads stay on the simulated clock's time line after the end too (continued on the wall).
+bool clocked() { return g.active && !t_inside; }
+
+// Simulated now on the monotonic base (or the wall clock's continuation after the end).
+ns_t now_locked() {
+  if (g.ended) return g.end_now + (wall_ns() - g.end_wall);
+  return g.now;
+}
+
+// ---- the channel ----------------------------------------------------------------------------
+bool send_record(const vt::Record& r) {
+  const auto b = vt::encode(r);
+  return syscall(SYS_sendto, g.fd, b.data(), b.size(), MSG_NOSIGNAL, nullptr, 0) == static_cast<long>(b.size());
+}
+
+// Receives one record within the watchdog; false when the channel closed or nothing came.
+bool recv_record(vt::Record& r, ns_t limit_ns) {
+  std::uint8_t b[vt::kRecordSize + 1];
+  const ns_t until = wall_ns() + limit_ns;
+  for (;;) {
+    pollfd p{g.fd, POLLIN, 0};
+    const ns_t left = until - wall_ns();
+    if (left <= 0) return false;
+    timespec ts = ns_ts(left);
+    const long pr = syscall(SYS_ppoll, &p, 1, &ts, nullptr, 8);
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr <= 0) return false;
+    const long n = syscall(SYS_recvfrom, g.fd, b, sizeof b, MSG_DONTWAIT, nullptr, nullptr);
+    if (n < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+    if (n <= 0) return false;
+    const auto rec = vt::decode(b, static_cast<std::size_t>(n));
+    if (!rec) return false;
+    r = *rec;
+    return true;
+  }
+}
+
+void go_wall(ns_t at) {
+  g.ended = true;
+  g.end_now = at;
+  g.end_wall = wall_ns();
+  cv_broadcast(&g.cv);
+}
+
+void connect_channel() {
+  const char* name = getenv(vt::kEnvChannel);
+  if (!name || !*name) return;
+  if (const char* e = getenv(vt::kEnvEpoch)) g.epoch = static_cast<ns_t>(atoll(e)) * kNs;
+  if (const char* w = getenv(vt::kEnvWatchdog)) g.watchdog = static_cast<ns_t>(atof(w) * 1e9);
+  if (const char* b = getenv(vt::kEnvBus)) {
+    if (strncmp(b, "raw:", 4) == 0) g.bus_raw = true;
+    if (strncmp(b, "udp:", 4) == 0) {
+      const char* colon = strrchr(b, ':');
+      if (colon && colon > b + 3) g.bus_port = atoi(colon + 1);
+    }
+  }
+  const int fd = static_cast<int>(syscall(SYS_socket, AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0));
+  if (fd < 0) return;
+  sockaddr_un a{};
+  a.sun_family = AF_UNIX;
+  const size_t len = strnlen(name, sizeof a.sun_path - 1);
+  memcpy(a.sun_path, name, len);
+  if (a.sun_path[0] == '@') a.sun_path[0] = '\0';  // abstract namespace
+  const socklen_t alen = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + len);
+  if (syscall(SYS_connect, fd, reinterpret_cast<sockaddr*>(&a), alen) != 0) {
+    say("omnitwin-vtime: cannot reach the twin at %s (%s): this process runs on the wall clock\n", name, strerror(errno));
+    syscall(SYS_close, fd);
+    return;
+  }
+  g.fd = fd;
+  vt::Record h;
+  h.type = vt::Type::hello;
+  h.pid = static_cast<std::uint32_t>(getpid());
+  h.ppid = static_cast<std::uint32_t>(getppid());
+  vt::Record w;
+  if (!send_record(h) || !recv_record(w, g.watchdog)) {
+    say("omnitwin-vtime: the twin did not welcome process %d: it runs on the wall clock\n", getpid());
+    return;
+  }
+  if (w.type == vt::Type::refuse) {
+    say("omnitwin-vtime: the twin refused process %d (only one process lives on the simulated clock): exiting\n", getpid());
+    syscall(SYS_exit_group, 3);
+  }
+  if (w.type != vt::Type::welcome) return;
+  g.now = w.now;
+  g.active = true;
+}
+
+void after_fork_child() {
+  // A second process cannot share the first one's clock: say so to the twin, which ends the run.
+  if (g.fd >= 0) syscall(SYS_close, g.fd);
+  g.fd = -1;
+  g.active = false;
+  g.running = 1;
+  g.waiters = nullptr;
+  g.leading = false;
+  pthread_mutex_t fresh = PTHREAD_MUTEX_INITIALIZER;
+  g.mu = fresh;
+  connect_channel();
+}
+
+__attribute__((constructor)) void vt_init() {
+  pthread_condattr_t a;
+  pthread_condattr_init(&a);
+  pthread_condattr_setclock(&a, CLOCK_MONOTONIC);
+  pthread_cond_init(&g.cv, &a);
+  connect_channel();
+  if (g.active) pthread_atfork(nullptr, nullptr, after_fork_child);
+}
+
+// ---- waiting --------------------------------------------------------------------------------
+bool has_socket(const Waiter& w) {
+  for (nfds_t i = 0; i < w.nfds; ++i) {
+    struct stat st;
+    if (w.fds[i].fd >= 0 && fstat(w.fds[i].fd, &st) == 0 && (S_ISSOCK(st.st_mode) || st.st_mode == 0)) return true;
+  }
+  return false;
+}
+
+bool fds_ready(const Waiter& w, ns_t grace_ns) {
+  if (w.nfds == 0) return false;
+  pollfd copy[64];
+  const nfds_t n = w.nfds < 64 ? w.nfds : 64;
+  for (nfds_t i = 0; i < n; ++i) copy[i] = {w.fds[i].fd, static_cast<short>(w.fds[i].events), 0};
+  timespec ts = ns_ts(grace_ns);
+  return syscall(SYS_ppoll, copy, n, &ts, nullptr, 8) > 0;
+}
+
+// Simulated timerfds that expired by now: their eventfds count the expirations.
+void fire_timers() {
+  for (int fd = 0; fd < kMaxFd; ++fd) {
+    Timer& t = g.timers[fd];
+    if (!t.used || t.expiry > g.now) continue;
+    std::uint64_t n = 1;
+    if (t.interval > 0) {
+      n += static_cast<std::uint64_t>((g.now - t.expiry) / t.interval);
+      t.expiry += static_cast<ns_t>(n) * t.interval;
+    } else {
+      t.expiry = vt::kNever;
+    }
+    ssize_t w = syscall(SYS_write, fd, &n, sizeof n);
+    (void)w;
+  }
+}
+
+ns_t earliest_timer() {
+  ns_t e = vt::kNever;
+  for (int fd = 0; fd < kMaxFd; ++fd)
+    if (g.timers[fd].used && g.timers[fd].expiry < e) e = g.timers[fd].expiry;
+  return e;
+}
+
+void satisfy(Waiter* w) {
+  w->satisfied = true;
+  ++g.running;
+}
+
+// The leader's turn (lock held, every thread waiting): one Wait/Wake with the twin, then the
+// waiters it ends. Returns false when the twin is gone (time then runs on the wall clock).
+bool lead() {
+  ns_t deadline = earliest_timer();
+  bool frame = false;
+  for (Waiter* w = g.waiters; w; w = w->next) {
+    if (w->deadline < deadline) deadline = w->deadline;
+    frame = frame || w->nfds > 0 || w->any_frame;
+  }
+  vt::Record r;
+  r.type = vt::Type::wait;
+  r.seq = ++g.seq;
+  r.now = g.now;
+  r.deadline = deadline < g.now ? g.now : deadline;
+  r.frames = g.sent;
+  r.wake_on_frame = frame ? 1 : 0;
+  g.leading = true;
+  pthread_mutex_unlock(&g.mu);
+  vt::Record a;
+  t_inside = true;
+  const bool ok = send_record(r) && recv_record(a, g.watchdog);
+  t_inside = false;
+  pthread_mutex_lock(&g.mu);
+  g.leading = false;
+  if (!ok || a.type == vt::Type::end || a.type != vt::Type::wake || a.seq != r.seq) {
+    if (!ok) say("omnitwin-vtime: no answer from the twin within %.0f s: continuing on the wall clock\n", g.watchdog * 1e-9);
+    go_wall(ok ? a.now : g.now);
+    return false;
+  }
+  const bool new_frames = a.frames != g.delivered;
+  g.now = a.now;
+  g.delivered = a.frames;
+  fire_timers();
+  for (Waiter* w = g.waiters; w; w = w->next) {
+    if (w->satisfied) continue;
+    if (w->deadline <= g.now) {
+      w->timed_out = true;
+      satisfy(w);
+    } else if (w->any_frame && new_frames) {
+      satisfy(w);
+    } else if (w->nfds > 0 && fds_ready(*w, 0)) {
+      satisfy(w);
+    } else if (w->nfds > 0 && new_frames && has_socket(*w) && fds_ready(*w, kGraceNs)) {
+      ++g.late;  // the kernel was still delivering the frame
+      satisfy(w);
+    }
+  }
+  ++g.generation;
+  cv_broadcast(&g.cv);
+  return true;
+}
+
+// Blocks the calling thread until `w` is satisfied (lock held on entry and exit). Returns
+// false when the run ended meanwhile (the caller then does the real call).
+bool wait_virtual(Waiter& w) {
+  t_spin = 0;
+  w.next = g.waiters;
+  g.waiters = &w;
+  --g.running;
+  while (!w.satisfied && !g.ended) {
+    if (g.running == 0 && !g.leading) {
+      if (!lead()) break;
+      continue;
+    }
+    const std::uint64_t gen = g.generation;
+    timespec until = ns_ts(wall_ns() + g.watchdog);
+    while (gen == g.generation && !w.satisfied && !g.ended && !(g.running == 0 && !g.leading)) {
+      if (cv_timedwait(&g.cv, &g.mu, &until) == ETIMEDOUT) {
+        say("omnitwin-vtime: a thread of process %d waited %.0f s of wall time for simulated time that did not move "
+            "(another thread runs or blocks outside the library?): continuing on the wall clock\n",
+            getpid(), g.watchdog * 1e-9);
+        go_wall(g.now);
+        break;
+      }
+    }
+  }
+  for (Waiter** p = &g.waiters; *p; p = &(*p)->next)
+    if (*p == &w) {
+      *p = w.next;
+      break;
+    }
+  if (!w.satisfied) ++g.running;
+  return !g.ended || w.satisfied;
+}
+
+// The busy-poll rule: the kSpinLimit-th call in a row that found nothing lets a quantum pass.
+void spun() {
+  if (++t_spin < kSpinLimit) return;
+  t_spin = 0;
+  Lock l;
+  if (!g.active || g.ended) return;
+  Waiter w;
+  w.deadline = g.now + kQuantum;
+  w.any_frame = true;
+  wait_virtual(w);
+}
+
+// A relative timeout as an absolute simulated deadline (negative: never).
+ns_t deadline_after(ns_t rel) { return rel < 0 ? vt::kNever : add_sat(g.now, rel); }
+
+// Waits for descriptors or a deadline; true when descriptors became ready.
+bool wait_fds(pollfd* fds, nfds_t n, ns_t deadline) {
+  Lock l;
+  Waiter w;
+  w.fds = fds;
+  w.nfds = n;
+  w.deadline = deadline;
+  wait_virtual(w);
+  return w.satisfied && !w.timed_out;
+}
+
+void sleep_until(ns_t deadline) {
+  Lock l;
+  if (deadline <= g.now) return;
+  Waiter w;
+  w.deadline = deadline;
+  wait_virtual(w);
+}
+
+// ---- clocks -------------------------------------------------------------------------------
+bool is_mono(clockid_t c) {
+  return c == CLOCK_MONOTONIC || c == CLOCK_MONOTONIC_RAW || c == CLOCK_MONOTONIC_COARSE || c == CLOCK_BOOTTIME ||
+         c == CLOCK_BOOTTIME_ALARM;
+}
+bool is_real(clockid_t c) {
+  return c == CLOCK_REALTIME || c == CLOCK_REALTIME_COARSE || c == CLOCK_TAI || c == CLOCK_REALTIME_ALARM;
+}
+ns_t base_of(clockid_t c) { return is_mono(c) ? kMonoBase : g.epoch + (c == CLOCK_TAI ? 37 * kNs : 0); }
+ns_t clock_now(clockid_t c) {
+  Lock l;
+  return base_of(c) + now_locked();
+}
+
+// Socket bookkeeping: a datagram to the bus counts as a frame the twin must receive.
+bool is_socket(int fd, int* family = nullptr, int* type = nullptr) {
+  int v = 0;
+  socklen_t len = sizeof v;
+  if (syscall(SYS_getsockopt, fd, SOL_SOCKET, SO_DOMAIN, &v, &len) != 0) return false;
+  if (family) *family = v;
+  len = sizeof v;
+  if (type && syscall(SYS_getsockopt, fd, SOL_SOCKET, SO_TYPE, &v, &len) == 0) *type = v;
+  return true;
+}
+
+int port_of(const sockaddr* a) {
+  if (!a) return -1;
+  if (a->sa_family == AF_INET) return ntohs(reinterpret_cast<const sockaddr_in*>(a)->sin_port);
+  if (a->sa_family == AF_INET6) return ntohs(reinterpret_cast<const sockaddr_in6*>(a)->sin6_port);
+  return -1;
+}
+
+// Frames one send carries (0 when it is not bus traffic); `to` null: the connected peer.
+std::uint64_t bus_frames(int fd, const sockaddr* to, std::size_t bytes, std::size_t segment) {
+  int fam = 0, type = 0;
+  if (!is_socket(fd, &fam, &type)) return 0;
+  if (fam == AF_PACKET) return g.bus_raw ? 1 : 0;
+  if ((fam != AF_INET && fam != AF_INET6) || type != SOCK_DGRAM || g.bus_port < 0) return 0;
+  sockaddr_storage peer{};
+  if (!to) {
+    socklen_t len = sizeof peer;
+    if (syscall(SYS_getpeername, fd, &peer, &len) != 0) return 0;
+    to = reinterpret_cast<const sockaddr*>(&peer);
+  }
+  if (port_of(to) != g.bus_port) return 0;
+  if (segment == 0) {
+    int seg = 0;
+    socklen_t len = sizeof seg;
+    if (syscall(SYS_getsockopt, fd, SOL_UDP, UDP_SEGMENT, &seg, &len) == 0 && seg > 0) segment = static_cast<std::size_t>(seg);
+  }
+  if (segment == 0 || bytes <= segment) return 1;
+  return (bytes + segment - 1) / segment;  // a GSO send: one datagram per segment
+}
+
+void count_sent(std::uint64_t n) {
+  if (n == 0) return;
+  Lock l;
+  g.sent += n;
+  t_spin = 0;
+}
+
+std::size_t msg_segment(const msghdr* m) {
+  if (!m || !m->msg_control) return 0;
+  for (cmsghdr* c = CMSG_FIRSTHDR(const_cast<msghdr*>(m)); c; c = CMSG_NXTHDR(const_cast<msghdr*>(m), c))
+    if (c->cmsg_level == SOL_UDP && c->cmsg_type == UDP_SEGMENT) {
+      std::uint16_t s = 0;
+      memcpy(&s, CMSG_DATA(c), sizeof s);
+      return s;
+    }
+  return 0;
+}
+
+bool nonblocking(int fd, int flags) {
+  if (flags & MSG_DONTWAIT) return true;
+  const int fl = static_cast<int>(syscall(SYS_fcntl, fd, F_GETFL));
+  return fl >= 0 && (fl & O_NONBLOCK);
+}
+
+ns_t rcvtimeo(int fd) {
+  timeval tv{};
+  socklen_t len = sizeof tv;
+  if (syscall(SYS_getsockopt, fd, SOL_SOCKET, SO_RCVTIMEO, &tv, &len) != 0) return -1;
+  const ns_t v = static_cast<ns_t>(tv.tv_sec) * kNs + static_cast<ns_t>(tv.tv_usec) * 1000;
+  return v == 0 ? -1 : v;
+}
+
+// A receive as the kernel would do it on simulated time. `attempt(flags)` is the real call.
+template <class Attempt>
+ssize_t receive(int fd, int flags, Attempt attempt) {
+  const ssize_t n = attempt(flags | MSG_DONTWAIT);
+  if (n >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) {
+    if (n >= 0) t_spin = 0;
+    return n;
+  }
+  if (nonblocking(fd, flags)) {
+    spun();
+    const int e = errno;
+    const ssize_t again = attempt(flags | MSG_DONTWAIT);
+    if (again < 0 && errno != EAGAIN && errno != EWOULDBLOCK) return again;
+    if (again < 0) errno = e == EWOULDBLOCK ? EWOULDBLOCK : EAGAIN;
+    return again;
+  }
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(rcvtimeo(fd));
+  }
+  for (;;) {
+    pollfd p{fd, POLLIN, 0};
+    if (!wait_fds(&p, 1, deadline)) {
+      Lock l;
+      if (g.ended) return attempt(flags);  // the run is over: the kernel decides
+      errno = EAGAIN;  // SO_RCVTIMEO passed
+      return -1;
+    }
+    const ssize_t r = attempt(flags | MSG_DONTWAIT);
+    if (r >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) return r;
+  }
+}
+
+}  // namespace
+
+// =============================================================================================
+// The intercepted calls (C linkage, default visibility).
+extern "C" {
+
+// ---- clocks ----
+int clock_gettime(clockid_t c, timespec* ts) {
+  REAL(clock_gettime);
+  if (!clocked() || !(is_mono(c) || is_real(c))) return real_clock_gettime(c, ts);
+  *ts = ns_ts(clock_now(c));
+  if (on()) spun();
+  return 0;
+}
+
+int gettimeofday(struct timeval* tv, void* tz) {
+  REAL(gettimeofday);
+  if (!clocked()) return real_gettimeofday(tv, tz);
+  {
+    const ns_t v = clock_now(CLOCK_REALTIME);
+    tv->tv_sec = static_cast<time_t>(v / kNs);
+    tv->tv_usec = static_cast<suseconds_t>((v % kNs) / 1000);
+  }
+  if (tz) memset(tz, 0, sizeof(struct timezone));
+  if (on()) spun();
+  return 0;
+}
+
+time_t time(time_t* out) {
+  REAL(time);
+  if (!clocked()) return real_time(out);
+  const time_t v = static_cast<time_t>(clock_now(CLOCK_REALTIME) / kNs);
+  if (out) *out = v;
+  if (on()) spun();
+  return v;
+}
+
+int timespec_get(timespec* ts, int base) {
+  REAL(timespec_get);
+  if (!clocked() || base != TIME_UTC) return real_timespec_get(ts, base);
+  *ts = ns_ts(clock_now(CLOCK_REALTIME));
+  if (on()) spun();
+  return base;
+}
+
+// ---- sleeps ----
+int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) {
+  REAL(clock_nanosleep);
+  if (!on()) {
+    if (g.ended && (flags & TIMER_ABSTIME) && (is_mono(c) || is_real(c))) {
+      // A deadline on the simulated clock, continued on the wall clock.
+      ns_t left;
+      {
+        Lock l;
+        left = ts_ns(*req) - base_of(c) - now_locked();
+      }
+      if (left <= 0) return 0;
+      const timespec rel = ns_ts(left);
+      return real_clock_nanosleep(CLOCK_MONOTONIC, 0, &rel, rem);
+    }
+    return real_clock_nanosleep(c, flags, req, rem);
+  }
+  if (!(is_mono(c) || is_real(c))) return real_clock_nanosleep(c, flags, req, rem);
+  if (!req) return EFAULT;
+  if (req->tv_nsec < 0 || req->tv_nsec >= kNs || req->tv_sec < 0) return EINVAL;
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = (flags & TIMER_ABSTIME) ? ts_ns(*req) - base_of(c) : add_sat(g.now, ts_ns(*req));
+  }
+  sleep_until(deadline);
+  if (rem && !(flags & TIMER_ABSTIME)) *rem = timespec{0, 0};
+  return 0;
+}
+
+int nanosleep(const timespec* req, timespec* rem) {
+  REAL(nanosleep);
+  if (!on()) return real_nanosleep(req, rem);
+  const int e = clock_nanosleep(CLOCK_MONOTONIC, 0, req, rem);
+  if (e != 0) {
+    errno = e;
+    return -1;
+  }
+  return 0;
+}
+
+int usleep(useconds_t us) {
+  REAL(usleep);
+  if (!on()) return real_usleep(us);
+  ns_t d;
+  {
+    Lock l;
+    d = add_sat(g.now, static_cast<ns_t>(us) * 1000);
+  }
+  sleep_until(d);
+  return 0;
+}
+
+unsigned int sleep(unsigned int s) {
+  REAL(sleep);
+  if (!on()) return real_sleep(s);
+  ns_t d;
+  {
+    Lock l;
+    d = add_sat(g.now, static_cast<ns_t>(s) * kNs);
+  }
+  sleep_until(d);
+  return 0;
+}
+
+// ---- descriptor waits ----
+int poll(pollfd* fds, nfds_t n, int timeout_ms) {
+  REAL(poll);
+  if (!on()) return real_poll(fds, n, timeout_ms);
+  const int r = real_poll(fds, n, 0);
+  if (r != 0) {
+    if (r > 0) t_spin = 0;
+    return r;
+  }
+  if (timeout_ms == 0) {
+    spun();
+    return real_poll(fds, n, 0);
+  }
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(timeout_ms < 0 ? -1 : static_cast<ns_t>(timeout_ms) * 1'000'000);
+  }
+  for (;;) {
+    if (!wait_fds(fds, n, deadline)) {
+      Lock l;
+      if (g.ended) return real_poll(fds, n, 0);
+      for (nfds_t i = 0; i < n; ++i) fds[i].revents = 0;
+      return 0;
+    }
+    const int again = real_poll(fds, n, 0);
+    if (again != 0) return again;
+  }
+}
+
+int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
+  REAL(ppoll);
+  if (!on()) return real_ppoll(fds, n, tmo, mask);
+  if (tmo && (tmo->tv_nsec < 0 || tmo->tv_nsec >= kNs || tmo->tv_sec < 0)) {
+    errno = EINVAL;
+    return -1;
+  }
+  const timespec zero{0, 0};
+  const int r = real_ppoll(fds, n, &zero, mask);
+  if (r != 0) {
+    if (r > 0) t_spin = 0;
+    return r;
+  }
+  if (tmo && ts_ns(*tmo) == 0) {
+    spun();
+    return real_ppoll(fds, n, &zero, mask);
+  }
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(tmo ? ts_ns(*tmo) : -1);
+  }
+  for (;;) {
+    if (!wait_fds(fds, n, deadline)) {
+      Lock l;
+      if (g.ended) return real_ppoll(fds, n, &zero, mask);
+      for (nfds_t i = 0; i < n; ++i) fds[i].revents = 0;
+      return 0;
+    }
+    const int again = real_ppoll(fds, n, &zero, mask);
+    if (again != 0) return again;
+  }
+}
+
+}  // extern "C"
+
+namespace {
+// select() as poll: the descriptors of the three sets, waited for with a deadline.
+int select_common(int nfds, fd_set* r, fd_set* w, fd_set* e, ns_t rel, const sigset_t* mask, timeval* tv_out) {
+  REAL(pselect);
+  fd_set r0, w0, e0;
+  if (r) r0 = *r;
+  if (w) w0 = *w;
+  if (e) e0 = *e;
+  const timespec zero{0, 0};
+  auto attempt = [&]() {
+    if (r) *r = r0;
+    if (w) *w = w0;
+    if (e) *e = e0;
+    return real_pselect(nfds, r, w, e, &zero, mask);
+  };
+  const int first = attempt();
+  if (first != 0) return first;
+  if (rel == 0) {
+    spun();
+    return attempt();
+  }
+  pollfd fds[FD_SETSIZE];
+  nfds_t n = 0;
+  for (int fd = 0; fd < nfds && fd < FD_SETSIZE; ++fd) {
+    short ev = 0;
+    if (r && FD_ISSET(fd, &r0)) ev |= POLLIN;
+    if (w && FD_ISSET(fd, &w0)) ev |= POLLOUT;
+    if (e && FD_ISSET(fd, &e0)) ev |= POLLPRI;
+    if (ev) fds[n++] = pollfd{fd, ev, 0};
+  }
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(rel);
+  }
+  for (;;) {
+    if (!wait_fds(fds, n, deadline)) {
+      {
+        Lock l;
+        if (g.ended) return attempt();
+      }
+      if (r) FD_ZERO(r);
+      if (w) FD_ZERO(w);
+      if (e) FD_ZERO(e);
+      if (tv_out) *tv_out = timeval{0, 0};
+      return 0;
+    }
+    const int again = attempt();
+    if (again != 0) return again;
+  }
+}
+}  // namespace
+
+extern "C" {
+
+int select(int nfds, fd_set* r, fd_set* w, fd_set* e, timeval* tv) {
+  REAL(select);
+  if (!on()) return real_select(nfds, r, w, e, tv);
+  if (tv && (tv->tv_sec < 0 || tv->tv_usec < 0)) {
+    errno = EINVAL;
+    return -1;
+  }
+  const ns_t rel = tv ? static_cast<ns_t>(tv->tv_sec) * kNs + static_cast<ns_t>(tv->tv_usec) * 1000 : -1;
+  return select_common(nfds, r, w, e, rel, nullptr, tv);
+}
+
+int pselect(int nfds, fd_set* r, fd_set* w, fd_set* e, const timespec* ts, const sigset_t* mask) {
+  REAL(pselect);
+  if (!on()) return real_pselect(nfds, r, w, e, ts, mask);
+  if (ts && (ts->tv_sec < 0 || ts->tv_nsec < 0 || ts->tv_nsec >= kNs)) {
+    errno = EINVAL;
+    return -1;
+  }
+  return select_common(nfds, r, w, e, ts ? ts_ns(*ts) : -1, mask, nullptr);
+}
+
+int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms, const sigset_t* mask) {
+  REAL(epoll_pwait);
+  if (!on()) return real_epoll_pwait(epfd, ev, max, timeout_ms, mask);
+  const int r = real_epoll_pwait(epfd, ev, max, 0, mask);
+  if (r != 0) {
+    if (r > 0) t_spin = 0;
+    return r;
+  }
+  if (timeout_ms == 0) {
+    spun();
+    return real_epoll_pwait(epfd, ev, max, 0, mask);
+  }
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(timeout_ms < 0 ? -1 : static_cast<ns_t>(timeout_ms) * 1'000'000);
+  }
+  pollfd p{epfd, POLLIN, 0};  // an epoll descriptor is readable while an event is ready
+  for (;;) {
+    if (!wait_fds(&p, 1, deadline)) {
+      Lock l;
+      if (g.ended) return real_epoll_pwait(epfd, ev, max, 0, mask);
+      return 0;
+    }
+    const int again = real_epoll_pwait(epfd, ev, max, 0, mask);
+    if (again != 0) return again;
+  }
+}
+
+int epoll_wait(int epfd, epoll_event* ev, int max, int timeout_ms) {
+  REAL(epoll_wait);
+  if (!on()) return real_epoll_wait(epfd, ev, max, timeout_ms);
+  return epoll_pwait(epfd, ev, max, timeout_ms, nullptr);
+}
+
+// ---- receives and sends on sockets ----
+ssize_t recv(int fd, void* buf, size_t len, int flags) {
+  REAL(recv);
+  if (!on()) return real_recv(fd, buf, len, flags);
+  return receive(fd, flags, [&](int f) { return real_recv(fd, buf, len, f); });
+}
+
+ssize_t recvfrom(int fd, void* buf, size_t len, int flags, sockaddr* from, socklen_t* fromlen) {
+  REAL(recvfrom);
+  if (!on()) return real_recvfrom(fd, buf, len, flags, from, fromlen);
+  return receive(fd, flags, [&](int f) { return real_recvfrom(fd, buf, len, f, from, fromlen); });
+}
+
+ssize_t recvmsg(int fd, msghdr* m, int flags) {
+  REAL(recvmsg);
+  if (!on()) return real_recvmsg(fd, m, flags);
+  return receive(fd, flags, [&](int f) { return real_recvmsg(fd, m, f); });
+}
+
+int recvmmsg(int fd, mmsghdr* v, unsigned int n, int flags, timespec* tmo) {
+  REAL(recvmmsg);
+  if (!on()) return real_recvmmsg(fd, v, n, flags, tmo);
+  // The timeout (checked by the kernel only between datagrams) is not simulated: see the docs.
+  return static_cast<int>(receive(fd, flags, [&](int f) { return static_cast<ssize_t>(real_recvmmsg(fd, v, n, f, nullptr)); }));
+}
+
+ssize_t read(int fd, void* buf, size_t len) {
+  REAL(read);
+  REAL(recv);
+  if (!on()) return real_read(fd, buf, len);
+  bool timer = false;
+  if (fd >= 0 && fd < kMaxFd) {
+    Lock l;
+    timer = g.timers[fd].used;
+  }
+  if (!timer && !is_socket(fd)) return real_read(fd, buf, len);
+  if (timer) {
+    // A timerfd: its eventfd holds the expirations; a blocking read waits for the next one.
+    const int fl = static_cast<int>(syscall(SYS_fcntl, fd, F_GETFL));
+    for (;;) {
+      const ssize_t r = static_cast<ssize_t>(syscall(SYS_read, fd, buf, len));
+      if (r >= 0 || errno != EAGAIN || (fl & O_NONBLOCK)) {
+        if (r < 0 && errno == EAGAIN) spun();
+        return r;
+      }
+      pollfd p{fd, POLLIN, 0};
+      if (!wait_fds(&p, 1, vt::kNever)) {
+        Lock l;
+        if (g.ended) return real_read(fd, buf, len);
+      }
+    }
+  }
+  return receive(fd, 0, [&](int f) { return real_recv(fd, buf, len, f); });
+}
+
+ssize_t send(int fd, const void* buf, size_t len, int flags) {
+  REAL(send);
+  const ssize_t n = real_send(fd, buf, len, flags);
+  if (n >= 0 && on()) count_sent(bus_frames(fd, nullptr, static_cast<std::size_t>(n), 0));
+  return n;
+}
+
+ssize_t sendto(int fd, const void* buf, size_t len, int flags, const sockaddr* to, socklen_t tolen) {
+  REAL(sendto);
+  const ssize_t n = real_sendto(fd, buf, len, flags, to, tolen);
+  if (n >= 0 && on()) count_sent(bus_frames(fd, to, static_cast<std::size_t>(n), 0));
+  return n;
+}
+
+ssize_t sendmsg(int fd, const msghdr* m, int flags) {
+  REAL(sendmsg);
+  const ssize_t n = real_sendmsg(fd, m, flags);
+  if (n >= 0 && on())
+    count_sent(bus_frames(fd, static_cast<const sockaddr*>(m->msg_name), static_cast<std::size_t>(n), msg_segment(m)));
+  return n;
+}
+
+int sendmmsg(int fd, mmsghdr* v, unsigned int vlen, int flags) {
+  REAL(sendmmsg);
+  const int n = real_sendmmsg(fd, v, vlen, flags);
+  if (n > 0 && on()) {
+    std::uint64_t frames = 0;
+    for (int i = 0; i < n; ++i)
+      frames += bus_frames(fd, static_cast<const sockaddr*>(v[i].msg_hdr.msg_name), v[i].msg_len, msg_segment(&v[i].msg_hdr));
+    count_sent(frames);
+  }
+  return n;
+}
+
+ssize_t write(int fd, const void* buf, size_t len) {
+  REAL(write);
+  const ssize_t n = real_write(fd, buf, len);
+  if (n >= 0 && on() && fd > 2 && is_socket(fd)) count_sent(bus_frames(fd, nullptr, static_cast<std::size_t>(n), 0));
+  return n;
+}
+
+// ---- timerfds ----
+int timerfd_create(int clockid, int flags) {
+  REAL(timerfd_create);
+  if (!on() || !(is_mono(clockid) || is_real(clockid))) return real_timerfd_create(clockid, flags);
+  if (flags & ~(TFD_NONBLOCK | TFD_CLOEXEC)) {
+    errno = EINVAL;
+    return -1;
+  }
+  const int fd = eventfd(0, (flags & TFD_NONBLOCK ? EFD_NONBLOCK : 0) | (flags & TFD_CLOEXEC ? EFD_CLOEXEC : 0));
+  if (fd < 0) return fd;
+  if (fd >= kMaxFd) {
+    syscall(SYS_close, fd);
+    errno = EMFILE;
+    return -1;
+  }
+  Lock l;
+  g.timers[fd] = Timer{true, vt::kNever, 0};
+  return fd;
+}
+
+int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
+  REAL(timerfd_settime);
+  bool ours = false;
+  if (fd >= 0 && fd < kMaxFd) {
+    Lock l;
+    ours = g.timers[fd].used;
+  }
+  if (!ours) return real_timerfd_settime(fd, flags, nv, old);
+  if (!nv) {
+    errno = EFAULT;
+    return -1;
+  }
+  if (nv->it_value.tv_nsec < 0 || nv->it_value.tv_nsec >= kNs || nv->it_interval.tv_nsec < 0 ||
+      nv->it_interval.tv_nsec >= kNs) {
+    errno = EINVAL;
+    return -1;
+  }
+  Lock l;
+  Timer& t = g.timers[fd];
+  if (old) {
+    old->it_interval = ns_ts(t.interval);
+    old->it_value = ns_ts(t.expiry == vt::kNever ? 0 : t.expiry - g.now);
+  }
+  std::uint64_t drop = 0;
+  ssize_t r = syscall(SYS_read, fd, &drop, sizeof drop);  // re-arming clears pending expirations
+  (void)r;
+  const ns_t v = ts_ns(nv->it_value);
+  t.interval = ts_ns(nv->it_interval);
+  if (v == 0)
+    t.expiry = vt::kNever;
+  else
+    t.expiry = (flags & TFD_TIMER_ABSTIME) ? v - kMonoBase : add_sat(g.now, v);
+  if (t.expiry != vt::kNever && t.expiry <= g.now) fire_timers();
+  return 0;
+}
+
+int timerfd_gettime(int fd, itimerspec* cur) {
+  REAL(timerfd_gettime);
+  bool ours = false;
+  if (fd >= 0 && fd < kMaxFd) {
+    Lock l;
+    ours = g.timers[fd].used;
+  }
+  if (!ours) return real_timerfd_gettime(fd, cur);
+  Lock l;
+  const Timer& t = g.timers[fd];
+  cur->it_interval = ns_ts(t.interval);
+  cur->it_value = ns_ts(t.expiry == vt::kNever ? 0 : t.expiry - g.now);
+  return 0;
+}
+
+int close(int fd) {
+  REAL(close);
+  if (fd >= 0 && fd < kMaxFd && g.active) {
+    Lock l;
+    g.timers[fd].used = false;
+  }
+  return real_close(fd);
+}
+
+// ---- threads ----
+}  // extern "C"
+
+namespace {
+struct Start {
+  void* (*fn)(void*);
+  void* arg;
+};
+
+void thread_ends() {
+  Lock l;
+  if (!g.active) return;
+  --g.running;
+  auto* e = static_cast<Exited*>(malloc(sizeof(Exited)));
+  if (e) {
+    e->id = pthread_self();
+    e->next = g.exited;
+    g.exited = e;
+  }
+  for (Waiter* w = g.waiters; w; w = w->next)
+    if (w->joining && !w->satisfied && pthread_equal(w->join, pthread_self())) satisfy(w);
+  cv_broadcast(&g.cv);  // a leader may be due now that one runner fewer is left
+}
+
+void* trampoline(void* p) {
+  Start s = *static_cast<Start*>(p);
+  free(p);
+  void* r = s.fn(s.arg);
+  thread_ends();
+  return r;
+}
+}  // namespace
+
+extern "C" {
+
+int pthread_create(pthread_t* t, const pthread_attr_t* a, void* (*fn)(void*), void* arg) {
+  REAL(pthread_create);
+  if (!g.active) return real_pthread_create(t, a, fn, arg);
+  auto* s = static_cast<Start*>(malloc(sizeof(Start)));
+  if (!s) return EAGAIN;
+  *s = Start{fn, arg};
+  {
+    Lock l;
+    ++g.running;  // counted before it starts: time cannot move past its first instant
+  }
+  const int r = real_pthread_create(t, a, trampoline, s);
+  if (r != 0) {
+    free(s);
+    Lock l;
+    --g.running;
+  }
+  return r;
+}
+
+void pthread_exit(void* v) {
+  static auto real_exit = real<void (*)(void*)>("pthread_exit");
+  if (g.active) thread_ends();
+  real_exit(v);
+  __builtin_unreachable();
+}
+
+int pthread_join(pthread_t t, void** ret) {
+  REAL(pthread_join);
+  if (on()) {
+    Lock l;
+    bool done = false;
+    for (Exited* e = g.exited; e; e = e->next) done = done || pthread_equal(e->id, t);
+    if (!done) {
+      Waiter w;
+      w.joining = true;
+      w.join = t;
+      wait_virtual(w);
+    }
+  }
+  return real_pthread_join(t, ret);
+}
+
+// Condition variables: a wait on the simulated clock, ended by a signal or broadcast of the same
+// variable or by its deadline (POSIX allows the spurious wake-ups this may add).
+}  // extern "C"
+
+namespace {
+int cond_wait_virtual(pthread_cond_t* c, pthread_mutex_t* m, ns_t deadline) {
+  Waiter w;
+  w.cond = c;
+  w.deadline = deadline;
+  pthread_mutex_lock(&g.mu);  // registered before the user's mutex is released: no lost signal
+  pthread_mutex_unlock(m);
+  wait_virtual(w);
+  const bool timed_out = w.timed_out;
+  pthread_mutex_unlock(&g.mu);
+  pthread_mutex_lock(m);
+  return timed_out ? ETIMEDOUT : 0;
+}
+
+int cond_wake(pthread_cond_t* c, bool all) {
+  bool found = false;
+  if (g.active && !g.ended) {
+    Lock l;
+    for (Waiter* w = g.waiters; w; w = w->next) {
+      if (w->cond != c || w->satisfied) continue;
+      satisfy(w);
+      found = true;
+      if (!all) break;
+    }
+    if (found) cv_broadcast(&g.cv);
+  }
+  static auto real_sig = real<cond_signal_fn>("pthread_cond_signal");
+  static auto real_all = real<cond_signal_fn>("pthread_cond_broadcast");
+  return all || !found ? (all ? real_all(c) : real_sig(c)) : 0;
+}
+}  // namespace
+
+extern "C" {
+
+int pthread_cond_wait(pthread_cond_t* c, pthread_mutex_t* m) {
+  static auto real_wait = real<cond_wait_fn>("pthread_cond_wait");
+  if (!on()) return real_wait(c, m);
+  return cond_wait_virtual(c, m, vt::kNever);
+}
+
+int pthread_cond_timedwait(pthread_cond_t* c, pthread_mutex_t* m, const timespec* abs) {
+  static auto real_wait = real<cond_timedwait_fn>("pthread_cond_timedwait");
+  if (!clocked()) return real_wait(c, m, abs);
+  if (abs->tv_nsec < 0 || abs->tv_nsec >= kNs) return EINVAL;
+  // The variable's clock is not visible: a deadline below 10^9 s is on the monotonic clock.
+  const ns_t v = ts_ns(*abs);
+  const bool mono = v < 1'000'000'000LL * kNs;
+  const ns_t deadline = mono ? v - kMonoBase : v - g.epoch;
+  if (on()) return cond_wait_virtual(c, m, deadline);
+  // After the end: the same instant on the real clock.
+  ns_t left;
+  {
+    Lock l;
+    left = deadline - now_locked();
+  }
+  timespec real_now;
+  syscall(SYS_clock_gettime, mono ? CLOCK_MONOTONIC : CLOCK_REALTIME, &real_now);
+  const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));
+  return real_wait(c, m, &until);
+}
+
+int pthread_cond_clockwait(pthread_cond_t* c, pthread_mutex_t* m, clockid_t clk, const timespec* abs) {
+  static auto real_wait = real<int (*)(pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*)>("pthread_cond_clockwait");
+  if (!clocked() || !(is_mono(clk) || is_real(clk))) return real_wait(c, m, clk, abs);
+  if (abs->tv_nsec < 0 || abs->tv_nsec >= kNs) return EINVAL;
+  const ns_t deadline = ts_ns(*abs) - base_of(clk);
+  if (on()) return cond_wait_virtual(c, m, deadline);
+  ns_t left;
+  {
+    Lock l;
+    left = deadline - now_locked();
+  }
+  timespec real_now;
+  syscall(SYS_clock_gettime, clk, &real_now);
+  const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));
+  return real_wait(c, m, clk, &until);
+}
+
+int pthread_cond_signal(pthread_cond_t* c) { return cond_wake(c, false); }
+int pthread_cond_broadcast(pthread_cond_t* c) { return cond_wake(c, true); }
+
+}  // extern "C"
