@@ -134,6 +134,7 @@ struct Timer {  // a timerfd, simulated: an eventfd the leader writes expiration
   bool used = false;
   ns_t expiry = vt::kNever;  // simulated time [ns]
   ns_t interval = 0;
+  bool nonblock = false;     // the program asked for TFD_NONBLOCK (the eventfd always is)
 };
 
 struct Exited {
@@ -887,18 +888,18 @@ ssize_t read(int fd, void* buf, size_t len) {
   REAL(read);
   REAL(recv);
   if (!on()) return real_read(fd, buf, len);
-  bool timer = false;
+  bool timer = false, timer_nonblock = false;
   if (fd >= 0 && fd < kMaxFd) {
     Lock l;
     timer = g.timers[fd].used;
+    timer_nonblock = g.timers[fd].nonblock;
   }
   if (!timer && !is_socket(fd)) return real_read(fd, buf, len);
   if (timer) {
     // A timerfd: its eventfd holds the expirations; a blocking read waits for the next one.
-    const int fl = static_cast<int>(syscall(SYS_fcntl, fd, F_GETFL));
     for (;;) {
       const ssize_t r = static_cast<ssize_t>(syscall(SYS_read, fd, buf, len));
-      if (r >= 0 || errno != EAGAIN || (fl & O_NONBLOCK)) {
+      if (r >= 0 || errno != EAGAIN || timer_nonblock) {
         if (r < 0 && errno == EAGAIN) spun();
         return r;
       }
@@ -961,7 +962,7 @@ int timerfd_create(int clockid, int flags) {
     errno = EINVAL;
     return -1;
   }
-  const int fd = eventfd(0, (flags & TFD_NONBLOCK ? EFD_NONBLOCK : 0) | (flags & TFD_CLOEXEC ? EFD_CLOEXEC : 0));
+  const int fd = eventfd(0, EFD_NONBLOCK | (flags & TFD_CLOEXEC ? EFD_CLOEXEC : 0));
   if (fd < 0) return fd;
   if (fd >= kMaxFd) {
     syscall(SYS_close, fd);
@@ -969,7 +970,7 @@ int timerfd_create(int clockid, int flags) {
     return -1;
   }
   Lock l;
-  g.timers[fd] = Timer{true, vt::kNever, 0};
+  g.timers[fd] = Timer{true, vt::kNever, 0, (flags & TFD_NONBLOCK) != 0};
   return fd;
 }
 

@@ -1,0 +1,379 @@
+// Tests of lockstep for masters we did not write (twin/master_vtime, twin/vtime/):
+//  - the channel's codec: round trip, golden bytes, every rejection;
+//  - the preload library on a probe program (tests/twin/vtime/vt_probe.c, plain libc) against a
+//    scripted twin end: each intercepted call's return value, errno and simulated time as the
+//    kernel would give them on the simulated clock, the busy-poll rule, timerfds, condition
+//    variables, two threads, and a fork (refused);
+//  - the command line: omni-master --clock wall under the library through `omnitwin run
+//    --master-cmd` reruns byte for byte and moves the platform as its --clock sim run does; the
+//    bad masters (exits early, crashes, never waits, ignores SIGTERM, static, forks) each give
+//    exit 3, a message that says what happened, and records.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <map>
+#include <sstream>
+
+#include "tests/twin/cli_support.hpp"
+#include "twin/master_process.hpp"
+#include "twin/master_vtime.hpp"
+
+namespace {
+
+using namespace omnitwin::twin;
+using namespace omnitwin::twin::cli;
+namespace vt = omnitwin::vtime;
+
+constexpr long long kMono = 1000'000'000'000LL;  // the library's CLOCK_MONOTONIC at t = 0
+
+// ---- codec --------------------------------------------------------------------------------
+
+TEST(VtimeCodec, RoundTripsEveryField) {
+  vt::Record r;
+  r.type = vt::Type::wait;
+  r.wake_on_frame = 1;
+  r.pid = 1234;
+  r.ppid = 99;
+  r.seq = 0x0102030405060708ULL;
+  r.now = 10'000'000;
+  r.deadline = 20'000'000;
+  r.frames = 77;
+  r.code = 5;
+  const auto b = vt::encode(r);
+  const auto d = vt::decode(b.data(), b.size());
+  ASSERT_TRUE(d.has_value());
+  EXPECT_EQ(vt::encode(*d), b);
+  EXPECT_EQ(d->seq, r.seq);
+  EXPECT_EQ(d->deadline, r.deadline);
+  EXPECT_EQ(d->wake_on_frame, 1);
+}
+
+TEST(VtimeCodec, GoldenWakeBytes) {
+  vt::Record r;
+  r.type = vt::Type::wake;
+  r.seq = 1;
+  r.now = 1'000'000;  // 1 ms
+  r.frames = 2;
+  const auto b = vt::encode(r);
+  const std::uint8_t head[] = {0x4f, 0x56, 0x54, 0x4d, 0x01, 0x00, 0x04, 0x00};  // "OVTM", v1, wake
+  EXPECT_EQ(0, std::memcmp(b.data(), head, sizeof head));
+  EXPECT_EQ(b[16], 1);
+  EXPECT_EQ(b[24], 0x40);  // 1'000'000 = 0x0F4240
+  EXPECT_EQ(b[25], 0x42);
+  EXPECT_EQ(b[26], 0x0f);
+  EXPECT_EQ(b[40], 2);
+  EXPECT_EQ(b[32 + 7], 0x7f);  // the default deadline: never (INT64_MAX)
+}
+
+TEST(VtimeCodec, RejectsWhatItCannotReencode) {
+  vt::Record r;
+  r.type = vt::Type::end;
+  const auto good = vt::encode(r);
+  EXPECT_FALSE(vt::decode(good.data(), 63));
+  auto b = good;
+  b[0] ^= 1;  // magic
+  EXPECT_FALSE(vt::decode(b.data(), b.size()));
+  b = good;
+  b[4] = 2;  // version
+  EXPECT_FALSE(vt::decode(b.data(), b.size()));
+  b = good;
+  b[6] = 7;  // type
+  EXPECT_FALSE(vt::decode(b.data(), b.size()));
+  b = good;
+  b[7] = 2;  // wake_on_frame
+  EXPECT_FALSE(vt::decode(b.data(), b.size()));
+  b = good;
+  b[60] = 1;  // padding
+  EXPECT_FALSE(vt::decode(b.data(), b.size()));
+}
+
+TEST(VtimeCommand, SplitsAsAShellWould) {
+  EXPECT_EQ(split_command("a b  'c d' \"e \\\"f\\\"\" g\\ h"),
+            (std::vector<std::string>{"a", "b", "c d", "e \"f\"", "g h"}));
+  EXPECT_THROW(split_command("a 'b"), std::invalid_argument);
+  EXPECT_TRUE(split_command("   ").empty());
+}
+
+TEST(VtimeCommand, KnowsWhatThePreloadCannotReach) {
+  EXPECT_EQ(preload_obstacle(OMNITWIN_BINARY_DIR "/tests/vt_probe"), "");
+  EXPECT_TRUE(preload_obstacle(OMNITWIN_BINARY_DIR "/tests/vt_probe_static").starts_with("statically linked"));
+  EXPECT_EQ(preload_obstacle("no-such-program-anywhere"), "not found on PATH");
+  EXPECT_TRUE(preload_obstacle(OMNITWIN_SOURCE_DIR "/scripts/bootstrap").starts_with("not an ELF"));
+}
+
+// ---- the library on the probe, against a scripted twin --------------------------------------
+
+// A twin end that wakes every wait at its deadline (no bus, no frames).
+struct ScriptedTwin {
+  VtimeServer server;
+  SimTime now = 0;
+  std::vector<vt::Record> waits;
+
+  VtimeServer::Status serve() {
+    for (;;) {
+      vt::Record w;
+      const VtimeServer::Status st = server.next_wait(w, std::chrono::seconds(5), now);
+      if (st != VtimeServer::Status::ok) return st;
+      waits.push_back(w);
+      if (w.deadline == vt::kNever) return VtimeServer::Status::protocol;  // would wait for ever
+      now = w.deadline;
+      server.wake(w.seq, now, 0);
+    }
+  }
+};
+
+std::map<std::string, long long> probe_values(const std::string& text, std::vector<std::string>* order = nullptr) {
+  std::map<std::string, long long> v;
+  std::istringstream in(text);
+  std::string name;
+  long long value = 0;
+  while (in >> name >> value) {
+    v[name] = value;
+    if (order) order->push_back(name);
+  }
+  return v;
+}
+
+class VtimeProbe : public ::testing::Test {
+ protected:
+  std::string probe() const { return OMNITWIN_BINARY_DIR "/tests/vt_probe"; }
+  TempDir dir_{"omnitwin-vtime"};
+};
+
+TEST_F(VtimeProbe, EveryInterceptedCallAnswersAsTheKernelWouldOnSimulatedTime) {
+  ScriptedTwin twin;
+  const std::string log = (dir_.path() / "probe.log").string();
+  MasterProcess p(probe(), {"calls"}, log, twin.server.environment(find_vtime_library(), "udp:127.0.0.1:9"));
+  ASSERT_EQ(twin.server.accept(std::chrono::seconds(10), 0), VtimeServer::Status::ok);
+  EXPECT_EQ(twin.serve(), VtimeServer::Status::closed) << read_bytes(log);
+  ASSERT_TRUE(p.wait(std::chrono::seconds(10))) << read_bytes(log);
+  EXPECT_EQ(p.exit_code(), 0) << read_bytes(log);
+  std::vector<std::string> order;
+  auto v = probe_values(read_bytes(log), &order);
+  const std::string text = read_bytes(log);
+  // Clocks at t = 0.
+  EXPECT_EQ(v["mono"], kMono) << text;
+  EXPECT_EQ(v["boot"], kMono);
+  EXPECT_EQ(v["real_s"], 1767225600);
+  EXPECT_EQ(v["tod_s"], 1767225600);
+  EXPECT_EQ(v["time"], 1767225600);
+  // Sleeps: exactly their length; an absolute deadline in the past returns at once.
+  EXPECT_EQ(v["nanosleep_rc"], 0);
+  EXPECT_EQ(v["after_nanosleep"], kMono + 1'500'000);
+  EXPECT_EQ(v["abs_rc"], 0);
+  EXPECT_EQ(v["after_abs"], kMono + 10'000'000);
+  EXPECT_EQ(v["past_rc"], 0);
+  EXPECT_EQ(v["after_past"], kMono + 10'000'000);
+  EXPECT_EQ(v["bad_rc"], EINVAL);  // clock_nanosleep returns the error
+  EXPECT_EQ(v["bad_nanosleep_rc"], -1);  // nanosleep sets errno
+  EXPECT_EQ(v["bad_nanosleep_errno"], EINVAL);
+  EXPECT_EQ(v["after_usleep"], kMono + 10'250'000);
+  EXPECT_EQ(v["sleep_rc"], 0);
+  const long long t1 = kMono + 1'010'250'000;
+  EXPECT_EQ(v["after_sleep"], t1);
+  // Descriptor waits time out after their timeout, returning 0 (select zeroes its timeval).
+  EXPECT_EQ(v["poll_rc"], 0);
+  EXPECT_EQ(v["after_poll"], t1 + 7'000'000);
+  EXPECT_EQ(v["select_rc"], 0);
+  EXPECT_EQ(v["select_tv"], 0);
+  EXPECT_EQ(v["after_select"], t1 + 10'000'000);
+  EXPECT_EQ(v["ppoll_rc"], 0);
+  EXPECT_EQ(v["after_ppoll"], t1 + 12'000'000);
+  EXPECT_EQ(v["epoll_rc"], 0);
+  EXPECT_EQ(v["after_epoll"], t1 + 14'000'000);
+  // SO_RCVTIMEO: -1 with EAGAIN after the timeout (as the kernel holds it: in whole jiffies).
+  EXPECT_EQ(v["recv_rc"], -1);
+  EXPECT_EQ(v["recv_errno"], EAGAIN);
+  EXPECT_GE(v["rcvtimeo_ns"], 5'000'000);
+  const long long t2 = t1 + 14'000'000 + v["rcvtimeo_ns"];
+  EXPECT_EQ(v["after_recv"], t2);
+  // The busy-poll rule: the 64th call in a row that finds nothing lets 1 µs pass.
+  EXPECT_EQ(v["dontwait_rc"], -1);
+  EXPECT_EQ(v["dontwait_errno"], EAGAIN);
+  EXPECT_EQ(v["after_spin"], t2 + 1'000);
+  // A datagram already there is taken at once.
+  EXPECT_EQ(v["self_rc"], 1);
+  EXPECT_EQ(v["after_self"], t2 + 1'000);
+  // A periodic timerfd: one expiration per read, each a period apart.
+  EXPECT_EQ(v["timerfd_settime_rc"], 0);
+  EXPECT_EQ(v["timerfd_read_rc"], 8);
+  EXPECT_EQ(v["timerfd_n"], 1);
+  EXPECT_EQ(v["after_timerfd"], t2 + 1'000 + 3'000'000);
+  EXPECT_EQ(v["timerfd_left"], 1'000'000);
+  // A condition variable nobody signals times out at its deadline.
+  EXPECT_EQ(v["cond_rc"], ETIMEDOUT);
+  const long long t3 = t2 + 1'000 + 7'000'000;
+  EXPECT_EQ(v["after_cond"], t3);
+  // Two threads on 3 ms and 5 ms periods, in time order; joined when both are done.
+  const std::vector<std::pair<std::string, long long>> ticks{
+      {"tick3000", t3 + 3'000'000}, {"tick5000", t3 + 5'000'000}, {"tick3000", t3 + 6'000'000},
+      {"tick3000", t3 + 9'000'000}, {"tick5000", t3 + 10'000'000}, {"tick5000", t3 + 15'000'000}};
+  std::vector<std::pair<std::string, long long>> seen;
+  std::istringstream in(text);
+  std::string name;
+  long long value = 0;
+  while (in >> name >> value)
+    if (name.starts_with("tick")) seen.emplace_back(name, value);
+  EXPECT_EQ(seen, ticks) << text;
+  EXPECT_EQ(v["after_join"], t3 + 15'000'000);
+}
+
+TEST_F(VtimeProbe, ReRunsAreIdenticalWaitForWait) {
+  std::vector<std::vector<vt::Record>> runs;
+  for (int i = 0; i < 2; ++i) {
+    ScriptedTwin twin;
+    MasterProcess p(probe(), {"calls"}, (dir_.path() / "p.log").string(),
+                    twin.server.environment(find_vtime_library(), "udp:127.0.0.1:9"));
+    ASSERT_EQ(twin.server.accept(std::chrono::seconds(10), 0), VtimeServer::Status::ok);
+    twin.serve();
+    p.wait(std::chrono::seconds(10));
+    runs.push_back(twin.waits);
+  }
+  ASSERT_EQ(runs[0].size(), runs[1].size());
+  for (std::size_t i = 0; i < runs[0].size(); ++i) EXPECT_EQ(vt::encode(runs[0][i]), vt::encode(runs[1][i])) << i;
+}
+
+TEST_F(VtimeProbe, AForkedChildIsRefusedAndEnds) {
+  ScriptedTwin twin;
+  const std::string log = (dir_.path() / "fork.log").string();
+  MasterProcess p(probe(), {"fork"}, log, twin.server.environment(find_vtime_library(), "udp:127.0.0.1:9"));
+  ASSERT_EQ(twin.server.accept(std::chrono::seconds(10), 0), VtimeServer::Status::ok);
+  EXPECT_EQ(twin.serve(), VtimeServer::Status::second_process);
+  EXPECT_GT(twin.server.other_pid(), 0);
+  EXPECT_NE(twin.server.other_pid(), p.pid());
+  p.stop(std::chrono::milliseconds(500));
+  EXPECT_TRUE(contains(read_bytes(log), "the twin refused process")) << read_bytes(log);
+}
+
+// ---- the command line -----------------------------------------------------------------------
+
+class CliVtime : public CliTest {
+ protected:
+  std::string omni_master() const { return OMNITWIN_BINARY_DIR "/controller/omni-master"; }
+  std::string probe(const std::string& mode, bool stat = false) const {
+    return std::string(OMNITWIN_BINARY_DIR "/tests/vt_probe") + (stat ? "_static " : " ") + mode;
+  }
+  Finished run_master(const std::string& out, const std::string& cmd, std::vector<std::string> extra = {}) {
+    std::vector<std::string> args{"run", test_scenario("ethercat_short.yaml"), "--no-progress", "--out",
+                                  (dir_ / out).string(), "--master-cmd", cmd};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args);
+  }
+  nlohmann::json metrics(const std::string& out) const {
+    return nlohmann::json::parse(read_bytes(dir_ / out / "metrics.json"));
+  }
+};
+
+TEST_F(CliVtime, OmniMasterOnTheWallClockRerunsByteIdenticalAndMovesAsItsSimClockRun) {
+  const std::string cmd = omni_master() + " --bus ethercat --clock wall --iface {iface} --config {out}/master.yaml";
+  const Finished a = run_master("a", cmd);
+  const Finished b = run_master("b", cmd);
+  ASSERT_EQ(a.code, 0) << a.out << a.err;
+  ASSERT_EQ(b.code, 0) << b.out << b.err;
+  EXPECT_EQ(read_bytes(dir_ / "a" / "trajectory.csv"), read_bytes(dir_ / "b" / "trajectory.csv"));
+  EXPECT_EQ(read_bytes(dir_ / "a" / "bus.csv"), read_bytes(dir_ / "b" / "bus.csv"));
+  const nlohmann::json m = metrics("a");
+  EXPECT_EQ(m["master"]["clock"], "virtual");
+  EXPECT_GT(m["master"]["virtual_time"]["waits"].get<int>(), 900);  // one per 5 ms cycle at least
+  EXPECT_GT(m["real_time_factor"].get<double>(), 1.0);
+  // The same master in lockstep on the sim-clock handshake: the platform moves identically
+  // (the columns of the master's own plan and odometry are not reported by a master we did not
+  // write, and are left out).
+  const Finished sim = run({"run", test_scenario("ethercat_short.yaml"), "--no-progress", "--out", (dir_ / "sim").string()});
+  ASSERT_EQ(sim.code, 0) << sim.out;
+  auto columns = [](const std::string& csv) {
+    std::vector<std::string> rows;
+    std::istringstream in(csv);
+    for (std::string line; std::getline(in, line);) {
+      std::vector<std::string> f;
+      std::istringstream ls(line);
+      for (std::string x; std::getline(ls, x, ',');) f.push_back(x);
+      std::string keep = f.size() > 16 ? f[0] + "," + f[4] + "," + f[5] + "," + f[6] : line;
+      for (std::size_t i = 16; i < f.size(); ++i) keep += "," + f[i];
+      rows.push_back(keep);
+    }
+    return rows;
+  };
+  EXPECT_EQ(columns(read_bytes(dir_ / "a" / "trajectory.csv")), columns(read_bytes(dir_ / "sim" / "trajectory.csv")));
+}
+
+// A master written as a customer writes one (plain C, AF_PACKET or UDP, clock_nanosleep, poll):
+// under the library it brings the drives to OP, runs them in CSV faster than real time, and
+// two runs are byte-identical.
+TEST_F(CliVtime, AForeignStyleMasterRunsFasterThanRealTimeAndRerunsByteIdentical) {
+  // It would run 5 s; the run ends at 2.5 s and stops it with SIGTERM, which it handles.
+  const std::string cmd = std::string(OMNITWIN_BINARY_DIR "/tests/ec_foreign_master") + " {iface} 5";
+  const Finished a = run_master("fa", cmd, {"--set", "duration=2.5"});
+  const Finished b = run_master("fb", cmd, {"--set", "duration=2.5"});
+  ASSERT_EQ(a.code, 0) << a.out << read_bytes(dir_ / "fa" / "master.log");
+  ASSERT_EQ(b.code, 0) << b.out;
+  const std::string log = read_bytes(dir_ / "fa" / "master.log");
+  EXPECT_TRUE(contains(log, "all drives Operation Enabled in CSV")) << log;
+  // Up to the run's end (2500 cycles) every frame came back; after it the twin answers no more.
+  const std::string during = log.substr(0, log.find("cycle 2501"));
+  EXPECT_FALSE(contains(during, "lost")) << log;
+  EXPECT_FALSE(contains(during, "WKC")) << log;
+  EXPECT_EQ(read_bytes(dir_ / "fa" / "trajectory.csv"), read_bytes(dir_ / "fb" / "trajectory.csv"));
+  const std::string log_b = read_bytes(dir_ / "fb" / "master.log");
+  EXPECT_EQ(during, log_b.substr(0, log_b.find("cycle 2501")));
+  EXPECT_TRUE(contains(read_bytes(dir_ / "fa" / "events.log"), "drive operation enabled"));
+  EXPECT_GT(metrics("fa")["real_time_factor"].get<double>(), 1.0);
+}
+
+TEST_F(CliVtime, AMasterThatExitsEarlyEndsTheRunWithExit3) {
+  const Finished f = run_master("early", probe("exit-early"));
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "left the virtual clock at t = 0.100")) << f.out;
+  EXPECT_TRUE(contains(f.out, "exit 0")) << f.out;
+  EXPECT_TRUE(fs::exists(dir_ / "early" / "metrics.json"));
+  EXPECT_TRUE(fs::exists(dir_ / "early" / "master.log"));
+}
+
+TEST_F(CliVtime, AMasterThatCrashesEndsTheRunWithExit3) {
+  const Finished f = run_master("crash", probe("crash"));
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "killed by signal 11")) << f.out;
+}
+
+TEST_F(CliVtime, AMasterThatNeverWaitsIsCaughtByTheWatchdog) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Finished f = run_master("busy", probe("busy"), {"--set", "master.watchdog=1"});
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "neither waited nor ended for 1 s of wall time at t = 0.100")) << f.out;
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(20));
+}
+
+TEST_F(CliVtime, AMasterThatIgnoresSigtermIsKilledAndSaidSo) {
+  const Finished f = run_master("term", probe("ignore-term"), {"--set", "duration=0.5", "--set", "master.stop_grace=0.5"});
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "did not end within 0.5 s of SIGTERM: killed")) << f.out;
+  EXPECT_TRUE(fs::exists(dir_ / "term" / "trajectory.csv"));
+}
+
+TEST_F(CliVtime, AStaticMasterIsRefusedOrRunsInRealtimeWhenAsked) {
+  const Finished f = run_master("static", probe("sleep", true));
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "statically linked")) << f.out;
+  EXPECT_TRUE(contains(f.out, "--clock realtime")) << f.out;
+  const Finished r = run_master("static-rt", probe("sleep", true),
+                                {"--set", "master.on_static=realtime", "--set", "duration=0.3"});
+  EXPECT_TRUE(contains(r.out + r.err, "runs on the wall clock")) << r.out << r.err;
+  EXPECT_EQ(metrics("static-rt")["clock"], "realtime");
+}
+
+TEST_F(CliVtime, AMasterThatForksEndsTheRunWithExit3) {
+  const Finished f = run_master("fork", probe("fork"));
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "a second process")) << f.out;
+}
+
+TEST_F(CliVtime, ABadCommandIsRefusedBeforeTheRun) {
+  const Finished f = run_master("bad", "'unbalanced");
+  EXPECT_NE(f.code, 0);
+  EXPECT_TRUE(contains(f.out + f.err, "unbalanced quote")) << f.out << f.err;
+  const Finished d = run({"run", test_scenario("run_short_line.yaml"), "--master-cmd", "x", "--out", (dir_ / "d").string()});
+  EXPECT_EQ(d.code, 2) << d.out << d.err;
+  EXPECT_TRUE(contains(d.err, "runs on bus ethercat or can")) << d.err;
+}
+
+}  // namespace

@@ -1,0 +1,193 @@
+/* A probe for the virtual-time library (tests/twin/master_vtime_test.cpp): plain C and libc, as
+ * a master we did not write is. Each mode makes the intercepted calls and prints what they
+ * returned ("NAME VALUE" lines, times in ns on the monotonic clock) so the test can compare them
+ * with what the kernel would give on the simulated clock; the other modes are the bad masters
+ * (exits early, crashes, never waits, ignores SIGTERM, forks). Built dynamic and static. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/select.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <sys/timerfd.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <time.h>
+#include <unistd.h>
+
+static long long mono(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
+}
+
+static void out(const char* name, long long v) {
+  printf("%s %lld\n", name, v);
+  fflush(stdout);
+}
+
+static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t cv = PTHREAD_COND_INITIALIZER;
+
+static void* ticker(void* arg) {
+  const long period_us = (long)(intptr_t)arg;
+  for (int i = 0; i < 3; ++i) {
+    usleep((useconds_t)period_us);
+    pthread_mutex_lock(&mu);
+    printf("tick%ld %lld\n", period_us, mono());
+    fflush(stdout);
+    pthread_mutex_unlock(&mu);
+  }
+  return NULL;
+}
+
+static int calls(void) {
+  struct timespec t;
+  out("mono", mono());
+  clock_gettime(CLOCK_REALTIME, &t);
+  out("real_s", t.tv_sec);
+  clock_gettime(CLOCK_BOOTTIME, &t);
+  out("boot", (long long)t.tv_sec * 1000000000LL + t.tv_nsec);
+  struct timeval tv;
+  gettimeofday(&tv, NULL);
+  out("tod_s", tv.tv_sec);
+  out("time", (long long)time(NULL));
+  /* sleeps */
+  struct timespec d = {0, 1500000};
+  out("nanosleep_rc", nanosleep(&d, NULL));
+  out("after_nanosleep", mono());
+  struct timespec abs = {1000, 10000000};
+  out("abs_rc", clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &abs, NULL));
+  out("after_abs", mono());
+  struct timespec past = {999, 0};
+  out("past_rc", clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &past, NULL));
+  out("after_past", mono());
+  struct timespec bad = {0, 1000000000};
+  out("bad_rc", clock_nanosleep(CLOCK_MONOTONIC, 0, &bad, NULL));
+  errno = 0;
+  out("bad_nanosleep_rc", nanosleep(&bad, NULL));
+  out("bad_nanosleep_errno", errno);
+  out("usleep_rc", usleep(250));
+  out("after_usleep", mono());
+  out("sleep_rc", sleep(1));
+  out("after_sleep", mono());
+  /* descriptor waits */
+  out("poll_rc", poll(NULL, 0, 7));
+  out("after_poll", mono());
+  struct timeval st = {0, 3000};
+  out("select_rc", select(0, NULL, NULL, NULL, &st));
+  out("select_tv", st.tv_sec * 1000000LL + st.tv_usec);
+  out("after_select", mono());
+  struct timespec pt = {0, 2000000};
+  out("ppoll_rc", ppoll(NULL, 0, &pt, NULL));
+  out("after_ppoll", mono());
+  int ep = epoll_create1(0);
+  struct epoll_event ev;
+  out("epoll_rc", epoll_wait(ep, &ev, 1, 2));
+  out("after_epoll", mono());
+  /* a UDP socket that nothing reaches: receive timeouts */
+  int s = socket(AF_INET, SOCK_DGRAM, 0);
+  struct sockaddr_in a;
+  memset(&a, 0, sizeof a);
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  bind(s, (struct sockaddr*)&a, sizeof a);
+  struct timeval rt = {0, 5000};
+  setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &rt, sizeof rt);
+  socklen_t rl = sizeof rt;
+  getsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &rt, &rl); /* the kernel keeps it in jiffies: rounded up */
+  out("rcvtimeo_ns", (rt.tv_sec * 1000000LL + rt.tv_usec) * 1000LL);
+  char buf[64];
+  errno = 0;
+  out("recv_rc", recv(s, buf, sizeof buf, 0));
+  out("recv_errno", errno);
+  out("after_recv", mono());
+  long long before = mono();
+  /* the busy-poll rule: after_recv and before are calls 1 and 2, these 61 make 63, the next 64 */
+  for (int i = 0; i < 61; ++i) recv(s, buf, sizeof buf, MSG_DONTWAIT);
+  (void)before;
+  errno = 0;
+  out("dontwait_rc", recv(s, buf, sizeof buf, MSG_DONTWAIT));
+  out("dontwait_errno", errno);
+  out("after_spin", mono());
+  /* a datagram to itself is there at once: no time passes */
+  socklen_t al = sizeof a;
+  getsockname(s, (struct sockaddr*)&a, &al);
+  sendto(s, "x", 1, 0, (struct sockaddr*)&a, sizeof a);
+  out("self_rc", recv(s, buf, sizeof buf, 0));
+  out("after_self", mono());
+  /* a periodic timerfd */
+  int tf = timerfd_create(CLOCK_MONOTONIC, 0);
+  struct itimerspec its = {{0, 1000000}, {0, 1000000}};
+  out("timerfd_settime_rc", timerfd_settime(tf, 0, &its, NULL));
+  for (int i = 0; i < 3; ++i) {
+    uint64_t n = 0;
+    out("timerfd_read_rc", read(tf, &n, sizeof n));
+    out("timerfd_n", (long long)n);
+    out("after_timerfd", mono());
+  }
+  struct itimerspec cur;
+  timerfd_gettime(tf, &cur);
+  out("timerfd_left", cur.it_value.tv_nsec);
+  close(tf);
+  /* a condition variable nobody signals */
+  struct timespec until;
+  clock_gettime(CLOCK_REALTIME, &until);
+  until.tv_nsec += 4000000;
+  if (until.tv_nsec >= 1000000000) { until.tv_nsec -= 1000000000; ++until.tv_sec; }
+  pthread_mutex_lock(&mu);
+  out("cond_rc", pthread_cond_timedwait(&cv, &mu, &until));
+  pthread_mutex_unlock(&mu);
+  out("after_cond", mono());
+  /* two threads on their own periods, joined */
+  pthread_t t1, t2;
+  pthread_create(&t1, NULL, ticker, (void*)(intptr_t)3000);
+  pthread_create(&t2, NULL, ticker, (void*)(intptr_t)5000);
+  pthread_join(t1, NULL);
+  pthread_join(t2, NULL);
+  out("after_join", mono());
+  return 0;
+}
+
+int main(int argc, char** argv) {
+  const char* mode = argc > 1 ? argv[1] : "calls";
+  if (!strcmp(mode, "calls")) return calls();
+  if (!strcmp(mode, "sleep")) { /* sleeps in 10 ms steps until SIGTERM */
+    for (;;) usleep(10000);
+  }
+  if (!strcmp(mode, "exit-early")) {
+    usleep(100000);
+    return 0;
+  }
+  if (!strcmp(mode, "crash")) {
+    usleep(100000);
+    raise(SIGSEGV);
+  }
+  if (!strcmp(mode, "busy")) { /* a loop without a single call the library sees */
+    usleep(100000);
+    volatile unsigned long x = 0;
+    for (;;) ++x;
+  }
+  if (!strcmp(mode, "ignore-term")) {
+    signal(SIGTERM, SIG_IGN);
+    for (;;) usleep(10000);
+  }
+  if (!strcmp(mode, "fork")) {
+    usleep(100000);
+    pid_t p = fork();
+    if (p == 0) {
+      usleep(1000);
+      _exit(0);
+    }
+    for (;;) usleep(10000);
+  }
+  fprintf(stderr, "vt_probe: unknown mode %s\n", mode);
+  return 2;
+}
