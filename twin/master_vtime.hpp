@@ -47,7 +47,6 @@ class VtimeServer {
   bool wake(std::uint64_t seq, SimTime now, std::uint64_t frames);
   void end(SimTime now);  // best effort
 
-  pid_t master_pid() const { return pid_; }
   pid_t other_pid() const { return other_pid_; }
   std::uint64_t waits() const { return waits_; }
 

@@ -163,11 +163,12 @@ struct State {
   Timer timers[kMaxFd];
   bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
   int bus_port = -1;            // udp:HOST:PORT : datagrams to PORT carry the bus
-  std::uint64_t late = 0;       // wakes where the kernel had not yet delivered the frame
 };
 constinit State g;  // constant-initialised: ready before any constructor runs
 constinit thread_local int t_spin = 0;
-constinit thread_local bool t_inside = false;  // the library's own calls on this thread
+// Set while this thread leads (talks to the twin): a signal handler that reads the clock or
+// waits then gets the kernel's answer instead of re-entering the library's own wait.
+constinit thread_local bool t_inside = false;
 
 struct Lock {
   Lock() { pthread_mutex_lock(&g.mu); }
@@ -289,7 +290,7 @@ __attribute__((constructor)) void vt_init() {
 bool has_socket(const Waiter& w) {
   for (nfds_t i = 0; i < w.nfds; ++i) {
     struct stat st;
-    if (w.fds[i].fd >= 0 && fstat(w.fds[i].fd, &st) == 0 && (S_ISSOCK(st.st_mode) || st.st_mode == 0)) return true;
+    if (w.fds[i].fd >= 0 && fstat(w.fds[i].fd, &st) == 0 && S_ISSOCK(st.st_mode)) return true;
   }
   return false;
 }
@@ -375,8 +376,7 @@ bool lead() {
     } else if (w->nfds > 0 && fds_ready(*w, 0)) {
       satisfy(w);
     } else if (w->nfds > 0 && new_frames && has_socket(*w) && fds_ready(*w, kGraceNs)) {
-      ++g.late;  // the kernel was still delivering the frame
-      satisfy(w);
+      satisfy(w);  // the kernel was still delivering the frame
     }
   }
   ++g.generation;
@@ -384,9 +384,9 @@ bool lead() {
   return true;
 }
 
-// Blocks the calling thread until `w` is satisfied (lock held on entry and exit). Returns
-// false when the run ended meanwhile (the caller then does the real call).
-bool wait_virtual(Waiter& w) {
+// Blocks the calling thread until `w` is satisfied or the run ends (lock held on entry and
+// exit); the caller tells the two apart by w.satisfied.
+void wait_virtual(Waiter& w) {
   t_spin = 0;
   w.next = g.waiters;
   g.waiters = &w;
@@ -414,7 +414,6 @@ bool wait_virtual(Waiter& w) {
       break;
     }
   if (!w.satisfied) ++g.running;
-  return !g.ended || w.satisfied;
 }
 
 // The busy-poll rule: the kSpinLimit-th call in a row that found nothing lets a quantum pass.
@@ -547,11 +546,7 @@ ssize_t receive(int fd, int flags, Attempt attempt) {
   }
   if (nonblocking(fd, flags)) {
     spun();
-    const int e = errno;
-    const ssize_t again = attempt(flags | MSG_DONTWAIT);
-    if (again < 0 && errno != EAGAIN && errno != EWOULDBLOCK) return again;
-    if (again < 0) errno = e == EWOULDBLOCK ? EWOULDBLOCK : EAGAIN;
-    return again;
+    return attempt(flags | MSG_DONTWAIT);  // a frame that came meanwhile, or EAGAIN again
   }
   ns_t deadline;
   {
