@@ -109,17 +109,28 @@ std::string find_master_program(const std::string& configured) {
       throw std::runtime_error(fmt::format("bus.master: '{}' is not an executable program", configured));
     return configured;
   }
+  // Build tree (build/twin/omnitwin → build/controller/omni-master), an install beside it,
+  // then this build's own (for test and benchmark programs elsewhere in the build tree).
+  std::string dir;
+  const std::string found = find_beside_executable({"../controller/omni-master", "omni-master"},
+                                                   OMNITWIN_BINARY_DIR "/controller/omni-master", X_OK, dir);
+  if (!found.empty()) return found;
+  throw std::runtime_error(fmt::format(
+      "bus: the master program omni-master was not found beside {} (build it, or set bus.master)", dir));
+}
+
+std::string find_beside_executable(const std::vector<std::string>& beside, const std::string& in_build, int mode,
+                                   std::string& folder) {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);
   const fs::path dir = ec ? fs::current_path() : self.parent_path();
-  // Build tree (build/twin/omnitwin → build/controller/omni-master), an install beside it,
-  // then this build's own (for test and benchmark programs elsewhere in the build tree).
-  for (const fs::path& p : {dir / ".." / "controller" / "omni-master", dir / "omni-master",
-                            fs::path(OMNITWIN_BINARY_DIR) / "controller" / "omni-master"}) {
-    if (access(p.c_str(), X_OK) == 0) return p.lexically_normal().string();
-  }
-  throw std::runtime_error(fmt::format(
-      "bus: the master program omni-master was not found beside {} (build it, or set bus.master)", dir.string()));
+  folder = dir.string();
+  std::vector<fs::path> candidates;
+  for (const std::string& b : beside) candidates.push_back(dir / b);
+  candidates.emplace_back(in_build);
+  for (const fs::path& p : candidates)
+    if (access(p.c_str(), mode) == 0) return p.lexically_normal().string();
+  return "";
 }
 
 namespace {

@@ -48,6 +48,12 @@ class MasterProcess {
   int exit_code_ = -1;
 };
 
+// A file the build makes beside the running executable: the first of `beside` (relative to
+// the executable's folder, `folder` on return) and then `in_build` (this build's tree) that
+// access(path, mode) accepts, as a normal path; "" when none does. Not real-time safe.
+std::string find_beside_executable(const std::vector<std::string>& beside, const std::string& in_build, int mode,
+                                   std::string& folder);
+
 // The master program to run: `configured` when given; else omni-master beside the omnitwin
 // executable (build tree: ../controller/omni-master; installed: same folder). Throws
 // RunSetupError-compatible std::runtime_error naming where it looked.

@@ -17,6 +17,7 @@
 #include <fmt/format.h>
 
 #include "twin/bus_network.hpp"
+#include "twin/master_process.hpp"
 
 namespace omnitwin::twin {
 
@@ -278,16 +279,13 @@ void VtimePacer::wait_until(SimTime t) {
 // ---- finding things -------------------------------------------------------------------------
 
 std::string find_vtime_library() {
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  const fs::path dir = ec ? fs::current_path() : self.parent_path();
-  for (const fs::path& p : {dir / "vtime" / "libomnitwin_vtime.so", dir / "libomnitwin_vtime.so",
-                            dir / ".." / "lib" / "libomnitwin_vtime.so",
-                            fs::path(OMNITWIN_BINARY_DIR) / "twin" / "vtime" / "libomnitwin_vtime.so"}) {
-    if (access(p.c_str(), R_OK) == 0) return fs::absolute(p).lexically_normal().string();
-  }
-  throw std::runtime_error(fmt::format("libomnitwin_vtime.so was not found beside {} (build target omnitwin_vtime)",
-                                       dir.string()));
+  // Build tree (build/twin/vtime/), an install beside the executable or in ../lib, this build.
+  std::string dir;
+  const std::string found =
+      find_beside_executable({"vtime/libomnitwin_vtime.so", "libomnitwin_vtime.so", "../lib/libomnitwin_vtime.so"},
+                             OMNITWIN_BINARY_DIR "/twin/vtime/libomnitwin_vtime.so", R_OK, dir);
+  if (!found.empty()) return fs::absolute(found).string();  // LD_PRELOAD resolves it in another cwd
+  throw std::runtime_error(fmt::format("libomnitwin_vtime.so was not found beside {} (build target omnitwin_vtime)", dir));
 }
 
 std::string preload_obstacle(const std::string& program) {
