@@ -12,18 +12,9 @@ namespace omnitwin::twin {
 namespace {
 
 constexpr int kBusNodes = 5;
-constexpr std::size_t kPendingCapacity = 256;
 constexpr double kTwoPi = 2 * std::numbers::pi;
 
 double timer_drift(double d) { return 1.0 / (1.0 + d) - 1.0; }
-
-can::BusConfig bus_config(const Scenario& s) {
-  can::BusConfig c;
-  c.bit_rate_bps = s.bus.can.bit_rate;
-  c.queue_capacity = 64;
-  c.max_nodes = kBusNodes;
-  return c;
-}
 
 const char* error_state_name(can::ErrorState e) {
   switch (e) {
@@ -43,17 +34,18 @@ std::string node_name(int fault_node) {
 }  // namespace
 
 CanDriveNetwork::CanDriveNetwork(const Scenario& s, Scheduler& sched, Hooks hooks, CanDriveSetup setup)
-    : s_(s), setup_(setup), sched_(sched), hooks_(std::move(hooks)), bus_(bus_config(s)), rng_(s.bus.can.seed) {
-  for (int i = 0; i < kBusNodes; ++i) bus_.attach();
-  bus_.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
-  bus_.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
-  bus_.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
-  transport_ = can::open_transport(s.bus.can.transport);
-  batch_ = s.clock == ClockMode::lockstep;
-  pending_.reserve(kPendingCapacity);
+    : s_(s),
+      setup_(setup),
+      sched_(sched),
+      hooks_(std::move(hooks)),
+      wire_(s, kBusNodes, s.clock == ClockMode::lockstep) {
+  can::CanBus& bus = wire_.bus();
+  bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
+  bus.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
+  bus.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
 }
 
-CanDriveNetwork::~CanDriveNetwork() { flush_transport(); }
+CanDriveNetwork::~CanDriveNetwork() = default;
 
 // Each drive's firmware cycle on its own oscillator, the four starting at different instants;
 // every drive powers on at t = 0.
@@ -68,98 +60,35 @@ void CanDriveNetwork::start() {
   }
 }
 
-void CanDriveNetwork::open_pcap(const std::string& path) {
-  can::PcapWriter::Options o;
-  o.flush_each_packet = false;
-  pcap_ = std::make_unique<can::PcapWriter>(path, o);
-}
-
-std::string CanDriveNetwork::close_pcap() { return close_capture(pcap_.get()); }
-std::string CanDriveNetwork::pcap_error() const { return capture_error(pcap_.get()); }
-
 // ---------------------------------------------------------------------------------------
 // The transport side
 
-void CanDriveNetwork::submit_from_far(const can::Frame& f, SimTime t) {
-  const SimTime stamp = t + std::llround(s_.bus.can.t_pre_us * 1e3) + extra_delay(FaultSpec::kMaster);
-  if (bus_.submit(kFar, f, stamp) != can::SubmitStatus::queued) ++refused_from_far_;
-}
-
-void CanDriveNetwork::flush_transport() {
-  if (pending_.empty()) return;
-  const std::size_t sent = transport_->send_many(pending_);
-  to_transport_ += sent;
-  send_failures_ += pending_.size() - sent;
-  pending_.clear();
-}
-
-bool CanDriveNetwork::drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) {
-  flush_transport();
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (from_transport_ < count) {
-    if (auto r = transport_->receive()) {
-      ++from_transport_;
-      submit_from_far(r->frame, t);
-      continue;
-    }
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left.count() <= 0 || !can::wait_readable(*transport_, left)) return from_transport_ >= count;
-  }
-  return true;
-}
-
-int CanDriveNetwork::poll_transport(SimTime t) {
-  int n = 0;
-  while (auto r = transport_->receive()) {
-    ++from_transport_;
-    ++n;
-    submit_from_far(r->frame, t);
-  }
-  return n;
-}
-
 void CanDriveNetwork::on_wake(SimTime t) {
-  bus_.advance(t);
-  poll_transport(t);
+  wire_.bus().advance(t);
+  wire_.poll_transport(t);
 }
 
 // ---------------------------------------------------------------------------------------
 // Wire callbacks
 
 void CanDriveNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing) {
-  if (receiver == kFar) return;  // the far side hears it through the transport (on_tx_done)
+  if (receiver == CanWire::kFar) return;  // the far side hears it through the transport (on_tx_done)
   const int i = receiver - 1;
-  if (lose(i)) {
-    ++lost_frames_;
-    return;
-  }
+  if (!wire_.arrives(i)) return;
   if (powered_[static_cast<std::size_t>(i)]) deliver(i, f, timing.end_ns);
   watch(i, timing.end_ns);
 }
 
 void CanDriveNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
-  if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
-  if (sender == kFar) return on_master_frame(f, timing.end_ns);
-  if (lose(FaultSpec::kMaster)) {
-    ++lost_frames_;
-    return;
-  }
-  if (batch_) {
-    pending_.push_back(can::TimedFrame{f, timing.end_ns});
-    if (pending_.size() >= kPendingCapacity) flush_transport();
-  } else if (transport_->send(f, timing.end_ns)) {
-    ++to_transport_;
-  } else {
-    ++send_failures_;
-  }
+  if (wire_.completed(sender, f, timing)) on_master_frame(f, timing.end_ns);
 }
 
 void CanDriveNetwork::on_bus_event(const can::BusEvent& e) {
-  if (e.kind == can::BusEventKind::error_frame || e.node == kFar) return;
+  if (e.kind == can::BusEventKind::error_frame || e.node == CanWire::kFar) return;
   const int i = e.node - 1;
   const std::string who = node_name(i);
   if (e.kind == can::BusEventKind::state_changed) {
-    if (e.state == can::ErrorState::bus_off) ++bus_off_events_;
+    if (e.state == can::ErrorState::bus_off) wire_.note_bus_off();
     hooks_.log(e.t_ns, "can", fmt::format("{} is {}", who, error_state_name(e.state)));
   } else {
     hooks_.log(e.t_ns, "can", fmt::format("{} recovered from bus-off", who));
@@ -170,7 +99,7 @@ void CanDriveNetwork::on_bus_event(const can::BusEvent& e) {
 // One drive period: the protocol's step against the wheel, the amplifier's set-point back.
 void CanDriveNetwork::on_drive_timer(int i, SimTime t) {
   if (!powered_[static_cast<std::size_t>(i)]) return;
-  bus_.advance(t);
+  wire_.bus().advance(t);
   drive::Feedback fb;
   fb.position_rad = hooks_.wheel_angle(i);
   fb.velocity_rad_s = hooks_.wheel_speed(i);
@@ -196,46 +125,22 @@ void CanDriveNetwork::watch(int i, SimTime t) {
 // ---------------------------------------------------------------------------------------
 // Faults
 
-bool CanDriveNetwork::lose(int target) {
-  for (LossState* l : {&loss_[static_cast<std::size_t>(target)], &loss_[FaultSpec::kAllNodes]}) {
-    if (!l->active) continue;
-    if (l->left > 0) {
-      --l->left;
-      return true;
-    }
-    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < l->rate) {
-      l->left = l->burst - 1;
-      return true;
-    }
-  }
-  return false;
-}
-
-std::int64_t CanDriveNetwork::extra_delay(int node) {
-  const DelayState& d = delay_[static_cast<std::size_t>(node)];
-  if (!d.active) return 0;
-  const double jitter = d.jitter_ns > 0 ? std::uniform_real_distribution<double>(0.0, d.jitter_ns)(rng_) : 0.0;
-  return std::llround(d.extra_ns + jitter);
-}
-
 void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
   const bool slave = f.wheel >= 0 && f.wheel < 4;
   const bool ok = f.kind == FaultSpec::Kind::frame_loss ? (slave || f.wheel == FaultSpec::kMaster || f.wheel == FaultSpec::kAllNodes)
                   : f.kind == FaultSpec::Kind::delay    ? (slave || f.wheel == FaultSpec::kMaster)
                                                         : slave || f.kind == FaultSpec::Kind::wheel_slip;
   if (!ok) throw std::invalid_argument(fmt::format("{} fault {} cannot act on node {}", setup_.name, to_string(f.kind), f.wheel));
-  bus_.advance(t);
+  wire_.bus().advance(t);
   const auto n = static_cast<std::size_t>(f.wheel);
   const std::string who = node_name(f.wheel);
   const char* edge = begin ? "begins" : "ends";
   switch (f.kind) {
     case FaultSpec::Kind::frame_loss:
-      loss_[n] = LossState{f.rate, f.burst, 0, begin};
-      hooks_.log(t, "fault", fmt::format("frame_loss to {} rate {} burst {} ({})", who, f.rate, f.burst, edge));
+      hooks_.log(t, "fault", wire_.apply_loss(f, begin, who));
       return;
     case FaultSpec::Kind::delay:
-      delay_[n] = DelayState{f.extra_ms * 1e6, f.jitter_ms * 1e6, begin};
-      hooks_.log(t, "fault", fmt::format("delay of {} +{} ms jitter {} ms ({})", who, f.extra_ms, f.jitter_ms, edge));
+      hooks_.log(t, "fault", wire_.apply_delay(f, begin, who));
       return;
     case FaultSpec::Kind::drift: {
       const double d = begin ? f.drift : setup_.drift[n];
@@ -245,13 +150,13 @@ void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     }
     case FaultSpec::Kind::power_loss:
       if (begin) {
-        bus_.detach(f.wheel + 1, t);
+        wire_.bus().detach(f.wheel + 1, t);
         drive_power(f.wheel, false, t);
         powered_[n] = false;
         hooks_.set_setpoint(f.wheel, 0.0);
       } else {
         // Power-on: the drive in its power-on state (a boot-up where the protocol has one).
-        bus_.reattach(f.wheel + 1, t);
+        wire_.bus().reattach(f.wheel + 1, t);
         powered_[n] = true;
         drive_power(f.wheel, true, t);
         ++power_cycles_;
@@ -260,8 +165,8 @@ void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       return;
     case FaultSpec::Kind::bus_off:
       if (begin) {
-        bus_.corrupt_frames_of(f.wheel + 1, 32);  // 32 × 8 > 255: bus-off
-      } else if (!bus_.request_recovery(f.wheel + 1, t)) {
+        wire_.bus().corrupt_frames_of(f.wheel + 1, 32);  // 32 × 8 > 255: bus-off
+      } else if (!wire_.bus().request_recovery(f.wheel + 1, t)) {
         hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
         return;
       }
@@ -282,13 +187,13 @@ void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
 nlohmann::json CanDriveNetwork::slave_metrics() const {
   nlohmann::json a = nlohmann::json::array();
   for (int i = 0; i < 4; ++i) {
-    const can::NodeStats& ns = bus_.node_stats(i + 1);
+    const can::NodeStats& ns = wire_.bus().node_stats(i + 1);
     const drive::Cia402Drive& d = drive_core(i);
     nlohmann::json j = {{"node", i + 1},
                         {"drive_state", drive::to_string(d.state())},
                         {"error_code", d.objects().error_code},
-                        {"can_state", error_state_name(bus_.error_state(i + 1))},
-                        {"tec", bus_.tec(i + 1)},
+                        {"can_state", error_state_name(wire_.bus().error_state(i + 1))},
+                        {"tec", wire_.bus().tec(i + 1)},
                         {"tx_errors", ns.tx_errors},
                         {"bus_off_events", ns.bus_off_events}};
     j.update(drive_json(i));
@@ -300,17 +205,15 @@ nlohmann::json CanDriveNetwork::slave_metrics() const {
 BusSample CanDriveNetwork::bus_sample() const {
   BusSample b;
   b.has_frames = true;
-  b.frames_tx = to_transport_ + pending_.size();
-  b.frames_rx = from_transport_;
-  const can::TransportStats ts = transport_->stats();
-  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
-  b.errors = bus_.stats().error_frames + malformed + send_failures_ + refused_from_far_;
+  b.frames_tx = wire_.frames_tx();
+  b.frames_rx = wire_.from_transport();
+  b.errors = wire_.errors();
   return b;
 }
 
 DriveStateCode CanDriveNetwork::drive_state(int axis0) const {
   if (!powered_[static_cast<std::size_t>(axis0)]) return DriveStateCode::off;
-  if (bus_.error_state(axis0 + 1) == can::ErrorState::bus_off) return DriveStateCode::fault;
+  if (wire_.bus().error_state(axis0 + 1) == can::ErrorState::bus_off) return DriveStateCode::fault;
   const drive::State fsa = drive_core(axis0).state();
   if (fsa == drive::State::fault || fsa == drive::State::fault_reaction_active) return DriveStateCode::fault;
   return drive_running(axis0) ? DriveStateCode::running : DriveStateCode::waiting;
@@ -330,26 +233,9 @@ WheelRecord CanDriveNetwork::wheel_record(int axis0) const {
 }
 
 nlohmann::json CanDriveNetwork::wire_metrics(SimTime now) const {
-  const BusSample b = bus_sample();
-  const can::TransportStats ts = transport_->stats();
-  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
-  return {{"name", setup_.name},
-          {"bit_rate", s_.bus.can.bit_rate},
-          {"transport", transport_->spec()},
-          {"frames_tx", b.frames_tx},
-          {"frames_rx", b.frames_rx},
-          {"frames", bus_.stats().frames},
-          {"error_frames", bus_.stats().error_frames},
-          {"lost_frames", lost_frames_},
-          {"bus_off_events", bus_off_events_},
-          {"load", bus_.bus_load(now)},
-          {"dropouts", 0},
-          {"errors", b.errors},
-          {"power_cycles", power_cycles_},
-          {"refused_from_transport", refused_from_far_},
-          {"transport_rx_malformed", malformed},
-          {"transport_send_failures", send_failures_},
-          {"pcap_frames", pcap_ ? pcap_->written() : 0}};
+  nlohmann::json m = wire_.metrics(setup_.name, now);
+  m.update({{"dropouts", 0}, {"errors", wire_.errors()}, {"power_cycles", power_cycles_}});
+  return m;
 }
 
 }  // namespace omnitwin::twin

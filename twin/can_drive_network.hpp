@@ -32,6 +32,7 @@
 #include "bus_emulators/can/transport.hpp"
 #include "bus_emulators/drive/cia402_drive.hpp"
 #include "twin/bus_network.hpp"
+#include "twin/can_wire.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
@@ -51,37 +52,37 @@ class CanDriveNetwork : public BusNetwork {
 
   const char* name() const override { return setup_.name; }
   const char* wire_name() const override { return "can"; }
-  std::string master_iface() const override { return transport_->spec(); }
+  std::string master_iface() const override { return wire_.transport().spec(); }
 
-  void open_pcap(const std::string& path) override;
-  void flush_pcap() override {
-    if (pcap_) pcap_->flush();
-  }
-  std::string close_pcap() override;
-  std::string pcap_error() const override;
-  void flush_transport() override;
+  void open_pcap(const std::string& path) override { wire_.open_pcap(path); }
+  void flush_pcap() override { wire_.flush_pcap(); }
+  std::string close_pcap() override { return wire_.close_pcap(); }
+  std::string pcap_error() const override { return wire_.pcap_error(); }
+  void flush_transport() override { wire_.flush_transport(); }
   void advance(SimTime t) override {
-    bus_.advance(t);
+    wire_.bus().advance(t);
     now_ = std::max(now_, t);
   }
-  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
-  int poll_transport(SimTime t) override;
+  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override {
+    return wire_.drain_transport(count, t, timeout);
+  }
+  int poll_transport(SimTime t) override { return wire_.poll_transport(t); }
   // Realtime: the transport's descriptor; a master's frames enter the wire the moment they
   // arrive (between the run's own events), not at the next master tick.
-  int wake_fd() const override { return batch_ ? -1 : transport_->poll_fd(); }
+  int wake_fd() const override { return wire_.batch() ? -1 : wire_.transport().poll_fd(); }
   void on_wake(SimTime t) override;
   void observe_wheels() override {}
   void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;
-  std::uint64_t frames_to_transport() const override { return to_transport_; }
-  std::uint64_t frames_from_transport() const override { return from_transport_; }
+  std::uint64_t frames_to_transport() const override { return wire_.to_transport(); }
+  std::uint64_t frames_from_transport() const override { return wire_.from_transport(); }
   SimTime master_start_ns() const override { return master_start_ns_; }
   BusSample bus_sample() const override;
-  std::int64_t wire_busy_ns() const override { return bus_.stats().busy_ns; }
+  std::int64_t wire_busy_ns() const override { return wire_.bus().stats().busy_ns; }
   DriveStateCode drive_state(int axis0) const override;
   WheelRecord wheel_record(int axis0) const override;
   nlohmann::json slave_metrics() const override;
 
-  const can::CanBus& bus() const { return bus_; }
+  const can::CanBus& bus() const { return wire_.bus(); }
 
  protected:
   // Builds the wire and opens the transport (throws can::TransportError). The derived class
@@ -108,7 +109,7 @@ class CanDriveNetwork : public BusNetwork {
 
   // What a drive hands to the wire (with the delay fault applied). Real-time safe.
   bool submit(int axis0, const can::Frame& f, SimTime at) {
-    return bus_.submit(axis0 + 1, f, at + extra_delay(axis0)) == can::SubmitStatus::queued;
+    return wire_.bus().submit(axis0 + 1, f, at + wire_.extra_delay(axis0)) == can::SubmitStatus::queued;
   }
   void note_master_start(SimTime end) {
     if (master_start_ns_ < 0) master_start_ns_ = end;
@@ -120,44 +121,20 @@ class CanDriveNetwork : public BusNetwork {
   Hooks& hooks() { return hooks_; }
 
  private:
-  struct LossState {
-    double rate = 0;
-    int burst = 1;
-    int left = 0;
-    bool active = false;
-  };
-  struct DelayState {
-    double extra_ns = 0, jitter_ns = 0;
-    bool active = false;
-  };
-  static constexpr int kFar = 0;
-
   void on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing);
   void on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing);
   void on_bus_event(const can::BusEvent& e);
   void on_drive_timer(int axis0, SimTime t);
-  void submit_from_far(const can::Frame& f, SimTime t);
-  bool lose(int target);
-  std::int64_t extra_delay(int node);
   void watch(int axis0, SimTime t);
 
   const Scenario& s_;
   CanDriveSetup setup_;
   Scheduler& sched_;
   Hooks hooks_;
-  can::CanBus bus_;
-  std::unique_ptr<can::Transport> transport_;
-  std::unique_ptr<can::PcapWriter> pcap_;
+  CanWire wire_;  // node 0 the transport side, 1..4 the drives
   std::array<Scheduler::TimerId, 4> timers_{};
   std::array<bool, 4> powered_{true, true, true, true};
   std::array<std::string, 4> last_state_{};
-  std::array<LossState, 6> loss_{};
-  std::array<DelayState, 5> delay_{};
-  std::mt19937_64 rng_;
-  std::uint64_t to_transport_ = 0, from_transport_ = 0;
-  bool batch_ = false;
-  std::vector<can::TimedFrame> pending_;
-  std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t power_cycles_ = 0;
   SimTime master_start_ns_ = -1;
   SimTime now_ = 0;

@@ -13,17 +13,6 @@ namespace omnitwin::twin {
 namespace {
 
 constexpr int kBusNodes = 5;  // the transport side + four slaves
-// Lockstep: slave frames held for one flush_transport(); more are sent at once (one master
-// tick at 1 ms carries about 8; a full 1 Mbit/s bus at 10 ms about 200).
-constexpr std::size_t kPendingCapacity = 256;
-
-can::BusConfig bus_config(const Scenario& s) {
-  can::BusConfig c;
-  c.bit_rate_bps = s.bus.can.bit_rate;
-  c.queue_capacity = 64;  // the transport side may hand over a burst (a PC script)
-  c.max_nodes = kBusNodes;
-  return c;
-}
 
 std::string node_name(int fault_node) {
   if (fault_node == FaultSpec::kMaster) return "master";
@@ -55,11 +44,16 @@ bool is_nmt_all(const can::Frame& f) {
 }  // namespace
 
 OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
-    : s_(s), sched_(sched), hooks_(std::move(hooks)), bus_(bus_config(s)), rng_(s.bus.can.seed) {
-  for (int i = 0; i < kBusNodes; ++i) bus_.attach();
-  bus_.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
-  bus_.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
-  bus_.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
+    : s_(s),
+      sched_(sched),
+      hooks_(std::move(hooks)),
+      // Lockstep batches the slaves' frames until omni-master's next grant; a master on the
+      // virtual clock gets each when it completes (the pacer runs the bus to that instant).
+      wire_(s, kBusNodes, s.clock == ClockMode::lockstep && !s.virtual_time_master()) {
+  can::CanBus& bus = wire_.bus();
+  bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) { on_deliver(r, f, t); });
+  bus.on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { on_tx_done(n, f, t); });
+  bus.on_event([this](const can::BusEvent& e) { on_bus_event(e); });
   start_phase_ = s.bus.can.start_phase;
   if (s.bus.can.start_phase_random) {
     // Their own stream, so that the faults' random sequences do not depend on this setting.
@@ -75,14 +69,9 @@ OmniCanNetwork::OmniCanNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
         [this, i](SimTime t) { on_slave_timer(i, t); }, c.drift);
     sched_.cancel(timers_[static_cast<std::size_t>(i)]);
   }
-  transport_ = can::open_transport(s.bus.can.transport);
-  // Lockstep batches the slaves' frames until omni-master's next grant; a master on the
-  // virtual clock gets each when it completes (the pacer runs the bus to that instant).
-  batch_ = s.clock == ClockMode::lockstep && !s.virtual_time_master();
-  pending_.reserve(kPendingCapacity);
 }
 
-OmniCanNetwork::~OmniCanNetwork() { flush_transport(); }
+OmniCanNetwork::~OmniCanNetwork() = default;
 
 void OmniCanNetwork::make_slave(int i) {
   const std::uint8_t id = omni::slave_of_axis(i + 1);
@@ -92,20 +81,13 @@ void OmniCanNetwork::make_slave(int i) {
   c.sync_interval = s_.bus.can.sync_interval;
   c.t_post_ns = std::llround(s_.bus.can.t_post_us * 1e3);
   c.start_phase_ns = std::llround(start_phase_[static_cast<std::size_t>(i)] * static_cast<double>(c.timer_period_ns));
-  auto send = [this, i](const can::Frame& f, std::int64_t at) { bus_.submit(bus_node(i), f, at + extra_delay(i)); };
+  auto send = [this, i](const can::Frame& f, std::int64_t at) {
+    wire_.bus().submit(bus_node(i), f, at + wire_.extra_delay(i));
+  };
   slaves_[static_cast<std::size_t>(i)] = std::make_unique<omni::OmniSlave>(c, send, hooks_.wheel_angle(i));
 }
 
-void OmniCanNetwork::open_pcap(const std::string& path) {
-  can::PcapWriter::Options o;
-  o.flush_each_packet = false;  // flushed once per master tick (flush_pcap)
-  pcap_ = std::make_unique<can::PcapWriter>(path, o);
-}
-
-std::string OmniCanNetwork::close_pcap() { return close_capture(pcap_.get()); }
-std::string OmniCanNetwork::pcap_error() const { return capture_error(pcap_.get()); }
-
-void OmniCanNetwork::advance(SimTime t) { bus_.advance(t); }
+void OmniCanNetwork::advance(SimTime t) { wire_.bus().advance(t); }
 
 void OmniCanNetwork::observe_wheels() {
   for (int i = 0; i < 4; ++i)
@@ -113,57 +95,12 @@ void OmniCanNetwork::observe_wheels() {
 }
 
 // ---------------------------------------------------------------------------------------
-// The transport side
-
-void OmniCanNetwork::submit_from_far(const can::Frame& f, SimTime t) {
-  const SimTime stamp = t + std::llround(s_.bus.can.t_pre_us * 1e3) + extra_delay(FaultSpec::kMaster);
-  // A burst beyond the transport side's queue is refused by the wire model: counted.
-  if (bus_.submit(kFar, f, stamp) != can::SubmitStatus::queued) ++refused_from_far_;
-}
-
-void OmniCanNetwork::flush_transport() {
-  if (pending_.empty()) return;
-  const std::size_t sent = transport_->send_many(pending_);
-  to_transport_ += sent;
-  send_failures_ += pending_.size() - sent;
-  pending_.clear();
-}
-
-bool OmniCanNetwork::drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) {
-  flush_transport();  // (the run has flushed before its grant; nothing is left here then)
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (from_transport_ < count) {
-    if (auto r = transport_->receive()) {
-      ++from_transport_;
-      submit_from_far(r->frame, t);
-      continue;
-    }
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left.count() <= 0 || !can::wait_readable(*transport_, left)) return from_transport_ >= count;
-  }
-  return true;
-}
-
-int OmniCanNetwork::poll_transport(SimTime t) {
-  int n = 0;
-  while (auto r = transport_->receive()) {
-    ++from_transport_;
-    ++n;
-    submit_from_far(r->frame, t);
-  }
-  return n;
-}
-
-// ---------------------------------------------------------------------------------------
 // Bus callbacks
 
 void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing) {
-  if (receiver == kFar) return;  // the far side heard it on the transport (on_tx_done)
+  if (receiver == CanWire::kFar) return;  // the far side heard it on the transport (on_tx_done)
   const int i = receiver - 1;
-  if (lose(i)) {
-    ++lost_frames_;
-    return;
-  }
+  if (!wire_.arrives(i)) return;
   omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
   const std::uint64_t before = sl.stats().steps();
   const omni::TimerAction a = sl.on_frame(f, timing.end_ns);
@@ -171,32 +108,16 @@ void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, cons
 }
 
 void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
-  if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
-  if (sender == kFar) {
-    if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
-    if (is_nmt_all(f)) bus_stopped_ = f.data[1] == kNmtStop;
-    return;
-  }
-  // A slave's frame reaches the master (and anyone else on the transport) when it completes.
-  if (lose(FaultSpec::kMaster)) {
-    ++lost_frames_;
-    return;
-  }
-  if (batch_) {
-    pending_.push_back(can::TimedFrame{f, timing.end_ns});
-    if (pending_.size() >= kPendingCapacity) flush_transport();
-  } else if (transport_->send(f, timing.end_ns)) {
-    ++to_transport_;
-  } else {
-    ++send_failures_;
-  }
+  if (!wire_.completed(sender, f, timing)) return;  // a slave's frame: on to the master
+  if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
+  if (is_nmt_all(f)) bus_stopped_ = f.data[1] == kNmtStop;
 }
 
 void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {
-  if (e.kind == can::BusEventKind::error_frame || e.node == kFar) return;  // counted by the bus
+  if (e.kind == can::BusEventKind::error_frame || e.node == CanWire::kFar) return;  // counted by the bus
   const std::string who = node_name(e.node - 1);
   if (e.kind == can::BusEventKind::state_changed) {
-    if (e.state == can::ErrorState::bus_off) ++bus_off_events_;
+    if (e.state == can::ErrorState::bus_off) wire_.note_bus_off();
     hooks_.log(e.t_ns, "can", fmt::format("{} is {}", who, state_name(e.state)));
   } else {
     hooks_.log(e.t_ns, "can", fmt::format("{} recovered from bus-off", who));
@@ -207,7 +128,7 @@ void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {
 // Slaves
 
 void OmniCanNetwork::on_slave_timer(int i, SimTime t) {
-  bus_.advance(t);  // frames that complete at or before the interrupt are in its FIFO
+  wire_.bus().advance(t);  // frames that complete at or before the interrupt are in its FIFO
   omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
   const std::uint64_t before = sl.stats().steps();
   const omni::TimerAction a = sl.on_timer(t, hooks_.wheel_angle(i));
@@ -230,28 +151,6 @@ void OmniCanNetwork::after_slave_input(int i, std::uint64_t steps_before, const 
 // ---------------------------------------------------------------------------------------
 // Faults
 
-bool OmniCanNetwork::lose(int target) {
-  for (LossState* l : {&loss_[static_cast<std::size_t>(target)], &loss_[FaultSpec::kAllNodes]}) {
-    if (!l->active) continue;
-    if (l->left > 0) {
-      --l->left;
-      return true;
-    }
-    if (std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < l->rate) {
-      l->left = l->burst - 1;
-      return true;
-    }
-  }
-  return false;
-}
-
-std::int64_t OmniCanNetwork::extra_delay(int node) {
-  const DelayState& d = delay_[static_cast<std::size_t>(node)];
-  if (!d.active) return 0;
-  const double jitter = d.jitter_ns > 0 ? std::uniform_real_distribution<double>(0.0, d.jitter_ns)(rng_) : 0.0;
-  return std::llround(d.extra_ns + jitter);
-}
-
 void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
   // The loader only lets each kind name the nodes it can act on; a hand-built fault that
   // names another is a programmer error.
@@ -260,18 +159,16 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
                   : f.kind == FaultSpec::Kind::delay    ? (slave || f.wheel == FaultSpec::kMaster)
                                                         : slave;
   if (!ok) throw std::invalid_argument(fmt::format("CAN fault {} cannot act on node {}", to_string(f.kind), f.wheel));
-  bus_.advance(t);
+  wire_.bus().advance(t);
   const std::size_t n = static_cast<std::size_t>(f.wheel);
   const std::string who = node_name(f.wheel);
   const char* edge = begin ? "begins" : "ends";
   switch (f.kind) {
     case FaultSpec::Kind::frame_loss:
-      loss_[n] = LossState{f.rate, f.burst, 0, begin};
-      hooks_.log(t, "fault", fmt::format("frame_loss to {} rate {} burst {} ({})", who, f.rate, f.burst, edge));
+      hooks_.log(t, "fault", wire_.apply_loss(f, begin, who));
       return;
     case FaultSpec::Kind::delay:
-      delay_[n] = DelayState{f.extra_ms * 1e6, f.jitter_ms * 1e6, begin};
-      hooks_.log(t, "fault", fmt::format("delay of {} +{} ms jitter {} ms ({})", who, f.extra_ms, f.jitter_ms, edge));
+      hooks_.log(t, "fault", wire_.apply_delay(f, begin, who));
       return;
     case FaultSpec::Kind::drift: {
       const double d = begin ? f.drift : s_.bus.can.drift[n];
@@ -283,7 +180,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::power_loss:
       if (begin) {
         // Off the bus, timer dead, drive output gone; the node's counts so far are kept.
-        bus_.detach(bus_node(f.wheel), t);
+        wire_.bus().detach(bus_node(f.wheel), t);
         sched_.cancel(timers_[n]);
         powered_[n] = false;
         dropouts_before_[n] += slaves_[n]->stats().dropouts;
@@ -296,7 +193,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
         const double drift = slaves_[n]->drift();
         make_slave(f.wheel);
         slaves_[n]->set_drift(drift);
-        bus_.reattach(bus_node(f.wheel), t);
+        wire_.bus().reattach(bus_node(f.wheel), t);
         powered_[n] = true;
         hooks_.set_setpoint(f.wheel, slaves_[n]->setpoint());
       }
@@ -304,8 +201,8 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       return;
     case FaultSpec::Kind::bus_off:
       if (begin) {
-        bus_.corrupt_frames_of(bus_node(f.wheel), 32);  // 32 × 8 > 255: bus-off
-      } else if (!bus_.request_recovery(bus_node(f.wheel), t)) {
+        wire_.bus().corrupt_frames_of(bus_node(f.wheel), 32);  // 32 × 8 > 255: bus-off
+      } else if (!wire_.bus().request_recovery(bus_node(f.wheel), t)) {
         hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
         return;
       }
@@ -329,7 +226,7 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
   const omni::OmniSlaveStats& st = sl.stats();
   const std::uint64_t samples = samples_before_[n] + st.samples;
   const std::uint64_t dropouts = dropouts_before_[n] + st.dropouts;
-  const can::NodeStats& ns = bus_.node_stats(bus_node(i));
+  const can::NodeStats& ns = wire_.bus().node_stats(bus_node(i));
   return {{"node", sl.config().node_id},
           {"state", powered_[n] ? omni::to_string(sl.state()) : "off"},
           {"samples", samples},
@@ -344,8 +241,8 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
           {"frames_sent", st.frames_sent},
           {"bad_frames", st.bad_frames},
           {"fifo_overruns", st.frames_overrun},
-          {"can_state", state_name(bus_.error_state(bus_node(i)))},
-          {"tec", bus_.tec(bus_node(i))},
+          {"can_state", state_name(wire_.bus().error_state(bus_node(i)))},
+          {"tec", wire_.bus().tec(bus_node(i))},
           {"tx_errors", ns.tx_errors},
           {"bus_off_events", ns.bus_off_events}};
 }
@@ -359,23 +256,21 @@ nlohmann::json OmniCanNetwork::slave_metrics() const {
 BusSample OmniCanNetwork::bus_sample() const {
   BusSample b;
   b.has_frames = true;
-  b.frames_tx = to_transport_ + pending_.size();  // (any still batched are sent at the end)
-  b.frames_rx = from_transport_;
+  b.frames_tx = wire_.frames_tx();  // (any still batched are sent at the end)
+  b.frames_rx = wire_.from_transport();
   std::uint64_t bad = 0;
   for (std::size_t i = 0; i < 4; ++i) {
     b.dropouts += dropouts_before_[i] + slaves_[i]->stats().dropouts;
     bad += slaves_[i]->stats().bad_frames;
   }
-  const can::TransportStats ts = transport_->stats();
-  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
-  b.errors = bus_.stats().error_frames + malformed + bad + send_failures_ + refused_from_far_;
+  b.errors = wire_.errors() + bad;
   return b;
 }
 
 DriveStateCode OmniCanNetwork::drive_state(int axis0) const {
   const auto i = static_cast<std::size_t>(axis0);
   if (!powered_[i]) return DriveStateCode::off;
-  if (bus_.error_state(bus_node(axis0)) == can::ErrorState::bus_off) return DriveStateCode::fault;
+  if (wire_.bus().error_state(bus_node(axis0)) == can::ErrorState::bus_off) return DriveStateCode::fault;
   switch (slaves_[i]->state()) {
     case omni::SlaveState::stopped: return DriveStateCode::waiting;
     case omni::SlaveState::running: return DriveStateCode::running;
@@ -402,28 +297,13 @@ nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
   const BusSample b = bus_sample();
   std::uint64_t samples = 0;
   for (std::size_t i = 0; i < 4; ++i) samples += samples_before_[i] + slaves_[i]->stats().samples;
-  const std::uint64_t dropouts = b.dropouts;
-  const can::TransportStats ts = transport_->stats();
-  const std::uint64_t malformed = ts.malformed_rx + ts.wrong_dlc_rx + ts.bad_id_rx + ts.unsupported_rx;
-  return {{"name", "can"},
-          {"bit_rate", s_.bus.can.bit_rate},
-          {"transport", transport_->spec()},
-          {"frames_tx", b.frames_tx},
-          {"frames_rx", b.frames_rx},
-          {"frames", bus_.stats().frames},
-          {"error_frames", bus_.stats().error_frames},
-          {"lost_frames", lost_frames_},
-          {"bus_off_events", bus_off_events_},
-          {"load", bus_.bus_load(now)},
-          {"dropouts", dropouts},
-          {"dropout_rate", samples ? static_cast<double>(dropouts) / static_cast<double>(samples) : 0.0},
-          {"errors", b.errors},
-          {"refused_from_transport", refused_from_far_},
-          {"transport_rx_malformed", malformed},
-          {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)
-          {"transport_send_waits", ts.send_waits},
-          {"pcap_frames", pcap_ ? pcap_->written() : 0},
-          {"sync", s_.bus.can.sync}};
+  nlohmann::json m = wire_.metrics("can", now);
+  m.update({{"dropouts", b.dropouts},
+            {"dropout_rate", samples ? static_cast<double>(b.dropouts) / static_cast<double>(samples) : 0.0},
+            {"errors", b.errors},
+            {"transport_send_waits", wire_.transport().stats().send_waits},
+            {"sync", s_.bus.can.sync}});
+  return m;
 }
 
 }  // namespace omnitwin::twin

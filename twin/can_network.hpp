@@ -33,6 +33,7 @@
 #include "bus_emulators/can/transport.hpp"
 #include "bus_emulators/omni/omni_slave.hpp"
 #include "twin/bus_network.hpp"
+#include "twin/can_wire.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
@@ -51,25 +52,23 @@ class OmniCanNetwork final : public BusNetwork {
   ~OmniCanNetwork() override;
 
   const char* name() const override { return "can"; }
-  std::string master_iface() const override { return transport_->spec(); }  // as opened (a port 0 named)
+  std::string master_iface() const override { return wire_.transport().spec(); }  // as opened (a port 0 named)
 
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).
   // Records are buffered; flush_pcap() pushes them to the kernel (the run does so each master
   // tick), and close_pcap() (the run's end) closes it, so SIGINT/SIGTERM leave it complete.
-  void open_pcap(const std::string& path) override;
-  void flush_pcap() override {
-    if (pcap_) pcap_->flush();
-  }
-  std::string close_pcap() override;
-  std::string pcap_error() const override;
+  void open_pcap(const std::string& path) override { wire_.open_pcap(path); }
+  void flush_pcap() override { wire_.flush_pcap(); }
+  std::string close_pcap() override { return wire_.close_pcap(); }
+  std::string pcap_error() const override { return wire_.pcap_error(); }
   // Not after an NMT stop to all nodes seen on the wire (from anyone), until an NMT start.
   bool master_must_talk() const override { return !bus_stopped_; }
   // Hands the batched frames to the transport, all at once. In lockstep the slaves' frames
   // are batched (the master reads them only after its grant), so this must run before
   // frames_to_transport() goes into a grant (the run calls it just before); nothing is
   // batched in realtime.
-  void flush_transport() override;
-  SimTime next_master_event() const override { return bus_.next_event_ns(); }
+  void flush_transport() override { wire_.flush_transport(); }
+  SimTime next_master_event() const override { return wire_.bus().next_event_ns(); }
 
   // Runs the simulated bus to t [ns]. Real-time safe (callbacks forward frames).
   void advance(SimTime t) override;
@@ -77,9 +76,11 @@ class OmniCanNetwork final : public BusNetwork {
   // Lockstep: receives frames from the transport until `count` frames have arrived in all
   // since the start, queueing each on node 0 at t + T_pre (+ any delay fault). Returns false
   // when they did not all arrive within `timeout`.
-  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override;
+  bool drain_transport(std::uint64_t count, SimTime t, std::chrono::milliseconds timeout) override {
+    return wire_.drain_transport(count, t, timeout);
+  }
   // Realtime: queues whatever the transport holds now at t + T_pre. Returns the number taken.
-  int poll_transport(SimTime t) override;
+  int poll_transport(SimTime t) override { return wire_.poll_transport(t); }
 
   // Every physics step: the counters follow the shafts. Real-time safe.
   void observe_wheels() override;
@@ -87,11 +88,11 @@ class OmniCanNetwork final : public BusNetwork {
   // A scenario CAN fault begins or ends at t. Not real-time safe (logs).
   void apply_fault(const FaultSpec& f, bool begin, SimTime t) override;
 
-  std::uint64_t frames_to_transport() const override { return to_transport_; }
-  std::uint64_t frames_from_transport() const override { return from_transport_; }
-  const can::CanBus& bus() const { return bus_; }
+  std::uint64_t frames_to_transport() const override { return wire_.to_transport(); }
+  std::uint64_t frames_from_transport() const override { return wire_.from_transport(); }
+  const can::CanBus& bus() const { return wire_.bus(); }
   const omni::OmniSlave& slave(int axis0) const { return *slaves_[static_cast<std::size_t>(axis0)]; }
-  const can::Transport& transport() const { return *transport_; }
+  const can::Transport& transport() const { return wire_.transport(); }
   // Time the master's NMT start-all completed on the wire [ns], or -1.
   SimTime master_start_ns() const override { return master_start_ns_; }
 
@@ -102,24 +103,12 @@ class OmniCanNetwork final : public BusNetwork {
   // The cumulative counters of bus_metrics (load left 0: the caller knows its interval) and
   // a slave's state for observers. Real-time safe (no allocation).
   BusSample bus_sample() const override;
-  std::int64_t wire_busy_ns() const override { return bus_.stats().busy_ns; }
+  std::int64_t wire_busy_ns() const override { return wire_.bus().stats().busy_ns; }
   DriveStateCode drive_state(int axis0) const override;
   // The slave's held command, counter, PI and DA (output = DA code). Real-time safe.
   WheelRecord wheel_record(int axis0) const override;
 
  private:
-  struct LossState {
-    double rate = 0;
-    int burst = 1;
-    int left = 0;  // frames of the current burst still to lose
-    bool active = false;
-  };
-  struct DelayState {
-    double extra_ns = 0;
-    double jitter_ns = 0;
-    bool active = false;
-  };
-  static constexpr int kFar = 0;  // bus node of the transport side
   static int bus_node(int axis0) { return axis0 + 1; }
 
   void on_deliver(can::BusNode receiver, const can::Frame& f, const can::FrameTiming& timing);
@@ -127,34 +116,18 @@ class OmniCanNetwork final : public BusNetwork {
   void on_bus_event(const can::BusEvent& e);
   void on_slave_timer(int axis0, SimTime t);
   void after_slave_input(int axis0, std::uint64_t steps_before, const omni::TimerAction& a);
-  void submit_from_far(const can::Frame& f, SimTime t);
   void make_slave(int axis0);
-  bool lose(int target);  // frame_loss roll for a receiver (0..3 slaves, kMaster)
-  std::int64_t extra_delay(int node);
   nlohmann::json slave_json(int axis0) const;
 
   const Scenario& s_;
   Scheduler& sched_;
   Hooks hooks_;
-  can::CanBus bus_;
-  std::unique_ptr<can::Transport> transport_;
-  std::unique_ptr<can::PcapWriter> pcap_;
+  CanWire wire_;  // node 0 the transport side, 1..4 the slaves
   std::array<std::unique_ptr<omni::OmniSlave>, 4> slaves_;
   std::array<Scheduler::TimerId, 4> timers_{};
   std::array<bool, 4> powered_{true, true, true, true};
-  std::array<LossState, 6> loss_{};   // by FaultSpec node: 0..3 slaves, 4 master, 5 all
-  std::array<DelayState, 5> delay_{}; // by FaultSpec node: 0..3 slaves, 4 master
-  std::mt19937_64 rng_;
   std::array<double, 4> start_phase_{};  // each slave's timer phase at NMT start [fraction of a period]
-  std::uint64_t to_transport_ = 0;  // frames the transport accepted
-  bool batch_ = false;               // lockstep: slave frames wait in pending_ for flush_transport()
-  std::vector<can::TimedFrame> pending_;
-  std::uint64_t from_transport_ = 0;
   bool bus_stopped_ = false;  // the last NMT command to all nodes was stop
-  std::uint64_t lost_frames_ = 0;
-  std::uint64_t send_failures_ = 0;
-  std::uint64_t refused_from_far_ = 0;  // frames from the transport the wire's queue refused
-  std::uint64_t bus_off_events_ = 0;
   SimTime master_start_ns_ = -1;
   // Slave statistics carried over power cycles (a returning node starts from zero).
   std::array<std::uint64_t, 4> dropouts_before_{}, samples_before_{};
