@@ -1,0 +1,113 @@
+// Tests of the CAN wire every CAN network of the twin shares (twin/can_wire): a node's frame
+// reaches the transport when it completes (at once, or held for flush_transport() in lockstep),
+// a frame from the far side does not go back and is handed to the protocol, frames from the
+// transport enter the wire at t + T_pre, frame loss and delay act and are counted, the
+// metrics count what happened. Over the in-process `mem:` transport.
+#include <gtest/gtest.h>
+
+#include <atomic>
+
+#include "bus_emulators/can/transport_mem.hpp"
+#include "twin/can_wire.hpp"
+
+namespace {
+
+using namespace omnitwin;
+using namespace omnitwin::twin;
+
+std::string unique_bus() {
+  static std::atomic<int> n{0};
+  return "can-wire-test-" + std::to_string(n++);
+}
+
+Scenario scenario(const std::string& bus) {
+  Scenario s;
+  s.bus.kind = BusKind::can;
+  s.bus.can.transport = "mem:" + bus;
+  s.bus.can.bit_rate = 1'000'000;
+  s.bus.can.t_pre_us = 50;
+  return s;
+}
+
+can::Frame frame(std::uint32_t id) {
+  can::Frame f;
+  f.id = id;
+  f.dlc = 1;
+  f.data[0] = 0x5a;
+  return f;
+}
+
+struct Wire {
+  explicit Wire(bool batch) : s(scenario(name)), far(name), wire(s, 2, batch) {
+    wire.bus().on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) {
+      if (wire.completed(n, f, t)) from_far.push_back(t.end_ns);
+    });
+    wire.bus().on_deliver([this](can::BusNode r, const can::Frame&, const can::FrameTiming& t) {
+      if (r == 1 && wire.arrives(0)) at_node.push_back(t.end_ns);
+    });
+  }
+  std::string name = unique_bus();
+  Scenario s;
+  can::MemTransport far;  // the master's end
+  CanWire wire;
+  std::vector<SimTime> from_far, at_node;
+};
+
+TEST(CanWire, ANodesFrameReachesTheTransportWhenItCompletes) {
+  Wire w(false);
+  w.wire.bus().submit(1, frame(0x181), 1'000);
+  w.wire.bus().advance(1'000'000);
+  const auto got = w.far.receive();
+  ASSERT_TRUE(got.has_value());
+  EXPECT_EQ(got->frame.id, 0x181u);
+  EXPECT_GT(got->timestamp_ns, 1'000);  // its end of frame
+  EXPECT_EQ(w.wire.to_transport(), 1u);
+  EXPECT_EQ(w.wire.frames_tx(), 1u);
+}
+
+TEST(CanWire, LockstepHoldsFramesUntilTheFlush) {
+  Wire w(true);
+  w.wire.bus().submit(1, frame(0x181), 0);
+  w.wire.bus().advance(1'000'000);
+  EXPECT_FALSE(w.far.receive().has_value());
+  EXPECT_EQ(w.wire.to_transport(), 0u);
+  EXPECT_EQ(w.wire.frames_tx(), 1u);  // held, counted
+  w.wire.flush_transport();
+  EXPECT_TRUE(w.far.receive().has_value());
+  EXPECT_EQ(w.wire.to_transport(), 1u);
+}
+
+TEST(CanWire, FramesFromTheTransportEnterAtTPreAndAreHandedToTheProtocol) {
+  Wire w(false);
+  ASSERT_TRUE(w.far.send(frame(0x000)));
+  ASSERT_TRUE(w.wire.drain_transport(1, 2'000'000, std::chrono::milliseconds(1000)));
+  EXPECT_EQ(w.wire.from_transport(), 1u);
+  w.wire.bus().advance(10'000'000);
+  ASSERT_EQ(w.from_far.size(), 1u);
+  EXPECT_GT(w.from_far[0], 2'050'000);  // entered at 2 ms + 50 µs, completed after
+  ASSERT_EQ(w.at_node.size(), 1u);
+  EXPECT_FALSE(w.far.receive().has_value());  // not echoed back to its sender
+}
+
+TEST(CanWire, FrameLossAndDelayActAndAreCounted) {
+  Wire w(false);
+  FaultSpec loss;
+  loss.kind = FaultSpec::Kind::frame_loss;
+  loss.wheel = FaultSpec::kMaster;
+  loss.rate = 1.0;
+  EXPECT_EQ(w.wire.apply_loss(loss, true, "master"), "frame_loss to master rate 1 burst 1 (begins)");
+  w.wire.bus().submit(1, frame(0x181), 0);
+  w.wire.bus().advance(1'000'000);
+  EXPECT_FALSE(w.far.receive().has_value());
+  EXPECT_EQ(w.wire.metrics("can", 1'000'000)["lost_frames"], 1);
+  w.wire.apply_loss(loss, false, "master");
+  FaultSpec delay;
+  delay.kind = FaultSpec::Kind::delay;
+  delay.wheel = 0;
+  delay.extra_ms = 2.0;
+  EXPECT_EQ(w.wire.apply_delay(delay, true, "axis 1"), "delay of axis 1 +2 ms jitter 0 ms (begins)");
+  EXPECT_EQ(w.wire.extra_delay(0), 2'000'000);
+  EXPECT_EQ(w.wire.extra_delay(1), 0);
+}
+
+}  // namespace
