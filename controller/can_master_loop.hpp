@@ -7,12 +7,14 @@
 //  * the wall clock: CLOCK_MONOTONIC absolute deadlines, one tick per period, frames handled
 //    as they arrive, SCHED_FIFO where permitted.
 // A Runner provides: on_frame(frame, t), tick(t), flush(), report(), frames_rx, frames_tx(), and
-// shutdown(t) for the end of a wall-clock run; CanOutbox is what its master core sends through.
+// shutdown(t) for the end of a wall-clock run; CanOutbox is what its master core sends through,
+// CanRunner the Runner both programs build on, run_can_master() the clock and its failures.
 // Header-only (templates).
 #pragma once
 
 #include <fmt/format.h>
 #include <poll.h>
+#include <unistd.h>
 #include <spdlog/spdlog.h>
 
 #include <cerrno>
@@ -24,10 +26,25 @@
 #include <vector>
 
 #include "bus_emulators/can/transport.hpp"
+#include "controller/platform_driver.hpp"
 #include "controller/program_support.hpp"
 #include "controller/sim_clock.hpp"
 
 namespace omnitwin::controller {
+
+// The command line a CAN master program runs with (omni-master --bus canopen | tml).
+struct CanProgramOptions {
+  std::string iface;          // CAN transport spec: udp:GROUP:PORT, socketcan:IFACE, mem:NAME
+  std::string config;         // the program's configuration YAML
+  std::string clock = "wall"; // sim | wall
+  std::string sim_clock;      // unix:PATH with --clock sim
+  double duration = -1;       // wall: seconds, < 0 = until SIGINT/SIGTERM
+  bool print_config = false;  // print what was loaded and exit
+  std::string stats;          // write the counters as JSON here at exit ("" = no)
+};
+
+// "[  123.4567 ms]": a program time in the log.
+inline std::string log_stamp(std::int64_t t_ns) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t_ns) * 1e-6); }
 
 // What a master core sends: held and sent in one batch after each tick in lockstep (the twin
 // reads them only after Done), straight to the transport on the wall clock.
@@ -146,6 +163,98 @@ int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Tr
   if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
   r.shutdown(monotonic_ns() - start);
   return 0;
+}
+
+// What a CAN master program's Runner shares, whatever its protocol: the outbox its core sends
+// through, the core (`Master`: on_frame, on_tick, finish, shutdown, position, the report's
+// state, reason and node), the platform loop, the frames received. `Derived` (CRTP) says when
+// the drives follow commands (drives_ready()), hands a wheel its speed (command(i, counts/s))
+// and names the start in the log (kStarted). The core is built from `core_args` and its send
+// callback.
+template <class Derived, class Master>
+class CanRunner {
+ public:
+  template <class... CoreArgs>
+  CanRunner(can::Transport& tr, bool hold, PlatformDriver platform, const CoreArgs&... core_args)
+      : out_(tr, hold),
+        master_(core_args..., [this](const can::Frame& f, std::int64_t t) { return out_.send(f, t); }),
+        platform_(std::move(platform)) {
+    master_.set_event_callback([](std::int64_t t, const std::string& s, bool warning) {
+      if (warning) spdlog::warn("{} {}", log_stamp(t), s);
+      else spdlog::info("{} {}", log_stamp(t), s);
+    });
+  }
+
+  const Master& master() const { return master_; }
+  void on_frame(const can::Frame& f, std::int64_t t) {
+    ++frames_rx;
+    master_.on_frame(f, t);
+  }
+  // One tick at t: the platform's set-points, then the core's frames.
+  void tick(std::int64_t t) {
+    platform(t);
+    master_.on_tick(t);
+  }
+  // Lockstep: the tick's frames in one batch. Refusals reach the core.
+  void flush() { master_.note_send_failures(out_.flush()); }
+  void release() { out_.release(); }
+  void shutdown(std::int64_t t) { master_.shutdown(t); }
+
+  simclock::MasterReport report() const {
+    simclock::MasterReport r;
+    r.state = master_.report_state();
+    r.reason = master_.reason();
+    r.node = master_.reason_node();
+    platform_.fill(r);
+    return r;
+  }
+  std::uint64_t frames_tx() const { return out_.frames_tx(); }
+  std::uint64_t frames_rx = 0;
+
+ protected:
+  Master& core() { return master_; }
+
+ private:
+  void platform(std::int64_t t) {
+    WheelCounts c{};
+    for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
+    Derived& d = static_cast<Derived&>(*this);
+    const PlatformDriver::Step st = platform_.tick(t, d.drives_ready(), c);
+    if (st.started) spdlog::info("{} {}: platform loop running", log_stamp(t), Derived::kStarted);
+    if (st.command)
+      for (int i = 0; i < 4; ++i) d.command(i, st.wheel_counts_per_s[static_cast<std::size_t>(i)]);
+    if (st.finished) {
+      master_.finish(t);
+      spdlog::info("{} path done", log_stamp(t));
+    }
+  }
+
+  CanOutbox out_;  // before the core: its send callback
+  Master master_;
+  PlatformDriver platform_;
+};
+
+// The program's clock (lockstep with --clock sim, else the wall clock with a tick every
+// tick_ns) until its end, then what is held goes out. Returns the exit code: 0, or 3 for a
+// runtime failure (logged) or a core that failed. Not real-time safe (sets up, logs).
+template <class Runner>
+int run_can_master(const CanProgramOptions& o, Runner& r, can::Transport& tr, std::int64_t tick_ns) {
+  const int sigfd = open_signal_fd();
+  int code = 0;
+  try {
+    code = o.clock == "sim" ? run_lockstep(o.sim_clock, r, tr, sigfd) : run_wall_clock(tick_ns, o.duration, r, tr, sigfd);
+  } catch (const LoopFailure& f) {
+    spdlog::error("{}", f.message);
+    code = 3;
+  } catch (const simclock::ChannelError& e) {
+    spdlog::error("{}", e.what());
+    code = 3;
+  }
+  r.flush();
+  r.release();
+  if (r.failed()) code = 3;
+  if (sigfd >= 0) ::close(sigfd);
+  return code;
 }
 
 }  // namespace omnitwin::controller

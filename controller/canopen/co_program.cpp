@@ -32,93 +32,37 @@ namespace omnitwin::controller::canopen {
 
 namespace {
 
-constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
+constexpr int kExitOk = 0, kExitUsage = 2;
 
-std::string stamp(SimTime t) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t) * 1e-6); }
-
-// The master core and the platform loop, one SYNC period at a time; frames out through an
-// outbox (lockstep: sent in one batch after the tick) or straight to the transport.
-class Runner {
+// The CANopen master core and the platform loop, one SYNC period at a time: the wheels' speeds
+// go into RPDO1 once every drive is operation enabled.
+class Runner : public CanRunner<Runner, CoMaster> {
  public:
+  static constexpr const char* kStarted = "wheel drives enabled";
   Runner(const CoProgramConfig& pc, const omnitwin::canopen::EdsDevice& eds, std::optional<MasterConfig> platform,
          can::Transport& tr, bool hold)
-      : pc_(pc),
-        out_(tr, hold),
-        master_(pc, eds, [this](const can::Frame& f, SimTime t) { return out_.send(f, t); }),
-        platform_(platform, master_tick(pc), pc.wheel_counts_per_rev) {
-    master_.set_event_callback([](SimTime t, const std::string& s, bool warning) {
-      if (warning) spdlog::warn("{} {}", stamp(t), s);
-      else spdlog::info("{} {}", stamp(t), s);
-    });
-  }
+      : CanRunner(tr, hold, PlatformDriver(platform, master_tick(pc), pc.wheel_counts_per_rev), pc, eds) {}
 
-  CoMaster& master() { return master_; }
-  const CoMaster& master() const { return master_; }
-
-  void on_frame(const can::Frame& f, SimTime t) {
-    ++frames_rx;
-    master_.on_frame(f, t);
-  }
-  // One SYNC period at t: the platform's set-points, then the core's frames.
-  void tick(SimTime t) {
-    platform(t);
-    master_.on_tick(t);
-  }
-  // Lockstep: the tick's frames in one batch. Refusals reach the core.
-  void flush() { master_.note_send_failures(out_.flush()); }
-  void release() { out_.release(); }
-  void shutdown(SimTime t) { master_.shutdown(t); }
-
-  simclock::MasterReport report() const {
-    simclock::MasterReport r;
-    r.state = master_.report_state();
-    r.reason = master_.reason();
-    r.node = master_.reason_node();
-    platform_.fill(r);
-    return r;
-  }
+  bool drives_ready() const { return master().phase() == CoPhase::running; }
+  void command(int i, double counts_per_s) { core().set_velocity(i, static_cast<std::int32_t>(std::llround(counts_per_s))); }
+  bool failed() const { return master().phase() == CoPhase::failed; }
 
   nlohmann::json stats() const {
-    const CoMasterStats& s = master_.stats();
+    const CoMaster& m = master();
+    const CoMasterStats& s = m.stats();
     nlohmann::json nodes = nlohmann::json::array();
     for (int i = 0; i < 4; ++i) {
-      const CoNodeView v = master_.node(i);
+      const CoNodeView v = m.node(i);
       nodes.push_back({{"node", v.id}, {"nmt_state", omnitwin::canopen::to_string(v.nmt)}, {"statusword", v.statusword},
                        {"emcy", v.emcy}, {"last_emcy", v.last_emcy}, {"tpdos", v.tpdos}, {"configured", v.configured},
                        {"lost", v.lost}});
     }
-    return {{"phase", to_string(master_.phase())}, {"cycles", s.ticks}, {"syncs", s.syncs},
+    return {{"phase", to_string(m.phase())}, {"cycles", s.ticks}, {"syncs", s.syncs},
             {"sdo_done", s.sdo_done}, {"sdo_aborts", s.sdo_aborts}, {"last_sdo_abort", s.last_abort},
             {"emcy", s.emcy}, {"heartbeat_timeouts", s.heartbeat_timeouts}, {"boot_ups", s.boot_ups},
             {"recoveries", s.recoveries}, {"tpdo_rx", s.tpdo_rx}, {"nmt_sent", s.nmt_sent},
             {"send_failures", s.tx_refused}, {"nodes", nodes}};
   }
-
-  bool failed() const { return master_.phase() == CoPhase::failed; }
-  std::uint64_t frames_tx() const { return out_.frames_tx(); }
-  std::uint64_t frames_rx = 0;
-
- private:
-  WheelCounts counts() const {
-    WheelCounts c{};
-    for (int i = 0; i < 4; ++i) c[static_cast<std::size_t>(i)] = master_.position(i);
-    return c;
-  }
-  void platform(SimTime t) {
-    const PlatformDriver::Step st = platform_.tick(t, master_.phase() == CoPhase::running, counts());
-    if (st.started) spdlog::info("{} wheel drives enabled: platform loop running", stamp(t));
-    if (st.command)
-      for (int i = 0; i < 4; ++i) master_.set_velocity(i, static_cast<std::int32_t>(std::llround(st.wheel_counts_per_s[static_cast<std::size_t>(i)])));
-    if (st.finished) {
-      master_.finish(t);
-      spdlog::info("{} path done", stamp(t));
-    }
-  }
-
-  const CoProgramConfig& pc_;
-  CanOutbox out_;  // before the core: its send callback
-  CoMaster master_;
-  PlatformDriver platform_;
 };
 
 void write_stats(const std::string& path, const Runner& r) {
@@ -183,24 +127,9 @@ int run_canopen_program(const ProgramOptions& o) {
                pc.sync_producer ? fmt::format("node {}", pc.sync_producer) : std::string("the master"),
                std::llround(master_tick(pc) * 1e6), pc.nodes[0], pc.nodes[1], pc.nodes[2], pc.nodes[3],
                pc.mode == WheelMode::csv ? "CSV" : "PV");
-  const int sigfd = open_signal_fd();
-  int code = kExitOk;
-  try {
-    code = o.clock == "sim" ? run_lockstep(o.sim_clock, *runner, *tr, sigfd)
-                            : run_wall_clock(std::llround(master_tick(pc) * 1e9), o.duration, *runner, *tr, sigfd);
-  } catch (const LoopFailure& f) {
-    spdlog::error("{}", f.message);
-    code = kExitRuntime;
-  } catch (const simclock::ChannelError& e) {
-    spdlog::error("{}", e.what());
-    code = kExitRuntime;
-  }
-  runner->flush();
-  runner->release();
-  if (runner->failed()) code = kExitRuntime;
+  const int code = run_can_master(o, *runner, *tr, std::llround(master_tick(pc) * 1e9));
   log_end(*runner);
   if (!o.stats.empty()) write_stats(o.stats, *runner);
-  if (sigfd >= 0) ::close(sigfd);
   return code;
 }
 

@@ -19,17 +19,11 @@
 
 #include <string>
 
+#include "controller/can_master_loop.hpp"
+
 namespace omnitwin::controller::canopen {
 
-struct ProgramOptions {
-  std::string iface;          // CAN transport spec: udp:GROUP:PORT, socketcan:IFACE, mem:NAME
-  std::string config;         // co_config YAML
-  std::string clock = "wall"; // sim | wall
-  std::string sim_clock;      // unix:PATH with --clock sim
-  double duration = -1;       // wall: seconds, < 0 = until SIGINT/SIGTERM
-  bool print_config = false;  // print what was loaded and exit
-  std::string stats;          // write the counters as JSON here at exit ("" = no)
-};
+using ProgramOptions = controller::CanProgramOptions;  // controller/can_master_loop.hpp
 
 // Runs the CANopen master program; returns the process exit code. Logs through spdlog.
 int run_canopen_program(const ProgramOptions& o);

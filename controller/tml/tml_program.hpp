@@ -7,17 +7,11 @@
 
 #include <string>
 
+#include "controller/can_master_loop.hpp"
+
 namespace omnitwin::controller::tml {
 
-struct ProgramOptions {
-  std::string iface;          // CAN transport spec: udp:GROUP:PORT, socketcan:IFACE, mem:NAME
-  std::string config;         // tml_config YAML
-  std::string clock = "wall"; // sim | wall
-  std::string sim_clock;      // unix:PATH with --clock sim
-  double duration = -1;       // wall: seconds, < 0 = until SIGINT/SIGTERM
-  bool print_config = false;
-  std::string stats;          // write the counters as JSON here at exit ("" = no)
-};
+using ProgramOptions = controller::CanProgramOptions;  // controller/can_master_loop.hpp
 
 int run_tml_program(const ProgramOptions& o);
 
