@@ -31,7 +31,6 @@ class CliEthercat : public CliTest {
     if (!transport.empty()) args.insert(args.end(), {"--set", "bus.transport=" + transport});
     return run(args);
   }
-  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
 };
 
 // The master configured the segment and ran the path with the expected WKC every cycle.

@@ -28,12 +28,9 @@ using omnitwin::testing::lines_of;
 
 class CliM3 : public CliTest {
  protected:
-  Finished run_short(const fs::path& out, std::vector<std::string> sets = {}) {
-    std::vector<std::string> args{"run", test_scenario("m3_short.yaml"), "--out", out.string(), "--no-progress"};
-    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
-    return run(args);
+  Finished run_short(const fs::path& out, const std::vector<std::string>& sets = {}) {
+    return run_test_scenario("m3_short.yaml", out, sets);
   }
-  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
 };
 
 // The master ran the whole path with every exchange answered in time.

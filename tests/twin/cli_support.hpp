@@ -4,6 +4,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -137,6 +138,12 @@ struct Finished {
 // Checks first that the omnitwin binary exists: the build makes it before twin_tests, so its
 // absence is a broken build and a hard failure (the test body then does not run), not a skip.
 class CliTest : public ::testing::Test {
+ public:
+  // A run directory's metrics.json.
+  static nlohmann::json metrics(const fs::path& run_dir) {
+    return nlohmann::json::parse(read_bytes(run_dir / "metrics.json"));
+  }
+
  protected:
   void SetUp() override {
     if (!fs::is_regular_file(omnitwin_binary()))
@@ -154,6 +161,12 @@ class CliTest : public ::testing::Test {
     const int code = c.wait(120s);
     EXPECT_NE(code, -1) << "omnitwin did not finish within 120 s";
     return {code, c.out(), c.err()};
+  }
+  // `omnitwin run tests/data/scenarios/NAME --out OUT --no-progress --set S…`.
+  Finished run_test_scenario(const std::string& name, const fs::path& out, const std::vector<std::string>& sets = {}) {
+    std::vector<std::string> args{"run", test_scenario(name), "--out", out.string(), "--no-progress"};
+    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
+    return run(args);
   }
 
   TempDir dir_{"omnitwin-cli"};

@@ -19,12 +19,9 @@ namespace {
 
 class CliTml : public CliTest {
  protected:
-  Finished run_short(const fs::path& out, std::vector<std::string> sets = {}) {
-    std::vector<std::string> args{"run", test_scenario("tml_short.yaml"), "--out", out.string(), "--no-progress"};
-    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
-    return run(args);
+  Finished run_short(const fs::path& out, const std::vector<std::string>& sets = {}) {
+    return run_test_scenario("tml_short.yaml", out, sets);
   }
-  static nlohmann::json metrics(const fs::path& out) { return nlohmann::json::parse(read_bytes(out / "metrics.json")); }
 };
 
 std::string shell(const std::string& cmd) {

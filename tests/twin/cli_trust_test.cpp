@@ -24,7 +24,6 @@ namespace {
 using namespace omnitwin::twin::cli;
 using omnitwin::testing::SmallTmpfs;
 
-nlohmann::json metrics_of(const fs::path& run_dir) { return nlohmann::json::parse(read_bytes(run_dir / "metrics.json")); }
 
 // A realtime CAN run keeps the scenario's bus (python-can's group and port, for anyone to
 // join); tests that run side by side under ctest -j take a free port each instead, or one
@@ -145,7 +144,7 @@ void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, doub
   EXPECT_EQ(code, 3) << c.out() << c.err();
   EXPECT_LT(took, limit_s + 1.0) << c.out();
   EXPECT_TRUE(contains(c.out(), "master lost")) << c.out();
-  const nlohmann::json m = metrics_of(out);
+  const nlohmann::json m = metrics(out);
   EXPECT_EQ(m.at("master").at("lost"), true);
   EXPECT_GT(m.at("master").at("lost_at_s").get<double>(), 1.0);
   EXPECT_TRUE(contains(read_bytes(out / "events.log"), "master      lost: ")) << read_bytes(out / "events.log");
@@ -175,7 +174,7 @@ TEST_F(CliTrust, ARecordedMasterLossLetsTheScenarioJudgeTheReaction) {
   ::kill(pid, SIGKILL);
   const int code = c.wait(30s);
   EXPECT_NE(code, 3) << c.out() << c.err();
-  const nlohmann::json m = metrics_of(out);
+  const nlohmann::json m = metrics(out);
   EXPECT_EQ(m.at("master").at("lost"), true);
   EXPECT_NEAR(m.at("sim_time_s").get<double>(), 4.0, 0.02);
   EXPECT_EQ(m.at("interrupted"), false);
@@ -189,7 +188,7 @@ TEST_F(CliTrust, ASignalInTheFirstMillisecondsGivesExit3) {
   std::this_thread::sleep_for(2ms);
   c.signal(SIGINT);
   EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
-  EXPECT_EQ(metrics_of(dir_ / "early").at("interrupted"), true);
+  EXPECT_EQ(metrics(dir_ / "early").at("interrupted"), true);
 }
 
 // SIGINT (once, or twice 50 ms apart) while the video renders: exit 3, metrics say
@@ -203,7 +202,7 @@ void expect_video_interrupt(const fs::path& io, const fs::path& out, Child& c, b
     c.signal(SIGINT);
   }
   EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
-  const nlohmann::json m = metrics_of(out);
+  const nlohmann::json m = CliTest::metrics(out);
   EXPECT_EQ(m.at("interrupted"), true);
   EXPECT_EQ(m.at("interrupted_phase"), "outputs");
   ASSERT_TRUE(fs::exists(out / "video.mp4")) << c.out() << c.err();
@@ -237,7 +236,7 @@ TEST_F(CliTrust, SigintWhileReportingGivesExit3) {
   ASSERT_TRUE(wait_for_text(io() / "stdout", "writing the report", c)) << c.out() << c.err();
   c.signal(SIGINT);
   EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
-  const nlohmann::json m = metrics_of(out);
+  const nlohmann::json m = metrics(out);
   EXPECT_EQ(m.at("interrupted"), true);
   EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
   if (fs::exists(out / "report.html")) EXPECT_TRUE(contains(read_bytes(out / "report.html"), "</html>"));
@@ -253,7 +252,7 @@ TEST_F(CliTrust, SigintInACanRunLeavesRecordsThatOpen) {
   std::this_thread::sleep_for(1000ms);
   c.signal(SIGINT);
   EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
-  EXPECT_EQ(metrics_of(out).at("interrupted"), true);
+  EXPECT_EQ(metrics(out).at("interrupted"), true);
   EXPECT_TRUE(capture_reads(out / "bus-can.pcap"));
   EXPECT_FALSE(read_bytes(out / "trajectory.csv").empty());
   EXPECT_TRUE(fs::exists(out / "master.log"));

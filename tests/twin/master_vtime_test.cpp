@@ -259,9 +259,7 @@ class CliVtime : public CliTest {
     args.insert(args.end(), extra.begin(), extra.end());
     return run(args);
   }
-  nlohmann::json metrics(const std::string& out) const {
-    return nlohmann::json::parse(read_bytes(dir_ / out / "metrics.json"));
-  }
+  nlohmann::json metrics(const std::string& out) const { return CliTest::metrics(dir_ / out); }
 };
 
 TEST_F(CliVtime, OmniMasterOnTheWallClockRerunsByteIdenticalAndMovesAsItsSimClockRun) {
