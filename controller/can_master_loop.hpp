@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,17 @@ struct CanProgramOptions {
   bool print_config = false;  // print what was loaded and exit
   std::string stats;          // write the counters as JSON here at exit ("" = no)
 };
+
+// The transport --iface names (a bare interface name means SocketCAN), or null after logging
+// why it cannot be opened (the program then exits 2). Not real-time safe.
+inline std::unique_ptr<can::Transport> open_can_iface(const std::string& iface) {
+  try {
+    return can::open_transport(normalize_iface(iface));
+  } catch (const can::TransportError& e) {
+    spdlog::error("--iface {}: {}", iface, e.what());
+    return nullptr;
+  }
+}
 
 // "[  123.4567 ms]": a program time in the log.
 inline std::string log_stamp(std::int64_t t_ns) { return fmt::format("[{:10.4f} ms]", static_cast<double>(t_ns) * 1e-6); }

@@ -419,4 +419,11 @@ Path build_path(const PathSpec& spec) {
   return path;
 }
 
+std::optional<MasterConfig> load_platform_section(const std::string& file, const std::string& yaml,
+                                                  const std::string& config) {
+  if (!file.empty()) return load_master_config(file);
+  if (!yaml.empty()) return parse_master_config(yaml, config + " (platform)");
+  return std::nullopt;
+}
+
 }  // namespace omnitwin::controller

@@ -74,6 +74,11 @@ struct MasterConfig {
 MasterConfig load_master_config(const std::string& path);
 // The same from YAML text; `file` names it in error messages. Throws MasterConfigError.
 MasterConfig parse_master_config(std::string_view yaml, const std::string& file = "<config>");
+// A master program's platform section: the file `file` names, else the YAML `yaml` written
+// inline in the configuration file `config` (named in errors), else none. Throws
+// MasterConfigError. Not real-time safe.
+std::optional<MasterConfig> load_platform_section(const std::string& file, const std::string& yaml,
+                                                  const std::string& config);
 // The configuration as YAML that parse_master_config() reads back to the same values
 // (numbers written with round-trip precision). Not real-time safe.
 std::string dump_master_config(const MasterConfig& config);

@@ -90,8 +90,7 @@ int run_canopen_program(const ProgramOptions& o) {
   std::optional<omnitwin::canopen::EdsDevice> eds;
   try {
     pc = load_co_config(o.config);
-    if (!pc.platform_file.empty()) platform = load_master_config(pc.platform_file);
-    else if (!pc.platform_yaml.empty()) platform = parse_master_config(pc.platform_yaml, o.config + " (platform)");
+    platform = load_platform_section(pc.platform_file, pc.platform_yaml, o.config);
     eds = omnitwin::canopen::load_eds(pc.eds);
   } catch (const CoConfigError& e) {
     spdlog::error("{}", e.what());
@@ -108,13 +107,8 @@ int run_canopen_program(const ProgramOptions& o) {
     if (platform) std::cout << dump_master_config(*platform);
     return kExitOk;
   }
-  std::unique_ptr<can::Transport> tr;
-  try {
-    tr = can::open_transport(normalize_iface(o.iface));
-  } catch (const can::TransportError& e) {
-    spdlog::error("--iface {}: {}", o.iface, e.what());
-    return kExitUsage;
-  }
+  const std::unique_ptr<can::Transport> tr = open_can_iface(o.iface);
+  if (!tr) return kExitUsage;
   std::unique_ptr<Runner> runner;
   try {
     runner = std::make_unique<Runner>(pc, *eds, platform, *tr, o.clock == "sim");

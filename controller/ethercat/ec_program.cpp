@@ -379,8 +379,7 @@ int run_ethercat_program(const ProgramOptions& o) {
   try {
     ec = load_ec_config(o.config);
     mc = make_master_config(ec);
-    if (!ec.platform_file.empty()) platform = load_master_config(ec.platform_file);
-    else if (!ec.platform_yaml.empty()) platform = parse_master_config(ec.platform_yaml, o.config + " (platform)");
+    platform = load_platform_section(ec.platform_file, ec.platform_yaml, o.config);
   } catch (const EcConfigError& e) {
     spdlog::error("{}", e.what());
     return kExitUsage;

@@ -352,8 +352,7 @@ int run_m3_program(const ProgramOptions& o) {
   std::optional<controller::MasterConfig> platform;
   try {
     pc = load_m3_config(o.config);
-    if (!pc.platform_file.empty()) platform = controller::load_master_config(pc.platform_file);
-    else if (!pc.platform_yaml.empty()) platform = controller::parse_master_config(pc.platform_yaml, o.config + " (platform)");
+    platform = controller::load_platform_section(pc.platform_file, pc.platform_yaml, o.config);
   } catch (const M3ConfigError& e) {
     spdlog::error("{}", e.what());
     return kExitUsage;

@@ -36,6 +36,7 @@
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/ethercat/ec_program.hpp"
+#include "controller/can_master_loop.hpp"
 #include "controller/canopen/co_program.hpp"
 #include "controller/tml/tml_program.hpp"
 #include "controller/mechatrolink3/m3_program.hpp"
@@ -449,12 +450,7 @@ int main(int argc, char** argv) {
     std::cout << controller::dump_master_config(*cfg);
     return kExitOk;
   }
-  std::unique_ptr<can::Transport> tr;
-  try {
-    tr = can::open_transport(normalize_iface(o.iface));
-  } catch (const can::TransportError& e) {
-    spdlog::error("--iface {}: {}", o.iface, e.what());
-    return kExitUsage;
-  }
+  const std::unique_ptr<can::Transport> tr = controller::open_can_iface(o.iface);
+  if (!tr) return kExitUsage;
   return run(o, *cfg, *tr);
 }

@@ -63,8 +63,7 @@ int run_tml_program(const ProgramOptions& o) {
   std::optional<MasterConfig> platform;
   try {
     pc = load_tml_config(o.config);
-    if (!pc.platform_file.empty()) platform = load_master_config(pc.platform_file);
-    else if (!pc.platform_yaml.empty()) platform = parse_master_config(pc.platform_yaml, o.config + " (platform)");
+    platform = load_platform_section(pc.platform_file, pc.platform_yaml, o.config);
   } catch (const TmlConfigError& e) {
     spdlog::error("{}", e.what());
     return kExitUsage;
@@ -77,13 +76,8 @@ int run_tml_program(const ProgramOptions& o) {
     if (platform) std::cout << dump_master_config(*platform);
     return kExitOk;
   }
-  std::unique_ptr<can::Transport> tr;
-  try {
-    tr = can::open_transport(normalize_iface(o.iface));
-  } catch (const can::TransportError& e) {
-    spdlog::error("--iface {}: {}", o.iface, e.what());
-    return kExitUsage;
-  }
+  const std::unique_ptr<can::Transport> tr = open_can_iface(o.iface);
+  if (!tr) return kExitUsage;
   Runner runner(pc, platform, *tr, o.clock == "sim");
   spdlog::info("TML master on {} ({}, clock {}, tick {} µs, axes {} {} {} {}, host axis {})", tr->spec(),
                pc.techcan ? "TechCAN" : "TMLCAN", o.clock, std::llround(pc.cycle * 1e6), pc.axes[0], pc.axes[1], pc.axes[2],
