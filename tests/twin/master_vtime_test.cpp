@@ -6,8 +6,8 @@
 //    variables, two threads, and a fork (refused);
 //  - the command line: omni-master --clock wall under the library through `omnitwin run
 //    --master-cmd` reruns byte for byte and moves the platform as its --clock sim run does; the
-//    bad masters (exits early, crashes, never waits, ignores SIGTERM, static, forks) each give
-//    exit 3, a message that says what happened, and records.
+//    same on bus can; the bad masters (exits early, crashes, never waits, ignores SIGTERM,
+//    static, forks) each give exit 3, a message that says what happened, and records.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -293,6 +293,27 @@ TEST_F(CliVtime, OmniMasterOnTheWallClockRerunsByteIdenticalAndMovesAsItsSimCloc
     return rows;
   };
   EXPECT_EQ(columns(read_bytes(dir_ / "a" / "trajectory.csv")), columns(read_bytes(dir_ / "sim" / "trajectory.csv")));
+}
+
+// The same on bus can: omni-master's Omni CAN master on its wall clock, over the UDP bus, under
+// the library; every slave frame reaches it at its end of frame.
+TEST_F(CliVtime, OmniCanMasterOnTheWallClockRerunsByteIdentical) {
+  const std::string cmd = omni_master() + " --bus can --clock wall --iface {iface} --config {out}/master.yaml";
+  std::vector<std::string> base{"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--no-progress",
+                                "--master-cmd", cmd, "--out"};
+  std::vector<std::string> a = base, b = base;
+  a.push_back((dir_ / "ca").string());
+  b.push_back((dir_ / "cb").string());
+  const Finished fa = run(a);
+  const Finished fb = run(b);
+  ASSERT_EQ(fa.code, 0) << fa.out << read_bytes(dir_ / "ca" / "master.log");
+  ASSERT_EQ(fb.code, 0) << fb.out;
+  EXPECT_EQ(read_bytes(dir_ / "ca" / "trajectory.csv"), read_bytes(dir_ / "cb" / "trajectory.csv"));
+  EXPECT_EQ(read_bytes(dir_ / "ca" / "bus.csv"), read_bytes(dir_ / "cb" / "bus.csv"));
+  const nlohmann::json m = metrics("ca");
+  EXPECT_EQ(m["master"]["clock"], "virtual");
+  EXPECT_GT(m["master"]["virtual_time"]["frame_wakes"].get<int>(), 100);  // woken by the slaves' frames
+  EXPECT_GT(m["bus"]["frames_rx"].get<int>(), 100);
 }
 
 // A master written as a customer writes one (plain C, AF_PACKET or UDP, clock_nanosleep, poll):
