@@ -619,7 +619,7 @@ int main(int argc, char** argv) {
 
   EchoOptions eo;
   CLI::App* echo = app.add_subcommand("echo", "print what a run publishes on DDS (docs/protocols/dds.md)");
-  echo->add_option("--topic", eo.topic, "all, or state|odom|joint_states|cmd_vel|drives|bus|events or a topic name")
+  echo->add_option("--topic", eo.topic, "all, or state|odom|joint_states|cmd_vel|drives|bus|events|clock or a topic name")
       ->capture_default_str();
   echo->add_option("--domain", eo.domain, "DDS domain (default $OMNITWIN_DDS_DOMAIN, else 0)")->check(CLI::Range(0, 232));
   echo->add_option("--interface", eo.interface, "network interface, e.g. lo (default $OMNITWIN_DDS_INTERFACE)");

@@ -132,6 +132,29 @@ TEST(DdsPublisher, JointStatesNameTheWheelsAndStampSimTime) {
   EXPECT_EQ(n, 1);
 }
 
+// /clock as ROS 2 reads it with use_sim_time: rt/clock, rosgraph_msgs/Clock, the sample's
+// simulated time split into seconds and nanoseconds.
+TEST(DdsPublisher, ClockCarriesTheSimulatedTimeOnRos2Clock) {
+  const std::optional<TopicInfo> topic = find_topic("clock");
+  ASSERT_TRUE(topic.has_value());
+  EXPECT_EQ(topic->name, "rt/clock");
+  EXPECT_EQ(topic->type_name, "rosgraph_msgs::msg::dds_::Clock_");
+  EXPECT_EQ(topic->label(), "clock");
+  DdsPublisher pub(loopback_settings(test_domain()));
+  TestReader reader(test_domain(), "clock");
+  ASSERT_TRUE(reader.wait_matched());
+  pub.start(run_info("clock"));
+  StateSample s = make_sample(3);
+  s.t_ns = 12'000'000'250;  // 12 s 250 ns
+  pub.offer(s);
+  pub.finish();
+  const int n = reader.take<rosgraph_msgs_msg_dds__Clock_>(1, [&](const rosgraph_msgs_msg_dds__Clock_& m) {
+    EXPECT_EQ(m.clock.sec, 12);
+    EXPECT_EQ(m.clock.nanosec, 250u);
+  });
+  EXPECT_EQ(n, 1);
+}
+
 TEST(DdsPublisher, DrivesAndBusStatisticsFollowTheSample) {
   DdsPublisher pub(loopback_settings(test_domain()));
   TestReader drives(test_domain(), "drives"), bus(test_domain(), "bus");

@@ -113,8 +113,10 @@ ResolvedEndpoint resolve_endpoint(const DdsEndpoint& ep) {
 }
 
 std::string_view TopicInfo::label() const {
-  constexpr std::string_view prefix = "rt/omnitwin/";
-  return name.substr(prefix.size());
+  // "rt/" is ROS 2's prefix for topics; ours are under omnitwin/, /clock is ROS 2's own.
+  for (const std::string_view prefix : {std::string_view("rt/omnitwin/"), std::string_view("rt/")})
+    if (name.starts_with(prefix)) return name.substr(prefix.size());
+  return name;
 }
 
 const std::vector<TopicInfo>& dds_topics() {
@@ -130,6 +132,7 @@ const std::vector<TopicInfo>& dds_topics() {
       {"bus", "rt/omnitwin/bus_statistics", "omnitwin::msg::dds_::BusStatistics_",
        &omnitwin_msg_dds__BusStatistics__desc},
       {"events", "rt/omnitwin/run_events", "omnitwin::msg::dds_::RunEvent_", &omnitwin_msg_dds__RunEvent__desc},
+      {"clock", "rt/clock", "rosgraph_msgs::msg::dds_::Clock_", &rosgraph_msgs_msg_dds__Clock__desc},
   };
   return topics;
 }

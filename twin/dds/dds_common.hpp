@@ -54,11 +54,11 @@ std::string interface_config_xml(const std::string& interface, bool loopback);
 // One published topic: the short name `omnitwin echo --topic` accepts, the DDS topic name,
 // and the DDS type name.
 struct TopicInfo {
-  std::string_view short_name;  // state, odom, joint_states, cmd_vel, drives, bus, events
-  std::string_view name;        // rt/omnitwin/…
+  std::string_view short_name;  // state, odom, joint_states, cmd_vel, drives, bus, events, clock
+  std::string_view name;        // rt/omnitwin/…, and rt/clock (ROS 2's /clock)
   std::string_view type_name;   // e.g. nav_msgs::msg::dds_::Odometry_
   const dds_topic_descriptor_t* descriptor = nullptr;  // idlc's type descriptor
-  std::string_view label() const;  // the name without "rt/omnitwin/": platform_state, odom, …
+  std::string_view label() const;  // the name without "rt/omnitwin/" (or "rt/"): platform_state, odom, clock…
 };
 const std::vector<TopicInfo>& dds_topics();
 // A topic by short name, full name or label; nullopt when unknown.

@@ -94,6 +94,12 @@ Json bus_json(const void* p) {
               {"frames_rx", m.frames_rx}, {"dropouts", m.dropouts}, {"errors", m.errors}, {"load", m.load}};
 }
 
+Json clock_json(const void* p) {
+  const auto& m = *static_cast<const rosgraph_msgs_msg_dds__Clock_*>(p);
+  const std::int64_t t_ns = ddsmsg::to_ns(m.clock);
+  return Json{{"topic", "clock"}, {"t", seconds(t_ns)}, {"t_ns", t_ns}, {"sec", m.clock.sec}, {"nanosec", m.clock.nanosec}};
+}
+
 Json event_json(const void* p) {
   const auto& m = *static_cast<const omnitwin_msg_dds__RunEvent_*>(p);
   return Json{{"topic", "run_events"}, {"t", seconds(m.t_ns)}, {"t_ns", m.t_ns}, {"kind", m.kind_name},
@@ -109,6 +115,7 @@ Formatter formatter_for(std::string_view short_name) {
   if (short_name == "cmd_vel") return cmd_vel_json;
   if (short_name == "drives") return drives_json;
   if (short_name == "bus") return bus_json;
+  if (short_name == "clock") return clock_json;
   return event_json;
 }
 

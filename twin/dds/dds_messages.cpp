@@ -120,6 +120,7 @@ void StateMessages::fill(const StateSample& s, const std::string& bus_name) {
   cmd_vel.angular = {0.0, 0.0, s.cmd_wz};
   fill_drives(drives, s);
   fill_bus(bus, s, bus_name);
+  clock.clock = to_time(s.t_ns);
 }
 
 omnitwin_msg_dds__RunEvent_ to_message(const RunEvent& e, const std::string& scenario) {

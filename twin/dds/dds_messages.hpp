@@ -36,6 +36,7 @@ struct StateMessages {
   bool has_cmd_vel = false;  // false when the master's command is unknown (NaN)
   omnitwin_msg_dds__DriveStates_ drives{};
   omnitwin_msg_dds__BusStatistics_ bus{};
+  rosgraph_msgs_msg_dds__Clock_ clock{};  // /clock: the sample's simulated time
 
   StateMessages();
   StateMessages(const StateMessages&) = delete;  // holds pointers into itself

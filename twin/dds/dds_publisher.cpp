@@ -12,7 +12,7 @@ namespace omnitwin::twin {
 // The topics and writers, created once in the constructor (Cyclone deletes them with the
 // participant). The scratch messages belong to the publishing thread.
 struct DdsPublisher::Writers {
-  dds_entity_t state = 0, odom = 0, joints = 0, cmd_vel = 0, drives = 0, bus = 0, events = 0;
+  dds_entity_t state = 0, odom = 0, joints = 0, cmd_vel = 0, drives = 0, bus = 0, events = 0, clock = 0;
   ddsmsg::StateMessages scratch;
 };
 
@@ -63,6 +63,7 @@ DdsPublisher::DdsPublisher(const DdsSettings& settings)
   w.drives = make_writer(p, "drives", state.get());
   w.bus = make_writer(p, "bus", state.get());
   w.events = make_writer(p, "events", events.get());
+  w.clock = make_writer(p, "clock", state.get());  // ROS 2's clock QoS: best effort, keep last 1
 }
 
 DdsPublisher::~DdsPublisher() { finish(); }
@@ -154,7 +155,7 @@ bool DdsPublisher::publish_samples() {
     w.scratch.fill(s, info_.bus);
     int failed = (dds_write(w.state, &w.scratch.state) < 0) + (dds_write(w.odom, &w.scratch.odom) < 0) +
                  (dds_write(w.joints, &w.scratch.joints) < 0) + (dds_write(w.drives, &w.scratch.drives) < 0) +
-                 (dds_write(w.bus, &w.scratch.bus) < 0);
+                 (dds_write(w.bus, &w.scratch.bus) < 0) + (dds_write(w.clock, &w.scratch.clock) < 0);
     if (w.scratch.has_cmd_vel) failed += dds_write(w.cmd_vel, &w.scratch.cmd_vel) < 0;
     published_.fetch_add(1, std::memory_order_relaxed);
     if (failed) write_errors_.fetch_add(static_cast<std::uint64_t>(failed), std::memory_order_relaxed);
