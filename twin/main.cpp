@@ -574,7 +574,7 @@ int main(int argc, char** argv) {
   run->add_option("--set", ra.sets, "override a scenario key, e.g. --set controller.period=0.005")
       ->type_name("KEY=VALUE");
   run->add_option("--master-cmd", ra.master_cmd,
-                  "run this master program instead of omni-master ({iface}, {out} are filled in); in lockstep "
+                  "run this master program instead of omni-master ({iface}, {ifname}, {out} are filled in); in lockstep "
                   "it lives on the twin's virtual clock (libomnitwin_vtime.so)")
       ->type_name("\"PROGRAM ARGS…\"");
   run->add_flag("--no-progress", ra.no_progress, "never draw the progress bar");

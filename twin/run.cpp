@@ -215,7 +215,7 @@ class PlatformRun {
   // a master of the user's own (master.command): on the virtual clock in lockstep
   std::unique_ptr<VtimeServer> vtime_server_;
   std::unique_ptr<VtimePacer> vtime_pacer_;
-  std::string master_command_;  // as run, {iface} and {out} substituted
+  std::string master_command_;  // as run, {iface}, {ifname} and {out} substituted
   std::unique_ptr<MasterProcess> master_;
   std::string master_program_;
   simclock::MasterReport report_{};
@@ -336,7 +336,7 @@ void PlatformRun::start_master() {
                                      lockstep ? "sim" : "wall"));
 }
 
-// A master the user brings: its command line with {iface} and {out} filled in, started under
+// A master the user brings: its command line with {iface}, {ifname} and {out} filled in, started under
 // the virtual-time library (lockstep) or plainly (realtime). Throws std::runtime_error when it
 // cannot start or, in lockstep, never joins the virtual clock.
 void PlatformRun::start_own_master(const std::string& dir) {
@@ -347,8 +347,12 @@ void PlatformRun::start_own_master(const std::string& dir) {
     throw std::runtime_error(fmt::format("master.command: {}", e.what()));
   }
   if (words.empty()) throw std::runtime_error("master.command: empty");
+  const std::string iface = net_->master_iface();
+  const std::string ifname = iface.starts_with("raw:") ? iface.substr(4) : iface;
   for (std::string& w : words) {
     for (std::size_t at; (at = w.find("{iface}")) != std::string::npos;) w.replace(at, 7, net_->master_iface());
+    // The bare interface name (raw:NAME → NAME) for masters that take one, as SOEM's samples do.
+    for (std::size_t at; (at = w.find("{ifname}")) != std::string::npos;) w.replace(at, 8, ifname);
     for (std::size_t at; (at = w.find("{out}")) != std::string::npos;) w.replace(at, 5, dir);
   }
   master_program_ = words[0];

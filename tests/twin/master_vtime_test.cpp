@@ -348,6 +348,17 @@ TEST_F(CliVtime, AMasterThatExitsEarlyEndsTheRunWithExit3) {
   EXPECT_TRUE(fs::exists(dir_ / "early" / "master.log"));
 }
 
+// {ifname}: the interface's bare name (raw:NAME → NAME), as SOEM's samples take it.
+TEST_F(CliVtime, IfnameIsTheBareInterfaceName) {
+  const Finished f = run_master("ifname", probe("exit-early") + " {ifname} {iface}");
+  EXPECT_EQ(f.code, 3) << f.out;  // it exits early: only its command line matters here
+  const std::string cmd = metrics("ifname")["master"]["command"];
+  const std::string iface = cmd.substr(cmd.rfind(' ') + 1);
+  const std::string name = iface.starts_with("raw:") ? iface.substr(4) : iface;
+  EXPECT_TRUE(cmd.ends_with(" exit-early " + name + " " + iface)) << cmd;
+  EXPECT_FALSE(contains(cmd, "{")) << cmd;
+}
+
 TEST_F(CliVtime, AMasterThatCrashesEndsTheRunWithExit3) {
   const Finished f = run_master("crash", probe("crash"));
   EXPECT_EQ(f.code, 3) << f.out;
