@@ -2,8 +2,10 @@
 //  - the channel's codec: round trip, golden bytes, every rejection;
 //  - the preload library on a probe program (tests/twin/vtime/vt_probe.c, plain libc) against a
 //    scripted twin end: each intercepted call's return value, errno and simulated time as the
-//    kernel would give them on the simulated clock, the busy-poll rule, timerfds, condition
-//    variables, two threads, and a fork (refused);
+//    kernel would give them on the simulated clock (clocks, sleeps, the poll/select/epoll
+//    families, every receive with SO_RCVTIMEO and MSG_DONTWAIT, relative, periodic and absolute
+//    timerfds, timed and clock waits on condition variables), the busy-poll rule on receives
+//    and on clock reads alone, two threads, and a fork (refused);
 //  - the command line: omni-master --clock wall under the library through `omnitwin run
 //    --master-cmd` reruns byte for byte and moves the platform as its --clock sim run does; the
 //    same on bus can; the bad masters (exits early, crashes, never waits, ignores SIGTERM,
@@ -216,6 +218,35 @@ TEST_F(VtimeProbe, EveryInterceptedCallAnswersAsTheKernelWouldOnSimulatedTime) {
     if (name.starts_with("tick")) seen.emplace_back(name, value);
   EXPECT_EQ(seen, ticks) << text;
   EXPECT_EQ(v["after_join"], t3 + 15'000'000);
+  // The other variants: C11's clock; recvfrom, recvmsg and read on the socket time out after
+  // its SO_RCVTIMEO each; pselect and epoll_pwait time out; an empty non-blocking timerfd is
+  // EAGAIN; an absolute timerfd fires at its instant; a spin on clock reads alone advances
+  // 1 µs per 64 reads; pthread_cond_clockwait times out on its clock.
+  const long long t4 = t3 + 15'000'000;
+  const long long rt = v["rcvtimeo_ns"];
+  EXPECT_EQ(v["timespec_get_s"], 1767225600 + (t4 - kMono) / 1'000'000'000);
+  EXPECT_EQ(v["recvfrom_rc"], -1);
+  EXPECT_EQ(v["recvfrom_errno"], EAGAIN);
+  EXPECT_EQ(v["after_recvfrom"], t4 + rt);
+  EXPECT_EQ(v["recvmsg_rc"], -1);
+  EXPECT_EQ(v["recvmsg_errno"], EAGAIN);
+  EXPECT_EQ(v["after_recvmsg"], t4 + 2 * rt);
+  EXPECT_EQ(v["read_rc"], -1);
+  EXPECT_EQ(v["read_errno"], EAGAIN);
+  const long long t5 = t4 + 3 * rt;
+  EXPECT_EQ(v["after_read"], t5);
+  EXPECT_EQ(v["pselect_rc"], 0);
+  EXPECT_EQ(v["after_pselect"], t5 + 3'000'000);
+  EXPECT_EQ(v["epoll_pwait_rc"], 0);
+  EXPECT_EQ(v["after_epoll_pwait"], t5 + 7'000'000);
+  EXPECT_EQ(v["timerfd_empty_rc"], -1);
+  EXPECT_EQ(v["timerfd_empty_errno"], EAGAIN);
+  EXPECT_EQ(v["timerfd_poll_rc"], 1);
+  EXPECT_EQ(v["timerfd_abs_read_rc"], 8);
+  EXPECT_EQ(v["after_timerfd_abs"], t5 + 9'000'000);
+  EXPECT_EQ(v["after_spin_clock"], t5 + 11'000'000);
+  EXPECT_EQ(v["clockwait_rc"], ETIMEDOUT);
+  EXPECT_EQ(v["after_clockwait"], t5 + 12'000'000);
 }
 
 TEST_F(VtimeProbe, ReRunsAreIdenticalWaitForWait) {

@@ -48,6 +48,74 @@ static void* ticker(void* arg) {
   return NULL;
 }
 
+/* The rest of the calls, after calls() (t4 = after_join): the other receive and wait
+ * variants, the C11 clock, an absolute timerfd, a clock-read spin and a clockwait. */
+static void more_calls(int s) {
+  char buf[64];
+  struct timespec t;
+  timespec_get(&t, TIME_UTC);
+  out("timespec_get_s", t.tv_sec);
+  /* the socket's SO_RCVTIMEO (rounded as the kernel holds it) applies to each receive */
+  struct sockaddr_in from;
+  socklen_t fl = sizeof from;
+  errno = 0;
+  out("recvfrom_rc", recvfrom(s, buf, sizeof buf, 0, (struct sockaddr*)&from, &fl));
+  out("recvfrom_errno", errno);
+  out("after_recvfrom", mono());
+  struct iovec iov = {buf, sizeof buf};
+  struct msghdr mh;
+  memset(&mh, 0, sizeof mh);
+  mh.msg_iov = &iov;
+  mh.msg_iovlen = 1;
+  errno = 0;
+  out("recvmsg_rc", recvmsg(s, &mh, 0));
+  out("recvmsg_errno", errno);
+  out("after_recvmsg", mono());
+  errno = 0;
+  out("read_rc", read(s, buf, sizeof buf));
+  out("read_errno", errno);
+  out("after_read", mono());
+  /* pselect and epoll_pwait time out */
+  struct timespec ps = {0, 3000000};
+  out("pselect_rc", pselect(0, NULL, NULL, NULL, &ps, NULL));
+  out("after_pselect", mono());
+  int ep = epoll_create1(0);
+  struct epoll_event ev;
+  out("epoll_pwait_rc", epoll_pwait(ep, &ev, 1, 4, NULL));
+  out("after_epoll_pwait", mono());
+  /* a timerfd armed at an absolute monotonic instant 2 ms ahead, then read once */
+  int tf = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK);
+  uint64_t n = 0;
+  errno = 0;
+  out("timerfd_empty_rc", read(tf, &n, sizeof n));
+  out("timerfd_empty_errno", errno);
+  struct itimerspec its;
+  memset(&its, 0, sizeof its);
+  long long at = mono() + 2000000;
+  its.it_value.tv_sec = at / 1000000000LL;
+  its.it_value.tv_nsec = at % 1000000000LL;
+  timerfd_settime(tf, TFD_TIMER_ABSTIME, &its, NULL);
+  struct pollfd p = {tf, POLLIN, 0};
+  out("timerfd_poll_rc", poll(&p, 1, -1));
+  out("timerfd_abs_read_rc", read(tf, &n, sizeof n));
+  out("after_timerfd_abs", mono());
+  close(tf);
+  /* a busy wait on clock reads alone: 2 ms pass in 1 µs steps, one per 64 reads */
+  const long long until = mono() + 2000000;
+  while (mono() < until) {
+  }
+  out("after_spin_clock", mono());
+  /* pthread_cond_clockwait on the monotonic clock */
+  struct timespec cw;
+  clock_gettime(CLOCK_MONOTONIC, &cw);
+  cw.tv_nsec += 1000000;
+  if (cw.tv_nsec >= 1000000000) { cw.tv_nsec -= 1000000000; ++cw.tv_sec; }
+  pthread_mutex_lock(&mu);
+  out("clockwait_rc", pthread_cond_clockwait(&cv, &mu, CLOCK_MONOTONIC, &cw));
+  pthread_mutex_unlock(&mu);
+  out("after_clockwait", mono());
+}
+
 static int calls(void) {
   struct timespec t;
   out("mono", mono());
@@ -153,6 +221,7 @@ static int calls(void) {
   pthread_join(t1, NULL);
   pthread_join(t2, NULL);
   out("after_join", mono());
+  more_calls(s);
   return 0;
 }
 
