@@ -31,18 +31,20 @@ std::int64_t wall_ms_left(std::chrono::steady_clock::time_point deadline) {
   return std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()).count();
 }
 
-// One record from `fd` within the deadline; closed on end of stream, protocol on garbage.
+// One record from `fd` within the deadline; closed on end of stream, protocol on garbage. A
+// record already waiting is taken with one system call; poll() only when none is.
 VtimeServer::Status read_record(int fd, Record& r, std::chrono::steady_clock::time_point deadline) {
   for (;;) {
-    pollfd p{fd, POLLIN, 0};
-    const std::int64_t left = wall_ms_left(deadline);
-    if (left < 0) return VtimeServer::Status::timeout;
-    const int pr = ::poll(&p, 1, static_cast<int>(left));
-    if (pr < 0 && errno == EINTR) continue;
-    if (pr == 0) return VtimeServer::Status::timeout;
     std::uint8_t b[vtime::kRecordSize + 1];
     const ssize_t n = ::recv(fd, b, sizeof b, MSG_DONTWAIT);
-    if (n < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+    if (n < 0 && (errno == EINTR || errno == EAGAIN)) {
+      pollfd p{fd, POLLIN, 0};
+      const std::int64_t left = wall_ms_left(deadline);
+      if (left < 0) return VtimeServer::Status::timeout;
+      const int pr = ::poll(&p, 1, static_cast<int>(left));
+      if (pr == 0) return VtimeServer::Status::timeout;
+      continue;
+    }
     if (n <= 0) return VtimeServer::Status::closed;
     const auto rec = vtime::decode(b, static_cast<std::size_t>(n));
     if (!rec) return VtimeServer::Status::protocol;

@@ -97,9 +97,11 @@ timespec ns_ts(ns_t v) {
   }
   return t;
 }
+// The wall clock, through glibc's real clock_gettime (the vDSO: no system call).
 ns_t wall_ns() {
+  static auto real_clock = real<int (*)(clockid_t, timespec*)>("clock_gettime");
   timespec t;
-  syscall(SYS_clock_gettime, CLOCK_MONOTONIC, &t);
+  real_clock(CLOCK_MONOTONIC, &t);
   return ts_ns(t);
 }
 ns_t add_sat(ns_t a, ns_t b) { return (b > 0 && a > vt::kNever - b) ? vt::kNever : a + b; }
@@ -161,6 +163,7 @@ struct State {
   Waiter* waiters = nullptr;
   Exited* exited = nullptr;
   Timer timers[kMaxFd];
+  int timers_end = 0;           // 1 + the highest descriptor that was a timerfd: the loops' bound
   bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
   int bus_port = -1;            // udp:HOST:PORT : datagrams to PORT carry the bus
 };
@@ -191,20 +194,17 @@ bool send_record(const vt::Record& r) {
   return syscall(SYS_sendto, g.fd, b.data(), b.size(), MSG_NOSIGNAL, nullptr, 0) == static_cast<long>(b.size());
 }
 
-// Receives one record within the watchdog; false when the channel closed or nothing came.
-bool recv_record(vt::Record& r, ns_t limit_ns) {
+// Receives one record within the watchdog (the channel's SO_RCVTIMEO: one system call per
+// record); false when the channel closed or nothing came in time.
+bool recv_record(vt::Record& r) {
   std::uint8_t b[vt::kRecordSize + 1];
-  const ns_t until = wall_ns() + limit_ns;
+  ns_t until = 0;
   for (;;) {
-    pollfd p{g.fd, POLLIN, 0};
-    const ns_t left = until - wall_ns();
-    if (left <= 0) return false;
-    timespec ts = ns_ts(left);
-    const long pr = syscall(SYS_ppoll, &p, 1, &ts, nullptr, 8);
-    if (pr < 0 && errno == EINTR) continue;
-    if (pr <= 0) return false;
-    const long n = syscall(SYS_recvfrom, g.fd, b, sizeof b, MSG_DONTWAIT, nullptr, nullptr);
-    if (n < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+    const long n = syscall(SYS_recvfrom, g.fd, b, sizeof b, 0, nullptr, nullptr);
+    if (n < 0 && errno == EINTR) {  // a signal: wait on, within the watchdog
+      if (until == 0) until = wall_ns() + g.watchdog;
+      if (wall_ns() < until) continue;
+    }
     if (n <= 0) return false;
     const auto rec = vt::decode(b, static_cast<std::size_t>(n));
     if (!rec) return false;
@@ -246,12 +246,14 @@ void connect_channel() {
     return;
   }
   g.fd = fd;
+  const timeval limit{static_cast<time_t>(g.watchdog / kNs), static_cast<suseconds_t>((g.watchdog % kNs) / 1000)};
+  syscall(SYS_setsockopt, fd, SOL_SOCKET, SO_RCVTIMEO, &limit, sizeof limit);
   vt::Record h;
   h.type = vt::Type::hello;
   h.pid = static_cast<std::uint32_t>(getpid());
   h.ppid = static_cast<std::uint32_t>(getppid());
   vt::Record w;
-  if (!send_record(h) || !recv_record(w, g.watchdog)) {
+  if (!send_record(h) || !recv_record(w)) {
     say("omnitwin-vtime: the twin did not welcome process %d: it runs on the wall clock\n", getpid());
     return;
   }
@@ -306,7 +308,7 @@ bool fds_ready(const Waiter& w, ns_t grace_ns) {
 
 // Simulated timerfds that expired by now: their eventfds count the expirations.
 void fire_timers() {
-  for (int fd = 0; fd < kMaxFd; ++fd) {
+  for (int fd = 0; fd < g.timers_end; ++fd) {
     Timer& t = g.timers[fd];
     if (!t.used || t.expiry > g.now) continue;
     std::uint64_t n = 1;
@@ -323,7 +325,7 @@ void fire_timers() {
 
 ns_t earliest_timer() {
   ns_t e = vt::kNever;
-  for (int fd = 0; fd < kMaxFd; ++fd)
+  for (int fd = 0; fd < g.timers_end; ++fd)
     if (g.timers[fd].used && g.timers[fd].expiry < e) e = g.timers[fd].expiry;
   return e;
 }
@@ -353,7 +355,7 @@ bool lead() {
   pthread_mutex_unlock(&g.mu);
   vt::Record a;
   t_inside = true;
-  const bool ok = send_record(r) && recv_record(a, g.watchdog);
+  const bool ok = send_record(r) && recv_record(a);
   t_inside = false;
   pthread_mutex_lock(&g.mu);
   g.leading = false;
@@ -966,6 +968,7 @@ int timerfd_create(int clockid, int flags) {
   }
   Lock l;
   g.timers[fd] = Timer{true, vt::kNever, 0, (flags & TFD_NONBLOCK) != 0};
+  if (fd >= g.timers_end) g.timers_end = fd + 1;
   return fd;
 }
 

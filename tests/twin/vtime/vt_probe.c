@@ -228,6 +228,11 @@ static int calls(void) {
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
   if (!strcmp(mode, "calls")) return calls();
+  if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
+    const long n = argc > 2 ? atol(argv[2]) : 1000;
+    for (long i = 0; i < n; ++i) usleep(1);
+    return 0;
+  }
   if (!strcmp(mode, "sleep")) { /* sleeps in 10 ms steps until SIGTERM */
     for (;;) usleep(10000);
   }
