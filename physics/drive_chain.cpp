@@ -28,7 +28,10 @@ double dac_volts(const DacParams& dac, int code) {
 }
 
 double driver_setpoint(const DriverParams& driver, const MotorParams& motor, double volts) {
-  const double w = driver.gain * (volts - driver.zero_volts);
+  // Input dead band around the zero voltage: inside it the amplifier sees 0.
+  const double v = volts - driver.zero_volts;
+  const double outside = std::max(std::abs(v) - driver.dead_band, 0.0);
+  const double w = driver.gain * std::copysign(outside, v);
   return std::clamp(w, -motor.speed_limit, motor.speed_limit);
 }
 
@@ -107,7 +110,32 @@ double VelocityLoop::ideal_code(double command_counts_per_sample) const {
   return zero_code_ + codes_per_count_per_sample_ * command_counts_per_sample;
 }
 
+namespace {
+// C on an 8051: a 16-bit int sum wraps modulo 2^16 (two's complement), it does not saturate.
+int16_t wrap16(long value) {
+  return static_cast<int16_t>(static_cast<uint16_t>(static_cast<unsigned long>(value) & 0xFFFFu));
+}
+}  // namespace
+
+int VelocityLoop::step_int16(double command_counts_per_sample, double measured_counts_per_sample) {
+  // Whole counts and whole-code gains, as the firmware holds them.
+  const long c = std::lround(command_counts_per_sample);
+  const long e = c - std::lround(measured_counts_per_sample);
+  const long kp = std::lround(loop_.kp), ki = std::lround(loop_.ki);
+  const long slope = std::lround(loop_.kff * codes_per_count_per_sample_);
+  // Each product and sum is stored in a 16-bit int, wrapping on overflow.
+  const int16_t ff = wrap16(std::lround(zero_code_) + wrap16(slope * c));
+  integral_ = wrap16(static_cast<long>(integral_) + wrap16(ki * e));
+  const int16_t u = wrap16(static_cast<long>(ff) + wrap16(kp * e) + static_cast<long>(integral_));
+  // The DA port takes the 12 low bits' range: the firmware clamps before writing.
+  const int top = dac_max_code(dac_);
+  saturated_ = u < 0 || u > top;
+  return std::clamp<int>(u, 0, top);
+}
+
 int VelocityLoop::step(double command_counts_per_sample, double measured_counts_per_sample) {
+  if (loop_.arithmetic == LoopArithmetic::int16)
+    return step_int16(command_counts_per_sample, measured_counts_per_sample);
   // Error in counts per sample and the feed-forward code for the command.
   const double e = command_counts_per_sample - measured_counts_per_sample;
   const double ff = zero_code_ + loop_.kff * (ideal_code(command_counts_per_sample) - zero_code_);

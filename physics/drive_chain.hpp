@@ -26,8 +26,9 @@ int dac_clamp_code(const DacParams& dac, double code);
 // Real-time safe.
 double dac_volts(const DacParams& dac, int code);
 
-// Analog velocity driver: speed setpoint [rad/s] = gain·(V − zero_volts), clamped to
-// ±motor.speed_limit. Real-time safe.
+// Analog velocity driver: speed setpoint [rad/s] = gain·(V − zero_volts) with the input
+// dead band taken out (|V − zero_volts| <= dead_band gives 0, beyond it the band is
+// subtracted), clamped to ±motor.speed_limit. Real-time safe.
 double driver_setpoint(const DriverParams& driver, const MotorParams& motor, double volts);
 
 // ---- HCTL-2032 style quadrature counter ----------------------------------------------------
@@ -93,6 +94,7 @@ class QuadratureCounter {
 // ideal_code(c) + kp·e + I; the offset is kept out of the kff scaling so kff ≠ 1 scales the
 // speed, not the standstill voltage.) Anti-windup by conditional integration: the integral is
 // not advanced when the output is saturated and the error pushes further into the limit.
+// With arithmetic = int16 the firmware's integer version runs instead (step_int16).
 class VelocityLoop {
  public:
   VelocityLoop(const VelocityLoopParams& loop, const DacParams& dac, const DriverParams& driver,
@@ -110,6 +112,10 @@ class VelocityLoop {
   bool saturated() const { return saturated_; }     // last output hit a DA limit
 
  private:
+  // The same law in the 8051's 16-bit integers (LoopArithmetic::int16): whole counts, whole
+  // codes, every sum wrapping at ±32768, no anti-windup; the DA clamps. Real-time safe.
+  int step_int16(double command_counts_per_sample, double measured_counts_per_sample);
+
   VelocityLoopParams loop_;
   DacParams dac_;
   double codes_per_count_per_sample_;  // d(code)/d(c) of the ideal mapping

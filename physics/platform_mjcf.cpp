@@ -210,8 +210,12 @@ void append_wheel(std::string& out, const PlatformParams& p, int wheel0) {
   out += "      <body name=\"" + name + "\" pos=\"" +
          nums({p.geometry.L * std::cos(a), p.geometry.L * std::sin(a), 0}) + "\" quat=\"" +
          nums({std::cos(a / 2), 0, 0, std::sin(a / 2)}) + "\">\n";
+  // Gearbox and bearing dry friction as MuJoCo's joint frictionloss (only when set: each
+  // one is a constraint row the solver pays for).
+  const std::string friction =
+      p.motor.friction_torque > 0 ? "\" frictionloss=\"" + num(p.motor.friction_torque) : "";
   out += "        <joint name=\"" + name + "\" type=\"hinge\" axis=\"1 0 0\" armature=\"" +
-         num(p.motor.armature) + "\" damping=\"" + num(p.motor.damping) + "\"/>\n";
+         num(p.motor.armature) + "\" damping=\"" + num(p.motor.damping) + friction + "\"/>\n";
   if (p.sim.variant == ModelVariant::rollers) {
     append_wheel_rollers(out, p, wheel0);
   } else {
@@ -231,6 +235,12 @@ void append_worldbody(std::string& out, const PlatformParams& p) {
          nums({g.chassis_size[0] / 2, g.chassis_size[1] / 2, g.chassis_size[2] / 2}) +
          "\" mass=\"" + num(g.chassis_mass) + "\" material=\"chassis\"/>\n";
   append_chassis_visuals(out, p);
+  // The payload: a box on the deck, welded to the chassis (it adds mass and inertia).
+  if (g.load_mass > 0)
+    out += "      <geom name=\"load\" type=\"box\" contype=\"0\" conaffinity=\"0\" pos=\"" +
+           nums({0, 0, g.chassis_size[2] / 2 + g.load_size[2] / 2}) + "\" size=\"" +
+           nums({g.load_size[0] / 2, g.load_size[1] / 2, g.load_size[2] / 2}) + "\" mass=\"" +
+           num(g.load_mass) + "\" rgba=\"0.55 0.42 0.25 1\"/>\n";
   for (int i = 0; i < 4; ++i) append_wheel(out, p, i);
   out += "    </body>\n";
   out += "  </worldbody>\n";
@@ -267,13 +277,24 @@ void append_contact_pairs(std::string& out, const PlatformParams& p) {
 void append_actuators(std::string& out, const PlatformParams& p) {
   const MotorParams& m = p.motor;
   out += "  <actuator>\n";
+  const std::string limits = "\" ctrllimited=\"true\" ctrlrange=\"" +
+                             nums({-m.speed_limit, m.speed_limit}) +
+                             "\" forcelimited=\"true\" forcerange=\"" +
+                             nums({-m.torque_limit, m.torque_limit}) + "\"/>\n";
   for (int i = 0; i < 4; ++i) {
-    // The amplifier as a velocity servo: torque = kv·(setpoint - omega), clamped.
-    out += "    <velocity name=\"" + wheel_name("motor", i) + "\" joint=\"" +
-           wheel_name("wheel", i) + "\" kv=\"" + num(m.kv) +
-           "\" ctrllimited=\"true\" ctrlrange=\"" + nums({-m.speed_limit, m.speed_limit}) +
-           "\" forcelimited=\"true\" forcerange=\"" + nums({-m.torque_limit, m.torque_limit}) +
-           "\"/>\n";
+    const std::string head =
+        "    <" + std::string(m.electrical_tau > 0 ? "general" : "velocity") + " name=\"" +
+        wheel_name("motor", i) + "\" joint=\"" + wheel_name("wheel", i);
+    if (m.electrical_tau > 0) {
+      // torque = kv·(act − ω) with act' = (setpoint − act)/electrical_tau: the amplifier's
+      // velocity servo behind one first-order electrical lag (MuJoCo's filter dynamics).
+      out += head + "\" dyntype=\"filter\" dynprm=\"" + num(m.electrical_tau) +
+             "\" gaintype=\"fixed\" gainprm=\"" + num(m.kv) + "\" biastype=\"affine\" biasprm=\"" +
+             nums({0, 0, -m.kv}) + limits;
+    } else {
+      // The amplifier as a velocity servo: torque = kv·(setpoint − ω), clamped.
+      out += head + "\" kv=\"" + num(m.kv) + limits;
+    }
   }
   out += "  </actuator>\n";
 }

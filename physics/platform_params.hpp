@@ -25,6 +25,10 @@ struct GeometryParams {
   double chassis_mass = 12.0;                      // [kg]
   double hub_mass = 0.25;                          // per wheel [kg]
   double wheel_width = 0.04;                       // hub visual width [m]
+  // Payload carried on the deck, a box centred on O_m resting on the chassis top. The thesis
+  // ran its platform unloaded (4-4-2 "空載測試"), hence 0 (no load body at all).
+  double load_mass = 0.0;                          // [kg], >= 0
+  std::array<double, 3> load_size{0.25, 0.25, 0.10};  // full box extents [m]
 };
 
 struct RollerParams {
@@ -45,19 +49,30 @@ struct FloorParams {
   double slip_gain = 1.0;       // scales `friction` (wheel-slip studies: < 1 slips sooner)
 };
 
-// Motor with its analog velocity-mode servo amplifier, as seen at the wheel shaft.
+// Motor with its analog velocity-mode servo amplifier and gearbox, as seen at the wheel
+// shaft (physics, not firmware). The amplifier closes a proportional velocity loop,
+// torque = kv·(setpoint − ω), whose setpoint reaches the torque through one first-order lag
+// of electrical_tau (armature L/R and the amplifier's current loop); with the wheel's
+// reflected inertia J the loop's mechanical time constant is τm = J/kv (J ≈ armature plus
+// the platform's share, ≈ 0.03 kg·m² here, so τm ≈ 15 ms at kv = 2). The gearbox adds dry
+// friction (friction_torque) and lost motion (backlash is not modelled).
 struct MotorParams {
-  double kv = 20.0;             // velocity-servo gain of the amplifier+motor [N·m·s/rad]
+  double kv = 2.0;              // velocity-servo gain of the amplifier+motor [N·m·s/rad]
+  double electrical_tau = 0.002;  // setpoint → torque lag [s]; 0 = none, else >= sim.timestep
   double torque_limit = 5.0;    // |torque| at the wheel [N·m]
   double speed_limit = 20.0;    // |speed setpoint| the amplifier accepts [rad/s]
   double armature = 0.02;       // reflected rotor inertia [kg·m²]
   double damping = 0.0;         // viscous friction in the wheel bearing [N·m·s/rad]
+  double friction_torque = 0.0; // dry (Coulomb) friction of gearbox and bearing [N·m]
 };
 
-// Analog velocity driver input: speed setpoint = gain·(V - zero_volts), clamped.
+// Analog velocity driver input: speed setpoint = gain·(V − zero_volts), clamped, with an
+// input dead band: |V − zero_volts| <= dead_band gives 0, beyond it the band is subtracted
+// (the amplifier's input comparator / offset trim; 0 = an ideal input).
 struct DriverParams {
   double zero_volts = 2.5;      // input voltage that means standstill [V]
   double gain = 8.0;            // [rad/s per V]
+  double dead_band = 0.0;       // half-width of the input dead band [V], >= 0
 };
 
 // 12-bit DA (AD7541 behind a TLC2274 buffer): V = D/4096 · vref, eq. 4-8.
@@ -72,12 +87,20 @@ struct EncoderParams {
   int index_per_rev = 1;        // index pulses per revolution
 };
 
+// How the slave's PI computes (firmware, not physics).
+enum class LoopArithmetic {
+  real,   // exact real arithmetic (an idealised controller)
+  int16,  // the 8051's 16-bit signed integers: gains and the integral in whole codes, the
+          // sum wraps at ±32768 (C on an 8051 does not saturate), then the DA clamps
+};
+
 // The slave's (8051) velocity loop: PI in counts per sample, output in DA codes.
 struct VelocityLoopParams {
   double period = 0.010;        // nominal sample period of the slave timer [s]
   double kp = 20.0;             // [DA codes per (count/sample)]
   double ki = 4.0;              // [DA codes per (count/sample)·sample]
   double kff = 1.0;             // feed-forward scale on the ideal code for the command [-]
+  LoopArithmetic arithmetic = LoopArithmetic::real;
 };
 
 struct SimParams {
@@ -108,5 +131,6 @@ struct PlatformParams {
 double wheel_alpha(int wheel);
 
 const char* to_string(ModelVariant v);
+const char* to_string(LoopArithmetic a);
 
 }  // namespace omnitwin::physics

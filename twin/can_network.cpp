@@ -78,6 +78,7 @@ void OmniCanNetwork::make_slave(int i) {
   omni::OmniSlaveConfig c = omni::make_slave_config(id, s_.platform);
   c.drift = s_.bus.can.drift[static_cast<std::size_t>(i)];
   c.sync_enabled = s_.bus.can.sync;
+  c.missing_command = s_.bus.can.hold_missing_command ? omni::MissingCommand::hold : omni::MissingCommand::skip;
   c.sync_interval = s_.bus.can.sync_interval;
   c.t_post_ns = std::llround(s_.bus.can.t_post_us * 1e3);
   c.start_phase_ns = std::llround(start_phase_[static_cast<std::size_t>(i)] * static_cast<double>(c.timer_period_ns));
@@ -236,6 +237,8 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
           {"resyncs", st.resyncs},
           {"commands", st.commands},
           {"stale_samples", st.stale_samples},
+          {"held_samples", st.held_samples},
+          {"missing_command", omni::to_string(sl.config().missing_command)},
           {"start_phase", start_phase_[n]},
           {"frames_received", st.frames_received},
           {"frames_sent", st.frames_sent},

@@ -179,7 +179,8 @@ struct ParamTrace {
 };
 
 void read_geometry(const YamlField& s, physics::GeometryParams& g, ParamTrace& t) {
-  s.allow_keys({"L", "r", "chassis_size", "chassis_mass", "hub_mass", "wheel_width"});
+  s.allow_keys({"L", "r", "chassis_size", "chassis_mass", "hub_mass", "wheel_width", "load_mass",
+                "load_size"});
   read_number(s, "L", g.L, Bounds::positive());
   if (read_number(s, "r", g.r, Bounds::positive())) t.radius_or_r = s["r"];
   if (s["chassis_size"].exists()) {
@@ -189,6 +190,11 @@ void read_geometry(const YamlField& s, physics::GeometryParams& g, ParamTrace& t
   read_number(s, "chassis_mass", g.chassis_mass, Bounds::positive());
   read_number(s, "hub_mass", g.hub_mass, Bounds::positive());
   read_number(s, "wheel_width", g.wheel_width, Bounds::positive());
+  read_number(s, "load_mass", g.load_mass, Bounds::non_negative());
+  if (s["load_size"].exists()) {
+    const auto v = s["load_size"].numbers(3, Bounds::positive());
+    g.load_size = {v[0], v[1], v[2]};
+  }
 }
 
 void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
@@ -213,8 +219,11 @@ void read_floor(const YamlField& s, physics::FloorParams& f) {
 }
 
 void read_motor(const YamlField& s, physics::MotorParams& m) {
-  s.allow_keys({"kv", "torque_limit", "speed_limit", "armature", "damping"});
+  s.allow_keys({"kv", "electrical_tau", "torque_limit", "speed_limit", "armature", "damping",
+                "friction_torque"});
   read_number(s, "kv", m.kv, Bounds::positive());
+  read_number(s, "electrical_tau", m.electrical_tau, Bounds::non_negative());
+  read_number(s, "friction_torque", m.friction_torque, Bounds::non_negative());
   read_number(s, "torque_limit", m.torque_limit, Bounds::positive());
   read_number(s, "speed_limit", m.speed_limit, Bounds::positive());
   read_number(s, "armature", m.armature, Bounds::non_negative());
@@ -224,9 +233,10 @@ void read_motor(const YamlField& s, physics::MotorParams& m) {
 void read_electronics(const YamlField& section, const std::string& name, physics::PlatformParams& p) {
   // The small drive-chain sections: driver, dac, encoder, velocity_loop.
   if (name == "driver") {
-    section.allow_keys({"zero_volts", "gain"});
+    section.allow_keys({"zero_volts", "gain", "dead_band"});
     read_number(section, "zero_volts", p.driver.zero_volts);
     read_number(section, "gain", p.driver.gain, Bounds::positive());
+    read_number(section, "dead_band", p.driver.dead_band, Bounds::non_negative());
   } else if (name == "dac") {
     section.allow_keys({"bits", "vref"});
     read_integer(section, "bits", p.dac.bits, Bounds::closed(1, 16));
@@ -237,11 +247,15 @@ void read_electronics(const YamlField& section, const std::string& name, physics
     read_integer(section, "lines", p.encoder.lines, Bounds::closed(1, 100'000'000));
     read_integer(section, "index_per_rev", p.encoder.index_per_rev, Bounds::non_negative());
   } else if (name == "velocity_loop") {
-    section.allow_keys({"period", "kp", "ki", "kff"});
+    section.allow_keys({"period", "kp", "ki", "kff", "arithmetic"});
     read_number(section, "period", p.velocity_loop.period, Bounds::open_closed(0, 1));
     read_number(section, "kp", p.velocity_loop.kp, Bounds::non_negative());
     read_number(section, "ki", p.velocity_loop.ki, Bounds::non_negative());
     read_number(section, "kff", p.velocity_loop.kff, Bounds::non_negative());
+    if (const YamlField a = section["arithmetic"]; a.exists())
+      p.velocity_loop.arithmetic = a.choice({"real", "int16"}) == "int16"
+                                       ? physics::LoopArithmetic::int16
+                                       : physics::LoopArithmetic::real;
   }
 }
 
@@ -268,6 +282,14 @@ void apply_param_sections(const YamlField& map, physics::PlatformParams& p) {
     read_electronics(map[name], name, p);
   }
   read_sim(map["sim"], p.sim);
+  // An electrical lag shorter than the step is integrated unstably by Euler.
+  if (p.motor.electrical_tau > 0 && p.motor.electrical_tau < p.sim.timestep) {
+    const YamlField tau = map["motor"]["electrical_tau"].exists() ? map["motor"]["electrical_tau"]
+                                                                   : map["sim"]["timestep"];
+    if (tau.exists())
+      tau.fail(fmt::format("motor.electrical_tau ({}) must be 0 or at least sim.timestep ({})",
+                           p.motor.electrical_tau, p.sim.timestep));
+  }
   // Rollers must fit inside the wheel envelope; blame whichever this layer set last.
   if (t.radius_or_r && !(p.rollers.radius < p.geometry.r)) {
     t.radius_or_r->fail(fmt::format("rollers.radius ({}) must be smaller than geometry.r ({})",
@@ -344,6 +366,8 @@ void read_can(const YamlField& f, CanSpec& c) {
     }
   }
   read_bool(f, "sync", c.sync);
+  if (const YamlField m = f["missing_command"]; m.exists())
+    c.hold_missing_command = m.choice({"skip", "hold"}) == "hold";
   read_integer(f, "sync_interval", c.sync_interval, Bounds::at_least(1));
   if (const YamlField p = f["start_phase"]; p.exists()) {
     // `random`, one fraction of a period for every slave, or one per axis.
@@ -500,7 +524,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   }
   if (!settings) return bus;
   if (bus.kind == BusKind::can) {
-    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval",
+    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval", "missing_command",
                   "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision"});
     read_can(f, bus.can);
     read_supervision(f["supervision"], bus.supervision);

@@ -89,6 +89,7 @@ struct CanSpec {
   double t_post_us = 88.8;                    // slave processing before a frame [µs] (table 2-1)
   std::array<double, 4> drift{3.62e-3, 3.62e-3, 3.62e-3, 3.62e-3};  // slave oscillators [-]
   bool sync = false;                          // synchronisation of 3-2-2
+  bool hold_missing_command = false;          // slaves: hold (true) or skip (fig. 4-16) a missing command
   int sync_interval = 20;                     // timer interrupts between resyncs
   // Each slave's timer phase at NMT start, as a fraction of its period [0, 1)
   // (OmniSlaveConfig::start_phase_ns); start_phase_random draws them from `seed` instead.

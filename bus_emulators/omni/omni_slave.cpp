@@ -76,6 +76,14 @@ SlaveConfigError validate_slave_config(const OmniSlaveConfig& c) {
   return SlaveConfigError::ok;
 }
 
+const char* to_string(MissingCommand m) {
+  switch (m) {
+    case MissingCommand::skip: return "skip";
+    case MissingCommand::hold: return "hold";
+  }
+  return "?";
+}
+
 const char* to_string(SlaveState s) {
   switch (s) {
     case SlaveState::stopped: return "stopped";
@@ -292,9 +300,13 @@ void OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
     ++stats_.dropouts;
   }
   ++stats_.samples;
-  if (!command_new_) {  // fig. 4-16: no new command, no velocity loop and no feedback
-    ++stats_.stale_samples;
-    return;
+  if (!command_new_) {  // no new command since the last step
+    // fig. 4-16: no velocity loop and no feedback; hold: run on with the old command.
+    if (config_.missing_command == MissingCommand::skip) {
+      ++stats_.stale_samples;
+      return;
+    }
+    ++stats_.held_samples;
   }
   command_new_ = false;
 

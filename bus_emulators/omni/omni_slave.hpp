@@ -41,6 +41,12 @@ namespace omnitwin::omni {
 // by the chip. Real-time safe.
 can::Sja1000Config slave_filter(std::uint8_t node_id);
 
+// A timer interrupt without a new command since the previous step:
+//  skip — fig. 4-16: no velocity loop, no feedback; the DA holds its last output;
+//  hold — the loop runs again with the held command and the feedback goes out.
+enum class MissingCommand : std::uint8_t { skip, hold };
+const char* to_string(MissingCommand m);  // "skip" / "hold"
+
 // Fixed configuration of one slave. Build it with make_slave_config() or fill it by hand;
 // OmniSlave's constructor checks it (validate_slave_config()).
 struct OmniSlaveConfig {
@@ -55,6 +61,10 @@ struct OmniSlaveConfig {
   // timer_period_ns·(1 + drift). Default: the thesis's measured 0.362 % (fig. 2-13 … 2-16).
   // The twin schedules the timer with it (Scheduler::add_periodic(…, drift)). > -1.
   double drift = 3.62e-3;
+  // What a timer interrupt that finds no new command does (fig. 4-16 skips; the other is the
+  // common firmware that keeps using the last command). Either way the next step's counter
+  // reading spans every period since the last step, so a skipped loop sees a doubled count.
+  MissingCommand missing_command = MissingCommand::skip;
   bool sync_enabled = false;  // synchronisation of 3-2-2
   int sync_interval = 20;     // timer interrupts between forced resyncs, >= 1 when enabled
   std::int64_t t_post_ns = 88'800;  // processing delay before a frame is sent [ns], table 2-1, >= 0
@@ -155,6 +165,9 @@ struct OmniSlaveStats {
   // Timer interrupts that found no new command since the previous step: the velocity loop and
   // the feedback were skipped (fig. 4-16). They still count as samples for the dropout rule.
   std::uint64_t stale_samples = 0;
+  // With MissingCommand::hold: timer interrupts that found no new command and ran the loop
+  // again with the held one (they send feedback; not in stale_samples).
+  std::uint64_t held_samples = 0;
   // 0-based index (in `samples`) of the first dropout, i.e. the number of samples run before
   // it; -1 while there has been none. With pure clock drift every later sample is a dropout
   // too, and then this equals n_drift_eq23().

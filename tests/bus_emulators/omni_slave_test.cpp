@@ -414,6 +414,31 @@ TEST(OmniSlave, InterruptWithoutANewCommandSkipsTheLoopAndTheFeedback) {
   EXPECT_EQ(slave.stats().steps(), 2u);
 }
 
+TEST(OmniSlave, HoldPolicyRunsTheLoopAgainWithTheOldCommand) {
+  // missing_command = hold: the interrupt without a new command still runs the velocity loop
+  // with the held command and sends feedback over its own period (10 counts, not 20 later);
+  // it counts as held, not stale, and is still a dropout sample (2-2-1).
+  Wire wire;
+  auto cfg = make_slave_config(node::axis1, params_with_period(5e-3));
+  cfg.drift = 0.0;
+  cfg.missing_command = MissingCommand::hold;
+  OmniSlave slave(cfg, wire.fn());
+  const double rad_per_count = kTwoPi / cfg.params.counts_per_rev();
+  slave.on_frame(start_all(), 0);
+  slave.on_frame(command({10, 0, 0, 0}), 100);
+  slave.on_timer(5'000'000, 10 * rad_per_count);
+  slave.on_timer(10'000'000, 20 * rad_per_count);  // no new command
+  ASSERT_EQ(wire.sent.size(), 2u);
+  EXPECT_EQ(slave.drive_chain().last().command, 10.0);
+  EXPECT_EQ(slave.drive_chain().last().delta_counts, 10);
+  EXPECT_EQ(slave.stats().held_samples, 1u);
+  EXPECT_EQ(slave.stats().stale_samples, 0u);
+  EXPECT_EQ(slave.stats().steps(), 2u);
+  EXPECT_EQ(slave.stats().dropouts, 1u);
+  EXPECT_STREQ(to_string(MissingCommand::hold), "hold");
+  EXPECT_STREQ(to_string(MissingCommand::skip), "skip");
+}
+
 TEST(OmniSlave, SyncSwitchesToEventDrivenAndRestartsTimerFromCommand) {
   Wire wire;
   auto cfg = make_slave_config(node::axis1, params_with_period(5e-3));

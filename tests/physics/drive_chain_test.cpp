@@ -1,11 +1,13 @@
 // Tests physics/drive_chain: the thesis slave's electronics — 12-bit DA (eq. 4-8), the analog
 // driver's input mapping and clamp, the HCTL-2032 style counter (exact counts, direction,
 // 32-bit wrap, index latching, RST), and the 8051 velocity PI closed around a first-order
-// motor simulated here (tracking within a count, anti-windup after saturation).
+// motor simulated here (tracking within a count, anti-windup after saturation), the driver's
+// input dead band, and the 8051's 16-bit integer PI with its wrap-around on overflow.
 #include "physics/drive_chain.hpp"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <climits>
 #include <cmath>
 #include <numbers>
@@ -183,6 +185,80 @@ TEST(VelocityLoop, TracksTheCommandOnAFirstOrderMotorWithGainError) {
     EXPECT_NEAR(sum / 100.0, c, 0.05) << "c=" << c;
     EXPECT_FALSE(chain.loop().saturated());
   }
+}
+
+TEST(Driver, DeadBandGivesZeroInsideAndSubtractsTheBandOutside) {
+  // ±0.05 V around 2.5 V is standstill; beyond it the band is taken off, so the curve is
+  // continuous (3.0 V: 0.45 V effective → 3.6 rad/s) and odd about the zero voltage.
+  DriverParams drv;
+  drv.dead_band = 0.05;
+  const MotorParams motor;
+  EXPECT_EQ(driver_setpoint(drv, motor, 2.5), 0.0);
+  EXPECT_EQ(driver_setpoint(drv, motor, 2.54), 0.0);
+  EXPECT_EQ(driver_setpoint(drv, motor, 2.46), 0.0);
+  EXPECT_NEAR(driver_setpoint(drv, motor, 2.55), 0.0, 1e-12);
+  EXPECT_NEAR(driver_setpoint(drv, motor, 3.0), 3.6, 1e-12);
+  EXPECT_NEAR(driver_setpoint(drv, motor, 2.0), -3.6, 1e-12);
+  // A dead band wider than the whole input range leaves the motor still.
+  drv.dead_band = 3.0;
+  EXPECT_EQ(driver_setpoint(drv, motor, 5.0), 0.0);
+}
+
+TEST(VelocityLoop, DeadBandMakesASmallCommandStallUntilTheIntegralPushesThrough) {
+  // A command of 1 count/sample asks for 0.314 rad/s at 10 ms, 32 codes = 0.039 V; the
+  // first sample adds kp·e = 20 and ki·e = 4 codes, 0.068 V in all, inside a 0.1 V dead band:
+  // the wheel stays still and only the integral of the error (4 codes a sample) carries the
+  // code out of the band after a few samples. Without the band the first sample moves it.
+  for (const double band : {0.0, 0.1}) {
+    PlatformParams p;
+    p.driver.dead_band = band;
+    WheelDriveChain chain(p);
+    MotorPlant plant;
+    int still = 0;
+    for (int k = 0; k < 20 && chain.setpoint() == 0.0; ++k) {
+      run(chain, plant, 1.0, 1, p.velocity_loop.period);
+      if (chain.setpoint() == 0.0) ++still;
+    }
+    if (band == 0.0) {
+      EXPECT_EQ(still, 0);
+    } else {
+      EXPECT_GE(still, 3);   // 0.1 V = 82 codes; 56 at the first sample, +4 a sample
+      EXPECT_LT(still, 20);  // but the integral gets there
+    }
+  }
+}
+
+TEST(VelocityLoop, Int16ArithmeticMatchesRealWhileSmallAndWrapsOnOverflow) {
+  // In range, the integer PI gives the real one's code (integer gains, whole counts).
+  PlatformParams p;
+  PlatformParams q = p;
+  q.velocity_loop.arithmetic = LoopArithmetic::int16;
+  VelocityLoop real(p.velocity_loop, p.dac, p.driver, p.counts_per_rev());
+  VelocityLoop fixed(q.velocity_loop, q.dac, q.driver, q.counts_per_rev());
+  for (const auto& [c, m] : {std::pair{7.0, 5.0}, {7.0, 7.0}, {-3.0, 0.0}, {0.0, 2.0}}) {
+    const int a = real.step(c, m), b = fixed.step(c, m);
+    EXPECT_NEAR(a, b, 1) << c << " " << m;
+  }
+  // A large gain and a stuck wheel: the real integral is held by the anti-windup, so the
+  // real loop keeps pushing forward; the 16-bit one runs past 32767, wraps negative and the DA output falls to 0 — the
+  // firmware reverses the wheel it was pushing.
+  p.velocity_loop.ki = q.velocity_loop.ki = 3000;
+  VelocityLoop real2(p.velocity_loop, p.dac, p.driver, p.counts_per_rev());
+  VelocityLoop fixed2(q.velocity_loop, q.dac, q.driver, q.counts_per_rev());
+  int lowest_real = 4095;
+  bool wrapped = false, top = false, dropped_after_top = false;
+  for (int k = 0; k < 12; ++k) {
+    lowest_real = std::min(lowest_real, real2.step(1.0, 0.0));
+    const int code = fixed2.step(1.0, 0.0);
+    if (fixed2.integral() < 0) wrapped = true;
+    if (code == 4095) top = true;
+    if (top && code == 0) dropped_after_top = true;
+    EXPECT_GE(fixed2.integral(), -32768.0);
+    EXPECT_LE(fixed2.integral(), 32767.0);
+  }
+  EXPECT_GE(lowest_real, 2100);  // never below feed-forward + kp·e: it keeps pushing forward
+  EXPECT_TRUE(wrapped);
+  EXPECT_TRUE(dropped_after_top);
 }
 
 TEST(VelocityLoop, AntiWindupKeepsTheIntegralBoundedInSaturation) {

@@ -225,8 +225,37 @@ TEST(Scenario, Omni4FileEqualsBuiltInDefaults) {
   EXPECT_EQ(p.velocity_loop.kp, d.velocity_loop.kp);
   EXPECT_EQ(p.velocity_loop.ki, d.velocity_loop.ki);
   EXPECT_EQ(p.velocity_loop.kff, d.velocity_loop.kff);
+  EXPECT_EQ(p.velocity_loop.arithmetic, d.velocity_loop.arithmetic);
   EXPECT_EQ(p.sim.timestep, d.sim.timestep);
   EXPECT_EQ(p.sim.variant, d.sim.variant);
+  EXPECT_EQ(p.geometry.load_mass, d.geometry.load_mass);
+  EXPECT_EQ(p.geometry.load_size, d.geometry.load_size);
+  EXPECT_EQ(p.motor.electrical_tau, d.motor.electrical_tau);
+  EXPECT_EQ(p.motor.friction_torque, d.motor.friction_torque);
+  EXPECT_EQ(p.driver.dead_band, d.driver.dead_band);
+}
+
+TEST(Scenario, FidelityOptionsAreReadFromOverrides) {
+  // Issue 15's model options, each set from --set style overrides.
+  const Scenario s = load_scenario(
+      scenario("minimal.yaml"),
+      {{"platform.motor.electrical_tau", "0.004"}, {"platform.motor.friction_torque", "0.2"},
+       {"platform.driver.dead_band", "0.03"}, {"platform.velocity_loop.arithmetic", "int16"},
+       {"platform.geometry.load_mass", "8"}, {"platform.geometry.load_size", "[0.2, 0.2, 0.05]"}});
+  EXPECT_EQ(s.platform.motor.electrical_tau, 0.004);
+  EXPECT_EQ(s.platform.motor.friction_torque, 0.2);
+  EXPECT_EQ(s.platform.driver.dead_band, 0.03);
+  EXPECT_EQ(s.platform.velocity_loop.arithmetic, physics::LoopArithmetic::int16);
+  EXPECT_EQ(s.platform.geometry.load_mass, 8.0);
+  EXPECT_EQ(s.platform.geometry.load_size[2], 0.05);
+}
+
+TEST(ScenarioErrors, ElectricalLagShorterThanTheStepIsRefused) {
+  const auto e = load_error(scenario("minimal.yaml"), {{"platform.motor.electrical_tau", "0.0005"}});
+  EXPECT_NE(std::string(e.what()).find("motor.electrical_tau"), std::string::npos) << e.what();
+  EXPECT_NE(std::string(e.what()).find("sim.timestep"), std::string::npos) << e.what();
+  const auto a = load_error(scenario("minimal.yaml"), {{"platform.velocity_loop.arithmetic", "float"}});
+  EXPECT_NE(std::string(a.what()).find("arithmetic"), std::string::npos) << a.what();
 }
 
 TEST(Scenario, ToStringNamesMatchFileSpelling) {
