@@ -234,6 +234,19 @@ int failed(const std::vector<Effect>& es) {
 
 // "a … b" over the k-th improvement [%] of ours (or, with `thesis`, the thesis's), at bit rates
 // from `from_kbps` up.
+// "helps" / "hurts" / "barely matters" when every bit rate agrees, else how many it helps.
+std::string verdict(const std::vector<Effect>& es, std::size_t k) {
+  std::size_t better = 0, worse = 0;
+  for (const Effect& e : es) {
+    if (sign_word(e.ours[k]) == "better") ++better;
+    if (sign_word(e.ours[k]) == "worse") ++worse;
+  }
+  if (!es.empty() && better == es.size()) return "helps";
+  if (!es.empty() && worse == es.size()) return "hurts";
+  if (better == 0 && worse == 0) return "barely matters";
+  return fmt::format("helps at {} of {} bit rates and hurts at {}", better, es.size(), worse);
+}
+
 std::string span(const std::vector<Effect>& es, std::size_t k, bool thesis = false, int from_kbps = 0) {
   double lo = 1e300, hi = -1e300;
   for (const Effect& e : es) {
@@ -335,8 +348,11 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "the PI kicks the wheel back: the axis rings, as the thesis's unsynchronised axes did. From the first "
              "overtaking on, every sample also holds the previous sample's command. The resync keeps the "
              "interrupt within T_post behind its command: dropouts vanish and at most {:.1f} loops per run are "
-             "skipped (where a command is late, at the start or behind a feedback frame).\n",
-             sign_word(fast.empty() ? 0 : fast.back().ours[3]) == "better" ? "helps" : "does not help",
+             "skipped (where a command is late, at the start or behind a feedback frame), but each resync also runs "
+             "one short sample whose count falls short of the command. The wheel motor's own time constants "
+             "(kv 2 N·m·s/rad behind a 2 ms electrical lag, docs/platform.md) smooth the kick of a skipped loop, so "
+             "where the short samples cost more than the skipped loops did, sync does not help.\n",
+             verdict(fast, 3),
              span(fast, 3), span(fast, 3, true), fast_skips, fast_sync_skips)
       << fmt::format(
              "- **Axis velocity IAE, slow clocks: sync {} ({}).** A slow slave's command is almost never "
@@ -345,7 +361,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "Each forced resync runs one sample in the receive interrupt, T_post + K·36 µs earlier than the "
              "timer would have: that sample is short, measures fewer counts than commanded, and the error spikes "
              "(the thesis saw these spikes). With K = {} the spikes outweigh what sync wins back.\n",
-             sign_word(slow.empty() ? 0 : slow.back().ours[3]) == "worse" ? "hurts" : "barely matters",
+             verdict(slow, 3),
              span(slow, 3), slow_skips, clocks[1].sync_interval)
       << fmt::format(
              "- **Y IAE** with sync under the fast reading: {} (the thesis: {}); it sums to a few centimetres over "
@@ -357,8 +373,9 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "feed-forward (the thesis's structure, fig. 4-13) on the 20 s trapezoid: σ {:.2f} cm whatever the bus "
              "does, and it dominates the contour. The thesis's "
              "X error was 3.5 – 7 cm per sample and largely the oscillation its text blames on lost commands and "
-             "nodes out of step; a twin platform with no load, no floor unevenness and no driver dead band does not "
-             "oscillate, so there is no such share for sync to remove.\n",
+             "nodes out of step; the default twin platform (unloaded as the thesis's; no gearbox friction, driver "
+             "dead band or floor unevenness, which the thesis does not quantify and no calibration has fitted yet: "
+             "docs/platform.md) does not oscillate, so there is no such share for sync to remove.\n",
              span(fast, 0), span(fast, 2), span(slow, 2), span(fast, 2, true, 250),
              fast.empty() ? 0.0 : fast.back().without->std_c)
       << "- **Dropouts.** With the thesis's definition (2-2-1: the command held does not belong to the sample) "
