@@ -112,9 +112,7 @@ double VelocityLoop::ideal_code(double command_counts_per_sample) const {
 
 namespace {
 // C on an 8051: a 16-bit int sum wraps modulo 2^16 (two's complement), it does not saturate.
-int16_t wrap16(long value) {
-  return static_cast<int16_t>(static_cast<uint16_t>(static_cast<unsigned long>(value) & 0xFFFFu));
-}
+int16_t wrap16(long value) { return static_cast<int16_t>(static_cast<uint16_t>(value)); }
 }  // namespace
 
 int VelocityLoop::step_int16(double command_counts_per_sample, double measured_counts_per_sample) {

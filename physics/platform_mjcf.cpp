@@ -282,18 +282,17 @@ void append_actuators(std::string& out, const PlatformParams& p) {
                              "\" forcelimited=\"true\" forcerange=\"" +
                              nums({-m.torque_limit, m.torque_limit}) + "\"/>\n";
   for (int i = 0; i < 4; ++i) {
-    const std::string head =
-        "    <" + std::string(m.electrical_tau > 0 ? "general" : "velocity") + " name=\"" +
-        wheel_name("motor", i) + "\" joint=\"" + wheel_name("wheel", i);
+    const std::string names =
+        " name=\"" + wheel_name("motor", i) + "\" joint=\"" + wheel_name("wheel", i) + "\"";
     if (m.electrical_tau > 0) {
       // torque = kv·(act − ω) with act' = (setpoint − act)/electrical_tau: the amplifier's
       // velocity servo behind one first-order electrical lag (MuJoCo's filter dynamics).
-      out += head + "\" dyntype=\"filter\" dynprm=\"" + num(m.electrical_tau) +
+      out += "    <general" + names + " dyntype=\"filter\" dynprm=\"" + num(m.electrical_tau) +
              "\" gaintype=\"fixed\" gainprm=\"" + num(m.kv) + "\" biastype=\"affine\" biasprm=\"" +
              nums({0, 0, -m.kv}) + limits;
     } else {
       // The amplifier as a velocity servo: torque = kv·(setpoint − ω), clamped.
-      out += head + "\" kv=\"" + num(m.kv) + limits;
+      out += "    <velocity" + names + " kv=\"" + num(m.kv) + limits;
     }
   }
   out += "  </actuator>\n";

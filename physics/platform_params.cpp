@@ -15,12 +15,4 @@ const char* to_string(ModelVariant v) {
   return "?";
 }
 
-const char* to_string(LoopArithmetic a) {
-  switch (a) {
-    case LoopArithmetic::real: return "real";
-    case LoopArithmetic::int16: return "int16";
-  }
-  return "?";
-}
-
 }  // namespace omnitwin::physics

@@ -131,6 +131,5 @@ struct PlatformParams {
 double wheel_alpha(int wheel);
 
 const char* to_string(ModelVariant v);
-const char* to_string(LoopArithmetic a);
 
 }  // namespace omnitwin::physics

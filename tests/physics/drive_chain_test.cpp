@@ -240,8 +240,8 @@ TEST(VelocityLoop, Int16ArithmeticMatchesRealWhileSmallAndWrapsOnOverflow) {
     EXPECT_NEAR(a, b, 1) << c << " " << m;
   }
   // A large gain and a stuck wheel: the real integral is held by the anti-windup, so the
-  // real loop keeps pushing forward; the 16-bit one runs past 32767, wraps negative and the DA output falls to 0 — the
-  // firmware reverses the wheel it was pushing.
+  // real loop keeps pushing forward; the 16-bit one runs past 32767, wraps negative and the
+  // DA output falls to 0 — the firmware reverses the wheel it was pushing.
   p.velocity_loop.ki = q.velocity_loop.ki = 3000;
   VelocityLoop real2(p.velocity_loop, p.dac, p.driver, p.counts_per_rev());
   VelocityLoop fixed2(q.velocity_loop, q.dac, q.driver, q.counts_per_rev());

@@ -254,6 +254,9 @@ TEST(ScenarioErrors, ElectricalLagShorterThanTheStepIsRefused) {
   const auto e = load_error(scenario("minimal.yaml"), {{"platform.motor.electrical_tau", "0.0005"}});
   EXPECT_NE(std::string(e.what()).find("motor.electrical_tau"), std::string::npos) << e.what();
   EXPECT_NE(std::string(e.what()).find("sim.timestep"), std::string::npos) << e.what();
+}
+
+TEST(ScenarioErrors, UnknownLoopArithmeticIsRefused) {
   const auto a = load_error(scenario("minimal.yaml"), {{"platform.velocity_loop.arithmetic", "float"}});
   EXPECT_NE(std::string(a.what()).find("arithmetic"), std::string::npos) << a.what();
 }

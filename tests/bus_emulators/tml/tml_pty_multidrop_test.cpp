@@ -4,6 +4,7 @@
 // acknowledgement, seed ch. 3) reaches every member; GiveMeData to one axis is answered by that
 // axis; two drives of other protocols cannot share the line.
 #include "bus_emulators/tml/tml_pty.hpp"
+#include "tests/support/raw_serial.hpp"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -39,15 +40,8 @@ struct MultiDrop : ::testing::Test {
     pty = std::make_unique<TmlPty>(*drives[0], 9600);
     pty->add_drop(*drives[1]);
     pty->add_drop(*drives[2]);
-    fd = open(pty->slave_path().c_str(), O_RDWR | O_NOCTTY);
-    ASSERT_GE(fd, 0);
-    termios tio{};
-    ASSERT_EQ(tcgetattr(fd, &tio), 0);
-    cfmakeraw(&tio);
-    tio.c_cflag |= CS8 | CSTOPB | CLOCAL | CREAD;
-    tio.c_cflag &= ~PARENB;
-    cfsetspeed(&tio, B9600);
-    ASSERT_EQ(tcsetattr(fd, TCSANOW, &tio), 0);
+    fd = omnitwin::testing::open_raw_serial_8n2(pty->slave_path(), B9600);
+    ASSERT_GE(fd, 0) << pty->slave_path();
   }
   void TearDown() override {
     if (fd >= 0) close(fd);

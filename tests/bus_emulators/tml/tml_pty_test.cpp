@@ -5,6 +5,7 @@
 // and a lost acknowledgement recovered with a SYNC byte 0x0D echoed and the command resent.
 // The answer's bytes arrive no sooner than the 8N2 line at 9600 bit/s allows.
 #include "bus_emulators/tml/tml_pty.hpp"
+#include "tests/support/raw_serial.hpp"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -35,15 +36,8 @@ struct TmlPtyTest : ::testing::Test {
     drive.power_on(TmlPty::monotonic_ns());
     pty = std::make_unique<TmlPty>(drive, kBaud);
     // A plain serial program: open, raw 8N2 at the baud rate.
-    fd = open(pty->slave_path().c_str(), O_RDWR | O_NOCTTY);
+    fd = omnitwin::testing::open_raw_serial_8n2(pty->slave_path(), B9600);
     ASSERT_GE(fd, 0) << pty->slave_path();
-    termios tio{};
-    ASSERT_EQ(tcgetattr(fd, &tio), 0);
-    cfmakeraw(&tio);
-    tio.c_cflag |= CS8 | CSTOPB | CLOCAL | CREAD;
-    tio.c_cflag &= ~PARENB;
-    cfsetspeed(&tio, B9600);
-    ASSERT_EQ(tcsetattr(fd, TCSANOW, &tio), 0);
   }
   void TearDown() override {
     if (fd >= 0) close(fd);
