@@ -107,7 +107,8 @@ void append_defaults(std::string& out, const PlatformParams& p) {
   // The capsule variant has no rollers and so no roller class.
   if (p.sim.variant == ModelVariant::rollers)
     out += "    <default class=\"roller\">\n"
-         "      <joint type=\"hinge\" damping=\"" + num(rp.damping) + "\"/>\n"
+         "      <joint type=\"hinge\" damping=\"" + num(rp.damping) +
+         (rp.friction_torque > 0 ? "\" frictionloss=\"" + num(rp.friction_torque) : std::string()) + "\"/>\n"
          "      <geom type=\"capsule\" contype=\"0\" conaffinity=\"0\" condim=\"3\" "
          "friction=\"" + nums({mu, 0.005, 0.0001}) + "\" size=\"" +
          num(rp.radius) + "\" mass=\"" + num(rp.mass) + "\"/>\n"
@@ -203,25 +204,63 @@ void append_wheel_capsule(std::string& out, const PlatformParams& p, int wheel0)
          nums({half, 0.004, 0.0008}) + "\" rgba=\"0.1 0.1 0.1 1\"/>\n";
 }
 
-void append_wheel(std::string& out, const PlatformParams& p, int wheel0) {
+// The wheel's place on the chassis: its frame turned by alpha about z, so +x is the radial
+// axle direction.
+std::string wheel_frame(const PlatformParams& p, int wheel0) {
   const double a = wheel_alpha(wheel0);
+  return "pos=\"" + nums({p.geometry.L * std::cos(a), p.geometry.L * std::sin(a), 0}) + "\" quat=\"" +
+         nums({std::cos(a / 2), 0, 0, std::sin(a / 2)}) + "\"";
+}
+
+// Gearbox and bearing dry friction as MuJoCo's joint frictionloss (only when set: each one is
+// a constraint row the solver pays for).
+std::string gear_friction(const MotorParams& m) {
+  return m.friction_torque > 0 ? "\" frictionloss=\"" + num(m.friction_torque) : "";
+}
+
+void append_wheel(std::string& out, const PlatformParams& p, int wheel0) {
   const std::string name = wheel_name("wheel", wheel0);
-  // Wheel frame turned by alpha about z: its +x is the radial axle direction.
-  out += "      <body name=\"" + name + "\" pos=\"" +
-         nums({p.geometry.L * std::cos(a), p.geometry.L * std::sin(a), 0}) + "\" quat=\"" +
-         nums({std::cos(a / 2), 0, 0, std::sin(a / 2)}) + "\">\n";
-  // Gearbox and bearing dry friction as MuJoCo's joint frictionloss (only when set: each
-  // one is a constraint row the solver pays for).
-  const std::string friction =
-      p.motor.friction_torque > 0 ? "\" frictionloss=\"" + num(p.motor.friction_torque) : "";
+  const bool geared = p.motor.backlash > 0;
+  out += "      <body name=\"" + name + "\" " + wheel_frame(p, wheel0) + ">\n";
+  // Rigid gearbox: the motor's armature and friction sit on the wheel's own hinge. With
+  // backlash they belong to the rotor (append_rotor) and the wheel keeps only its bearing.
   out += "        <joint name=\"" + name + "\" type=\"hinge\" axis=\"1 0 0\" armature=\"" +
-         num(p.motor.armature) + "\" damping=\"" + num(p.motor.damping) + friction + "\"/>\n";
+         num(geared ? 0.0 : p.motor.armature) + "\" damping=\"" + num(p.motor.damping) +
+         (geared ? "" : gear_friction(p.motor)) + "\"/>\n";
   if (p.sim.variant == ModelVariant::rollers) {
     append_wheel_rollers(out, p, wheel0);
   } else {
     append_wheel_capsule(out, p, wheel0);
   }
   out += "      </body>\n";
+}
+
+// With backlash: the motor's rotor (reflected to the wheel) on the wheel's axis, a body of its
+// own with a token mass; the actuator drives it and the tendon of append_tendons couples it to
+// the wheel through the gap.
+void append_rotor(std::string& out, const PlatformParams& p, int wheel0) {
+  const std::string name = wheel_name("rotor", wheel0);
+  out += "      <body name=\"" + name + "\" " + wheel_frame(p, wheel0) + ">\n";
+  out += "        <inertial pos=\"0 0 0\" mass=\"0.01\" diaginertia=\"1e-6 1e-6 1e-6\"/>\n";
+  out += "        <joint name=\"" + name + "\" type=\"hinge\" axis=\"1 0 0\" armature=\"" + num(p.motor.armature) +
+         gear_friction(p.motor) + "\"/>\n";
+  out += "      </body>\n";
+}
+
+// The gear teeth: wheel angle − rotor angle limited to ±backlash/2, a one-sided constraint at
+// either flank (MuJoCo tendon limit; 4 ms time constant, the stiffest the 1 ms step keeps stable).
+void append_tendons(std::string& out, const PlatformParams& p) {
+  if (p.motor.backlash <= 0) return;
+  const double half = p.motor.backlash / 2;
+  out += "  <tendon>\n";
+  for (int i = 0; i < 4; ++i) {
+    out += "    <fixed name=\"" + wheel_name("gear", i) + "\" limited=\"true\" range=\"" + nums({-half, half}) +
+           "\" solreflimit=\"" + nums({std::max(0.004, 2 * p.sim.timestep), 1}) + "\">\n";
+    out += "      <joint joint=\"" + wheel_name("wheel", i) + "\" coef=\"1\"/>\n";
+    out += "      <joint joint=\"" + wheel_name("rotor", i) + "\" coef=\"-1\"/>\n";
+    out += "    </fixed>\n";
+  }
+  out += "  </tendon>\n";
 }
 
 void append_worldbody(std::string& out, const PlatformParams& p) {
@@ -242,6 +281,8 @@ void append_worldbody(std::string& out, const PlatformParams& p) {
            nums({g.load_size[0] / 2, g.load_size[1] / 2, g.load_size[2] / 2}) + "\" mass=\"" +
            num(g.load_mass) + "\" rgba=\"0.55 0.42 0.25 1\"/>\n";
   for (int i = 0; i < 4; ++i) append_wheel(out, p, i);
+  if (p.motor.backlash > 0)
+    for (int i = 0; i < 4; ++i) append_rotor(out, p, i);
   out += "    </body>\n";
   out += "  </worldbody>\n";
 }
@@ -282,8 +323,9 @@ void append_actuators(std::string& out, const PlatformParams& p) {
                              "\" forcelimited=\"true\" forcerange=\"" +
                              nums({-m.torque_limit, m.torque_limit}) + "\"/>\n";
   for (int i = 0; i < 4; ++i) {
-    const std::string names =
-        " name=\"" + wheel_name("motor", i) + "\" joint=\"" + wheel_name("wheel", i) + "\"";
+    // The motor drives its rotor when the gearbox has play, else the wheel directly.
+    const std::string joint = wheel_name(m.backlash > 0 ? "rotor" : "wheel", i);
+    const std::string names = " name=\"" + wheel_name("motor", i) + "\" joint=\"" + joint + "\"";
     if (m.electrical_tau > 0) {
       // torque = kv·(act − ω) with act' = (setpoint − act)/electrical_tau: the amplifier's
       // velocity servo behind one first-order electrical lag (MuJoCo's filter dynamics).
@@ -307,6 +349,7 @@ std::string platform_mjcf(const PlatformParams& p) {
   append_visual_and_assets(out);
   append_defaults(out, p);
   append_worldbody(out, p);
+  append_tendons(out, p);
   append_contact_pairs(out, p);
   append_actuators(out, p);
   out += "</mujoco>\n";

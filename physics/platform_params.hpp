@@ -41,6 +41,8 @@ struct RollerParams {
   double coverage_deg = 15;   // capsule half-length = (r - radius)·tan(coverage/2)
   double mass = 0.01;         // per roller [kg]
   double damping = 0.0;       // hinge damping [N·m·s/rad]
+  double friction_torque = 0.0;  // dry friction of each roller's bearing [N·m]: the rollers'
+                                 // rolling resistance (0 = free rollers)
 };
 
 struct FloorParams {
@@ -64,6 +66,10 @@ struct MotorParams {
   double armature = 0.02;       // reflected rotor inertia [kg·m²]
   double damping = 0.0;         // viscous friction in the wheel bearing [N·m·s/rad]
   double friction_torque = 0.0; // dry (Coulomb) friction of gearbox and bearing [N·m]
+  // Gear backlash: the total play between the motor and the wheel, at the wheel [rad]; 0 = a
+  // rigid gearbox. When > 0 the motor gets its own rotor (it carries the armature and the
+  // gearbox friction) and drives the wheel through a gap of this width.
+  double backlash = 0.0;
 };
 
 // Analog velocity driver input: speed setpoint = gain·(V − zero_volts), clamped, with an
@@ -73,6 +79,10 @@ struct DriverParams {
   double zero_volts = 2.5;      // input voltage that means standstill [V]
   double gain = 8.0;            // [rad/s per V]
   double dead_band = 0.0;       // half-width of the input dead band [V], >= 0
+  // Relative gain error of each wheel's amplifier [-], wheels 1..4: the physical speed is
+  // setpoint·(1 + gain_error[i]) (component tolerance; 0 = four identical drivers). Applied
+  // by the physics (PlatformSim), so every bus and master meets the same mismatched wheels.
+  std::array<double, 4> gain_error{0.0, 0.0, 0.0, 0.0};
 };
 
 // 12-bit DA (AD7541 behind a TLC2274 buffer): V = D/4096 · vref, eq. 4-8.

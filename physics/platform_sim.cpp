@@ -120,6 +120,7 @@ PlatformSim PlatformSim::from_file(const std::string& mjcf_path, const PlatformP
 PlatformSim::PlatformSim(ModelPtr model, const PlatformParams& p)
     : model_(std::move(model)),
       speed_limit_(p.motor.speed_limit),
+      gain_error_(p.driver.gain_error),
       nominal_height_(p.geometry.r) {
   // Names first (throws on a broken contract), then data, then the initial placement.
   resolve_ids();
@@ -141,8 +142,11 @@ void PlatformSim::resolve_ids() {
     const int j = require(m, mjOBJ_JOINT, "wheel" + n, missing);
     const int a = require(m, mjOBJ_ACTUATOR, "motor" + n, missing);
     if (j >= 0 && m->jnt_type[j] != mjJNT_HINGE) mistyped += " wheel" + n + "(not a hinge)";
-    if (a >= 0 && (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_trnid[2 * a] != j)) {
-      mistyped += " motor" + n + "(does not drive joint wheel" + n + ")";
+    // The motor drives the wheel, or (a gearbox with backlash) its own rotor hinge "rotorN".
+    const int rotor = mj_name2id(m, mjOBJ_JOINT, ("rotor" + n).c_str());
+    const bool on_rotor = rotor >= 0 && m->jnt_type[rotor] == mjJNT_HINGE && a >= 0 && m->actuator_trnid[2 * a] == rotor;
+    if (a >= 0 && (m->actuator_trntype[a] != mjTRN_JOINT || (m->actuator_trnid[2 * a] != j && !on_rotor))) {
+      mistyped += " motor" + n + "(does not drive joint wheel" + n + " or rotor" + n + ")";
     }
     if (j >= 0) wheel_qpos_[i] = m->jnt_qposadr[j], wheel_dof_[i] = m->jnt_dofadr[j];
     motor_[i] = a;
@@ -205,7 +209,9 @@ void PlatformSim::reset(double x, double y, double phi) {
 
 bool PlatformSim::set_wheel_speed_setpoint(int wheel0, double rad_s) {
   if (!valid_wheel(wheel0) || std::isnan(rad_s)) return false;
-  data_->ctrl[motor_[wheel0]] = std::clamp(rad_s, -speed_limit_, speed_limit_);
+  // The amplifier's own gain error scales what it makes of the setpoint, then its limit.
+  const double actual = rad_s * (1.0 + gain_error_[static_cast<std::size_t>(wheel0)]);
+  data_->ctrl[motor_[wheel0]] = std::clamp(actual, -speed_limit_, speed_limit_);
   return true;
 }
 

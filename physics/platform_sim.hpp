@@ -120,6 +120,7 @@ class PlatformSim {
   ModelPtr model_;
   DataPtr data_;
   double speed_limit_ = 0;     // |setpoint| limit [rad/s]
+  std::array<double, 4> gain_error_{};  // driver.gain_error: speed = setpoint·(1 + e)
   double nominal_height_ = 0;  // first guess for the chassis height [m] (wheel radius)
   int root_qpos_ = 0, root_dof_ = 0;
   std::array<int, 4> wheel_qpos_{}, wheel_dof_{}, motor_{};

@@ -20,6 +20,11 @@ namespace omnitwin::twin {
 struct ExperimentOptions {
   std::string out_dir;  // output folder; empty: out/<name> under the working directory
   bool quick = false;   // fewer configurations and messages (tests); the same checks run
+  // thesis-platform: the thesis-line scenario to run (default: models/scenarios/
+  // thesis_line_fitted.yaml when it exists, else thesis_line.yaml); thesis-calibrate: where to
+  // write the fitted scenario (default: that fitted file; in quick mode: the output folder).
+  std::string model;
+  int budget = 0;       // thesis-calibrate: objective evaluations (0: its default)
 };
 
 // Exit codes of run_experiment() and of each experiment function.
@@ -36,11 +41,12 @@ int run_experiment(const std::string& name, const ExperimentOptions& options);
 std::vector<std::string> experiment_names();
 
 // The experiments themselves (registered under "can-timing", "can-dropout", "thesis-platform",
-// "m3-cycle").
+// "m3-cycle", "thesis-calibrate").
 int run_can_timing(const ExperimentOptions& options);
 int run_can_dropout(const ExperimentOptions& options);
 int run_thesis_platform(const ExperimentOptions& options);
 int run_m3_cycle(const ExperimentOptions& options);
+int run_thesis_calibrate(const ExperimentOptions& options);
 
 // ---- the m3-cycle verification: one configuration run on the in-process M-III rig ----
 

@@ -628,12 +628,19 @@ int main(int argc, char** argv) {
   echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)");
   echo->add_flag("--json", eo.json, "JSON lines instead of text");
 
-  std::string exp_name, exp_out;
+  std::string exp_name, exp_out, exp_model;
   bool exp_quick = false;
+  int exp_budget = 0;
   CLI::App* experiment = app.add_subcommand("experiment", "run one of the seeds' experiments (docs/experiments.md)");
-  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform | m3-cycle")->required();
+  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform | m3-cycle | thesis-calibrate")
+      ->required();
   experiment->add_option("--out", exp_out, "output folder (default out/<name>/)");
   experiment->add_flag("--quick", exp_quick, "fewer configurations (a smoke run; the same checks)");
+  experiment->add_option("--model", exp_model,
+                         "thesis-platform: the thesis-line scenario to run (default "
+                         "models/scenarios/thesis_line_fitted.yaml); thesis-calibrate: where to write the fit");
+  experiment->add_option("--budget", exp_budget, "thesis-calibrate: objective evaluations (default 130)")
+      ->check(CLI::Range(0, 100000));
 
   std::string model_scenario, model_variant, model_out;
   CLI::App* model = app.add_subcommand("model", "write the platform MJCF generated from the parameters");
@@ -676,7 +683,7 @@ int main(int argc, char** argv) {
     }
     if (*echo) return cmd_echo(eo);
     if (*model) return cmd_model(model_scenario, model_variant, model_out);
-    if (*experiment) return run_experiment(exp_name, ExperimentOptions{exp_out, exp_quick});
+    if (*experiment) return run_experiment(exp_name, ExperimentOptions{exp_out, exp_quick, exp_model, exp_budget});
   } catch (const std::exception& e) {
     // Anything not handled closer to its cause is a runtime failure, never an abort.
     std::cerr << "omnitwin: " << e.what() << "\n";

@@ -199,7 +199,7 @@ void read_geometry(const YamlField& s, physics::GeometryParams& g, ParamTrace& t
 
 void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
   s.allow_keys({"rows", "per_row", "row_offset", "row_phase_deg", "wheel_phase_deg", "radius",
-                "coverage_deg", "mass", "damping"});
+                "coverage_deg", "mass", "damping", "friction_torque"});
   read_integer(s, "rows", r.rows, Bounds::at_least(1));
   read_integer(s, "per_row", r.per_row, Bounds::at_least(1));
   read_number(s, "row_offset", r.row_offset, Bounds::non_negative());
@@ -209,6 +209,7 @@ void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
   read_number(s, "coverage_deg", r.coverage_deg, Bounds{0.0, 180.0, true, true});
   read_number(s, "mass", r.mass, Bounds::positive());
   read_number(s, "damping", r.damping, Bounds::non_negative());
+  read_number(s, "friction_torque", r.friction_torque, Bounds::non_negative());
 }
 
 void read_floor(const YamlField& s, physics::FloorParams& f) {
@@ -220,8 +221,9 @@ void read_floor(const YamlField& s, physics::FloorParams& f) {
 
 void read_motor(const YamlField& s, physics::MotorParams& m) {
   s.allow_keys({"kv", "electrical_tau", "torque_limit", "speed_limit", "armature", "damping",
-                "friction_torque"});
+                "friction_torque", "backlash"});
   read_number(s, "kv", m.kv, Bounds::positive());
+  read_number(s, "backlash", m.backlash, Bounds::closed(0.0, 0.5));
   read_number(s, "electrical_tau", m.electrical_tau, Bounds::non_negative());
   read_number(s, "friction_torque", m.friction_torque, Bounds::non_negative());
   read_number(s, "torque_limit", m.torque_limit, Bounds::positive());
@@ -233,10 +235,14 @@ void read_motor(const YamlField& s, physics::MotorParams& m) {
 void read_electronics(const YamlField& section, const std::string& name, physics::PlatformParams& p) {
   // The small drive-chain sections: driver, dac, encoder, velocity_loop.
   if (name == "driver") {
-    section.allow_keys({"zero_volts", "gain", "dead_band"});
+    section.allow_keys({"zero_volts", "gain", "dead_band", "gain_error"});
     read_number(section, "zero_volts", p.driver.zero_volts);
     read_number(section, "gain", p.driver.gain, Bounds::positive());
     read_number(section, "dead_band", p.driver.dead_band, Bounds::non_negative());
+    if (section["gain_error"].exists()) {
+      const auto e = section["gain_error"].numbers(4, Bounds::closed(-0.5, 0.5));
+      std::copy(e.begin(), e.end(), p.driver.gain_error.begin());
+    }
   } else if (name == "dac") {
     section.allow_keys({"bits", "vref"});
     read_integer(section, "bits", p.dac.bits, Bounds::closed(1, 16));

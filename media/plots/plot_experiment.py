@@ -184,6 +184,24 @@ def plot_platform(rows, out_dir):
     save(fig, out_dir, "thesis_platform_iae.png")
 
 
+def plot_platform_time(rows, out_dir):
+    """Seed 002's figs. 4-21 … 4-28 as the twin sees them: the odometric X, Y and contour error
+    over time at one bit rate, without and with sync, one panel each (one run of each)."""
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
+    for sync, style in ((0, "-"), (1, "-")):
+        sel = [r for r in rows if r["sync"] == sync]
+        t = [r["t_s"] for r in sel]
+        for ax, key, name in zip(axes, ("ex_cm", "ey_cm", "ec_cm"), ("X", "Y", "contour")):
+            ax.plot(t, [r[key] for r in sel], style, linewidth=0.8, alpha=0.85, label="sync" if sync else "no sync")
+            ax.set_ylabel(f"{name} error [cm]")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7)
+    rate = rows[0]["rate_kbps"] if rows else 0
+    axes[0].set_title(f"twin, {rate} kbit/s: odometric pose error (planned − odometry) without and with sync", fontsize=9)
+    axes[-1].set_xlabel("t [s]")
+    save(fig, out_dir, "thesis_platform_time.png")
+
+
 def plot_m3_cycle(rows, out_dir):
     """M-III shortest transmission cycle over slave count: one panel per topology, one colour
     per data length; 1 retry slot solid, 0 and 2 retry slots the band around it; the
@@ -213,9 +231,9 @@ def plot_m3_cycle(rows, out_dir):
 
 def main(argv):
     kinds = {"can-timing": plot_timing, "can-dropout": plot_dropout, "thesis-platform": plot_platform,
-             "m3-cycle": plot_m3_cycle}
+             "thesis-platform-time": plot_platform_time, "m3-cycle": plot_m3_cycle}
     if len(argv) != 4 or argv[1] not in kinds:
-        sys.stderr.write("usage: plot_experiment.py can-timing|can-dropout|thesis-platform|m3-cycle CSV OUT_DIR\n")
+        sys.stderr.write("usage: plot_experiment.py can-timing|can-dropout|thesis-platform|thesis-platform-time|m3-cycle CSV OUT_DIR\n")
         return 2
     kinds[argv[1]](read_rows(argv[2]), argv[3])
     return 0

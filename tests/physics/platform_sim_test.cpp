@@ -489,5 +489,83 @@ TEST_F(PlatformSimTest, GearFrictionAndPayloadReachTheModel) {
   EXPECT_EQ(mj_name2id(bare.model(), mjOBJ_GEOM, "load"), -1);
 }
 
+TEST_F(PlatformSimTest, EachDriversGainErrorScalesWhatItMakesOfItsSetpoint) {
+  // driver.gain_error: wheel i's amplifier turns setpoint s into s·(1 + e_i); without the
+  // electrical lag the first step's torque is kv times that, wheel by wheel.
+  PlatformParams p = params(ModelVariant::rollers);
+  p.motor.electrical_tau = 0.0;
+  p.driver.gain_error = {0.1, 0.0, -0.2, 0.05};
+  PlatformSim s(p);
+  const double sp = 0.5;
+  for (int w = 0; w < 4; ++w) ASSERT_TRUE(s.set_wheel_speed_setpoint(w, sp));
+  s.step();
+  for (int w = 0; w < 4; ++w)
+    EXPECT_NEAR(s.wheel_torque(w), p.motor.kv * sp * (1.0 + p.driver.gain_error[static_cast<std::size_t>(w)]), 1e-9)
+        << "wheel " << w + 1;
+}
+
+// Angle of a named hinge [rad].
+double hinge_angle(const PlatformSim& s, const char* joint) {
+  const int j = mj_name2id(s.model(), mjOBJ_JOINT, joint);
+  EXPECT_GE(j, 0) << joint;
+  return j >= 0 ? s.data()->qpos[s.model()->jnt_qposadr[j]] : 0.0;
+}
+
+TEST_F(PlatformSimTest, GearBacklashLetsTheRotorCrossTheGapBeforeTheWheelTurnsBack) {
+  // motor.backlash 0.1 rad: the motor drives its own rotor, which pushes the wheel at one
+  // flank of the gap (rotor − wheel = +0.05 rad driving forwards) and crosses to the other
+  // flank (−0.05) when the setpoint reverses, while the wheel lags the reversal.
+  PlatformParams p = params(ModelVariant::rollers);
+  p.motor.backlash = 0.1;
+  PlatformSim s(p);
+  const int motor = mj_name2id(s.model(), mjOBJ_ACTUATOR, "motor1");
+  ASSERT_GE(motor, 0);
+  EXPECT_EQ(s.model()->actuator_trnid[2 * motor], mj_name2id(s.model(), mjOBJ_JOINT, "rotor1"));
+  // The motor's armature has moved from the wheel's hinge to the rotor's.
+  const int wheel = mj_name2id(s.model(), mjOBJ_JOINT, "wheel1");
+  EXPECT_EQ(s.model()->dof_armature[s.model()->jnt_dofadr[wheel]], 0.0);
+  const auto gap = [&] { return hinge_angle(s, "rotor1") - hinge_angle(s, "wheel1"); };
+  while (s.time() < 0.5) {
+    for (int w = 0; w < 4; ++w) s.set_wheel_speed_setpoint(w, w < 2 ? 2.0 : -2.0);
+    s.step();
+  }
+  EXPECT_NEAR(gap(), 0.05, 0.01);
+  EXPECT_GT(s.wheel_speed(0), 1.5);
+  // Reverse: within a few steps the rotor is on its way back while the wheel still turns on.
+  double wheel_at_flip = hinge_angle(s, "wheel1");
+  for (int k = 0; k < 10; ++k) {
+    for (int w = 0; w < 4; ++w) s.set_wheel_speed_setpoint(w, w < 2 ? -2.0 : 2.0);
+    s.step();
+  }
+  EXPECT_LT(gap(), 0.04);
+  EXPECT_GT(hinge_angle(s, "wheel1"), wheel_at_flip);  // the wheel has not turned back yet
+  while (s.time() < 1.0) {
+    for (int w = 0; w < 4; ++w) s.set_wheel_speed_setpoint(w, w < 2 ? -2.0 : 2.0);
+    s.step();
+  }
+  EXPECT_NEAR(gap(), -0.05, 0.01);
+  EXPECT_LT(s.wheel_speed(0), -1.5);
+}
+
+TEST_F(PlatformSimTest, ARigidGearboxHasNoRotorAndRollerFrictionReachesEveryRoller) {
+  // backlash 0 (default): no rotor joints, the motor on the wheel; rollers.friction_torque
+  // becomes every roller hinge's frictionloss.
+  PlatformParams p = params(ModelVariant::rollers);
+  p.rollers.friction_torque = 0.002;
+  PlatformSim s(p);
+  EXPECT_EQ(mj_name2id(s.model(), mjOBJ_JOINT, "rotor1"), -1);
+  EXPECT_EQ(s.model()->ntendon, 0);
+  const int motor = mj_name2id(s.model(), mjOBJ_ACTUATOR, "motor1");
+  EXPECT_EQ(s.model()->actuator_trnid[2 * motor], mj_name2id(s.model(), mjOBJ_JOINT, "wheel1"));
+  int rollers = 0;
+  for (int j = 0; j < s.model()->njnt; ++j) {
+    const char* name = mj_id2name(s.model(), mjOBJ_JOINT, j);
+    if (name == nullptr || std::string(name).rfind("roller", 0) != 0) continue;
+    EXPECT_DOUBLE_EQ(s.model()->dof_frictionloss[s.model()->jnt_dofadr[j]], 0.002) << name;
+    ++rollers;
+  }
+  EXPECT_EQ(rollers, 4 * p.rollers.rows * p.rollers.per_row);
+}
+
 }  // namespace
 }  // namespace omnitwin::physics

@@ -233,6 +233,9 @@ TEST(Scenario, Omni4FileEqualsBuiltInDefaults) {
   EXPECT_EQ(p.motor.electrical_tau, d.motor.electrical_tau);
   EXPECT_EQ(p.motor.friction_torque, d.motor.friction_torque);
   EXPECT_EQ(p.driver.dead_band, d.driver.dead_band);
+  EXPECT_EQ(p.driver.gain_error, d.driver.gain_error);
+  EXPECT_EQ(p.motor.backlash, d.motor.backlash);
+  EXPECT_EQ(p.rollers.friction_torque, d.rollers.friction_torque);
 }
 
 TEST(Scenario, FidelityOptionsAreReadFromOverrides) {
@@ -241,13 +244,26 @@ TEST(Scenario, FidelityOptionsAreReadFromOverrides) {
       scenario("minimal.yaml"),
       {{"platform.motor.electrical_tau", "0.004"}, {"platform.motor.friction_torque", "0.2"},
        {"platform.driver.dead_band", "0.03"}, {"platform.velocity_loop.arithmetic", "int16"},
-       {"platform.geometry.load_mass", "8"}, {"platform.geometry.load_size", "[0.2, 0.2, 0.05]"}});
+       {"platform.geometry.load_mass", "8"}, {"platform.geometry.load_size", "[0.2, 0.2, 0.05]"},
+       {"platform.driver.gain_error", "[0.02, -0.01, 0, 0.03]"}, {"platform.motor.backlash", "0.01"},
+       {"platform.rollers.friction_torque", "0.001"}});
   EXPECT_EQ(s.platform.motor.electrical_tau, 0.004);
   EXPECT_EQ(s.platform.motor.friction_torque, 0.2);
   EXPECT_EQ(s.platform.driver.dead_band, 0.03);
   EXPECT_EQ(s.platform.velocity_loop.arithmetic, physics::LoopArithmetic::int16);
   EXPECT_EQ(s.platform.geometry.load_mass, 8.0);
   EXPECT_EQ(s.platform.geometry.load_size[2], 0.05);
+  EXPECT_EQ(s.platform.driver.gain_error, (std::array<double, 4>{0.02, -0.01, 0.0, 0.03}));
+  EXPECT_EQ(s.platform.motor.backlash, 0.01);
+  EXPECT_EQ(s.platform.rollers.friction_torque, 0.001);
+}
+
+TEST(ScenarioErrors, DriverGainErrorsNeedFourValuesWithinHalf) {
+  // One value per wheel, each a relative error within ±50 %.
+  const auto few = load_error(scenario("minimal.yaml"), {{"platform.driver.gain_error", "[0.1, 0.1]"}});
+  EXPECT_NE(std::string(few.what()).find("gain_error"), std::string::npos) << few.what();
+  const auto big = load_error(scenario("minimal.yaml"), {{"platform.driver.gain_error", "[0.1, 0.1, 0.6, 0]"}});
+  EXPECT_NE(std::string(big.what()).find("gain_error"), std::string::npos) << big.what();
 }
 
 TEST(ScenarioErrors, ElectricalLagShorterThanTheStepIsRefused) {

@@ -1,0 +1,89 @@
+// Tests twin/experiment_thesis_calibrate (and the rig it shares with thesis-platform,
+// twin/experiment_thesis): a quick calibration starts from the project's defaults, writes a
+// scenario that loads and holds exactly the best evaluation's values, a trace with one row per
+// evaluation and a report naming method, bounds and result; the committed fitted scenario
+// loads, lies inside the bounds and says what it was fitted to.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tests/support/temp_dir.hpp"
+#include "twin/experiment.hpp"
+#include "twin/experiment_thesis.hpp"
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The rows of a CSV file, each split at commas (header first).
+std::vector<std::vector<std::string>> csv_rows(const fs::path& p) {
+  std::vector<std::vector<std::string>> rows;
+  for (const std::string& line : omnitwin::testing::lines_of(omnitwin::testing::read_bytes(p))) {
+    std::vector<std::string> cells;
+    std::istringstream in(line);
+    for (std::string c; std::getline(in, c, ',');) cells.push_back(c);
+    if (!cells.empty()) rows.push_back(cells);
+  }
+  return rows;
+}
+
+// The fitted values of a scenario in the trace's order.
+std::vector<double> fitted_values(const Scenario& s) {
+  return {s.controller.kp[0],          s.controller.ki[0],          s.platform.velocity_loop.kp,
+          s.platform.velocity_loop.ki, s.platform.driver.dead_band, s.platform.motor.friction_torque};
+}
+
+TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAndMethod) {
+  omnitwin::testing::TempDir dir("omnitwin-cal");
+  ExperimentOptions o{dir.path().string(), true};
+  o.budget = 8;
+  ASSERT_EQ(run_experiment("thesis-calibrate", o), kExperimentOk);
+  // The trace: one row per evaluation, the first at the project's defaults.
+  const auto rows = csv_rows(dir.path() / "thesis_calibrate.csv");
+  ASSERT_EQ(rows.size(), 9u);
+  ASSERT_EQ(rows[0][8], "objective");
+  const Scenario defaults = load_scenario(thesis::plain_scenario());
+  const std::vector<double> start = fitted_values(defaults);
+  for (std::size_t k = 0; k < start.size(); ++k) EXPECT_DOUBLE_EQ(std::stod(rows[1][k + 1]), start[k]) << k;
+  // The written scenario holds the best row's values exactly.
+  const auto best = std::min_element(rows.begin() + 1, rows.end(),
+                                     [](const auto& a, const auto& b) { return std::stod(a[8]) < std::stod(b[8]); });
+  const Scenario fitted = load_scenario((dir.path() / "thesis_line_fitted.yaml").string());
+  const std::vector<double> v = fitted_values(fitted);
+  for (std::size_t k = 0; k < v.size(); ++k) EXPECT_DOUBLE_EQ(v[k], std::stod((*best)[k + 1])) << k;
+  EXPECT_EQ(fitted.controller.kp[0], fitted.controller.kp[1]);    // x and y share their gains
+  EXPECT_EQ(fitted.controller.kp[2], defaults.controller.kp[2]);  // the heading loop is not fitted
+  // It is still the thesis line.
+  ASSERT_EQ(fitted.path.segments.size(), 1u);
+  EXPECT_EQ(fitted.path.segments[0].dx, 2.0);
+  EXPECT_EQ(fitted.path.segments[0].duration, 20.0);
+  // The report names the method, the objective and every free parameter.
+  const std::string md = omnitwin::testing::read_bytes(dir.path() / "thesis_calibrate.md");
+  for (const char* word : {"Nelder–Mead", "ln(ours / thesis)", "controller.kp", "platform.velocity_loop.ki",
+                           "platform.driver.dead_band", "platform.motor.friction_torque", "platform.motor.backlash", "QUICK"})
+    EXPECT_NE(md.find(word), std::string::npos) << word;
+}
+
+TEST(ThesisCalibrate, TheCommittedFitLoadsInsideItsBoundsAndSaysWhatItWasFittedTo) {
+  ASSERT_TRUE(fs::exists(thesis::fitted_scenario()));
+  EXPECT_EQ(thesis::default_scenario(), thesis::fitted_scenario());
+  const Scenario s = load_scenario(thesis::fitted_scenario());
+  const std::vector<double> v = fitted_values(s);
+  const std::vector<std::pair<double, double>> bounds{{0.5, 8}, {0, 8}, {5, 150}, {0, 40}, {0, 0.3}, {0, 1.5}, {0, 0.05}};
+  for (std::size_t k = 0; k < v.size(); ++k) {
+    EXPECT_GE(v[k], bounds[k].first) << k;
+    EXPECT_LE(v[k], bounds[k].second) << k;
+  }
+  const std::string text = omnitwin::testing::read_bytes(thesis::fitted_scenario());
+  EXPECT_NE(text.find("no sync, 1000 kbit/s"), std::string::npos);
+  EXPECT_NE(text.find("Objective"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

@@ -1,0 +1,62 @@
+// Tests twin/experiment_thesis_platform in quick mode (250 and 1000 kbit/s, two trials, 40 cm
+// in 4 s): it runs the scenario it is given, marks the fast no-sync 1000 kbit/s row as the
+// fitted one and every other as held out, counts the acceptance checks, and writes the pose
+// error over time without and with sync at 250 kbit/s from the runs' own trajectories.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tests/support/temp_dir.hpp"
+#include "twin/experiment.hpp"
+#include "twin/experiment_thesis.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(ThesisPlatform, AQuickRunOfTheFittedScenarioReportsTheFitRowAndPredictions) {
+  omnitwin::testing::TempDir dir("omnitwin-tp");
+  ExperimentOptions o{dir.path().string(), true};
+  o.model = thesis::fitted_scenario();
+  const int rc = run_experiment("thesis-platform", o);
+  // 0 when every direction matches, 1 when one differs; never a runtime failure.
+  ASSERT_TRUE(rc == kExperimentOk || rc == kExperimentCheckFailed) << rc;
+  const std::string md = omnitwin::testing::read_bytes(dir.path() / "thesis_platform.md");
+  EXPECT_NE(md.find("Scenario: `thesis_line_fitted.yaml`. Its free parameters"), std::string::npos);
+  // Quick: 2 bit rates × 2 sync settings on the fast reading; one fitted, three held out.
+  EXPECT_NE(md.find("| 1000 | no | **fitted** |"), std::string::npos);
+  EXPECT_NE(md.find("| 250 | yes | held out |"), std::string::npos);
+  EXPECT_NE(md.find(" of 3** (the acceptance asks for 6 of 7)"), std::string::npos);
+  EXPECT_NE(md.find(" of 6**."), std::string::npos);  // sign checks: X, contour, axis at 250 and 1000
+  EXPECT_NE(md.find("Overall axis-IAE improvement"), std::string::npos);
+  // The time series: both runs at 250 kbit/s, 10 ms samples over the 4 s path and its 2 s settle,
+  // the contour error the hypotenuse of X and Y.
+  const std::vector<std::string> lines =
+      omnitwin::testing::lines_of(omnitwin::testing::read_bytes(dir.path() / "thesis_platform_time.csv"));
+  ASSERT_GT(lines.size(), 1000u);
+  EXPECT_EQ(lines[0], "rate_kbps,sync,t_s,ex_cm,ey_cm,ec_cm");
+  int with = 0, without = 0;
+  double t_max = 0, ex_max = 0;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::vector<double> v;
+    std::istringstream in(lines[i]);
+    for (std::string c; std::getline(in, c, ',');) v.push_back(std::stod(c));
+    ASSERT_EQ(v.size(), 6u) << lines[i];
+    EXPECT_EQ(v[0], 250);
+    (v[1] == 1 ? with : without)++;
+    t_max = std::max(t_max, v[2]);
+    ex_max = std::max(ex_max, v[3]);
+    EXPECT_NEAR(v[5], std::hypot(v[3], v[4]), 1e-4) << lines[i];
+  }
+  EXPECT_EQ(with, without);
+  EXPECT_NEAR(t_max, 6.0, 0.05);
+  EXPECT_GT(ex_max, 0.5);  // the fitted P loop lags the planned pose by centimetres
+}
+
+}  // namespace
+}  // namespace omnitwin::twin

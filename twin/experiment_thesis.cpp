@@ -1,0 +1,130 @@
+// twin layer — the thesis rig shared by thesis-platform and thesis-calibrate (see
+// experiment_thesis.hpp): the thesis's numbers and one scored run of the thesis line.
+#include "twin/experiment_thesis.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "twin/run.hpp"
+
+namespace omnitwin::twin::thesis {
+
+namespace fs = std::filesystem;
+
+const std::array<Row, 4>& rows() {
+  static const std::array<Row, 4> kRows = {{
+      {125,
+       {13612, 2091, 13702, 2971.9},
+       {13919, 2041.9, 14419, 2611.3},
+       {7.633, 1.092, 7.652, 2.067},
+       {7.755, 1.244, 8.044, 1.807}},
+      {250,
+       {11207, 2673, 11549, 3069.3},
+       {8448.7, 1752.4, 8636.5, 2217.9},
+       {6.21, 1.432, 6.370, 2.154},
+       {4.585, 0.933, 4.679, 1.550}},
+      {500,
+       {11456, 2514, 11758, 2626.5},
+       {7850.5, 1617.3, 8035.2, 2238.7},
+       {6.3, 1.349, 6.451, 1.809},
+       {4.384, 0.864, 4.470, 1.558}},
+      {1000,
+       {11043, 2139.4, 11263, 2737.8},
+       {6741.1, 1307.9, 6879.6, 2308.2},
+       {6.07, 1.151, 6.177, 1.945},
+       {3.726, 0.718, 3.798, 1.600}},
+  }};
+  return kRows;
+}
+
+const Row& row(int rate_kbps) {
+  for (const Row& r : rows())
+    if (r.rate_kbps == rate_kbps) return r;
+  throw std::logic_error("thesis: no thesis row for this bit rate");
+}
+
+std::array<ClockReading, 2> clock_readings(const Scenario& s) {
+  const double d = std::fabs(s.bus.can.drift[0]);
+  // Resync before the drift eats the T_post margin the resync leaves (can-dropout's rule).
+  const double per_interrupt_us = d * s.controller.period * 1e6;
+  const int k_fast = std::max(1, static_cast<int>(std::floor(s.bus.can.t_post_us / per_interrupt_us)));
+  return {ClockReading{"fast", -d, k_fast}, ClockReading{"slow", d, s.bus.can.sync_interval}};
+}
+
+namespace {
+
+double avg_axes(const nlohmann::json& m, const char* key) {
+  double s = 0;
+  for (const auto& a : m.at("axes")) s += a.at(key).get<double>();
+  return s / 4.0;
+}
+
+}  // namespace
+
+Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, bool sync, int trial, int port) {
+  std::vector<Override> o{{"bus", "can"},
+                          {"bus.bit_rate", std::to_string(rate_kbps * 1000)},
+                          {"bus.drift", fmt::format("{}", clock.drift)},
+                          {"bus.sync", sync ? "true" : "false"},
+                          {"bus.sync_interval", std::to_string(clock.sync_interval)},
+                          {"bus.start_phase", "random"},
+                          {"bus.seed", std::to_string(trial + 1)},
+                          {"bus.transport", fmt::format("udp:239.74.163.2:{}", port)}};
+  if (setup.quick) o.push_back({"path.segments.0.line.duration", "4"}), o.push_back({"path.segments.0.line.dx", "0.4"});
+  o.insert(o.end(), setup.overrides.begin(), setup.overrides.end());
+  Scenario s = load_scenario(setup.scenario, o);
+  if (!setup.records) s.outputs.video.enabled = false, s.outputs.report = false;
+  RunOptions ro;
+  ro.out_dir =
+      (setup.dir / fmt::format("{}_{}k_{}_t{}", clock.name, rate_kbps, sync ? "sync" : "nosync", trial)).string();
+  const RunResult r = run_scenario(s, ro);
+  const nlohmann::json& m = r.metrics;
+  const nlohmann::json& od = m.at("platform_odometry");
+  Result x;
+  x.clock = clock;
+  x.rate_kbps = rate_kbps;
+  x.sync = sync;
+  x.iae_x = od.at("iae_x_cm"), x.iae_y = od.at("iae_y_cm"), x.iae_c = od.at("iae_contour_cm");
+  x.std_x = od.at("std_x_cm"), x.std_y = od.at("std_y_cm"), x.std_c = od.at("std_contour_cm");
+  x.true_iae_c = m.at("platform").at("iae_contour_cm");
+  x.true_final = m.at("platform").at("final_error_cm");
+  x.axis_iae = avg_axes(m, "iae_velocity_pulse");
+  x.axis_std = avg_axes(m, "std_velocity_pulse");
+  x.dropout_pct = 100.0 * m.at("bus").at("dropout_rate").get<double>();
+  x.load_pct = 100.0 * m.at("bus").at("load").get<double>();
+  x.exit_code = r.exit_code;
+  x.master_state = m.at("master").at("state");
+  for (const auto& sl : m.at("slaves")) x.stale += static_cast<double>(sl.at("stale_samples").get<std::uint64_t>());
+  x.c_min = x.c_max = x.iae_c;
+  x.a_min = x.a_max = x.axis_iae;
+  x.run_dir = ro.out_dir;
+  return x;
+}
+
+Result average(const std::vector<Result>& ts) {
+  Result m = ts.front();
+  m.trials = static_cast<int>(ts.size());
+  for (double Result::*f : {&Result::iae_x, &Result::iae_y, &Result::iae_c, &Result::std_x, &Result::std_y,
+                            &Result::std_c, &Result::true_iae_c, &Result::true_final, &Result::axis_iae,
+                            &Result::axis_std, &Result::dropout_pct, &Result::load_pct, &Result::stale}) {
+    double sum = 0;
+    for (const Result& t : ts) sum += t.*f;
+    m.*f = sum / static_cast<double>(ts.size());
+  }
+  for (const Result& t : ts) {
+    m.c_min = std::min(m.c_min, t.iae_c), m.c_max = std::max(m.c_max, t.iae_c);
+    m.a_min = std::min(m.a_min, t.axis_iae), m.a_max = std::max(m.a_max, t.axis_iae);
+    m.exit_code = std::max(m.exit_code, t.exit_code);
+    if (t.master_state != m.master_state) m.master_state = "mixed";
+  }
+  return m;
+}
+
+std::string plain_scenario() { return std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line.yaml"; }
+std::string fitted_scenario() { return std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line_fitted.yaml"; }
+std::string default_scenario() { return fs::exists(fitted_scenario()) ? fitted_scenario() : plain_scenario(); }
+
+}  // namespace omnitwin::twin::thesis

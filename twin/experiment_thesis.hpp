@@ -1,0 +1,78 @@
+// twin layer — the rig that `thesis-platform` and `thesis-calibrate` share: seed 002's tables
+// 4-3 … 4-10, the two readings of the slaves' drift, and one run of the thesis line on bus
+// `can` scored as the thesis scored it (see experiment_thesis_platform.cpp for the study,
+// experiment_thesis_calibrate.cpp for the fit).
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin::thesis {
+
+// The thesis's tables by bit rate, no sync and sync, each {X, Y, contour [cm], axis average
+// [pulses]}: IAE from tables 4-3/4-4 and 4-7/4-8, σ from tables 4-5/4-6 and 4-9/4-10.
+struct Row {
+  int rate_kbps;
+  std::array<double, 4> nosync;
+  std::array<double, 4> sync;
+  std::array<double, 4> nosync_std;
+  std::array<double, 4> sync_std;
+};
+const std::array<Row, 4>& rows();
+const Row& row(int rate_kbps);  // throws std::logic_error for a rate the thesis did not run
+
+// One reading of the slaves' oscillators.
+struct ClockReading {
+  std::string name;       // "fast" / "slow"
+  double drift = 0;       // every slave's drift [-]
+  int sync_interval = 0;  // K: timer interrupts between resyncs
+};
+
+// The two readings for scenario `s` (its T_post, period and drift size): fast (the slave's
+// timer gains; K from can-dropout's rule) first, slow (the scenario's K) second.
+std::array<ClockReading, 2> clock_readings(const Scenario& s);
+
+// One run's figures, or the mean of a configuration's trials.
+struct Result {
+  ClockReading clock;
+  int rate_kbps = 0;
+  bool sync = false;
+  double iae_x = 0, iae_y = 0, iae_c = 0, std_x = 0, std_y = 0, std_c = 0;  // odometry [cm]
+  double true_iae_c = 0, true_final = 0;                                    // MuJoCo pose [cm]
+  double axis_iae = 0, axis_std = 0;                                        // averages over the four axes [pulses]
+  double dropout_pct = 0, load_pct = 0;
+  double stale = 0;  // interrupts without a new command (loop skipped), four slaves
+  // Over the trials (random start phases) of one configuration; a single run: all equal.
+  int trials = 1;
+  double c_min = 0, c_max = 0, a_min = 0, a_max = 0;  // contour IAE [cm], axis IAE [pulses]
+  int exit_code = 0;
+  std::string master_state;
+  std::string run_dir;  // the first trial's run folder
+};
+
+// What one run needs besides its configuration.
+struct RunSetup {
+  std::string scenario;             // the thesis line's scenario file
+  std::vector<Override> overrides;  // applied after the configuration's own
+  std::filesystem::path dir;        // run folders go under it
+  bool quick = false;               // 40 cm in 4 s instead of 200 cm in 20 s
+  bool records = true;              // false: no video, report, pcap-free figures only
+};
+
+// One run of clock reading `clock` at `rate_kbps`, with or without sync; trial t draws the
+// slaves' timer phases at NMT start from seed t + 1; `port` is its own UDP port.
+Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, bool sync, int trial, int port);
+
+// The mean of a configuration's trials, with the spread of contour and axis IAE.
+Result average(const std::vector<Result>& trials);
+
+// The default scenario: the fitted thesis line when it exists, else the plain one.
+std::string default_scenario();
+std::string plain_scenario();   // models/scenarios/thesis_line.yaml
+std::string fitted_scenario();  // models/scenarios/thesis_line_fitted.yaml (thesis-calibrate)
+
+}  // namespace omnitwin::twin::thesis

@@ -1,0 +1,297 @@
+// twin layer — `omnitwin experiment thesis-calibrate`: fits the parameters seed 002 does not
+// give to ONE of its configurations, so that thesis-platform can report the other seven as
+// predictions (issue 15, item 3).
+//
+// The fitted row is the thesis's no-sync 1000 kbit/s configuration (tables 4-3 … 4-6), run on
+// the whole twin as thesis-platform runs it (the fast reading of the drift, bus `can`, master
+// process, lockstep). The free parameters are the ones the thesis is silent on: the master's
+// position-loop gains (fig. 4-13 names a PI, not its gains), the 8051's velocity-PI gains, the
+// driver's dead band, the gearbox's dry friction and backlash. Each lives in the unit box mapped onto
+// its bounds; a bounded Nelder–Mead (twin/nelder_mead.hpp) minimises the mean squared log
+// ratio of our figures (IAE and σ of X, contour and the axes' velocity; Y is reported, not
+// weighed: see kWeighed) to the thesis's, each the mean of two runs with their own random
+// slave phases. The result
+// is written as a scenario file (models/scenarios/thesis_line_fitted.yaml by default) with
+// the method, the bounds and the whole trace in the output folder.
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "twin/experiment.hpp"
+#include "twin/experiment_thesis.hpp"
+#include "twin/nelder_mead.hpp"
+
+namespace omnitwin::twin {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// One free parameter: its place in the scenario, bounds and start (the project's default).
+struct FreeParameter {
+  const char* name;  // as written in the scenario file
+  const char* unit;
+  double lo, hi, start;
+  const char* why;  // why it is free and why these bounds
+  double at(double u) const { return lo + u * (hi - lo); }
+  double unit_of(double v) const { return (v - lo) / (hi - lo); }
+};
+
+const std::vector<FreeParameter>& free_parameters() {
+  static const std::vector<FreeParameter> kParams = {
+      {"controller.kp (x, y)", "1/s", 0.5, 8.0, 6.0,
+       "fig. 4-13 names a PI on the pose error, not its gains; 8/s is near where the 10 ms loop with its "
+       "two-sample bus delay stops being well damped"},
+      {"controller.ki (x, y)", "1/s²", 0.0, 8.0, 6.0, "as kp; 0 is a P loop"},
+      {"platform.velocity_loop.kp", "DA codes per count/sample", 1.0, 150.0, 20.0,
+       "the 8051's PI gains are not in the thesis; above ~150 the loop is unstable with any motor in the bounds"},
+      {"platform.velocity_loop.ki", "DA codes per count/sample per sample", 0.0, 60.0, 4.0,
+       "as kp; the first search (Y weighed) ended on the bound 40 then set"},
+      {"platform.driver.dead_band", "V", 0.0, 0.3, 0.0,
+       "an analog amplifier's input offset/dead band; 0.3 V is 2.4 rad/s, a third of cruise speed"},
+      {"platform.motor.friction_torque", "N·m", 0.0, 1.5, 0.0,
+       "gearbox + bearing dry friction, not in the thesis; 1.5 N·m is about the roller grip"},
+      {"platform.motor.backlash", "rad", 0.0, 0.05, 0.0,
+       "gear play at the wheel, not in the thesis; 0.05 rad (3°) is a worn spur gearbox's, and above 0.02 rad a "
+       "stiff velocity PI already rings into a limit cycle"},
+  };
+  return kParams;
+}
+
+// The eight figures the fit compares, ours (Result) against the thesis's row.
+struct Figures {
+  std::array<double, 8> ours{}, thesis{};
+  static constexpr std::array<const char*, 8> kNames = {"IAE X [cm]",        "IAE Y [cm]",     "IAE contour [cm]",
+                                                        "axis IAE [pulses]", "σ X [cm]",       "σ Y [cm]",
+                                                        "σ contour [cm]",    "axis σ [pulses]"};
+};
+
+Figures figures_of(const thesis::Result& r) {
+  const thesis::Row& t = thesis::row(r.rate_kbps);
+  Figures f;
+  f.ours = {r.iae_x, r.iae_y, r.iae_c, r.axis_iae, r.std_x, r.std_y, r.std_c, r.axis_std};
+  for (std::size_t k = 0; k < 4; ++k) {
+    f.thesis[k] = r.sync ? t.sync[k] : t.nosync[k];
+    f.thesis[k + 4] = r.sync ? t.sync_std[k] : t.nosync_std[k];
+  }
+  return f;
+}
+
+// Which figures the objective weighs: all but Y's. Over the box of free
+// parameters our odometric Y error stayed far below the thesis's (report_md says how far): the master's Y loop
+// holds an unloaded platform on its line whatever the drives do, so nothing in the box reaches
+// the thesis's Y, and with Y in the objective the search gave up a factor 4 on X for a factor
+// 2 on Y (docs/results/thesis-calibrate/). Y is still reported, as a prediction that fails.
+constexpr std::array<bool, 8> kWeighed = {true, false, true, true, true, false, true, true};
+
+// The objective: mean of (ln(ours/thesis))² over the weighed figures; a figure at zero counts
+// as 1e-6 of the thesis's (a huge but finite miss).
+double objective(const Figures& f) {
+  double sum = 0;
+  int n = 0;
+  for (std::size_t k = 0; k < f.ours.size(); ++k) {
+    if (!kWeighed[k]) continue;
+    const double ratio = std::max(f.ours[k], 1e-6 * f.thesis[k]) / f.thesis[k];
+    sum += std::log(ratio) * std::log(ratio);
+    ++n;
+  }
+  return sum / n;
+}
+
+// The scenario overrides of parameter values `v` (phi gains stay the scenario's).
+std::vector<Override> overrides_of(const std::vector<double>& v, double phi_kp, double phi_ki) {
+  return {{"controller.kp", fmt::format("[{:.4g}, {:.4g}, {:.4g}]", v[0], v[0], phi_kp)},
+          {"controller.ki", fmt::format("[{:.4g}, {:.4g}, {:.4g}]", v[1], v[1], phi_ki)},
+          {"platform.velocity_loop.kp", fmt::format("{:.4g}", v[2])},
+          {"platform.velocity_loop.ki", fmt::format("{:.4g}", v[3])},
+          {"platform.driver.dead_band", fmt::format("{:.4g}", v[4])},
+          {"platform.motor.friction_torque", fmt::format("{:.4g}", v[5])},
+          {"platform.motor.backlash", fmt::format("{:.4g}", v[6])}};
+}
+
+// Parameter values at box point u, rounded as they are written (4 significant digits), so the
+// file reproduces what was evaluated.
+std::vector<double> values_at(const std::vector<double>& u) {
+  std::vector<double> v;
+  for (std::size_t i = 0; i < u.size(); ++i)
+    v.push_back(std::stod(fmt::format("{:.4g}", free_parameters()[i].at(u[i]))));
+  return v;
+}
+
+// The fitted scenario: the thesis line with the fitted values.
+std::string fitted_yaml(const std::vector<double>& v, double phi_kp, double phi_ki, double j, int evals,
+                        const Figures& f, const std::string& params_path) {
+  std::ostringstream out;
+  out << "# The thesis line (seed 002, 4-4-2) with the parameters the thesis does not give, fitted by\n"
+      << "# `omnitwin experiment thesis-calibrate` to ONE configuration: no sync, 1000 kbit/s, the\n"
+      << "# slaves' timers gaining 0.362 % (tables 4-3 … 4-6). `omnitwin experiment thesis-platform`\n"
+      << "# runs it and reports the other configurations as predictions. Method, bounds and trace:\n"
+      << "# docs/results/thesis-calibrate/. Written by the program; edit by re-running it.\n"
+      << fmt::format(
+             "# Objective (mean squared log ratio of 6 figures, Y not weighed, to the thesis's): {:.4f} after {} "
+             "evaluations.\n",
+             j, evals)
+      << "# Fit row, ours / thesis:";
+  for (std::size_t k = 0; k < 8; ++k)
+    out << fmt::format("{} {} {:.4g}/{:.4g}", k ? "," : "", Figures::kNames[k], f.ours[k], f.thesis[k]);
+  out << "\nname: thesis_line_fitted\n"
+      << "description: \"200 cm along world X in 20 s (seed 002, 4-4-2), parameters fitted to the no-sync 1000 kbit/s "
+         "row\"\n"
+      << "platform:\n  params: " << params_path << "\n"
+      << fmt::format("  velocity_loop: {{kp: {:.4g}, ki: {:.4g}}}\n", v[2], v[3])
+      << fmt::format("  driver: {{dead_band: {:.4g}}}\n", v[4])
+      << fmt::format("  motor: {{friction_torque: {:.4g}, backlash: {:.4g}}}\n", v[5], v[6])
+      << "bus: direct\nclock: lockstep\ncontroller:\n  period: 0.010\n"
+      << fmt::format("  kp: [{:.4g}, {:.4g}, {:.4g}]\n  ki: [{:.4g}, {:.4g}, {:.4g}]\n", v[0], v[0], phi_kp, v[1], v[1],
+                     phi_ki)
+      << "path:\n  start: {x: 0, y: 0, phi_deg: 0}\n  segments:\n    - line: {dx: 2.0, dy: 0.0, duration: 20}\n"
+      << "settle: 2.0\n";
+  return out.str();
+}
+
+struct Evaluation {
+  std::vector<double> values;
+  Figures figures;
+  double j = 0;
+};
+
+std::string trace_csv(const std::vector<Evaluation>& evals) {
+  std::string s =
+      "evaluation,master_kp,master_ki,velocity_kp,velocity_ki,dead_band_v,friction_nm,backlash_rad,objective,"
+      "iae_x_cm,iae_y_cm,iae_contour_cm,axis_iae_pulse,std_x_cm,std_y_cm,std_contour_cm,axis_std_pulse\n";
+  for (std::size_t i = 0; i < evals.size(); ++i) {
+    const Evaluation& e = evals[i];
+    s += fmt::format("{},{},{:.6f}", i + 1, fmt::join(e.values, ","), e.j);
+    for (double x : e.figures.ours) s += fmt::format(",{:.5g}", x);
+    s += "\n";
+  }
+  return s;
+}
+
+std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResult& r, const Evaluation& best,
+                      const std::string& model_path, int trials, bool quick) {
+  double y_lo = 1e300, y_hi = 0;  // our Y IAE over the search [cm]
+  for (const Evaluation& e : evals) y_lo = std::min(y_lo, e.figures.ours[1]), y_hi = std::max(y_hi, e.figures.ours[1]);
+  std::ostringstream out;
+  out << "# thesis-calibrate: the free parameters fitted to the no-sync 1000 kbit/s row\n\n"
+      << (quick ? "QUICK run (40 cm in 4 s, a few evaluations): the mechanics only, not a fit.\n\n" : "")
+      << "`omnitwin experiment thesis-calibrate` runs the thesis line (models/scenarios/thesis_line.yaml) on bus "
+         "`can` exactly as thesis-platform does (master process, four Omni slaves, UDP multicast, lockstep), at "
+         "the ONE configuration it fits: 1000 kbit/s, no synchronisation, the slaves' timers gaining 0.362 % "
+         "(the fast reading, docs/experiments.md).\n\n"
+      << "## Method\n\n"
+      << fmt::format(
+             "- **Objective**: J = mean over six figures of (ln(ours / thesis))²: IAE and σ of X and "
+             "contour (odometry, tables 4-3, 4-5) and of the axes' velocity error (the four axes' mean, "
+             "tables 4-4, 4-6). A log ratio weighs a figure twice too big as badly as one half too small. "
+             "Each figure is the mean of {} runs, the slaves' start phases drawn from seeds 1 … {}.\n"
+             "- **Y is not weighed.** Over this search's {} evaluations our odometric Y IAE stayed between {:.0f} "
+             "and {:.0f} cm (the thesis: 1308 … 2673 cm): the master's Y loop holds the unloaded platform on its line "
+             "whatever the drives do, and per-wheel driver gain errors of ±20 % (driver.gain_error, tried by hand) "
+             "did not move it either. A search with Y weighed like the others (eight figures, made while building "
+             "this, before backlash was a parameter) ended at J 4.45 with X 4× too small, having traded X for a "
+             "factor 2 on Y (kp 7.6/s, the velocity PI almost pure I). Y stays in the tables below, as a "
+             "prediction that fails.\n",
+             trials, trials, evals.size(), y_lo, y_hi)
+      << "- **Search**: Nelder–Mead (reflection 1, expansion 2, contraction ½, shrink ½) in the unit box, each "
+         "coordinate mapped linearly onto its parameter's bounds, trial points projected onto the box; start at "
+         "the project's defaults, first simplex 0.25 of each range; values are rounded to 4 significant digits "
+         "before a run so the written file reproduces what was evaluated.\n"
+      << fmt::format("- **Budget**: {} evaluations ({}); J of the start {:.4f}, of the result {:.4f}.\n\n",
+                     r.evaluations, r.converged ? "the simplex converged" : "the budget ended it",
+                     evals.empty() ? 0.0 : evals.front().j, best.j)
+      << "## Free parameters, bounds and result\n\n| parameter | unit | bounds | start | fitted | why free, why these "
+         "bounds |\n"
+      << "|---|---|---|---|---|---|\n";
+  for (std::size_t i = 0; i < free_parameters().size(); ++i) {
+    const FreeParameter& p = free_parameters()[i];
+    out << fmt::format("| {} | {} | {:g} … {:g} | {:g} | **{:.4g}** | {} |\n", p.name, p.unit, p.lo, p.hi, p.start,
+                       best.values[i], p.why);
+  }
+  out << "\nEverything else stays the platform file's (models/platform/omni4.yaml): mass, motor, encoder, DA, the "
+         "8051's arithmetic. The master's heading gains stay the scenario's.\n\n"
+      << "## The fitted row, ours against the thesis\n\n| figure | start | fitted | thesis | fitted / thesis |\n"
+      << "|---|---|---|---|---|\n";
+  for (std::size_t k = 0; k < 8; ++k) {
+    out << fmt::format("| {} | {:.4g} | {:.4g} | {:.4g} | {:.2f} |\n", Figures::kNames[k],
+                       evals.empty() ? 0.0 : evals.front().figures.ours[k], best.figures.ours[k],
+                       best.figures.thesis[k], best.figures.ours[k] / best.figures.thesis[k]);
+  }
+  // The model's path as a reader of the repository sees it (relative inside the source tree).
+  const fs::path source = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal();
+  const std::string rel = fs::absolute(model_path).lexically_normal().lexically_relative(source).string();
+  const std::string shown = !rel.empty() && rel.rfind("..", 0) != 0 ? rel : model_path;
+  out << "\nThe fitted scenario: `" << shown << "`. The held-out configurations are judged by "
+      << "`omnitwin experiment thesis-platform` (docs/results/thesis-platform/). The trace of every evaluation "
+         "is thesis_calibrate.csv beside this file.\n";
+  return out.str();
+}
+
+}  // namespace
+
+int run_thesis_calibrate(const ExperimentOptions& options) {
+  const fs::path dir = experiment::output_dir("thesis-calibrate", options);
+  const Scenario base = load_scenario(thesis::plain_scenario(), {{"bus", "can"}});
+  const thesis::ClockReading fast = thesis::clock_readings(base)[0];
+  const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
+  const int trials = options.quick ? 1 : 2;
+  const int budget = options.budget > 0 ? options.budget : (options.quick ? 9 : 130);
+  thesis::RunSetup setup{thesis::plain_scenario(), {}, dir / "runs", options.quick, false};
+  std::vector<Evaluation> evals;
+  int runs = 0;  // each run its own UDP port, 46200 … 46799 (no test or scenario uses them)
+  bool failed = false;
+  // One evaluation: the fitted configuration's trials at box point u.
+  auto f = [&](const std::vector<double>& u) {
+    Evaluation e;
+    e.values = values_at(u);
+    setup.overrides = overrides_of(e.values, phi_kp, phi_ki);
+    std::vector<thesis::Result> ts;
+    for (int t = 0; t < trials; ++t) {
+      ts.push_back(thesis::run_one(setup, fast, 1000, false, t, 46200 + runs++ % 600));
+      failed = failed || ts.back().exit_code == 3;
+    }
+    e.figures = figures_of(thesis::average(ts));
+    e.j = failed ? 1e3 : objective(e.figures);
+    evals.push_back(e);
+    std::cout << fmt::format(
+        "  {:3} J {:8.4f}  kp {:.3g} ki {:.3g} | vkp {:.3g} vki {:.3g} | band {:.3g} V friction "
+        "{:.3g} N·m backlash {:.3g} rad | X {:.0f} Y {:.0f} axis {:.0f}\n",
+        evals.size(), e.j, e.values[0], e.values[1], e.values[2], e.values[3], e.values[4], e.values[5],
+        e.values[6], e.figures.ours[0], e.figures.ours[1], e.figures.ours[3]);
+    return e.j;
+  };
+  std::vector<double> u0;
+  for (const FreeParameter& p : free_parameters()) u0.push_back(p.unit_of(p.start));
+  const NelderMeadResult r = nelder_mead(f, u0, NelderMeadOptions{budget, 0.25, 1e-3});
+  if (failed) {
+    std::cerr << "thesis-calibrate: a run failed (see " << (dir / "runs").string() << ")\n";
+    return kExperimentRuntimeError;
+  }
+  const auto best = std::min_element(evals.begin(), evals.end(), [](auto& a, auto& b) { return a.j < b.j; });
+  const std::string model = !options.model.empty() ? options.model
+                            : options.quick        ? (dir / "thesis_line_fitted.yaml").string()
+                                                   : thesis::fitted_scenario();
+  // The platform file: relative inside the source tree (the committed fit), absolute elsewhere.
+  const fs::path source = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal();
+  const fs::path platform = source / "models/platform/omni4.yaml";
+  const fs::path folder = fs::absolute(model).parent_path().lexically_normal();
+  const std::string inside = folder.lexically_relative(source).string();
+  const bool in_tree = !inside.empty() && inside.rfind("..", 0) != 0;
+  const std::string params = in_tree ? platform.lexically_relative(folder).string() : platform.string();
+  experiment::write_text(model,
+                         fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params));
+  experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
+  experiment::write_text(dir / "thesis_calibrate.md", report_md(evals, r, *best, model, trials, options.quick));
+  std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
+                           r.evaluations, evals.front().j, best->j, model, dir.string());
+  return kExperimentOk;
+}
+
+}  // namespace omnitwin::twin
