@@ -12,6 +12,7 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <system_error>
@@ -379,16 +380,27 @@ WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message&
   }
 }
 
-// The socket address for `path`; throws ChannelError when it does not fit sun_path.
-sockaddr_un socket_address(const std::string& path) {
+// True for an abstract-namespace name ("@NAME": no file, nothing to clean up, no directory
+// that must be able to hold a socket).
+bool is_abstract(const std::string& path) { return path.front() == '@'; }
+
+// The socket address for `path` with its exact length ("@NAME" in the abstract namespace);
+// throws ChannelError when it does not fit sun_path.
+struct SocketAddress {
   sockaddr_un sa{};
-  sa.sun_family = AF_UNIX;
-  if (path.size() >= sizeof(sa.sun_path))
+  socklen_t len = 0;
+};
+SocketAddress socket_address(const std::string& path) {
+  SocketAddress a;
+  a.sa.sun_family = AF_UNIX;
+  if (path.size() >= sizeof(a.sa.sun_path))
     throw ChannelError("sim-clock socket path is " + std::to_string(path.size()) +
-                       " bytes; a Unix socket path holds at most " +
-                       std::to_string(sizeof(sa.sun_path) - 1) + ": " + path);
-  std::memcpy(sa.sun_path, path.data(), path.size());
-  return sa;
+                       " bytes; a Unix socket path holds at most " + std::to_string(sizeof(a.sa.sun_path) - 1) +
+                       ": " + path);
+  std::memcpy(a.sa.sun_path, path.data(), path.size());
+  if (is_abstract(path)) a.sa.sun_path[0] = '\0';  // the abstract name is the bytes after the NUL
+  a.len = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + path.size() + (is_abstract(path) ? 0 : 1));
+  return a;
 }
 
 // A new SOCK_SEQPACKET socket; throws ChannelError.
@@ -405,6 +417,7 @@ void close_fd(int& fd) {
 
 // Removes a socket file left at `path` by an earlier run (never a file of another kind).
 void remove_stale_socket(const std::string& path) {
+  if (is_abstract(path)) return;
   struct stat st{};
   if (::lstat(path.c_str(), &st) == 0 && S_ISSOCK(st.st_mode)) ::unlink(path.c_str());
 }
@@ -415,10 +428,10 @@ bool retry_connect(int err) {
 }
 
 // Connects a new socket to `sa`, retrying while the listener is missing until `deadline`.
-int connect_until(const sockaddr_un& sa, Clock::time_point deadline, const std::string& path) {
+int connect_until(const SocketAddress& sa, Clock::time_point deadline, const std::string& path) {
   for (;;) {
     int fd = make_socket(0);
-    if (::connect(fd, reinterpret_cast<const sockaddr*>(&sa), sizeof sa) == 0) return fd;
+    if (::connect(fd, reinterpret_cast<const sockaddr*>(&sa.sa), sa.len) == 0) return fd;
     const int err = errno;
     close_fd(fd);
     const auto left = deadline - Clock::now();
@@ -431,10 +444,10 @@ int connect_until(const sockaddr_un& sa, Clock::time_point deadline, const std::
 }  // namespace
 
 std::string parse_address(std::string_view address) {
-  // "unix:" followed by a non-empty path without NUL bytes.
+  // "unix:" followed by a non-empty path without NUL bytes ("@" alone names nothing).
   constexpr std::string_view kScheme = "unix:";
   const bool ok = address.starts_with(kScheme) && address.size() > kScheme.size() &&
-                  address.find('\0') == std::string_view::npos;
+                  address.find('\0') == std::string_view::npos && address != "unix:@";
   if (!ok)
     throw ChannelError("sim-clock address '" + std::string(address) + "': expected unix:PATH");
   return std::string(address.substr(kScheme.size()));
@@ -445,10 +458,10 @@ std::string parse_address(std::string_view address) {
 
 Server::Server(std::string_view address) : address_(address), path_(parse_address(address)) {
   // Address first (it may throw), then a non-blocking listener bound in place of a stale file.
-  const sockaddr_un sa = socket_address(path_);
+  const SocketAddress sa = socket_address(path_);
   remove_stale_socket(path_);
   listen_fd_ = make_socket(SOCK_NONBLOCK);
-  if (::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&sa), sizeof sa) != 0) {
+  if (::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&sa.sa), sa.len) != 0) {
     const int err = errno;
     close_fd(listen_fd_);
     throw ChannelError("sim-clock: cannot bind " + path_ + ": " + errno_text(err));
@@ -456,14 +469,14 @@ Server::Server(std::string_view address) : address_(address), path_(parse_addres
   if (::listen(listen_fd_, 1) != 0) {
     const int err = errno;
     close_fd(listen_fd_);
-    ::unlink(path_.c_str());
+    if (!is_abstract(path_)) ::unlink(path_.c_str());
     throw ChannelError("sim-clock: cannot listen on " + path_ + ": " + errno_text(err));
   }
 }
 
 Server::~Server() {
   close_fd(conn_fd_);
-  if (listen_fd_ >= 0) ::unlink(path_.c_str());
+  if (listen_fd_ >= 0 && !is_abstract(path_)) ::unlink(path_.c_str());
   close_fd(listen_fd_);
 }
 
@@ -539,7 +552,7 @@ void Server::end(std::int64_t t_ns) {
 Client::Client(std::string_view address, std::chrono::milliseconds timeout) {
   // Connect (waiting for the twin's listener), then introduce ourselves.
   const std::string path = parse_address(address);
-  const sockaddr_un sa = socket_address(path);
+  const SocketAddress sa = socket_address(path);
   int fd = connect_until(sa, deadline_after(timeout), path);
   if (!send_message(fd, Hello{static_cast<std::uint32_t>(::getpid())})) {
     const int err = errno;

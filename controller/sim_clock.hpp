@@ -135,11 +135,13 @@ enum class WaitStatus : std::uint8_t {
 };
 const char* to_string(WaitStatus s);
 
-// "unix:PATH" → PATH; throws ChannelError for anything else.
+// "unix:PATH" → PATH; throws ChannelError for anything else. PATH "@NAME" is NAME in Linux's
+// abstract socket namespace: no file, so it works wherever the file system cannot hold a
+// socket (a 9p or FUSE /tmp) and leaves nothing behind.
 std::string parse_address(std::string_view address);
 
 // Twin end. Creates the listening socket at construction (removing a stale socket file at
-// PATH first) and removes it again in the destructor.
+// PATH first) and removes it again in the destructor (nothing to remove for "@NAME").
 class Server {
  public:
   explicit Server(std::string_view address);  // throws ChannelError

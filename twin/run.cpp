@@ -308,9 +308,10 @@ void PlatformRun::start_master() {
     args.insert(args.end(), {"--stats", (dir / "master-stats.json").string()});
   const bool lockstep = s_.clock == ClockMode::lockstep;
   if (lockstep) {
-    // A short socket path (sun_path holds 108 bytes; run directories can be longer).
+    // An abstract socket: no file, so no directory (/tmp on 9p, a read-only TMPDIR) can refuse
+    // it, and a short name whatever the run directory is (sun_path holds 108 bytes).
     static std::atomic<int> serial{0};
-    const std::string addr = fmt::format("unix:/tmp/omnitwin-{}-{}.clock", ::getpid(), serial++);
+    const std::string addr = fmt::format("unix:@omnitwin-{}-{}.clock", ::getpid(), serial++);
     clock_server_ = std::make_unique<simclock::Server>(addr);
     args.insert(args.end(), {"--clock", "sim", "--sim-clock", addr});
   } else {

@@ -244,7 +244,8 @@ TEST(SimClockCodec, NamesOfEveryValue) {
 TEST(SimClockAddress, ParsesUnixPathsOnly) {
   EXPECT_EQ(parse_address("unix:/tmp/x.sock"), "/tmp/x.sock");
   EXPECT_EQ(parse_address("unix:rel/x"), "rel/x");
-  for (std::string_view bad : {"", "unix:", "/tmp/x.sock", "tcp:127.0.0.1:1", "UNIX:/x"})
+  EXPECT_EQ(parse_address("unix:@omnitwin-1.clock"), "@omnitwin-1.clock");  // abstract namespace
+  for (std::string_view bad : {"", "unix:", "unix:@", "/tmp/x.sock", "tcp:127.0.0.1:1", "UNIX:/x"})
     EXPECT_THROW(parse_address(bad), ChannelError) << bad;
   EXPECT_THROW(parse_address(std::string_view("unix:/a\0b", 9)), ChannelError);
 }
@@ -596,6 +597,27 @@ TEST(SimClockChannel, BadAddressesThrow) {
   // A directory that does not exist cannot hold the socket.
   Fixture f;
   EXPECT_THROW(Server("unix:" + (f.dir / "missing" / "clock.sock").string()), ChannelError);
+}
+
+TEST(SimClockChannel, AnAbstractAddressWorksWithoutAFileAndFreesItsNameAtTheEnd) {
+  // "unix:@NAME": the twin's default, so a /tmp that cannot hold a socket (9p) does not matter.
+  const std::string address = "unix:@omnitwin-test-" + std::to_string(::getpid()) + ".clock";
+  {
+    Server server(address);
+    EXPECT_THROW(Server{address}, ChannelError);  // the name is taken while it lives
+    EchoLog log;
+    MasterThread master(address, echo(log));
+    ASSERT_EQ(server.accept(2s), WaitStatus::ok);
+    Done d;
+    ASSERT_EQ(server.grant(Grant{0, 0, {1, 2, 3, 4}}, d, 2s), WaitStatus::ok);
+    EXPECT_EQ(d.frames[0], 1u);
+    server.end(0);
+    master.join();
+    EXPECT_EQ(master.error(), "");
+    EXPECT_EQ(log.ticks, 1);
+    EXPECT_FALSE(std::filesystem::exists(address.substr(5)));  // no file named after it
+  }
+  Server again(address);  // freed with the first server
 }
 
 TEST(SimClockChannel, OverLongPathThrowsWithItsLength) {
