@@ -5,6 +5,9 @@
 // `otv<pid>` with `ip link add … type vcan` (root) and deletes it afterwards, so parallel
 // test processes never share one. Where SocketCAN or vcan is unavailable (as on kernels
 // without the modules) the tests skip and say why; the error paths are tested everywhere.
+// With $OMNITWIN_REQUIRE_VCAN=1 (the vcan-labelled ctest run, scripts/vcan-vm) a missing vcan
+// fails instead of skipping, so a CI run that was meant to exercise SocketCAN cannot pass
+// without it.
 #include "bus_emulators/can/transport.hpp"
 #include "bus_emulators/can/transport_socketcan.hpp"
 
@@ -63,11 +66,23 @@ class VcanInterface {
   bool created_ = false;
 };
 
+// True when the run asked for SocketCAN to be there (OMNITWIN_REQUIRE_VCAN=1).
+bool vcan_required() {
+  const char* v = std::getenv("OMNITWIN_REQUIRE_VCAN");
+  return v != nullptr && std::string(v) == "1";
+}
+
 TEST(SocketCanTransport, ExchangesFramesOnVcan) {
   std::string why;
-  if (!SocketCanTransport::available(&why)) GTEST_SKIP() << "skipped: " << why;
+  if (!SocketCanTransport::available(&why)) {
+    if (vcan_required()) FAIL() << "OMNITWIN_REQUIRE_VCAN=1 but " << why;
+    GTEST_SKIP() << "skipped: " << why;
+  }
   VcanInterface vcan;
-  if (vcan.name().empty()) GTEST_SKIP() << "skipped: " << vcan.why();
+  if (vcan.name().empty()) {
+    if (vcan_required()) FAIL() << "OMNITWIN_REQUIRE_VCAN=1 but " << vcan.why();
+    GTEST_SKIP() << "skipped: " << vcan.why();
+  }
 
   auto a = open_transport("socketcan:" + vcan.name());
   auto b = open_transport("socketcan:" + vcan.name());
