@@ -13,11 +13,13 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace omnitwin::twin {
 
 struct ExperimentOptions {
+  ExperimentOptions(std::string out = {}, bool quick_run = false) : out_dir(std::move(out)), quick(quick_run) {}
   std::string out_dir;  // output folder; empty: out/<name> under the working directory
   bool quick = false;   // fewer configurations and messages (tests); the same checks run
   // thesis-platform: the thesis-line scenario to run (default: models/scenarios/

@@ -683,7 +683,11 @@ int main(int argc, char** argv) {
     }
     if (*echo) return cmd_echo(eo);
     if (*model) return cmd_model(model_scenario, model_variant, model_out);
-    if (*experiment) return run_experiment(exp_name, ExperimentOptions{exp_out, exp_quick, exp_model, exp_budget});
+    if (*experiment) {
+      ExperimentOptions eo(exp_out, exp_quick);
+      eo.model = exp_model, eo.budget = exp_budget;
+      return run_experiment(exp_name, eo);
+    }
   } catch (const std::exception& e) {
     // Anything not handled closer to its cause is a runtime failure, never an abort.
     std::cerr << "omnitwin: " << e.what() << "\n";
