@@ -26,14 +26,30 @@ namespace {
 // ---------------------------------------------------------------------------------------
 // Small helpers
 
+// `text` with control characters written as \xHH, so an error message stays one line
+// whatever bytes a bad file put into it (a YAML parser quotes the character it choked on).
+std::string one_line(const std::string& text) {
+  std::string out;
+  for (const char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f) out += fmt::format("\\x{:02x}", u);
+    else out += c;
+  }
+  return out;
+}
+
 std::string format_error(const std::string& file, int line, const std::string& key,
                          const std::string& message) {
-  std::string out = file;
+  std::string out = one_line(file);
   if (line > 0) out += fmt::format(":{}", line);
   out += ": ";
-  if (!key.empty()) out += key + ": ";
-  return out + message;
+  if (!key.empty()) out += one_line(key) + ": ";
+  return out + one_line(message);
 }
+
+// The longest run a scenario may ask for [s]: 11.6 days simulated. Anything longer is a typo
+// (a duration of 1e308 s would run until someone kills it), not a soak.
+constexpr double kMaxRunSeconds = 1e6;
 
 std::vector<std::string> split_key(const std::string& key) {
   const auto views = split_dots(key);
@@ -622,7 +638,7 @@ PathSegment read_segment(const YamlField& item) {
     seg.radius = v.required("radius").number(Bounds::positive());
     read_bool(v, "ccw", seg.ccw);
   }
-  seg.duration = v.required("duration").number(Bounds::positive());
+  seg.duration = v.required("duration").number(Bounds::open_closed(0, kMaxRunSeconds));
   return seg;
 }
 
@@ -848,14 +864,17 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   }
   s.controller = read_controller(root["controller"]);
   s.path = read_path(root["path"]);
-  read_number(root, "settle", s.settle, Bounds::non_negative());
+  read_number(root, "settle", s.settle, Bounds::closed(0, kMaxRunSeconds));
   s.duration = path_duration(s.path) + s.settle;
   if (s.bus.kind == BusKind::ethercat) s.duration += s.bus.ethercat.startup;
   if (s.bus.kind == BusKind::m3) s.duration += s.bus.m3.startup;
   if (s.bus.kind == BusKind::canopen) s.duration += s.bus.canopen.startup;
   if (s.bus.kind == BusKind::tml) s.duration += s.bus.tml.startup;
-  read_number(root, "duration", s.duration, Bounds::positive());
+  read_number(root, "duration", s.duration, Bounds::open_closed(0, kMaxRunSeconds));
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
+  if (s.duration > kMaxRunSeconds)
+    root.fail(fmt::format("the run would last {:g} s; at most {:g} s (11.6 days) can be simulated", s.duration,
+                          kMaxRunSeconds));
   for (const auto& item : root["faults"].elements()) {
     s.faults.push_back(read_fault(item, s.bus));
     check_fault_timing(item, s.faults, s.duration);

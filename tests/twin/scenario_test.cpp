@@ -4,10 +4,12 @@
 // input throws a ScenarioError with exactly the right file, line and key.
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <string>
 #include <vector>
 
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
@@ -264,6 +266,37 @@ TEST(ScenarioErrors, DriverGainErrorsNeedFourValuesWithinHalf) {
   EXPECT_NE(std::string(few.what()).find("gain_error"), std::string::npos) << few.what();
   const auto big = load_error(scenario("minimal.yaml"), {{"platform.driver.gain_error", "[0.1, 0.1, 0.6, 0]"}});
   EXPECT_NE(std::string(big.what()).find("gain_error"), std::string::npos) << big.what();
+}
+
+TEST(ScenarioErrors, AControlCharacterFromTheFileStaysOutOfTheOneLineMessage) {
+  // Found by the scenario mutants: yaml-cpp quotes the character it choked on, and a newline
+  // there split the CLI's one-line error in two (binary garbage). Control characters are
+  // written as \xHH.
+  omnitwin::testing::TempDir dir("omnitwin-scenario");
+  const std::string path = (dir.path() / "escape.yaml").string();
+  {
+    std::ofstream f(path, std::ios::binary);
+    f << "name: \"a\\\x01\"\n" << "bus: direct\n";  // an escape yaml-cpp does not know
+  }
+  const auto e = load_error(path);
+  const std::string m = e.what();
+  EXPECT_EQ(m.find('\x01'), std::string::npos) << m;
+  EXPECT_NE(m.find("\\x01"), std::string::npos) << m;
+}
+
+TEST(ScenarioErrors, ARunLongerThanElevenDaysIsATypoNotASoak) {
+  // Found by the scenario mutants: settle 1e308 loaded and would have run until killed.
+  for (const Override& o : std::vector<Override>{{"settle", "1e308"},
+                                                 {"duration", "2e6"},
+                                                 {"path.segments.0.line.duration", "1e308"}}) {
+    const auto e = load_error(scenario("minimal.yaml"), {o});
+    EXPECT_NE(std::string(e.what()).find(o.key), std::string::npos) << e.what();
+  }
+  // Many segments, each allowed, that add up to too much.
+  std::vector<Override> long_path{{"settle", "9e5"}, {"path.segments.0.line.duration", "9e5"}};
+  const auto e = load_error(scenario("minimal.yaml"), long_path);
+  EXPECT_NE(std::string(e.what()).find("at most 1e+06 s"), std::string::npos) << e.what();
+  EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"duration", "3600"}}));  // an hour's soak
 }
 
 TEST(ScenarioErrors, ElectricalLagShorterThanTheStepIsRefused) {
