@@ -90,6 +90,7 @@ struct RunArgs {
   bool no_video = false;
   bool no_report = false;
   bool dds = false;
+  bool loopback = false;         // --loopback: nothing leaves this machine (confine_to_loopback)
   std::string master_cmd;        // --master-cmd "PROGRAM ARGS…"
 };
 
@@ -233,7 +234,8 @@ void print_summary(const RunResult& r) {
 
 int cmd_run(const RunArgs& a) {
   try {
-    const Scenario s = load_scenario(a.scenario, collect_overrides(a));
+    Scenario s = load_scenario(a.scenario, collect_overrides(a));
+    if (a.loopback) confine_to_loopback(s);
     RunOptions o;
     o.out_dir = a.out.empty() ? (fs::path("out") / s.name).string() : a.out;
     o.progress = !a.no_progress && stderr_is_terminal();
@@ -549,6 +551,8 @@ void add_output_flags(CLI::App* cmd, RunArgs& a) {
   cmd->add_flag("--no-video", a.no_video, "no video");
   cmd->add_flag("--no-report", a.no_report, "no report.html");
   cmd->add_flag("--dds", a.dds, "publish the run on DDS (outputs.dds sets domain, interface, rate)");
+  cmd->add_flag("--loopback", a.loopback,
+                "keep everything on this machine: the bus's UDP on lo, DDS on lo (docs/reliability.md)");
 }
 
 }  // namespace

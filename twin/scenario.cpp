@@ -954,4 +954,56 @@ const char* to_string(ClockMode c) {
   return "?";
 }
 
+// ---------------------------------------------------------------------------------------
+// --loopback
+
+namespace {
+
+const char* const kLoopbackFlag = "--loopback";
+
+// True for a host that is this machine's loopback (127.0.0.0/8, ::1, localhost).
+bool loopback_host(const std::string& host) {
+  return host == "localhost" || host == "::1" || host == "[::1]" || host.rfind("127.", 0) == 0;
+}
+
+// A CAN-family UDP spec with iface=lo (refused when it names another interface).
+std::string can_spec_on_loopback(const std::string& spec, const std::string& key) {
+  if (spec.rfind("udp:", 0) != 0) return spec;  // socketcan:, mem: stay on this machine's kernel
+  const std::size_t q = spec.find('?');
+  if (q != std::string::npos) {
+    const std::string options = "&" + spec.substr(q + 1) + "&";
+    const std::size_t at = options.find("&iface=");
+    if (at != std::string::npos) {
+      const std::string iface = options.substr(at + 7, options.find('&', at + 7) - at - 7);
+      if (iface == "lo") return spec;
+      throw ScenarioError(kLoopbackFlag, 0, key, fmt::format("'{}' sends on interface {}, not lo", spec, iface));
+    }
+  }
+  return spec + (q == std::string::npos ? "?" : "&") + "iface=lo";
+}
+
+// EtherCAT / M-III: auto, veth and mem are local; udp must name a loopback host; raw is a NIC.
+void check_ethernet_spec(const std::string& spec, const std::string& key) {
+  if (spec == "auto" || spec == "veth" || spec.rfind("mem:", 0) == 0) return;
+  if (spec.rfind("udp:", 0) == 0) {
+    const std::string rest = spec.substr(4);
+    const std::string host = rest.substr(0, rest.rfind(':'));
+    if (loopback_host(host)) return;
+    throw ScenarioError(kLoopbackFlag, 0, key, fmt::format("'{}' reaches host {}, not this machine", spec, host));
+  }
+  throw ScenarioError(kLoopbackFlag, 0, key, fmt::format("'{}' puts frames on a network interface", spec));
+}
+
+}  // namespace
+
+void confine_to_loopback(Scenario& s) {
+  s.bus.can.transport = can_spec_on_loopback(s.bus.can.transport, "bus.transport");
+  if (s.bus.kind == BusKind::ethercat) check_ethernet_spec(s.bus.ethercat.transport, "bus.transport");
+  if (s.bus.kind == BusKind::m3) check_ethernet_spec(s.bus.m3.transport, "bus.transport");
+  if (!s.outputs.dds.config_file.empty())
+    throw ScenarioError(kLoopbackFlag, 0, "outputs.dds.config",
+                        "a Cyclone DDS configuration file names its own interfaces; drop it or --loopback");
+  s.outputs.dds.interface = "lo";
+}
+
 }  // namespace omnitwin::twin

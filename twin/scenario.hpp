@@ -318,6 +318,15 @@ struct Override {
   std::string value;
 };
 
+// `omnitwin run --loopback`: confines everything a run puts on the network to this machine.
+// CAN-family buses over UDP get iface=lo (their multicast joins and leaves on loopback only);
+// EtherCAT and M-III keep auto/veth/mem (local by construction) and UDP to a loopback host;
+// DDS publishes on lo. The sim clock is an abstract Unix socket and never leaves the machine.
+// Throws ScenarioError (key: the setting) for what cannot be confined: a UDP transport bound
+// to another interface or host, a raw Ethernet interface, a DDS configuration file (it names
+// its own interfaces).
+void confine_to_loopback(Scenario& s);
+
 // Loads, merges (parameter file ← scenario platform section ← overrides) and validates.
 // Throws ScenarioError on any problem. Not real-time safe (file I/O).
 Scenario load_scenario(const std::string& path, const std::vector<Override>& overrides = {});

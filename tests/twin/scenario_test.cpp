@@ -299,6 +299,44 @@ TEST(ScenarioErrors, ARunLongerThanElevenDaysIsATypoNotASoak) {
   EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"duration", "3600"}}));  // an hour's soak
 }
 
+TEST(ScenarioLoopback, CanOverUdpIsPutOnLoAndOtherInterfacesAreRefused) {
+  Scenario s = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}});
+  confine_to_loopback(s);
+  EXPECT_EQ(s.bus.can.transport, "udp:239.74.163.2:43113?iface=lo");
+  EXPECT_EQ(s.outputs.dds.interface, "lo");
+  Scenario t = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"bus.transport", "udp:239.74.163.2:1?ttl=1"}});
+  confine_to_loopback(t);
+  EXPECT_EQ(t.bus.can.transport, "udp:239.74.163.2:1?ttl=1&iface=lo");
+  confine_to_loopback(t);  // already confined: unchanged
+  EXPECT_EQ(t.bus.can.transport, "udp:239.74.163.2:1?ttl=1&iface=lo");
+  Scenario v = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"bus.transport", "socketcan:vcan0"}});
+  confine_to_loopback(v);
+  EXPECT_EQ(v.bus.can.transport, "socketcan:vcan0");  // a kernel CAN interface, not the network
+  Scenario e = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"bus.transport", "udp:239.1.2.3:5?iface=eth0"}});
+  try {
+    confine_to_loopback(e);
+    ADD_FAILURE() << "iface=eth0 was confined";
+  } catch (const ScenarioError& err) {
+    EXPECT_EQ(err.key(), "bus.transport");
+    EXPECT_NE(std::string(err.what()).find("eth0"), std::string::npos) << err.what();
+  }
+}
+
+TEST(ScenarioLoopback, EthernetBusesMustStayLocalAndADdsFileIsRefused) {
+  for (const char* ok : {"auto", "veth", "udp:127.0.0.1:34980", "udp:localhost:34980"}) {
+    Scenario s = load_scenario(scenario("minimal.yaml"), {{"bus", "ethercat"}, {"bus.transport", ok}});
+    EXPECT_NO_THROW(confine_to_loopback(s)) << ok;
+  }
+  Scenario far = load_scenario(scenario("minimal.yaml"), {{"bus", "m3"}, {"bus.transport", "udp:10.0.0.2:34980"}});
+  EXPECT_THROW(confine_to_loopback(far), ScenarioError);
+  Scenario raw = load_scenario(scenario("minimal.yaml"),
+                               {{"bus", "ethercat"}, {"bus.transport", "raw:eth0"}, {"bus.master_iface", "eth1"}});
+  EXPECT_THROW(confine_to_loopback(raw), ScenarioError);
+  Scenario dds = load_scenario(scenario("minimal.yaml"));
+  dds.outputs.dds.config_file = "cyclone.xml";
+  EXPECT_THROW(confine_to_loopback(dds), ScenarioError);
+}
+
 TEST(ScenarioErrors, ElectricalLagShorterThanTheStepIsRefused) {
   const auto e = load_error(scenario("minimal.yaml"), {{"platform.motor.electrical_tau", "0.0005"}});
   EXPECT_NE(std::string(e.what()).find("motor.electrical_tau"), std::string::npos) << e.what();
