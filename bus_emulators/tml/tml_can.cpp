@@ -46,6 +46,9 @@ CanStatus encode_take_data(const Message& m, can::Frame& out) {
   const std::uint16_t sender = m.data[0];
   const std::uint8_t axis = id_of(sender);
   if (!axis_ok(axis) || is_group(sender)) return CanStatus::axis_out_of_range;
+  // The layout carries the axis and the HOST bit, nothing else: a sender code with other bits
+  // set would come back as another code (fuzz.tml_decode: 0x2124 came back as 0x0120).
+  if (sender != axis_id_code(axis, is_host(sender))) return CanStatus::bad_identifier;
   out = data_frame(techcan::take_data_base + axis, false);
   out.data[0] = lo(m.opcode);
   out.data[1] = static_cast<std::uint8_t>((axis & 0x1F) << 3 | (is_host(sender) ? 0x04 : 0) | (m.opcode >> 8 & 0x03));

@@ -140,6 +140,22 @@ TEST(TechCan, SyncOpcodeWithDataStaysABroadcast) {
   EXPECT_EQ(g, can::make_data(0x020, {}));
 }
 
+// Found by fuzz.tml_decode (fuzz/corpus/tml_decode/techcan-takedata-sender-0x2124): a TakeData
+// whose sender word is no axis ID code (0x2124: bits beyond the axis and HOST bit) cannot be
+// packed into the TakeData layout, which would send it back as 0x0120; it is refused as a bad
+// identifier, like a sender axis TechCAN cannot address.
+TEST(TechCan, ATakeDataSenderThePackedLayoutCannotCarryIsRefused) {
+  TechCanMessage t;
+  ASSERT_EQ(decode_techcan(can::make_data(0x001, {0x04, 0xB4, 0x24, 0x21}), t), CanStatus::ok);
+  can::Frame g;
+  EXPECT_EQ(encode_techcan(t.message, g), CanStatus::bad_identifier);
+  Message odd = take_data(axis_id_code(3), axis_id_code(5), 0x022A, 2, false);
+  odd.data[0] = 0x2124;
+  EXPECT_EQ(encode_techcan(odd, g), CanStatus::bad_identifier);
+  odd.data[0] = axis_id_code(5, true);  // the HOST bit is carried
+  EXPECT_EQ(encode_techcan(odd, g), CanStatus::ok);
+}
+
 TEST(TechCan, GoldenTakeData2WithMer) {
   // The seed prints byte 3 as 40h; MER = 0x0008 makes it 08h.
   expect_techcan(take_data2(master_id(3), 2, 0x08FC, 0x0008, false), 0x102, {0x00, 0xFC, 0x08, 0x08, 0x00},
