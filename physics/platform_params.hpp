@@ -57,7 +57,7 @@ struct FloorParams {
 // of electrical_tau (armature L/R and the amplifier's current loop); with the wheel's
 // reflected inertia J the loop's mechanical time constant is τm = J/kv (J ≈ armature plus
 // the platform's share, ≈ 0.03 kg·m² here, so τm ≈ 15 ms at kv = 2). The gearbox adds dry
-// friction (friction_torque) and lost motion (backlash is not modelled).
+// friction (friction_torque) and lost motion (backlash).
 struct MotorParams {
   double kv = 2.0;              // velocity-servo gain of the amplifier+motor [N·m·s/rad]
   double electrical_tau = 0.002;  // setpoint → torque lag [s]; 0 = none, else >= sim.timestep

@@ -125,6 +125,12 @@ Result average(const std::vector<Result>& ts) {
 
 std::string plain_scenario() { return std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line.yaml"; }
 std::string fitted_scenario() { return std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line_fitted.yaml"; }
+std::string source_relative(const fs::path& p) {
+  const fs::path source = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal();
+  const std::string rel = fs::absolute(p).lexically_normal().lexically_relative(source).string();
+  return !rel.empty() && rel.rfind("..", 0) != 0 ? rel : "";
+}
+
 std::string default_scenario() { return fs::exists(fitted_scenario()) ? fitted_scenario() : plain_scenario(); }
 
 }  // namespace omnitwin::twin::thesis

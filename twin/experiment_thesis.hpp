@@ -25,6 +25,10 @@ struct Row {
 const std::array<Row, 4>& rows();
 const Row& row(int rate_kbps);  // throws std::logic_error for a rate the thesis did not run
 
+// The one configuration thesis-calibrate fits (no sync, fast clocks) is at this bit rate; every
+// other row of the tables is a prediction.
+constexpr int kFitRateKbps = 1000;
+
 // One reading of the slaves' oscillators.
 struct ClockReading {
   std::string name;       // "fast" / "slow"
@@ -60,7 +64,7 @@ struct RunSetup {
   std::vector<Override> overrides;  // applied after the configuration's own
   std::filesystem::path dir;        // run folders go under it
   bool quick = false;               // 40 cm in 4 s instead of 200 cm in 20 s
-  bool records = true;              // false: no video, report, pcap-free figures only
+  bool records = true;              // false: no video and no report (the figures need neither)
 };
 
 // One run of clock reading `clock` at `rate_kbps`, with or without sync; trial t draws the
@@ -74,5 +78,9 @@ Result average(const std::vector<Result>& trials);
 std::string default_scenario();
 std::string plain_scenario();   // models/scenarios/thesis_line.yaml
 std::string fitted_scenario();  // models/scenarios/thesis_line_fitted.yaml (thesis-calibrate)
+
+// `p` relative to the source tree when it lies inside it (how the committed files name each
+// other), else "".
+std::string source_relative(const std::filesystem::path& p);
 
 }  // namespace omnitwin::twin::thesis

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <iostream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -225,9 +226,8 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
                        best.figures.thesis[k], best.figures.ours[k] / best.figures.thesis[k]);
   }
   // The model's path as a reader of the repository sees it (relative inside the source tree).
-  const fs::path source = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal();
-  const std::string rel = fs::absolute(model_path).lexically_normal().lexically_relative(source).string();
-  const std::string shown = !rel.empty() && rel.rfind("..", 0) != 0 ? rel : model_path;
+  const std::string rel = thesis::source_relative(model_path);
+  const std::string shown = rel.empty() ? model_path : rel;
   out << "\nThe fitted scenario: `" << shown << "`. The held-out configurations are judged by "
       << "`omnitwin experiment thesis-platform` (docs/results/thesis-platform/). The trace of every evaluation "
          "is thesis_calibrate.csv beside this file.\n";
@@ -246,7 +246,6 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   thesis::RunSetup setup{thesis::plain_scenario(), {}, dir / "runs", options.quick, false};
   std::vector<Evaluation> evals;
   int runs = 0;  // each run its own UDP port, 46200 … 46799 (no test or scenario uses them)
-  bool failed = false;
   // One evaluation: the fitted configuration's trials at box point u.
   auto f = [&](const std::vector<double>& u) {
     Evaluation e;
@@ -254,11 +253,13 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     setup.overrides = overrides_of(e.values, phi_kp, phi_ki);
     std::vector<thesis::Result> ts;
     for (int t = 0; t < trials; ++t) {
-      ts.push_back(thesis::run_one(setup, fast, 1000, false, t, 46200 + runs++ % 600));
-      failed = failed || ts.back().exit_code == 3;
+      ts.push_back(thesis::run_one(setup, fast, thesis::kFitRateKbps, false, t, 46200 + runs++ % 600));
+      // A failed run ends the search (run_experiment reports it, exit 3): its figures mean nothing.
+      if (ts.back().exit_code == 3)
+        throw std::runtime_error("a run failed (see " + ts.back().run_dir + ")");
     }
     e.figures = figures_of(thesis::average(ts));
-    e.j = failed ? 1e3 : objective(e.figures);
+    e.j = objective(e.figures);
     evals.push_back(e);
     std::cout << fmt::format(
         "  {:3} J {:8.4f}  kp {:.3g} ki {:.3g} | vkp {:.3g} vki {:.3g} | band {:.3g} V friction "
@@ -270,21 +271,15 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   std::vector<double> u0;
   for (const FreeParameter& p : free_parameters()) u0.push_back(p.unit_of(p.start));
   const NelderMeadResult r = nelder_mead(f, u0, NelderMeadOptions{budget, 0.25, 1e-3});
-  if (failed) {
-    std::cerr << "thesis-calibrate: a run failed (see " << (dir / "runs").string() << ")\n";
-    return kExperimentRuntimeError;
-  }
   const auto best = std::min_element(evals.begin(), evals.end(), [](auto& a, auto& b) { return a.j < b.j; });
   const std::string model = !options.model.empty() ? options.model
                             : options.quick        ? (dir / "thesis_line_fitted.yaml").string()
                                                    : thesis::fitted_scenario();
   // The platform file: relative inside the source tree (the committed fit), absolute elsewhere.
-  const fs::path source = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal();
-  const fs::path platform = source / "models/platform/omni4.yaml";
+  const fs::path platform = fs::path(OMNITWIN_SOURCE_DIR).lexically_normal() / "models/platform/omni4.yaml";
   const fs::path folder = fs::absolute(model).parent_path().lexically_normal();
-  const std::string inside = folder.lexically_relative(source).string();
-  const bool in_tree = !inside.empty() && inside.rfind("..", 0) != 0;
-  const std::string params = in_tree ? platform.lexically_relative(folder).string() : platform.string();
+  const std::string params =
+      thesis::source_relative(folder).empty() ? platform.string() : platform.lexically_relative(folder).string();
   experiment::write_text(model,
                          fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params));
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));

@@ -42,15 +42,13 @@ namespace fs = std::filesystem;
 using thesis::ClockReading;
 using thesis::Result;
 
-const thesis::Row& thesis_row(int rate_kbps) { return thesis::row(rate_kbps); }
-
 // Runs per configuration, each with its own random start phases of the slaves' timers.
 constexpr int kTrials = 5;
 
-// The configuration thesis-calibrate fits (fast clocks, 1000 kbit/s, no sync); every other one
-// is a prediction.
+// The configuration thesis-calibrate fits (fast clocks, thesis::kFitRateKbps, no sync); every
+// other one is a prediction.
 bool is_fit_row(const Result& r, const std::string& fast) {
-  return r.clock.name == fast && r.rate_kbps == 1000 && !r.sync;
+  return r.clock.name == fast && r.rate_kbps == thesis::kFitRateKbps && !r.sync;
 }
 
 std::string to_csv(const std::vector<Result>& rs) {
@@ -60,7 +58,7 @@ std::string to_csv(const std::vector<Result>& rs) {
       "axis_iae_min_pulse,axis_iae_max_pulse,axis_std_pulse,dropout_pct,stale_samples,bus_load_pct,"
       "thesis_iae_x_cm,thesis_iae_y_cm,thesis_iae_contour_cm,thesis_axis_iae_pulse\n";
   for (const Result& r : rs) {
-    const auto& tv = r.sync ? thesis_row(r.rate_kbps).sync : thesis_row(r.rate_kbps).nosync;
+    const auto& tv = r.sync ? thesis::row(r.rate_kbps).sync : thesis::row(r.rate_kbps).nosync;
     s += fmt::format(
         "{},{},{},{},{},{},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.5f},{:.5f},{:.5f},{:.4f},{:.5f},{:.3f},{:.3f},{:.3f},"
         "{:.5f},{:.3f},{:.1f},{:.3f},{},{},{},{}\n",
@@ -96,7 +94,7 @@ std::vector<Effect> effects(const std::vector<Result>& rs, const std::string& cl
     const Result& a = rs[i];
     const Result& b = rs[i + 1];
     if (a.clock.name != clock) continue;
-    const thesis::Row& t = thesis_row(a.rate_kbps);
+    const thesis::Row& t = thesis::row(a.rate_kbps);
     Effect e;
     e.rate_kbps = a.rate_kbps;
     e.without = &a, e.with = &b;
@@ -157,7 +155,7 @@ std::string run_table(const std::vector<Result>& rs) {
          "axis σ | dropouts | loops skipped | bus load | thesis IAE x / y / contour | thesis axis IAE |\n"
       << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const Result& r : rs) {
-    const auto& tv = r.sync ? thesis_row(r.rate_kbps).sync : thesis_row(r.rate_kbps).nosync;
+    const auto& tv = r.sync ? thesis::row(r.rate_kbps).sync : thesis::row(r.rate_kbps).nosync;
     out << fmt::format("| {} | {} | {} | {:.1f} | {:.1f} | {:.1f} [{:.1f} … {:.1f}] | {:.3f} | {:.1f} [{:.1f} … {:.1f}] | "
                        "{:.3f} | {:.1f} % | {:.1f} | {:.1f} % | {} / {} / {} | {} |\n",
                        r.clock.name, r.rate_kbps, r.sync ? fmt::format("K = {}", r.clock.sync_interval) : "no",
@@ -236,7 +234,7 @@ std::string time_csv(const std::vector<Result>& rs, const std::string& clock, in
 
 // ours / thesis for X, Y, contour and axis IAE of one configuration.
 std::array<double, 4> ratios(const Result& r) {
-  const auto& t = r.sync ? thesis_row(r.rate_kbps).sync : thesis_row(r.rate_kbps).nosync;
+  const auto& t = r.sync ? thesis::row(r.rate_kbps).sync : thesis::row(r.rate_kbps).nosync;
   return {r.iae_x / t[0], r.iae_y / t[1], r.iae_c / t[2], r.axis_iae / t[3]};
 }
 

@@ -96,7 +96,7 @@ inline std::vector<KeyLine> key_lines(const std::vector<std::string>& lines) {
   std::vector<KeyLine> out;
   for (std::size_t i = 0; i < lines.size(); ++i) {
     std::smatch m;
-    if (!std::regex_match(lines[i], m, kv) || lines[i].find('#') == 0) continue;
+    if (!std::regex_match(lines[i], m, kv)) continue;  // comments and list items without a key
     out.push_back({i, static_cast<std::size_t>(m.position(3)), static_cast<std::size_t>(m.length(1))});
   }
   return out;

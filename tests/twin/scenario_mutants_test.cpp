@@ -9,6 +9,7 @@
 // cli_scenario_mutants_slow_test.cpp (label slow).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -68,7 +69,8 @@ TEST_F(ScenarioMutants, EveryMutantLoadsOrIsRefusedWithOneLineNamingTheFile) {
   EXPECT_GE(refusals.size(), 700u);
   for (const auto& [kind, n] : refused) std::cout << kind << ": " << n << " refused, " << loaded[kind] << " loaded\n";
   // A sample through the CLI: exit 2, the same one line on stderr, nothing on stdout, no run dir.
-  for (std::size_t i = 0; i < refusals.size(); i += refusals.size() / 40) {
+  const std::size_t step = std::max<std::size_t>(1, refusals.size() / 40);
+  for (std::size_t i = 0; i < refusals.size(); i += step) {
     const auto& [file, message] = refusals[i];
     const fs::path out = work() / "runs" / file.stem();
     const cli::Finished r = run({"run", file.string(), "--out", out.string(), "--no-progress"});
