@@ -261,8 +261,10 @@ void Esc::after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_i
 void Esc::al_control_written(SimTime t) {
   const AlDecision d = al_decide(state_, error_, read16(reg::kAlControl));
   if (d.clear_error) {
+    const bool was = error_;
     error_ = false;
     code_ = AlStatusCode::none;
+    if (was && app_ != nullptr) app_->on_al_error_cleared(state_, t);
   }
   switch (d.transition) {
     case AlTransition::ignored:
@@ -300,11 +302,22 @@ void Esc::enter_state(AlState s, SimTime t) {
   update_al_registers();
 }
 
-void Esc::set_al_error(AlState fall_to, AlStatusCode code) {
+void Esc::set_al_error(AlState fall_to, AlStatusCode code, SimTime t) {
+  const AlState from = state_;
   if (al_rank(fall_to) < al_rank(state_)) state_ = fall_to;
   error_ = true;
   code_ = code;
   update_al_registers();
+  if (state_ != from && app_ != nullptr) app_->on_al_fallback(from, state_, code, t);
+}
+
+void Esc::set_sm_deactivated(int i, bool off) {
+  if (i < 0 || i >= cfg_.sync_managers) return;
+  auto& u = sms_[static_cast<std::size_t>(i)];
+  if (u.reg.pdi_deactivated() == off) return;
+  u.reg.pdi_control = static_cast<std::uint8_t>(off ? (u.reg.pdi_control | 0x01) : (u.reg.pdi_control & ~0x01));
+  u.reset();  // buffers start afresh either way
+  update_sm_registers(i);
 }
 
 // ---- time -------------------------------------------------------------------------------------
@@ -316,7 +329,7 @@ void Esc::watchdog_check(SimTime t) {
   int trigger_sm = -1;
   for (int i = 0; i < cfg_.sync_managers; ++i) {
     const auto& r = sms_[static_cast<std::size_t>(i)].reg;
-    if (r.enabled && r.buffered() && r.ecat_writes() && r.watchdog_trigger()) {
+    if (r.active() && r.buffered() && r.ecat_writes() && r.watchdog_trigger()) {
       trigger_sm = i;
       break;
     }
@@ -331,7 +344,7 @@ void Esc::watchdog_check(SimTime t) {
   const auto& r = sms_[static_cast<std::size_t>(trigger_sm)].reg;
   const std::size_t end = std::min<std::size_t>(mem_.size(), static_cast<std::size_t>(r.start) + 3u * r.length);
   if (r.start < end) std::fill(mem_.begin() + r.start, mem_.begin() + static_cast<std::ptrdiff_t>(end), 0);
-  set_al_error(AlState::safeop, AlStatusCode::watchdog);
+  set_al_error(AlState::safeop, AlStatusCode::watchdog, t);
 }
 
 void Esc::advance(SimTime t) noexcept {
@@ -384,7 +397,7 @@ SimTime Esc::next_event_time() const noexcept {
     bool armed = false;
     for (int i = 0; i < cfg_.sync_managers; ++i) {
       const auto& r = sms_[static_cast<std::size_t>(i)].reg;
-      if (r.enabled && r.buffered() && r.ecat_writes() && r.watchdog_trigger()) armed = true;
+      if (r.active() && r.buffered() && r.ecat_writes() && r.watchdog_trigger()) armed = true;
     }
     if (armed && wd_time != 0) {
       const std::int64_t limit = static_cast<std::int64_t>(wd_time) * (read16(reg::kWatchdogDivider) + 2) * 40;

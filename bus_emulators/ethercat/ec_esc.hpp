@@ -32,7 +32,8 @@
 //
 // Model choices: all datagrams of a frame reach one ESC at the same time t (the frame's arrival);
 // logical writes do not trigger register side effects (FMMUs map RAM); the AL watchdog reaction
-// (OP → SAFE-OP + 0x001B, outputs zeroed) is done here rather than by the firmware; the SM0
+// (OP → SAFE-OP + 0x001B, outputs zeroed) is done here rather than by the firmware, which is told
+// through EscApplication::on_al_fallback; the SM0
 // mailbox is read by the firmware (emptied) right after on_mailbox returns.
 #pragma once
 
@@ -81,6 +82,12 @@ class EscApplication {  // the slave firmware behind the PDI (ethercat/device im
   // The master completed a write of the SM2 (outputs) buffer.
   virtual void on_outputs(std::span<const std::uint8_t> outputs, SimTime t) = 0;
   virtual void on_sync0(SimTime /*t*/) {}  // a SYNC0 pulse (DC active)
+  // The AL state fell from `from` to `to` with the error bit and `code` without a master request
+  // (the process-data watchdog, or Esc::set_al_error). The firmware reacts as on a requested
+  // step down (stops applying outputs, deactivates its output SM).
+  virtual void on_al_fallback(AlState /*from*/, AlState /*to*/, AlStatusCode /*code*/, SimTime /*t*/) {}
+  // The master acknowledged the error bit (0x0120 bit 4) while in `state`; the error is cleared.
+  virtual void on_al_error_cleared(AlState /*state*/, SimTime /*t*/) {}
   virtual void on_sync1(SimTime /*t*/) {}  // a SYNC1 pulse (SYNC1 active)
 };
 
@@ -122,7 +129,13 @@ class Esc {
   AlState al_state() const { return state_; }
   AlStatusCode al_status_code() const { return code_; }
   bool al_error() const { return error_; }
-  void set_al_error(AlState fall_to, AlStatusCode code);  // firmware-detected error (e.g. sync)
+  // Firmware-detected error (e.g. sync): the error bit, `code`, and a fall to `fall_to` when
+  // that is below the current state (the application's on_al_fallback is then called).
+  void set_al_error(AlState fall_to, AlStatusCode code, SimTime t = 0);
+  // PDI control 0x0807 + 8·sm bit 0: the firmware deactivates (true) or reactivates SM `sm`.
+  // A deactivated SM refuses every ECAT access to its area (no WKC) and, if it triggers the
+  // watchdog, no longer arms it; reactivation starts its buffers afresh (no complete buffer).
+  void set_sm_deactivated(int sm, bool deactivated);
   std::uint16_t station_address() const { return read16(0x0010); }
   std::uint16_t alias() const { return read16(0x0012); }
   std::uint8_t read8(std::uint16_t reg) const;

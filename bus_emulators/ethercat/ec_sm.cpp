@@ -29,6 +29,7 @@ void SmUnit::reset() {
 }
 
 bool SmUnit::ecat_allowed(bool write, bool pd_active) const {
+  if (reg.pdi_deactivated()) return false;
   if (reg.mailbox()) {
     if (reg.ecat_writes()) return write && !full_;
     return !write && full_;

@@ -25,6 +25,10 @@ struct SyncManager {
   bool buffered() const { return (control & 0x03) == 0x00; }
   bool ecat_writes() const { return (control & 0x0C) == 0x04; }
   bool watchdog_trigger() const { return (control & 0x40) != 0; }
+  // 0x0807 bit 0: the PDI (the firmware) deactivated this SM; the ECAT side sees it enabled in
+  // 0x0806 but every access to its area is refused (no data, no WKC).
+  bool pdi_deactivated() const { return (pdi_control & 0x01) != 0; }
+  bool active() const { return enabled && !pdi_deactivated(); }
   bool overlaps(std::uint32_t a, std::uint32_t n) const {
     return length != 0 && a < static_cast<std::uint32_t>(start) + length && start < a + n;
   }

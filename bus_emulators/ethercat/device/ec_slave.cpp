@@ -100,6 +100,7 @@ DriveSlave::DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& co
   EscConfig ec = cfg_.esc;
   ec.sii = build_sii(desc_, cfg_.alias, cfg_.serial);
   esc_ = std::make_unique<Esc>(std::move(ec), this);
+  esc_->set_sm_deactivated(sm_out_, true);  // outputs SM active in SAFE-OP (no error) and OP only
 }
 
 void DriveSlave::build_od() {
@@ -260,12 +261,14 @@ OdState DriveSlave::od_state() const {
 AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
   auto refuse = [&](AlStatusCode c) {
     ++stats_.al_refused;
+    if (from == AlState::safeop) esc_->set_sm_deactivated(sm_out_, true);  // SAFE-OP + error, as on a local error
     return c;
   };
   if (to == AlState::boot) return refuse(AlStatusCode::bootstrap_not_supported);
   if (to == AlState::init) {
     coe_->reset();
     outputs_stopped();
+    esc_->set_sm_deactivated(sm_out_, true);
     return AlStatusCode::none;
   }
   if (from == AlState::init && to == AlState::preop) {
@@ -283,6 +286,10 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
   // up (PRE-OP → SAFE-OP, SAFE-OP → OP) are refused; going down is always accepted.
   const bool up = (from == AlState::preop && to == AlState::safeop) || (from == AlState::safeop && to == AlState::op);
   if (up && esc_->dc().sync0_invalid()) return refuse(AlStatusCode::invalid_dc_sync_config);
+  if (from == AlState::safeop && to == AlState::op) {
+    esc_->set_sm_deactivated(sm_out_, false);  // the SAFE-OP + error case: the ack came with the OP request
+    return AlStatusCode::none;
+  }
   if (from == AlState::preop && to == AlState::safeop) {
     const std::size_t ob = output_bytes(), ib = input_bytes();
     const SyncManager& o = esc_->sm(sm_out_);
@@ -297,10 +304,12 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
       return refuse(AlStatusCode::invalid_output_config);
     if (app_ == SlaveApp::multiaxis) multiaxis_status();
     pack_inputs();  // inputs valid from the first SAFE-OP read
+    esc_->set_sm_deactivated(sm_out_, false);  // outputs are taken (not applied) from SAFE-OP on
     (void)t;
     return AlStatusCode::none;
   }
   if (to == AlState::preop || to == AlState::safeop) outputs_stopped();
+  if (to == AlState::preop) esc_->set_sm_deactivated(sm_out_, true);
   return AlStatusCode::none;
 }
 
@@ -316,6 +325,17 @@ void DriveSlave::on_outputs(std::span<const std::uint8_t> /*outputs*/, SimTime /
 
 void DriveSlave::on_sync0(SimTime t) { firmware(t); }
 
+// A local error (the watchdog) dropped the slave: outputs stop and SM2 is deactivated, so the
+// master's WKC shows it; the acknowledge of the error activates SM2 again (on_al_error_cleared).
+void DriveSlave::on_al_fallback(AlState /*from*/, AlState /*to*/, AlStatusCode /*code*/, SimTime /*t*/) {
+  outputs_stopped();
+  esc_->set_sm_deactivated(sm_out_, true);
+}
+
+void DriveSlave::on_al_error_cleared(AlState state, SimTime /*t*/) {
+  if (state == AlState::safeop || state == AlState::op) esc_->set_sm_deactivated(sm_out_, false);
+}
+
 // SYNC0 activated and accepted by the ESC (an invalid cycle gives no pulses: free run instead).
 bool DriveSlave::sync0_driven() const { return (esc_->read8(0x0981) & 0x03) == 0x03 && !esc_->dc().sync0_invalid(); }
 
@@ -326,6 +346,7 @@ void DriveSlave::cycle(SimTime t) noexcept {
 
 void DriveSlave::power_cycle(SimTime t) {
   esc_->power_cycle(t);
+  esc_->set_sm_deactivated(sm_out_, true);
   coe_->reset();
   for (auto& a : axes_) a->power_cycle();
   od_.restore_defaults();

@@ -20,11 +20,19 @@
 //                     length = RxPDO bytes, else 0x001D; SM3 likewise for TxPDO bytes, else 0x001E
 //                     (a direction with 0 bytes may be disabled). The process-data layout is
 //                     fixed here.
-//   SAFE-OP → OP      accepted; outputs are applied from then on.
+//   SAFE-OP → OP      accepted; the Outputs SM (SM2) is activated and outputs are applied from
+//                     its first complete buffer on.
 //   → SAFE-OP / OP    (steps up only) refused with 0x0030 invalid DC SYNC configuration while
 //                     SYNC0 is activated with a cycle the ESC refuses (DcClock::sync0_invalid).
 //   → INIT / PRE-OP   CoE transfers dropped (INIT), outputs no longer applied, axes' controlwords
-//                     set to 0 (the drives disable), as a real drive does when outputs stop.
+//   / SAFE-OP         set to 0 (the drives disable), as a real drive does when outputs stop.
+// The Outputs SM (SM2) is deactivated by the firmware (PDI control 0x0807 bit 0) as the common
+// slave stack (Beckhoff's SSC) does it: off in INIT and PRE-OP, on from PRE-OP → SAFE-OP (the
+// master's outputs are taken, not applied, in SAFE-OP), on in OP, and OFF when a local error —
+// the ESC's process-data watchdog — drops the slave to SAFE-OP + error (on_al_fallback), until
+// the master acknowledges the error (on_al_error_cleared). So a master supervising by WKC alone
+// sees a watchdog trip: 4 slaves × (2 + 1) = 12 in SAFE-OP and OP, one slave in SAFE-OP + error
+// takes 2 away. docs/protocols/ethercat-states.md has the table, state by state.
 // The firmware cycle (cycle(t), or on_sync0(t) while DC SYNC0 is active): pending CoE replies
 // posted to SM1; in OP the last complete buffer of the ESI's Outputs SM (SM2) is unpacked into
 // the OD entries it maps (the axes' Objects); the cycle hook runs, if one is set (a caller may
@@ -127,6 +135,8 @@ class DriveSlave final : public EscApplication {
   void on_mailbox(std::span<const std::uint8_t> mailbox, SimTime t) override;
   void on_outputs(std::span<const std::uint8_t> outputs, SimTime t) override;
   void on_sync0(SimTime t) override;
+  void on_al_fallback(AlState from, AlState to, AlStatusCode code, SimTime t) override;
+  void on_al_error_cleared(AlState state, SimTime t) override;
 
  private:
   void build_od();

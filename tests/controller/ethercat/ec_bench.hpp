@@ -34,6 +34,7 @@ struct Bench {
   bool sent = false;
   int drop_next = 0;  // frames to lose
   int late_every = 0; // > 0: every n-th frame passes the slaves but comes back too late
+  int paused = 0;     // > 0: the master is not ticked for that many steps (a stalled master)
   std::uint64_t frames = 0;
   me::SimTime t = 0;
   me::SimTime cycle = 1'000'000;
@@ -66,7 +67,11 @@ struct Bench {
     }
     chain.advance(t);
     sent = false;
-    master->tick(t);
+    if (paused > 0) {
+      --paused;
+    } else {
+      master->tick(t);
+    }
     if (sent) {
       ++frames;
       if (drop_next > 0) {

@@ -290,6 +290,34 @@ TEST(EcMaster, SlaveFallingToSafeOpWithAnErrorIsReportedAndBroughtBack) {
   EXPECT_EQ(b.master->stats().slaves_lost, 0u);
 }
 
+// Issue 20: a master that stalls longer than the process-data watchdog (100 ms) trips every
+// drive to SAFE-OP + 0x001B. The drives' firmware deactivates their output SM then, so the next
+// cycle's WKC is 4 (inputs only) instead of 12 — a master supervising by WKC alone notices. Ours
+// reads the AL status, reports 0x001B and brings the slaves back to OP, WKC 12 again.
+TEST(EcMaster, AStalledMasterSeesTheWatchdogInTheWkcAndBringsTheSlavesBack) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int k = 0; k < 20; ++k) b.step();
+  ASSERT_EQ(b.master->stats().last_wkc, 12);
+  b.paused = 150;  // 150 ms without a frame
+  for (int k = 0; k < 150; ++k) b.step();
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(b.chain.esc(i).al_state(), omnitwin::ethercat::AlState::safeop);
+    EXPECT_EQ(b.chain.esc(i).al_status_code(), omnitwin::ethercat::AlStatusCode::watchdog);
+  }
+  b.step();  // the first cycle after the stall
+  EXPECT_EQ(b.master->stats().last_wkc, 4) << "the output SM of a slave in SAFE-OP + error takes no writes";
+  ASSERT_TRUE(b.run_until([&] { return has_event(*b.master, "AL status code 0x001B"); }, 200)) << events(*b.master);
+  ASSERT_TRUE(b.run_until([&] { return b.master->operational() && b.master->stats().last_wkc == 12; }, 5000))
+      << events(*b.master);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(b.chain.esc(i).al_state(), omnitwin::ethercat::AlState::op);
+    EXPECT_FALSE(b.chain.esc(i).al_error());
+    EXPECT_EQ(b.master->slave(i).recoveries, 1u);
+  }
+  EXPECT_GT(b.master->stats().wkc_errors, 0u);
+}
+
 TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   const auto multi = omnitwin::ethercat::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
   ASSERT_FALSE(multi.empty());
