@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include "bus_emulators/ethercat/device/ec_sii.hpp"
@@ -86,6 +87,9 @@ DriveSlave::DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& co
   }
   build_od();
   install_pdo_checks();
+  bind_sync_params(0x1C32, sync_out_);
+  bind_sync_params(0x1C33, sync_in_);
+  set_factor_objects();
   if (!build_layout(true, rx_) || !build_layout(false, tx_))
     throw EsiError(fmt::format("{}: '{}': default PDO assignment maps absent objects", desc.source, desc.name));
   in_image_.assign(kCoeMailboxMax, 0);
@@ -140,6 +144,89 @@ void DriveSlave::bind_multiaxis_axis(int a) {
   od_.bind(idx, 4, o.homing_acceleration);
   od_.bind(idx, 5, o.following_error_window);
   od_.bind(idx, 6, o.position_window);
+}
+
+// 0x1C32/0x1C33 bound to the firmware's SmSyncParams (see ec_slave.hpp), with the sync mode's
+// check and the "get cycle time" command.
+void DriveSlave::bind_sync_params(std::uint16_t index, SmSyncParams& p) {
+  OdObject* o = od_.find(index);
+  if (!o) return;  // an ESI without the object: nothing to feed
+  p.min_cycle = DcClock::kMinSyncCycleNs;
+  od_.bind(index, 1, p.sync_mode);
+  od_.bind(index, 2, p.cycle_time);
+  od_.bind(index, 3, p.shift_time);
+  od_.bind(index, 4, p.supported);
+  od_.bind(index, 5, p.min_cycle);
+  od_.bind(index, 6, p.calc_copy);
+  od_.bind(index, 8, p.get_cycle);
+  od_.bind(index, 9, p.delay);
+  od_.bind(index, 10, p.sync0_cycle);
+  od_.bind(index, 11, p.sm_missed);
+  od_.bind(index, 12, p.too_small);
+  od_.bind(index, 13, p.shift_short);
+  od_.bind(index, 32, p.sync_error);
+  o->check = [](const OdObject&, std::uint8_t sub, std::span<const std::uint8_t> data) {
+    if (sub != 1 || data.size() < 2) return SdoAbort::none;
+    const auto v = static_cast<std::uint16_t>(data[0] | (data[1] << 8));
+    return v == 0 || v == 2 ? SdoAbort::none : SdoAbort::value_range;
+  };
+  o->after_write = [this](OdObject&, std::uint8_t sub) {
+    if (sub == 1) {
+      sync_mode_written_ = true;
+      return;
+    }
+    if (sub != 8 || (sync_out_.get_cycle != 2 && sync_in_.get_cycle != 2)) return;
+    for (SmSyncParams* q : {&sync_out_, &sync_in_}) {  // one command clears both directions
+      q->sm_missed = q->too_small = q->shift_short = 0;
+      q->sync_error = 0;
+      q->get_cycle = 0;
+    }
+  };
+}
+
+// Rational approximation p/q (q ≤ 1000) of a gear ratio, for 0x6091.
+static void ratio_of(double r, std::uint32_t& p, std::uint32_t& q) {
+  p = 1;
+  q = 1;
+  double best = 1e300;
+  for (std::uint32_t d = 1; d <= 1000 && best > 1e-12; ++d) {
+    const double n = std::round(r * d);
+    if (n < 1) continue;
+    const double err = std::abs(n / d - r);
+    if (err < best) {
+      best = err;
+      p = static_cast<std::uint32_t>(n);
+      q = d;
+    }
+  }
+}
+
+// 0x608F/0x6091/0x6092 of every axis from the drive configuration. Position units are motor
+// encoder counts, so the CiA 402 position factor (0x608F · 0x6091 / 0x6092) is 1.
+void DriveSlave::set_factor_objects() {
+  std::uint32_t motor = 1, shaft = 1;
+  ratio_of(cfg_.drive.gear_ratio, motor, shaft);
+  const auto counts = static_cast<std::int64_t>(std::llround(cfg_.drive.counts_per_rev));
+  for (int a = 0; a < axes(); ++a) {
+    const auto off = static_cast<std::uint16_t>(kAxisOffset * a);
+    auto set = [&](std::uint16_t idx, std::uint8_t sub, std::int64_t v) {
+      if (OdEntry* e = od_.entry(static_cast<std::uint16_t>(idx + off), sub)) e->set_int(v);
+    };
+    set(0x608F, 1, counts);
+    set(0x608F, 2, 1);
+    set(0x6091, 1, motor);
+    set(0x6091, 2, shaft);
+    set(0x6092, 1, counts * motor);
+    set(0x6092, 2, shaft);
+    // 0x60C2: period value × 10^index s; the index must lie in -6..0 (µs … s).
+    if (OdObject* ip = od_.find(static_cast<std::uint16_t>(0x60C2 + off))) {
+      ip->check = [](const OdObject&, std::uint8_t sub, std::span<const std::uint8_t> data) {
+        if (sub != 2 || data.empty()) return SdoAbort::none;
+        const auto idx = static_cast<std::int8_t>(data[0]);
+        return idx >= -6 && idx <= 0 ? SdoAbort::none : SdoAbort::value_range;
+      };
+    }
+  }
 }
 
 void DriveSlave::install_pdo_checks() {
@@ -291,6 +378,10 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
     return AlStatusCode::none;
   }
   if (from == AlState::preop && to == AlState::safeop) {
+    // A sync mode the master wrote must match the SYNC0 activation it made.
+    const bool dc = sync0_driven();
+    if (sync_mode_written_ && ((sync_out_.sync_mode == 2) != dc || (sync_in_.sync_mode == 2) != dc))
+      return refuse(AlStatusCode::invalid_dc_sync_config);
     const std::size_t ob = output_bytes(), ib = input_bytes();
     const SyncManager& o = esc_->sm(sm_out_);
     const SyncManager& i = esc_->sm(sm_in_);
@@ -319,6 +410,7 @@ void DriveSlave::on_mailbox(std::span<const std::uint8_t> mailbox, SimTime /*t*/
 }
 
 void DriveSlave::on_outputs(std::span<const std::uint8_t> /*outputs*/, SimTime /*t*/) {
+  outputs_fresh_ = true;
   // Outputs are taken from the last complete SM2 buffer at the firmware cycle (seed 001: the
   // slave reads the commands before t1 of its cycle), not at the moment the frame passes.
 }
@@ -351,6 +443,13 @@ void DriveSlave::power_cycle(SimTime t) {
   for (auto& a : axes_) a->power_cycle();
   od_.restore_defaults();
   if (auto* e = od_.entry(0x1018, 4)) e->set_int(static_cast<std::int64_t>(cfg_.serial));
+  sync_out_ = SmSyncParams{};
+  sync_in_ = SmSyncParams{};
+  sync_out_.min_cycle = sync_in_.min_cycle = DcClock::kMinSyncCycleNs;
+  sync_mode_written_ = false;
+  outputs_fresh_ = false;
+  last_cycle_ = -1;
+  set_factor_objects();
   if (app_ == SlaveApp::multiaxis) {
     if (auto* e = od_.entry(kRxAssign, 0)) e->set_int(axes());
     if (auto* e = od_.entry(kTxAssign, 0)) e->set_int(axes());
@@ -376,8 +475,29 @@ void DriveSlave::outputs_stopped() noexcept {
   for (auto& c : cards_) c.prev_control = 0;
 }
 
+// 0x1C32/0x1C33 live values at a firmware cycle at t (see SmSyncParams).
+void DriveSlave::update_sync_params(SimTime t) noexcept {
+  const bool dc = sync0_driven();
+  const std::uint32_t sync0 = dc ? esc_->read32(0x09A0) : 0;
+  const std::uint32_t local = last_cycle_ >= 0 && t > last_cycle_ ? static_cast<std::uint32_t>(std::min<SimTime>(t - last_cycle_, 0xFFFFFFFF)) : 0;
+  last_cycle_ = t;
+  // Counted once outputs are being applied (SSC counts after the first outputs in OP too).
+  const bool missed = dc && esc_->al_state() == AlState::op && outputs_valid_ && !outputs_fresh_;
+  outputs_fresh_ = false;
+  for (SmSyncParams* p : {&sync_out_, &sync_in_}) {
+    if (!sync_mode_written_) p->sync_mode = dc ? 2 : 0;
+    p->sync0_cycle = sync0;
+    p->cycle_time = dc ? sync0 : local;
+    if (dc && esc_->al_state() == AlState::op) {
+      if (missed && p->sm_missed < 0xFFFF) ++p->sm_missed;
+      p->sync_error = missed ? 1 : 0;
+    }
+  }
+}
+
 void DriveSlave::firmware(SimTime t) noexcept {
   ++stats_.cycles;
+  update_sync_params(t);
   pump_mailbox();
   const AlState s = esc_->al_state();
   if (s == AlState::op) {

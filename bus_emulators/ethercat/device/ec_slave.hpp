@@ -79,6 +79,31 @@ struct DriveSlaveStats {
   std::uint64_t address_errors = 0;     // multiaxis: command modules addressing no fitted card
 };
 
+// ETG.1020 SyncManager synchronisation parameters, 0x1C32 (outputs, SM2) and 0x1C33 (inputs,
+// SM3): the firmware keeps the live values here and the OD entries are bound to them.
+//  :01 sync mode      0 free run (the firmware's own cycle), 2 DC SYNC0; SM-synchronous (1) is
+//                     not supported (:04 = 0x0005) and refused with 0x06090030. Written by the
+//                     master in PRE-OP, it must agree with the SYNC0 activation (0x0981) at
+//                     PRE-OP → SAFE-OP, else 0x0030; never written, it follows the activation.
+//  :02 cycle time     [ns] the SYNC0 cycle with DC, else the firmware's measured local cycle
+//  :05 minimum cycle  [ns] DcClock::kMinSyncCycleNs; :03 :06 :09 shift, calc+copy, delay: 0 (the
+//                     model's firmware takes no time)
+//  :08 get cycle time 2 resets the error counters (then reads 0); 0/1 are kept
+//  :0A SYNC0 cycle    [ns] 0x09A0 while SYNC0 is active, else 0
+//  :0B SM event missed  SYNC0 pulses in OP that found no new SM2 buffer since the last one
+//  :0C :0D            0 (no cycle is too short for the model)
+//  :20 sync error     the last SYNC0 pulse in OP missed its SM event
+struct SmSyncParams {
+  std::uint16_t sync_mode = 0;
+  std::uint32_t cycle_time = 0, shift_time = 0;
+  std::uint16_t supported = 0x0005;
+  std::uint32_t min_cycle = 0, calc_copy = 0;
+  std::uint16_t get_cycle = 0;
+  std::uint32_t delay = 0, sync0_cycle = 0;
+  std::uint16_t sm_missed = 0, too_small = 0, shift_short = 0;
+  std::uint8_t sync_error = 0;
+};
+
 // One PDO entry in the process image: `bits` bits at bit `offset` of the image ↔ the OD entry.
 struct PdoSlot {
   std::uint32_t offset = 0;
@@ -104,6 +129,7 @@ class DriveSlave final : public EscApplication {
   SlaveApp app() const { return app_; }
   const DeviceDescription& description() const { return desc_; }
   const DriveSlaveStats& stats() const { return stats_; }
+  const SmSyncParams& sync_params(bool outputs) const { return outputs ? sync_out_ : sync_in_; }
 
   // Bytes of the assigned RxPDOs / TxPDOs with the current 0x1C12/0x1C13 and mappings.
   std::size_t output_bytes() const;
@@ -143,6 +169,9 @@ class DriveSlave final : public EscApplication {
   void bind_cia402_axis(int a);
   void bind_multiaxis_axis(int a);
   void install_pdo_checks();
+  void bind_sync_params(std::uint16_t index, SmSyncParams& p);
+  void set_factor_objects();
+  void update_sync_params(SimTime t) noexcept;
   SdoAbort check_mapping(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
   SdoAbort check_assign(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
   std::size_t assigned_bits(bool rx) const;
@@ -178,6 +207,10 @@ class DriveSlave final : public EscApplication {
   std::vector<Card> cards_;
   CycleHook hook_;
   DriveSlaveStats stats_;
+  SmSyncParams sync_out_, sync_in_;
+  bool sync_mode_written_ = false;  // the master wrote 0x1C32:01 or 0x1C33:01 since power-on
+  bool outputs_fresh_ = false;      // a complete SM2 buffer since the last firmware cycle
+  SimTime last_cycle_ = -1;
 };
 
 }  // namespace omnitwin::ethercat

@@ -653,5 +653,90 @@ TEST_F(EcMultiAxis, ParametersBoundToTheAxis) {
   EXPECT_EQ(m.sdo_abort(0x2F, 0x1600, 0, 0), 0x06010002u);  // fixed mapping
 }
 
+// Issue 20: the objects a CiA 402 master writes or reads before OP. 0x60C2 (interpolation time
+// period) takes the CSP/CSV period in PRE-OP; its index must be a power of ten from µs to s.
+TEST_F(EcSlave, InterpolationTimePeriodIsWritableBeforeOp) {
+  to_preop();
+  auto up = [&](std::uint8_t sub) { return m.sdo(0x40, 0x60C2, sub)[12]; };
+  EXPECT_EQ(up(0), 2);
+  EXPECT_EQ(up(1), 1);
+  EXPECT_EQ(static_cast<std::int8_t>(up(2)), -3);  // 1 ms
+  EXPECT_EQ(m.sdo(0x2F, 0x60C2, 1, 2)[8], 0x60);   // 2 × 10^-3 s
+  EXPECT_EQ(m.sdo(0x2F, 0x60C2, 2, 0xFD)[8], 0x60);
+  EXPECT_EQ(up(1), 2);
+  EXPECT_EQ(m.sdo_abort(0x2F, 0x60C2, 2, 0xF9), 0x06090030u);  // 10^-7 s: out of range
+  EXPECT_EQ(static_cast<std::int8_t>(up(2)), -3);
+}
+
+// 0x608F/0x6091/0x6092 tell a master the counts per revolution and the gear: position units
+// are motor counts, so 0x608F · 0x6091 / 0x6092 = 1. They are read-only.
+TEST(EcSlaveFactors, EncoderResolutionGearAndFeedFollowTheDriveConfiguration) {
+  DriveSlaveConfig c;
+  c.drive.counts_per_rev = 4096;
+  c.drive.gear_ratio = 2.5;
+  DriveSlave slave(load("omnitwin_drive.xml"), c);
+  auto v = [&](std::uint16_t i, std::uint8_t s) { return slave.od().entry(i, s)->as_int(); };
+  EXPECT_EQ(v(0x608F, 1), 4096);
+  EXPECT_EQ(v(0x608F, 2), 1);
+  EXPECT_EQ(v(0x6091, 1), 5);
+  EXPECT_EQ(v(0x6091, 2), 2);
+  EXPECT_EQ(v(0x6092, 1), 4096 * 5);
+  EXPECT_EQ(v(0x6092, 2), 2);
+  const std::array<std::uint8_t, 4> d{1, 0, 0, 0};
+  EXPECT_EQ(slave.od().write(0x6091, 1, OdState::preop, d), SdoAbort::read_only);
+  slave.power_cycle(0);
+  EXPECT_EQ(v(0x6091, 1), 5);  // still the configuration's, not the ESI default
+}
+
+// 0x1C32/0x1C33 (ETG.1020): free run until SYNC0 is activated, then DC SYNC0 with the SYNC0
+// cycle; SM-synchronous mode is refused; a DC mode written without SYNC0 refuses SAFE-OP
+// (0x0030); in OP each SYNC0 pulse without a new output buffer counts as an SM event missed,
+// and "get cycle time" = 2 clears the counters.
+TEST_F(EcSlave, SmSynchronisationParametersFollowTheDcModel) {
+  to_preop();
+  auto up16 = [&](std::uint16_t i, std::uint8_t s) { return get_u16(m.sdo(0x40, i, s).data() + 12); };
+  auto up32 = [&](std::uint16_t i, std::uint8_t s) { return get_u32(m.sdo(0x40, i, s).data() + 12); };
+  EXPECT_EQ(up16(0x1C32, 1), 0);       // free run
+  EXPECT_EQ(up16(0x1C32, 4), 0x0005);  // free run and DC SYNC0 supported
+  EXPECT_EQ(up32(0x1C32, 5), DcClock::kMinSyncCycleNs);
+  EXPECT_EQ(m.sdo_abort(0x2B, 0x1C32, 1, 1), 0x06090030u);  // SM-synchronous: not supported
+  EXPECT_EQ(m.sdo(0x2B, 0x1C32, 1, 2)[8], 0x60);
+  EXPECT_EQ(m.sdo(0x2B, 0x1C33, 1, 2)[8], 0x60);
+  m.pd_sms(0x1100, 18, 0x1180, 24);
+  EXPECT_EQ(m.request(4), 0x12);  // DC mode written, SYNC0 not active
+  EXPECT_EQ(m.read16(0x0134), 0x0030);
+  Bytes cyc(4, 0);
+  put_u32(cyc.data(), 1'000'000);
+  m.fpwr(0x09A0, cyc);
+  m.fpwr(0x0980, {0x00, 0x03});
+  ASSERT_TRUE(slave.sync0_driven());
+  EXPECT_EQ(m.request(0x14), 4);
+  ASSERT_EQ(m.request(8), 8);
+  // OP: one output buffer per 1 ms SYNC0 pulse, then three pulses without one.
+  const SimTime t0 = m.t;
+  Bytes out(42, 0);
+  for (int k = 1; k <= 5; ++k) {
+    m.lrw(out);
+    slave.esc().advance(t0 + k * 1'000'000 + 500'000);
+    m.t = t0 + k * 1'000'000 + 500'000;
+  }
+  const auto missed_before = slave.sync_params(true).sm_missed;
+  EXPECT_EQ(missed_before, 0);
+  slave.esc().advance(m.t + 3'000'000);
+  m.t += 3'000'000;
+  EXPECT_EQ(slave.sync_params(true).sm_missed, missed_before + 3);
+  EXPECT_EQ(slave.sync_params(true).sync_error, 1);
+  EXPECT_EQ(slave.sync_params(false).sm_missed, missed_before + 3);
+  // Over SDO (each mailbox exchange here takes 100 µs of bus time, so a pulse may pass).
+  EXPECT_EQ(up16(0x1C32, 1), 2);
+  EXPECT_EQ(up32(0x1C32, 2), 1'000'000u);
+  EXPECT_EQ(up32(0x1C32, 10), 1'000'000u);
+  EXPECT_GE(up16(0x1C33, 11), missed_before + 3);
+  EXPECT_EQ(m.sdo(0x2B, 0x1C32, 8, 2)[8], 0x60);  // clear the counters (both objects)
+  EXPECT_LE(slave.sync_params(true).sm_missed, 1);
+  EXPECT_LE(slave.sync_params(false).sm_missed, 1);
+  EXPECT_EQ(slave.sync_params(true).get_cycle, 0);
+}
+
 }  // namespace
 }  // namespace omnitwin::ethercat
