@@ -1,21 +1,13 @@
 // bus_emulators/canopen — the EMCY producer (see co_emcy.hpp).
 #include "bus_emulators/canopen/co_emcy.hpp"
 
+#include "bus_emulators/drive/cia402_drive.hpp"
+
 #include <algorithm>
 
 namespace omnitwin::canopen {
 
-std::uint8_t register_bit_of(std::uint16_t code) {
-  switch (code >> 12) {
-    case 0x2: return error_register::current;
-    case 0x3: return error_register::voltage;
-    case 0x4: return error_register::temperature;
-    case 0x8: return (code & 0xFF00) == 0x8600 || (code & 0xFF00) == 0x8500 ? error_register::device_profile
-                                                                            : error_register::communication;
-    case 0xF: return (code & 0xFF00) == 0xFF00 ? error_register::manufacturer : 0;
-    default: return 0;
-  }
-}
+std::uint8_t register_bit_of(std::uint16_t code) { return drive::error_class_bit(code); }
 
 EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od), node_id_(node_id) {}
 

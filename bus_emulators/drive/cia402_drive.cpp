@@ -478,4 +478,15 @@ Command Cia402Drive::step(SimTime t, const Feedback& fb) {
   return out;
 }
 
+std::uint8_t error_class_bit(std::uint16_t code) {
+  switch (code >> 12) {
+    case 0x2: return 0x02;
+    case 0x3: return 0x04;
+    case 0x4: return 0x08;
+    case 0x8: return (code & 0xFF00) == 0x8600 || (code & 0xFF00) == 0x8500 ? 0x20 : 0x10;
+    case 0xF: return (code & 0xFF00) == 0xFF00 ? 0x80 : 0;
+    default: return 0;
+  }
+}
+
 }  // namespace omnitwin::drive

@@ -56,6 +56,11 @@ inline constexpr std::uint32_t kAllModes = mode_bit(Mode::pp) | mode_bit(Mode::p
 // Error codes 0x603F used by the drive.
 inline constexpr std::uint16_t kErrorFollowing = 0x8611;   // following error
 inline constexpr std::uint16_t kErrorExternal = 0x6320;    // raise_fault default (parameter/other)
+// The CiA 301 error register (0x1001) class bit of an error code: current 0x02 (2xxx), voltage
+// 0x04 (3xxx), temperature 0x08 (4xxx), device profile 0x20 (85xx/86xx), communication 0x10
+// (other 8xxx), manufacturer 0x80 (FFxx), else 0 (the generic bit 0x01 is the caller's). Shared
+// by the CANopen EMCY producer and the EtherCAT CoE emergency.
+std::uint8_t error_class_bit(std::uint16_t code);
 
 // The CiA 402 objects of one axis in their OD types and units (B binds the OD to these).
 struct Objects {

@@ -23,7 +23,8 @@ constexpr std::uint16_t kRegStation = 0x0010, kRegAlControl = 0x0120, kRegAlStat
                         kRegEeprom = 0x0500, kRegFmmu = 0x0600, kRegSm = 0x0800, kRegDcRecv = 0x0900,
                         kRegDcSysTime = 0x0910, kRegDcRecvLocal = 0x0918, kRegDcOffset = 0x0920,
                         kRegDcDelay = 0x0928, kRegDcActivation = 0x0981, kRegDcAssign = 0x0980,
-                        kRegDcStart = 0x0990, kRegDcCycle0 = 0x09A0;
+                        kRegDcStart = 0x0990, kRegDcCycle0 = 0x09A0, kRegEventMask = 0x0200;
+constexpr std::uint8_t kEventSm1 = 0x20;  // ECAT event request/mask bit of SM1 (bit 4 + 1)
 constexpr std::size_t kMaxEvents = 64;
 constexpr int kSiiRetries = 20;
 
@@ -134,7 +135,7 @@ void EcMaster::tick(SimTime t) {
     awaiting_ = false;
     // A lost mailbox read may have emptied SM1: ask the slave to repeat its reply.
     for (auto& s : slaves_)
-      if (s.mbx_read_sent && s.job) s.repeat_pending = true;
+      if (s.mbx_read_sent && (s.job || s.mbx_poll)) s.repeat_pending = true;
     // A cyclic frame that never came back is a cycle without any WKC.
     if (lrw_out_) cyclic_wkc(0, false, t);
   }
@@ -224,9 +225,11 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
   }
   awaiting_ = false;
   ++stats_.frames_received;
+  bool sm1_event = false;
   for (std::size_t i = 0; i < v.count; ++i) {
     const ec::Datagram& d = v.datagrams[i];
     const Slot& sl = slots_[i];
+    if (d.irq() & kEventSm1) sm1_event = true;
     switch (sl.kind) {
       case SlotKind::count: {
         const int n = d.wkc();
@@ -258,6 +261,8 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
       case SlotKind::mbx:
         mbx_reply(slaves_[sl.slave], d, t);
         break;
+      case SlotKind::event_mask:
+        break;  // best effort: a slave without it is only read on requests
       case SlotKind::repeat:
         if (d.wkc() == 1) {
           slaves_[sl.slave].repeat_pending = false;
@@ -311,6 +316,9 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
     }
     if (phase_ == MasterPhase::failed) return;
   }
+  if (sm1_event)  // someone has mail: read every idle mailbox until it is empty
+    for (auto& s : slaves_)
+      if (!s.job && mbx_ready(s)) s.mbx_poll = true;
   after_frame(t, true);
 }
 
@@ -636,6 +644,8 @@ void EcMaster::slave_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
       sm[12] = s.sii.sms.size() > 1 && s.sii.sms[i1].control ? s.sii.sms[i1].control : 0x22;
       sm[14] = 0x01;
       step(0, Cmd::fpwr, kRegSm, 16, sm);
+      const std::uint8_t mask[2] = {kEventSm1, 0};  // ECAT event mask: SM1 (emergencies)
+      add(b, {SlotKind::event_mask, s.position}, Cmd::fpwr, s.station, kRegEventMask, 2, mask);
       break;
     }
     case SlaveStep::pd_config: {
@@ -944,7 +954,10 @@ void EcMaster::mbx_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
   if (!s.job) {
     std::deque<MbxJob>* q = !s.internal_jobs.empty() ? &s.internal_jobs : nullptr;
     if (!q && s.step == SlaveStep::op && !s.user_jobs.empty()) q = &s.user_jobs;
-    if (!q) return;
+    if (!q) {
+      mbx_poll_fill(s, b);
+      return;
+    }
     s.job = std::move(q->front());
     q->pop_front();
     s.xfer.begin(s.job->req, s.sii.mbx_out_size);
@@ -971,13 +984,47 @@ void EcMaster::mbx_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
   }
 }
 
+// No transfer: read SM1 (or ask for its repeat after a lost read) while mbx_poll is set.
+void EcMaster::mbx_poll_fill(Slave& s, ec::PduBuilder& b) {
+  if (!s.mbx_poll) return;
+  if (s.repeat_pending) {
+    const std::uint8_t act = static_cast<std::uint8_t>(0x01 | (s.repeat_toggle ? 0x00 : 0x02));
+    add(b, {SlotKind::repeat, s.position}, Cmd::fpwr, s.station, kRegSm + 8 + 6, 1, &act);
+    return;
+  }
+  if (add(b, {SlotKind::mbx, s.position}, Cmd::fprd, s.station, s.sii.mbx_in_start, s.sii.mbx_in_size))
+    s.mbx_read_sent = true;
+}
+
+bool EcMaster::take_emergency(Slave& s, std::span<const std::uint8_t> mailbox) {
+  const auto e = parse_emergency(mailbox);
+  if (!e) return false;
+  ++s.emergencies;
+  ++stats_.emergencies;
+  s.last_emergency = e->code;
+  s.last_error_register = e->error_register;
+  emit(fmt::format("slave {} (station 0x{:04X}) emergency 0x{:04X} ({}), error register 0x{:02X}, data {:02X}", s.position,
+                   s.station, e->code, emergency_text(e->code), e->error_register, fmt::join(e->data, " ")));
+  return true;
+}
+
 void EcMaster::mbx_reply(Slave& s, const ec::Datagram& d, SimTime) {
-  if (!s.job || d.wkc() != 1) return;  // mailbox full (write) or empty (read): again next tick
+  const std::span<const std::uint8_t> mbx(d.data(), d.length());
+  if (!s.job) {  // a poll: an emergency, or the mailbox is empty (WKC 0) and polling ends
+    if (d.wkc() != 1) {
+      s.mbx_poll = false;
+      return;
+    }
+    take_emergency(s, mbx);  // anything else there (a stale repeated answer) is dropped
+    return;
+  }
+  if (d.wkc() != 1) return;  // mailbox full (write) or empty (read): again next tick
   if (s.mbx_writing) {
     s.mbx_writing = false;
     return;
   }
-  switch (s.xfer.on_reply(std::span<const std::uint8_t>(d.data(), d.length()))) {
+  if (take_emergency(s, mbx)) return;  // not the answer: keep reading
+  switch (s.xfer.on_reply(mbx)) {
     case SdoTransfer::ReplyOutcome::ignored:
       break;
     case SdoTransfer::ReplyOutcome::progress:

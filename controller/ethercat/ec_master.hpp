@@ -51,6 +51,12 @@
 // segment_lost() true, stop_reason() says why, one event line), and the offline probes bring
 // the slaves back through INIT → OP if the segment returns (segment_lost() false again once
 // every slave is back in OP; stats count both).
+// Emergencies: with the mailbox SMs the master also writes the ECAT event mask (0x0200) = SM1
+// event, so a slave with something in SM1 sets that bit in the IRQ field of every datagram it
+// passes (the cyclic one included). A frame whose IRQ shows it makes every mailbox slave without
+// a transfer read its SM1 until it is empty; a CoE emergency found there, or in the middle of an
+// SDO transfer, is counted per slave (last code, error register), logged as an event line and
+// never mistaken for an SDO answer.
 // Allocation: configuration and SDO requests allocate; a steady cyclic tick does not.
 #pragma once
 
@@ -140,6 +146,9 @@ struct SlaveStatus {
   std::int64_t dc_delay_ns = 0;            // propagation delay from the reference clock
   bool dc = false;                         // takes part in DC
   std::uint64_t recoveries = 0;            // times brought back to OP
+  std::uint64_t emergencies = 0;           // CoE emergencies read from its mailbox
+  std::uint16_t last_emergency = 0;        // the last one's error code (0x0000: reset / none)
+  std::uint8_t last_error_register = 0;    // … and its error register
 };
 
 struct EcMasterStats {
@@ -156,6 +165,7 @@ struct EcMasterStats {
   std::uint64_t slaves_lost = 0, recoveries = 0;
   std::uint64_t segment_losses = 0;    // times the whole segment went silent (left OP)
   std::uint64_t segment_returns = 0;   // times every slave was back in OP after such a loss
+  std::uint64_t emergencies = 0;       // CoE emergencies read (every slave)
   std::uint16_t last_wkc = 0, expected_wkc = 0;
 };
 
@@ -216,7 +226,7 @@ class EcMaster {
   void set_event_callback(EventFn fn) { on_event_ = std::move(fn); }
 
  private:
-  enum class SlotKind : std::uint8_t { count, reset, address, step, mbx, repeat, check, al_brd, lrw, frmw, dc };
+  enum class SlotKind : std::uint8_t { count, reset, address, step, mbx, repeat, check, al_brd, lrw, frmw, dc, event_mask };
   struct Slot {
     SlotKind kind = SlotKind::count;
     int slave = -1;
@@ -253,6 +263,7 @@ class EcMaster {
     bool mbx_read_sent = false;     // the outstanding frame carries a mailbox read
     bool repeat_pending = false;    // that frame was lost: ask for the reply again
     bool repeat_toggle = false;     // SM1 repeat request bit as last written
+    bool mbx_poll = false;          // read SM1 without a request: an SM1 event was seen (emergencies)
     int internal_failed = 0;
     std::string internal_error;
     // PDO mapping read over CoE
@@ -269,6 +280,8 @@ class EcMaster {
   void step_failed(Slave& s, const std::string& why, SimTime t);
   void mbx_fill(Slave& s, omnitwin::ethercat::PduBuilder& b, SimTime t);
   void mbx_reply(Slave& s, const omnitwin::ethercat::Datagram& d, SimTime t);
+  bool take_emergency(Slave& s, std::span<const std::uint8_t> mailbox);
+  void mbx_poll_fill(Slave& s, omnitwin::ethercat::PduBuilder& b);
   void finish_job(Slave& s, SdoStatus status);
   void queue_internal(Slave& s, SdoRequest req, SdoCallback cb);
   void start_pdo_read(Slave& s);

@@ -13,6 +13,39 @@ using omnitwin::ethercat::get_u32;
 using omnitwin::ethercat::put_u16;
 using omnitwin::ethercat::put_u32;
 
+std::optional<CoeEmergency> parse_emergency(std::span<const std::uint8_t> m) noexcept {
+  if (m.size() < 16 || (m[5] & 0x0F) != static_cast<std::uint8_t>(MbxType::coe) || get_u16(m.data()) < 10) return std::nullopt;
+  if ((get_u16(m.data() + 6) >> 12) != static_cast<std::uint16_t>(CoeService::emergency)) return std::nullopt;
+  CoeEmergency e;
+  e.code = get_u16(m.data() + 8);
+  e.error_register = m[10];
+  for (std::size_t i = 0; i < e.data.size(); ++i) e.data[i] = m[11 + i];
+  return e;
+}
+
+const char* emergency_text(std::uint16_t code) {
+  if (code == 0x0000) return "error reset or no error";
+  if (code == 0x8611) return "following error";
+  if (code == 0x8612) return "reference limit";
+  if ((code & 0xFF00) == 0xFF00) return "device specific";
+  switch (code >> 12) {
+    case 0x1: return "generic error";
+    case 0x2: return "current";
+    case 0x3: return "voltage";
+    case 0x4: return "temperature";
+    case 0x5: return "device hardware";
+    case 0x6: return (code & 0xFF00) == 0x6300 ? "data set / parameter" : "device software";
+    case 0x7: return "additional modules";
+    case 0x8: return (code & 0xFF00) == 0x8400 ? "velocity controller"
+                     : (code & 0xFF00) == 0x8500 ? "position controller"
+                     : (code & 0xFF00) == 0x8600 ? "positioning controller"
+                                                 : "monitoring / communication";
+    case 0x9: return "external error";
+    case 0xF: return "additional functions";
+    default: return "unknown error code";
+  }
+}
+
 const char* sdo_abort_text(std::uint32_t code) {
   switch (static_cast<SdoAbort>(code)) {
     case SdoAbort::toggle: return "toggle bit not alternated";

@@ -12,7 +12,9 @@
 #pragma once
 
 #include <cstddef>
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -37,6 +39,17 @@ enum class SdoAbort : std::uint32_t {
   cannot_store = 0x08000020, device_state = 0x08000022,
 };
 const char* sdo_abort_text(std::uint32_t code);  // short text, "unknown abort code" otherwise
+
+// A CoE emergency message (ETG.1000.6 service 1) as read from SM1.
+struct CoeEmergency {
+  std::uint16_t code = 0;            // CiA 301/402 error code (0x0000: error reset / no error)
+  std::uint8_t error_register = 0;   // 0x1001 at the time
+  std::array<std::uint8_t, 5> data{};  // manufacturer-specific
+};
+// The emergency in a whole mailbox read (header + CoE), or nullopt when it is something else.
+std::optional<CoeEmergency> parse_emergency(std::span<const std::uint8_t> mailbox) noexcept;
+// Short text of an error code by its CiA 301/402 class ("following error", "generic error", …).
+const char* emergency_text(std::uint16_t code);
 
 // The outcome of one transfer.
 enum class SdoStatus : std::uint8_t {

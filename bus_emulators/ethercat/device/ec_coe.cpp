@@ -67,6 +67,17 @@ std::uint8_t* CoeServer::begin_reply(std::size_t data_len, MailboxType type) {
   return r.bytes.data() + kMailboxHeaderSize;
 }
 
+bool CoeServer::post_emergency(std::uint16_t code, std::uint8_t error_register, const std::uint8_t (&data)[5]) noexcept {
+  std::uint8_t* p = begin_reply(10, MailboxType::coe);
+  if (!p) return false;
+  put_u16(p, static_cast<std::uint16_t>(coe::svc_emergency << 12));  // CoE header: number 0, service
+  put_u16(p + 2, code);
+  p[4] = error_register;
+  std::copy(std::begin(data), std::end(data), p + 5);
+  ++stats_.emergencies;
+  return true;
+}
+
 void CoeServer::mailbox_error(MailboxError e) {
   ++stats_.mailbox_errors;
   std::uint8_t* p = begin_reply(4, MailboxType::error);

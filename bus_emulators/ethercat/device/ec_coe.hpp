@@ -4,7 +4,7 @@
 // (expedited ≤ 4 bytes, normal, segmented with toggle and last-segment bits), complete access
 // when advertised, SDO aborts (in an SDO *request* service, command 0x80, u32 SdoAbort), and
 // the SDO information service (object list by list type, fragmented; object description;
-// entry description; error). Mailbox types other than CoE and malformed headers get a mailbox
+// entry description; error), and emergency messages the firmware posts. Mailbox types other than CoE and malformed headers get a mailbox
 // error reply (type 0). A request whose mailbox counter (1–7) equals the previous request's
 // is a repeat and is never executed again: when the previous replies have all been read (the
 // master lost the reply on its way back) they are queued again; while one is still unread
@@ -51,6 +51,7 @@ struct CoeStats {
   std::uint64_t aborts = 0;          // SDO aborts sent
   std::uint64_t mailbox_errors = 0;  // mailbox error replies sent
   std::uint64_t dropped_replies = 0; // queue full
+  std::uint64_t emergencies = 0;     // emergency messages queued
 };
 
 class CoeServer {
@@ -64,6 +65,12 @@ class CoeServer {
   void set_mailbox_size(std::size_t bytes) noexcept;
   // Drops pending replies and any transfer (INIT, power cycle).
   void reset() noexcept;
+
+  // A CoE emergency (ETG.1000.6: CoE header service 1; error code LE16, error register,
+  // 5 manufacturer bytes) queued behind the pending replies; false when the queue is full
+  // (counted as dropped). It is not part of any request's replies, so a repeated request never
+  // sends it again. RT-safe.
+  bool post_emergency(std::uint16_t code, std::uint8_t error_register, const std::uint8_t (&data)[5]) noexcept;
 
   bool has_reply() const noexcept { return count_ > 0; }
   std::span<const std::uint8_t> front() const noexcept;  // header + data of the oldest reply

@@ -77,6 +77,7 @@ DriveSlave::DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& co
   axes_.reserve(static_cast<std::size_t>(axes));
   for (int a = 0; a < axes; ++a) axes_.push_back(std::make_unique<drive::Cia402Drive>(cfg_.drive));
   cards_.assign(static_cast<std::size_t>(axes), Card{});
+  emcy_code_.assign(static_cast<std::size_t>(axes), 0);
 
   // The SII describes the fitted axes only: PDOs of absent cards are not assigned by default.
   if (app_ == SlaveApp::multiaxis) {
@@ -457,6 +458,7 @@ void DriveSlave::power_cycle(SimTime t) {
   build_layout(true, rx_);
   build_layout(false, tx_);
   cards_.assign(cards_.size(), Card{});
+  emcy_code_.assign(emcy_code_.size(), 0);
   outputs_valid_ = false;
 }
 
@@ -514,10 +516,33 @@ void DriveSlave::firmware(SimTime t) noexcept {
     outputs_stopped();
   }
   if (hook_) hook_(t);
+  signal_emergencies();
   if (s == AlState::safeop || s == AlState::op) {
     if (app_ == SlaveApp::multiaxis) multiaxis_status();
     pack_inputs();
   }
+}
+
+void DriveSlave::signal_emergencies() noexcept {
+  std::uint8_t reg = 0;
+  for (int a = 0; a < axes(); ++a) {
+    const std::uint16_t code = axes_[static_cast<std::size_t>(a)]->objects().error_code;
+    if (code != 0) reg = static_cast<std::uint8_t>(reg | 0x01 | drive::error_class_bit(code));
+  }
+  if (OdEntry* e = od_.entry(0x1001, 0)) e->set_int(reg);
+  for (int a = 0; a < axes(); ++a) {
+    const std::uint16_t code = axes_[static_cast<std::size_t>(a)]->objects().error_code;
+    std::uint16_t& last = emcy_code_[static_cast<std::size_t>(a)];
+    if (code == last) continue;
+    last = code;
+    const std::uint8_t data[5] = {static_cast<std::uint8_t>(a + 1), 0, 0, 0, 0};
+    if (esc_->al_state() != AlState::init && coe_->post_emergency(code, reg, data)) {
+      ++stats_.emergencies;
+    } else {
+      ++stats_.emergencies_lost;
+    }
+  }
+  pump_mailbox();
 }
 
 void DriveSlave::pack_inputs() noexcept {

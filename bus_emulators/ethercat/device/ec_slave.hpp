@@ -33,6 +33,11 @@
 // the master acknowledges the error (on_al_error_cleared). So a master supervising by WKC alone
 // sees a watchdog trip: 4 slaves × (2 + 1) = 12 in SAFE-OP and OP, one slave in SAFE-OP + error
 // takes 2 away. docs/protocols/ethercat-states.md has the table, state by state.
+// Emergencies: at every firmware cycle an axis whose 0x603F changed sends one CoE emergency — its
+// new code (CiA 402: 0x8611 following error, 0x6320 parameter/external, …) with the error
+// register 0x1001 (generic bit + the code's class bit) and the axis number (1-based) in the first
+// manufacturer byte; back to 0 (the fault reset) it sends code 0x0000 "error reset". 0x1001 is
+// the OR over the axes. In INIT (no mailbox) nothing is sent and the change is counted as lost.
 // The firmware cycle (cycle(t), or on_sync0(t) while DC SYNC0 is active): pending CoE replies
 // posted to SM1; in OP the last complete buffer of the ESI's Outputs SM (SM2) is unpacked into
 // the OD entries it maps (the axes' Objects); the cycle hook runs, if one is set (a caller may
@@ -77,6 +82,8 @@ struct DriveSlaveStats {
   std::uint64_t mailbox_posted = 0;     // replies handed to SM1
   std::uint64_t al_refused = 0;         // AL requests refused by the firmware checks
   std::uint64_t address_errors = 0;     // multiaxis: command modules addressing no fitted card
+  std::uint64_t emergencies = 0;        // CoE emergencies queued (faults and their resets)
+  std::uint64_t emergencies_lost = 0;   // not sent: INIT (no mailbox) or the reply queue full
 };
 
 // ETG.1020 SyncManager synchronisation parameters, 0x1C32 (outputs, SM2) and 0x1C33 (inputs,
@@ -172,6 +179,7 @@ class DriveSlave final : public EscApplication {
   void bind_sync_params(std::uint16_t index, SmSyncParams& p);
   void set_factor_objects();
   void update_sync_params(SimTime t) noexcept;
+  void signal_emergencies() noexcept;
   SdoAbort check_mapping(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
   SdoAbort check_assign(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
   std::size_t assigned_bits(bool rx) const;
@@ -211,6 +219,7 @@ class DriveSlave final : public EscApplication {
   bool sync_mode_written_ = false;  // the master wrote 0x1C32:01 or 0x1C33:01 since power-on
   bool outputs_fresh_ = false;      // a complete SM2 buffer since the last firmware cycle
   SimTime last_cycle_ = -1;
+  std::vector<std::uint16_t> emcy_code_;  // per axis: the 0x603F last signalled
 };
 
 }  // namespace omnitwin::ethercat

@@ -318,6 +318,33 @@ TEST(EcMaster, AStalledMasterSeesTheWatchdogInTheWkcAndBringsTheSlavesBack) {
   EXPECT_GT(b.master->stats().wkc_errors, 0u);
 }
 
+// Issue 20: a drive fault reaches the master as a CoE emergency: the slave's SM1 event shows in
+// the cyclic frame's IRQ field, the master reads the mailbox, logs "emergency 0x8611 (following
+// error)" once, and the fault reset's "error reset" 0x0000 after it. The WKC stays 12 meanwhile.
+TEST(EcMaster, ADriveFaultArrivesAsOneEmergencyAndItsResetAsAnother) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  for (int k = 0; k < 20; ++k) b.step();
+  EXPECT_EQ(b.master->stats().emergencies, 0u);
+  b.slaves[2]->axis(0).raise_fault(omnitwin::drive::kErrorFollowing);
+  ASSERT_TRUE(b.run_until([&] { return b.master->stats().emergencies >= 1; }, 100)) << events(*b.master);
+  for (int k = 0; k < 50; ++k) b.step();
+  EXPECT_EQ(b.master->stats().emergencies, 1u) << events(*b.master);
+  EXPECT_EQ(b.master->slave(2).emergencies, 1u);
+  EXPECT_EQ(b.master->slave(2).last_emergency, 0x8611);
+  EXPECT_EQ(b.master->slave(2).last_error_register, 0x21);
+  EXPECT_TRUE(has_event(*b.master, "slave 2 (station 0x1003) emergency 0x8611 (following error), error register 0x21"))
+      << events(*b.master);
+  const auto cw = b.master->find_entry(2, 0x6040, 0);
+  ASSERT_TRUE(cw.has_value());
+  b.master->write_entry(*cw, 0x0080);  // fault reset
+  ASSERT_TRUE(b.run_until([&] { return b.master->stats().emergencies >= 2; }, 200)) << events(*b.master);
+  EXPECT_EQ(b.master->slave(2).last_emergency, 0x0000);
+  EXPECT_TRUE(has_event(*b.master, "emergency 0x0000 (error reset or no error)")) << events(*b.master);
+  EXPECT_EQ(b.master->stats().last_wkc, 12);
+  EXPECT_EQ(b.master->slave(0).emergencies, 0u);
+}
+
 TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   const auto multi = omnitwin::ethercat::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
   ASSERT_FALSE(multi.empty());

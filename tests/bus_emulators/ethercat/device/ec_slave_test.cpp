@@ -738,5 +738,47 @@ TEST_F(EcSlave, SmSynchronisationParametersFollowTheDcModel) {
   EXPECT_EQ(slave.sync_params(true).get_cycle, 0);
 }
 
+// Issue 20: a following-error fault sends exactly one CoE emergency 0x8611 through SM1 (error
+// register generic + device profile, axis 1), and the fault reset one "error reset" 0x0000.
+TEST_F(EcSlave, FollowingErrorSendsOneEmergencyAndTheResetClearsIt) {
+  to_op();
+  Bytes out(42, 0);
+  m.lrw(out);
+  slave.cycle(m.t);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);  // nothing in SM1
+  for (int k = 1; k <= 5; ++k) slave.axis(0).step(m.t - 10'000'000 + k * 1'000'000, {});  // power-up
+  slave.axis(0).raise_fault(drive::kErrorFollowing);
+  for (int k = 1; k <= 20; ++k) slave.axis(0).step(m.t + k * 1'000'000, {});  // fault reaction → fault
+  ASSERT_EQ(slave.axis(0).objects().error_code, drive::kErrorFollowing);
+  ASSERT_EQ(slave.axis(0).state(), drive::State::fault);
+  for (int k = 0; k < 3; ++k) slave.cycle(m.t + k);  // the code is signalled once, not per cycle
+  auto r = m.fprd(0x1080, 128);
+  ASSERT_EQ(r.wkc, 1);
+  EXPECT_EQ(get_u16(r.data.data()), 10);              // mailbox length
+  EXPECT_EQ(r.data[5] & 0x0F, 3);                     // CoE
+  EXPECT_EQ(get_u16(r.data.data() + 6) >> 12, 1);     // emergency service
+  EXPECT_EQ(get_u16(r.data.data() + 8), 0x8611);
+  EXPECT_EQ(r.data[10], 0x21);                        // generic | device profile
+  EXPECT_EQ(r.data[11], 1);                           // axis 1
+  EXPECT_EQ(slave.od().entry(0x1001, 0)->as_int(), 0x21);
+  slave.cycle(m.t + 10);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0) << "exactly one emergency";
+  // Fault reset through the process data (controlword bit 7).
+  put_u16(out.data(), 0x0080);
+  m.lrw(out);
+  slave.cycle(m.t);
+  slave.axis(0).step(m.t + 30'000'000, {});
+  ASSERT_EQ(slave.axis(0).objects().error_code, 0);
+  slave.cycle(m.t + 1);
+  r = m.fprd(0x1080, 128);
+  ASSERT_EQ(r.wkc, 1);
+  EXPECT_EQ(get_u16(r.data.data() + 6) >> 12, 1);
+  EXPECT_EQ(get_u16(r.data.data() + 8), 0x0000);
+  EXPECT_EQ(r.data[10], 0x00);
+  EXPECT_EQ(slave.od().entry(0x1001, 0)->as_int(), 0);
+  EXPECT_EQ(slave.stats().emergencies, 2u);
+  EXPECT_EQ(slave.coe().stats().emergencies, 2u);
+}
+
 }  // namespace
 }  // namespace omnitwin::ethercat
