@@ -127,6 +127,15 @@ struct DriveWords {
     if (!axis(in, t, 2, slave, ch) || !read(in, t, slave, ch, kStatusword, 0, sw)) return R::error;
     return push(t, flag((sw & 0x6F) == 0x27));
   }
+  // ( ch n -- code ): the error code of the drive's last CoE emergency (0 after the reset's
+  // "no error" emergency, -1 when none has come). Not in seed 004: the seed shows drive errors
+  // only through drive-fault?; this adds the code the drive reported.
+  static R emcy_fetch(In& in, T& t, std::int64_t) {
+    int slave = 0, ch = 0;
+    if (!axis(in, t, 2, slave, ch)) return R::error;
+    const auto c = in.drives_.last_emergency(slave, ch);
+    return push(t, c ? static_cast<std::int64_t>(*c) : -1);
+  }
   // ( ch n -- flag ): bit aux of the digital inputs 0x60FD.
   static R dins_bit(In& in, T& t, std::int64_t aux) {
     int slave = 0, ch = 0;
@@ -229,6 +238,7 @@ struct DriveWords {
     in.add_prim("reset-fault", reset_fault);
     in.add_prim("drive-on?", drive_on_q);
     in.add_prim("drive-fault?", status_bit, 3);
+    in.add_prim("drive-emcy@", emcy_fetch);
     in.add_prim("target-reached?", status_bit, 10);
     in.add_prim("until-no-requests", until_no_requests, 0, false, /*background_only=*/true);
 

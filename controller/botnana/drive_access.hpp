@@ -74,6 +74,9 @@ class DriveAccess {  // implemented by the EtherCAT master's drive layer (E)
   // The highest slave number the master knows (until-no-requests asks slaves 1..slaves()
   // besides those the interpreter itself sent requests to); 0 when unknown.
   virtual int slaves() const { return 0; }
+  // The error code of the last emergency the drive sent for this channel (0x0000 after its
+  // reset); nullopt: none received, or the master does not receive emergencies.
+  virtual std::optional<std::uint16_t> last_emergency(int /*slave*/, int /*ch*/) const { return std::nullopt; }
   // The object behind a user-planned PDO entry of (slave, ch); nullopt when none is
   // configured (the drive-wpdo/rpdo words then fail with an error naming the word).
   virtual std::optional<ObjectRef> user_pdo(int slave, int ch, UserPdo which) const {

@@ -327,4 +327,11 @@ void EcDrives::set_user_pdo(botnana::UserPdo which, botnana::ObjectRef object) {
 
 bool EcDrives::requests_pending(int slave) const { return m_.sdo_pending(slave - 1) > 0; }
 
+std::optional<std::uint16_t> EcDrives::last_emergency(int slave, int ch) const {
+  if (slave < 1 || slave > m_.slave_count() || ch < 1) return std::nullopt;
+  const auto& e = m_.slave(slave - 1).axis_emergency;
+  if (static_cast<std::size_t>(ch) > e.size() || m_.slave(slave - 1).emergencies == 0) return std::nullopt;
+  return e[static_cast<std::size_t>(ch) - 1];
+}
+
 }  // namespace omnitwin::controller::ethercat

@@ -69,6 +69,7 @@ class EcDrives : public botnana::DriveAccess {
   bool requests_pending(int slave) const override;
   std::string last_error() const override { return error_; }
   int slaves() const override { return m_.slave_count(); }
+  std::optional<std::uint16_t> last_emergency(int slave, int ch) const override;
   std::optional<botnana::ObjectRef> user_pdo(int slave, int ch, botnana::UserPdo which) const override;
 
   // The objects behind drive-wpdo1/2 and drive-rpdo1/2 (CiA 402 base indices, every axis).

@@ -1003,6 +1003,9 @@ bool EcMaster::take_emergency(Slave& s, std::span<const std::uint8_t> mailbox) {
   ++stats_.emergencies;
   s.last_emergency = e->code;
   s.last_error_register = e->error_register;
+  const std::size_t axis = e->data[0] >= 1 && e->data[0] <= 64 ? e->data[0] : 1;
+  if (s.axis_emergency.size() < axis) s.axis_emergency.resize(axis, 0);
+  s.axis_emergency[axis - 1] = e->code;
   emit(fmt::format("slave {} (station 0x{:04X}) emergency 0x{:04X} ({}), error register 0x{:02X}, data {:02X}", s.position,
                    s.station, e->code, emergency_text(e->code), e->error_register, fmt::join(e->data, " ")));
   return true;

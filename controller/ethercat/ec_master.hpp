@@ -149,6 +149,9 @@ struct SlaveStatus {
   std::uint64_t emergencies = 0;           // CoE emergencies read from its mailbox
   std::uint16_t last_emergency = 0;        // the last one's error code (0x0000: reset / none)
   std::uint8_t last_error_register = 0;    // … and its error register
+  // Per axis (the emergency's first data byte, 1-based, as our drives send it; 1 otherwise):
+  // the last code, index 0 = axis 1. Grows on the first emergency of a higher axis.
+  std::vector<std::uint16_t> axis_emergency;
 };
 
 struct EcMasterStats {

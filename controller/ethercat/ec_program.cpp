@@ -458,10 +458,11 @@ int run_ethercat_program(const ProgramOptions& o) {
   if (runner.failure()) code = kExitRuntime;
   const auto& s = m.stats();
   spdlog::info("end: state {}, phase {}{}, {} slaves, frames tx {} rx {}, cycles {}, WKC errors {}, lost frames {}, "
-               "timeouts {}, SDO done {} failed {}, slaves lost {}, recoveries {}, segment losses {} returns {}",
+               "timeouts {}, SDO done {} failed {}, slaves lost {}, recoveries {}, segment losses {} returns {}, "
+               "emergencies {}",
                runner.state(), to_string(m.phase()), m.operational() ? " (OP)" : " (not OP)", m.slave_count(),
                runner.frames_tx, runner.frames_rx, s.cycles, s.wkc_errors, s.lost_frames, s.timeouts, s.sdo_done,
-               s.sdo_failed, s.slaves_lost, s.recoveries, s.segment_losses, s.segment_returns);
+               s.sdo_failed, s.slaves_lost, s.recoveries, s.segment_losses, s.segment_returns, s.emergencies);
   if (!m.stop_reason().empty()) spdlog::warn("stop reason: {}", m.stop_reason());
   if (!o.stats.empty()) {
     const nlohmann::json j = {{"ecat_phase", to_string(m.phase())}, {"state", runner.state()},
@@ -474,13 +475,19 @@ int run_ethercat_program(const ProgramOptions& o) {
                               {"lost_frames", s.lost_frames}, {"stray_frames", s.stray_frames},
                               {"timeouts", s.timeouts}, {"sdo_done", s.sdo_done}, {"sdo_failed", s.sdo_failed},
                               {"slaves_lost", s.slaves_lost}, {"recoveries", s.recoveries},
-                              {"master_error", m.error()}};
-    write_stats_file(o.stats, j.dump());
+                              {"emergencies", s.emergencies}, {"master_error", m.error()}};
+    nlohmann::json per = nlohmann::json::array();  // emergencies per slave: count, last code
+    for (int i = 0; i < m.slave_count(); ++i)
+      per.push_back({{"emergencies", m.slave(i).emergencies}, {"last_emergency", m.slave(i).last_emergency}});
+    nlohmann::json out = j;
+    out["slave_emergencies"] = per;
+    write_stats_file(o.stats, out.dump());
   }
   for (int i = 0; i < m.slave_count(); ++i) {
     const SlaveStatus& sl = m.slave(i);
-    spdlog::info("slave {} station 0x{:04X}: step {}, AL {} (code 0x{:04X}), recoveries {}", i, sl.station,
-                 to_string(sl.step), to_string(sl.al_state), sl.al_code, sl.recoveries);
+    spdlog::info("slave {} station 0x{:04X}: step {}, AL {} (code 0x{:04X}), recoveries {}, emergencies {} (last 0x{:04X})",
+                 i, sl.station, to_string(sl.step), to_string(sl.al_state), sl.al_code, sl.recoveries, sl.emergencies,
+                 sl.last_emergency);
   }
   if (sigfd >= 0) ::close(sigfd);
   return code;

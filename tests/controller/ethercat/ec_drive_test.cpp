@@ -3,11 +3,13 @@
 // goals drive the axes to operation enabled, PDO objects are written/read through the image,
 // other objects through queued SDOs (requests_pending), and the `go` bit is cleared once the
 // drive acknowledges a profile-position set-point; a lost segment quick-stops every axis, and
-// they stay stopped when it returns.
+// they stay stopped when it returns; a drive's CoE emergency code reaches the Botnana word
+// drive-emcy@.
 #include "controller/ethercat/ec_drive.hpp"
 
 #include <gtest/gtest.h>
 
+#include "controller/botnana/botnana_interpreter.hpp"
 #include "ec_bench.hpp"
 
 using namespace omnitwin::controller::ethercat;
@@ -165,4 +167,19 @@ TEST(EcDrive, LostSegmentQuickStopsEveryAxisAndTheyStayStoppedWhenItReturns) {
   }
   d.set_goal(1, 1, PdsGoal::operation_enabled);
   EXPECT_FALSE(d.stopped()) << "a new goal lifts the stop";
+}
+
+TEST(EcDrive, TheLastEmergencyOfADriveIsWhatDriveEmcyFetches) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  std::string out;
+  omnitwin::botnana::Interpreter in(*b.drives, [&](std::string_view s) { out += s; });
+  ASSERT_TRUE(in.evaluate("1 3 drive-emcy@ .").ok);
+  EXPECT_EQ(out, "-1 ");  // none received yet
+  b.slaves[2]->axis(0).raise_fault(omnitwin::drive::kErrorFollowing);
+  ASSERT_TRUE(b.run_until([&] { return b.master->stats().emergencies >= 1; }, 100));
+  out.clear();
+  ASSERT_TRUE(in.evaluate("1 3 drive-emcy@ . 1 2 drive-emcy@ . 1 3 drive-fault? .").ok);
+  EXPECT_EQ(out, "34321 -1 -1 ");  // 0x8611 on slave 3; slave 2 sent nothing; fault flag true
+  EXPECT_FALSE(in.evaluate("1 9 drive-emcy@").ok);
 }
