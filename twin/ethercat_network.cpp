@@ -131,6 +131,7 @@ void EthercatNetwork::take_frame(const std::uint8_t* pdu, std::size_t size, SimT
   p.at = t + std::llround(spec_.t_pre_us * 1e3);
   p.size = static_cast<std::uint16_t>(std::min(size, p.pdu.size()));
   std::copy_n(pdu, p.size, p.pdu.begin());
+  p.wire = transport_ && transport_->wire_header(p.hdr);
   ++pending_count_;
 }
 
@@ -147,7 +148,7 @@ bool EthercatNetwork::lose_frame() {
 
 void EthercatNetwork::process_frame(Pending& p) {
   const std::span<std::uint8_t> pdu(p.pdu.data(), p.size);
-  if (pcap_) pcap_->write(pdu, p.at, ethercat::Direction::out);
+  capture(p, pdu, p.at, ethercat::Direction::out);
   busy_ns_ += wire_ns(p.size);
   if (lose_frame()) {
     ++lost_frames_;
@@ -158,11 +159,26 @@ void EthercatNetwork::process_frame(Pending& p) {
     return;
   }
   // Back at the master after the line's round trip (plus any delay fault).
-  send_reply(p.pdu.data(), p.size, chain_.last_return_time() + std::llround(delay_ns_));
+  send_reply(p, chain_.last_return_time() + std::llround(delay_ns_));
 }
 
-void EthercatNetwork::send_reply(const std::uint8_t* pdu, std::size_t size, SimTime t) {
-  if (pcap_) pcap_->write(std::span<const std::uint8_t>(pdu, size), t, ethercat::Direction::back);
+// One record of the capture: with the addresses the frame carried when the transport knows them.
+void EthercatNetwork::capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir) {
+  if (!pcap_) return;
+  if (!p.wire) {
+    pcap_->write(pdu, t, dir);
+    return;
+  }
+  ethercat::Mac dst{}, src{};
+  std::copy_n(p.hdr.begin(), 6, dst.begin());
+  std::copy_n(p.hdr.begin() + 6, 6, src.begin());
+  pcap_->write(pdu, t, dir, dst, src);
+}
+
+void EthercatNetwork::send_reply(const Pending& p, SimTime t) {
+  const std::uint8_t* pdu = p.pdu.data();
+  const std::size_t size = p.size;
+  capture(p, std::span<const std::uint8_t>(pdu, size), t, ethercat::Direction::back);
   if (!batch_ && delay_ns_ <= 0) {
     if (transport_->send(std::span<const std::uint8_t>(pdu, size)))
       ++to_transport_;

@@ -41,6 +41,7 @@ namespace omnitwin::ethercat {
 class DriveSlave;
 class EcTransport;
 class PcapWriter;
+enum class Direction : std::uint8_t;
 class VethPair;
 }  // namespace omnitwin::ethercat
 
@@ -94,6 +95,8 @@ class EthercatNetwork final : public BusNetwork {
   struct Pending {               // a frame from the master, waiting for its instant
     SimTime at = 0;
     std::uint16_t size = 0;
+    bool wire = false;                                     // hdr holds its Ethernet header (raw)
+    std::array<std::uint8_t, ethercat::kEthHeaderSize> hdr{};
     std::array<std::uint8_t, ethercat::kMaxPdu> pdu{};
   };
   struct Reply {                 // a returned frame, waiting for its instant / the next grant
@@ -105,7 +108,8 @@ class EthercatNetwork final : public BusNetwork {
   void open_transport(const Scenario& s);
   void take_frame(const std::uint8_t* pdu, std::size_t size, SimTime t);
   void process_frame(Pending& p);
-  void send_reply(const std::uint8_t* pdu, std::size_t size, SimTime t);
+  void send_reply(const Pending& p, SimTime t);
+  void capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir);
   void release_replies(SimTime t);
   void on_drive_timer(int axis0, SimTime t);
   void drive_cycle(int axis0, SimTime t);

@@ -12,6 +12,11 @@ LineTransport choose_line_transport(const std::string& spec, const std::string& 
   LineTransport t;
   if (s == "veth") {
     t.veth = std::make_shared<ethercat::VethPair>();
+    // Fixed addresses from the documentation range (RFC 7042) instead of the kernel's random
+    // ones: captures show the addresses the frames carry and stay byte-identical across runs,
+    // and the first byte's bit 1 is clear, so the slaves' marking of returned frames shows.
+    t.veth->set_address(t.veth->a(), "00:00:5e:00:53:10");
+    t.veth->set_address(t.veth->b(), "00:00:5e:00:53:11");
     t.slaves_spec = "raw:" + t.veth->b();
     t.master_iface = "raw:" + t.veth->a();
   } else if (s.starts_with("raw:")) {

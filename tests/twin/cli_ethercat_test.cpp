@@ -77,6 +77,17 @@ TEST_F(CliEthercat, LockstepOverVethIsByteIdenticalAndDecodes) {
   };
   for (const char* cmd : {"0x07", "0x02", "0x04", "0x05", "0x0c"})  // BRD APWR FPRD FPWR LRW
     EXPECT_TRUE(has(cmd)) << "no datagram with command " << cmd;
+  // Issue 20: the addresses in the capture are the ones on the wire: the master's frames from
+  // its veth end's MAC (the run sets 00:00:5e:00:53:10, not the capture's stand-in :01 for
+  // transports without addresses) to broadcast, the returned ones with the first slave's
+  // marking (bit 1 of the first source byte).
+  const fs::path macs = dir_ / "macs.txt";
+  ASSERT_EQ(std::system(("tshark -r " + pcap + " -T fields -e eth.src -e eth.dst | sort | uniq -c > " + macs.string() +
+                         " 2>/dev/null").c_str()), 0);
+  const auto pairs = lines_of(read_bytes(macs));
+  ASSERT_EQ(pairs.size(), 2u) << read_bytes(macs);
+  EXPECT_TRUE(contains(read_bytes(macs), "00:00:5e:00:53:10\tff:ff:ff:ff:ff:ff")) << read_bytes(macs);
+  EXPECT_TRUE(contains(read_bytes(macs), "02:00:5e:00:53:10\tff:ff:ff:ff:ff:ff")) << read_bytes(macs);
 }
 
 // EtherCAT over UDP on loopback (what a run uses without root) drives the same run.

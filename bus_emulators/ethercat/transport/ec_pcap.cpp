@@ -18,14 +18,18 @@ const char* to_string(Direction d) {
 }
 
 bool PcapWriter::write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir) {
+  return write(pdu, t, dir, kBroadcast, master_mac_);
+}
+
+bool PcapWriter::write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir, const Mac& dst, const Mac& src) {
   if (!writable()) return false;
   if (pdu.size() > kMaxPdu) {
     refuse();
     return false;
   }
-  Mac src = master_mac_;
-  if (dir == Direction::back) src[0] |= 0x02;
-  write_eth_header(frame(), kBroadcast, src);
+  Mac from = src;
+  if (dir == Direction::back) from[0] |= 0x02;
+  write_eth_header(frame(), dst, from);
   if (!pdu.empty()) std::memcpy(frame() + kEthHeaderSize, pdu.data(), pdu.size());
   return record(kEthHeaderSize + pdu.size(), t, static_cast<int>(dir));
 }

@@ -5,7 +5,8 @@
 // whatever transport moved them (raw, UDP, in-process): the frame going out is addressed from
 // the master's MAC to ff:ff:ff:ff:ff:ff, the frame coming back has bit 1 of the first
 // source-MAC byte set (as ESCs mark it), both with EtherType 0x88A4 and padded with zeros to
-// 60 bytes. Frames already carrying their Ethernet header (a raw capture) can be written as
+// 60 bytes. When the transport knows the addresses a frame really carried (raw), the caller
+// passes them and the record shows those, so a capture shows what was on the wire. Frames already carrying their Ethernet header (a raw capture) can be written as
 // they are with write_frame().
 //
 // Written through libpcap (pcap_open_dead_with_tstamp_precision + pcap_dump_fopen) with
@@ -62,6 +63,10 @@ class PcapWriter : public bus_emulators::EthernetCapture {
   // addresses). Returns false once closed, for a PDU over kMaxPdu bytes (counted in
   // refused()), or when writing or flushing failed (then and from then on). RT-safe.
   bool write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir);
+  // The same with the addresses the frame carried on the wire (a raw transport): an out frame as
+  // `dst` ← `src`; a returned one as `dst` ← `src` with bit 1 of its first byte set, as the
+  // first slave marks it on its way back.
+  bool write(std::span<const std::uint8_t> pdu, SimTime t, Direction dir, const Mac& dst, const Mac& src);
   // Appends a whole Ethernet frame (header included) as it is, padded to 60 bytes if shorter.
   bool write_frame(std::span<const std::uint8_t> frame, SimTime t, Direction dir) {
     return write_ethernet(frame, t, static_cast<int>(dir));

@@ -28,9 +28,11 @@
 
 #include <sys/socket.h>
 
+#include "bus_emulators/ethercat/ec_frame.hpp"
 #include "bus_emulators/readable_waiter.hpp"
 #include "bus_emulators/transport_spec.hpp"
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -61,6 +63,9 @@ class EcTransport {
   // EtherCAT and malformed ones skipped and counted), waiting up to timeout (0 = do not wait).
   // Returns its size, 0 on timeout, -1 on a system error (counted in receive_errors). Never throws.
   virtual int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) = 0;
+  // The Ethernet header (destination, source, EtherType) of the last PDU receive() returned,
+  // as it was on the wire; false for transports without one (udp, mem). For captures.
+  virtual bool wire_header(std::array<std::uint8_t, kEthHeaderSize>& /*out*/) const { return false; }
   // A descriptor that polls readable (POLLIN) while a PDU may be waiting, for event loops.
   virtual int fd() const = 0;
   // The canonical spec and the role, e.g. "raw:eth1 (master, 00:1b:21:0a:0b:0c)".

@@ -128,6 +128,7 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
       reply_hdr_[6] |= 0x02;  // bit 1 of the first source-MAC byte: "passed a slave"
       have_peer_ = true;
     }
+    last_hdr_ = rx_hdr_;
     ++stats_.received;
     return static_cast<int>(size);
   }

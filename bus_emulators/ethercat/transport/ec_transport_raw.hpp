@@ -50,6 +50,10 @@ class RawTransport final : public EcTransport {
   int fd() const override { return fd_; }
   std::string describe() const override;
   Stats stats() const override { return stats_; }
+  bool wire_header(std::array<std::uint8_t, kEthHeaderSize>& out) const override {
+    out = last_hdr_;
+    return stats_.received > 0;
+  }
 
   const Mac& mac() const { return mac_; }         // the interface's MAC when opened
   bool kernel_filter() const { return kernel_filter_; }  // the BPF filter is attached
@@ -68,6 +72,7 @@ class RawTransport final : public EcTransport {
   bool have_peer_ = false;                                // slaves: a frame was received
   std::array<std::uint8_t, kEthHeaderSize> tx_hdr_{};     // master: broadcast from mac_
   std::array<std::uint8_t, kEthHeaderSize> reply_hdr_{};  // slaves: the marked received header
+  std::array<std::uint8_t, kEthHeaderSize> last_hdr_{};   // the header of the last PDU returned
   std::array<std::uint8_t, kEthHeaderSize> rx_hdr_{};     // scratch for receive()
   Stats stats_;
 };

@@ -140,6 +140,25 @@ TEST(EcPcap, MasterMacLargePdusRawFramesAndNegativeTimes) {
   EXPECT_EQ(recs[1].bytes[59], 0);
 }
 
+// Issue 20: records with the addresses a raw transport saw: out as given, back with the
+// slaves' marking of the source.
+TEST(EcPcap, RecordsCarryTheWireAddressesWhenGiven) {
+  TempDir dir("ec-pcap");
+  const auto path = dir / "w.pcap";
+  PcapWriter w(path.string());
+  const Mac dst = {0xff, 0xff, 0xff, 0xff, 0xff, 0xff}, src = {0x01, 0x01, 0x01, 0x01, 0x01, 0x01};  // SOEM's
+  const auto p = pdu({{Cmd::brd, 0, 0, 2}});
+  EXPECT_TRUE(w.write(p, 1, Direction::out, dst, src));
+  EXPECT_TRUE(w.write(p, 2, Direction::back, dst, src));
+  w.close();
+  const auto recs = read_capture(path);
+  ASSERT_EQ(recs.size(), 2u);
+  EXPECT_TRUE(std::equal(dst.begin(), dst.end(), recs[0].bytes.begin()));
+  EXPECT_TRUE(std::equal(src.begin(), src.end(), recs[0].bytes.begin() + 6));
+  EXPECT_EQ(recs[1].bytes[6], 0x03);  // 01 | 02
+  EXPECT_EQ(recs[1].bytes[7], 0x01);
+}
+
 TEST(EcPcap, FileIsValidAfterEveryFlushWhileOpen) {
   TempDir dir("ec-pcap");
   const auto path = dir / "c.pcap";

@@ -175,7 +175,13 @@ TEST_F(EcRawTransport, FramesOnTheWireAndTheReplyMacMarking) {
   marked[0] |= 0x02;
   EXPECT_EQ(back->bytes, frame_of(marked, kEtherType, out));
   EXPECT_EQ(slaves.reply_header()[6], 0x02);
+  // The header the last received PDU carried, for captures (issue 20).
+  std::array<std::uint8_t, kEthHeaderSize> hdr{};
+  ASSERT_TRUE(slaves.wire_header(hdr));
+  EXPECT_TRUE(std::equal(hdr.begin(), hdr.end(), frame_of(kMasterMac, kEtherType, out).begin()));
   EXPECT_EQ(master.receive(buf, 1s), 16);
+  ASSERT_TRUE(master.wire_header(hdr));
+  EXPECT_EQ(hdr[6], marked[0]);
 }
 
 TEST_F(EcRawTransport, QdiscBypassIsOnByDefaultAndOptional) {
