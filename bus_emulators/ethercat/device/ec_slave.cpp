@@ -171,9 +171,9 @@ void DriveSlave::bind_sync_params(std::uint16_t index, SmSyncParams& p) {
     const auto v = static_cast<std::uint16_t>(data[0] | (data[1] << 8));
     return v == 0 || v == 2 ? SdoAbort::none : SdoAbort::value_range;
   };
-  o->after_write = [this](OdObject&, std::uint8_t sub) {
+  o->after_write = [this, &p](OdObject&, std::uint8_t sub) {
     if (sub == 1) {
-      sync_mode_written_ = true;
+      (&p == &sync_out_ ? sync_mode_written_out_ : sync_mode_written_in_) = true;
       return;
     }
     if (sub != 8 || (sync_out_.get_cycle != 2 && sync_in_.get_cycle != 2)) return;
@@ -381,8 +381,10 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
   if (from == AlState::preop && to == AlState::safeop) {
     // A sync mode the master wrote must match the SYNC0 activation it made.
     const bool dc = sync0_driven();
-    if (sync_mode_written_ && ((sync_out_.sync_mode == 2) != dc || (sync_in_.sync_mode == 2) != dc))
+    if ((sync_mode_written_out_ && (sync_out_.sync_mode == 2) != dc) ||
+        (sync_mode_written_in_ && (sync_in_.sync_mode == 2) != dc))
       return refuse(AlStatusCode::invalid_dc_sync_config);
+    follow_sync_mode(dc);
     const std::size_t ob = output_bytes(), ib = input_bytes();
     const SyncManager& o = esc_->sm(sm_out_);
     const SyncManager& i = esc_->sm(sm_in_);
@@ -447,7 +449,7 @@ void DriveSlave::power_cycle(SimTime t) {
   sync_out_ = SmSyncParams{};
   sync_in_ = SmSyncParams{};
   sync_out_.min_cycle = sync_in_.min_cycle = DcClock::kMinSyncCycleNs;
-  sync_mode_written_ = false;
+  sync_mode_written_out_ = sync_mode_written_in_ = false;
   outputs_fresh_ = false;
   last_cycle_ = -1;
   set_factor_objects();
@@ -477,6 +479,12 @@ void DriveSlave::outputs_stopped() noexcept {
   for (auto& c : cards_) c.prev_control = 0;
 }
 
+// A sync mode the master did not write follows the SYNC0 activation.
+void DriveSlave::follow_sync_mode(bool dc) noexcept {
+  if (!sync_mode_written_out_) sync_out_.sync_mode = dc ? 2 : 0;
+  if (!sync_mode_written_in_) sync_in_.sync_mode = dc ? 2 : 0;
+}
+
 // 0x1C32/0x1C33 live values at a firmware cycle at t (see SmSyncParams).
 void DriveSlave::update_sync_params(SimTime t) noexcept {
   const bool dc = sync0_driven();
@@ -486,8 +494,8 @@ void DriveSlave::update_sync_params(SimTime t) noexcept {
   // Counted once outputs are being applied (SSC counts after the first outputs in OP too).
   const bool missed = dc && esc_->al_state() == AlState::op && outputs_valid_ && !outputs_fresh_;
   outputs_fresh_ = false;
+  follow_sync_mode(dc);
   for (SmSyncParams* p : {&sync_out_, &sync_in_}) {
-    if (!sync_mode_written_) p->sync_mode = dc ? 2 : 0;
     p->sync0_cycle = sync0;
     p->cycle_time = dc ? sync0 : local;
     if (dc && esc_->al_state() == AlState::op) {

@@ -91,7 +91,8 @@ struct DriveSlaveStats {
 //  :01 sync mode      0 free run (the firmware's own cycle), 2 DC SYNC0; SM-synchronous (1) is
 //                     not supported (:04 = 0x0005) and refused with 0x06090030. Written by the
 //                     master in PRE-OP, it must agree with the SYNC0 activation (0x0981) at
-//                     PRE-OP → SAFE-OP, else 0x0030; never written, it follows the activation.
+//                     PRE-OP → SAFE-OP, else 0x0030; never written, it follows the activation
+//                     (each object on its own: a master may write only 0x1C32).
 //  :02 cycle time     [ns] the SYNC0 cycle with DC, else the firmware's measured local cycle
 //  :05 minimum cycle  [ns] DcClock::kMinSyncCycleNs; :03 :06 :09 shift, calc+copy, delay: 0 (the
 //                     model's firmware takes no time)
@@ -179,6 +180,7 @@ class DriveSlave final : public EscApplication {
   void bind_sync_params(std::uint16_t index, SmSyncParams& p);
   void set_factor_objects();
   void update_sync_params(SimTime t) noexcept;
+  void follow_sync_mode(bool dc) noexcept;
   void signal_emergencies() noexcept;
   SdoAbort check_mapping(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
   SdoAbort check_assign(const OdObject& o, std::uint8_t sub, std::span<const std::uint8_t> data) const;
@@ -216,7 +218,8 @@ class DriveSlave final : public EscApplication {
   CycleHook hook_;
   DriveSlaveStats stats_;
   SmSyncParams sync_out_, sync_in_;
-  bool sync_mode_written_ = false;  // the master wrote 0x1C32:01 or 0x1C33:01 since power-on
+  bool sync_mode_written_out_ = false;  // the master wrote 0x1C32:01 since power-on
+  bool sync_mode_written_in_ = false;   // … 0x1C33:01
   bool outputs_fresh_ = false;      // a complete SM2 buffer since the last firmware cycle
   SimTime last_cycle_ = -1;
   std::vector<std::uint16_t> emcy_code_;  // per axis: the 0x603F last signalled
