@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "physics/platform_mjcf.hpp"
+#include "twin/check.hpp"
 #include "twin/clock.hpp"
 #include "twin/dds/dds_echo.hpp"
 #include "twin/dds_observer.hpp"
@@ -322,174 +323,6 @@ int cmd_run(const RunArgs& a) {
   }
 }
 
-// The scenario files under the given paths: files as given, directories searched
-// recursively for *.yaml, in sorted order so reports are stable.
-std::vector<std::string> scenario_files(const std::vector<std::string>& paths) {
-  std::vector<std::string> files;
-  for (const auto& p : paths) {
-    if (!fs::is_directory(p)) {
-      files.push_back(p);
-      continue;
-    }
-    std::vector<std::string> found;
-    for (const auto& e : fs::recursive_directory_iterator(p))
-      if (e.is_regular_file() && (e.path().extension() == ".yaml" || e.path().extension() == ".yml"))
-        found.push_back(e.path().string());
-    std::sort(found.begin(), found.end());
-    files.insert(files.end(), found.begin(), found.end());
-  }
-  return files;
-}
-
-struct CheckOptions {
-  std::string junit;
-  std::string out_root = "out/check";
-  bool video = false;   // --video: render every run (off by default: CI time)
-  bool report = true;   // each run's report.html and the index page
-  int jobs = 1;         // -j N: scenarios run at once
-};
-
-// One scenario's line of the check index (media/report/check_index.py).
-nlohmann::json index_entry(const std::string& file, const std::string& run_dir, const JunitCase& c,
-                           const nlohmann::json& metrics) {
-  nlohmann::json m = nlohmann::json::object();
-  for (const char* k : {"sim_time_s", "wall_time_s", "real_time_factor", "clock", "interrupted"})
-    if (metrics.contains(k)) m[k] = metrics[k];
-  for (const char* k : {"platform", "bus"})
-    if (metrics.contains(k)) m[k] = metrics[k];
-  return {{"scenario", c.name}, {"file", file}, {"run_dir", run_dir}, {"passed", c.passed},
-          {"exit_code", c.passed ? 0 : (c.error ? 2 : 1)}, {"failures", c.failures}, {"metrics", m}};
-}
-
-// What the scenarios of one `check` share; guarded by `mutex` when they run in parallel.
-struct CheckShared {
-  std::mutex mutex;
-  std::map<std::string, std::string> used;  // scenario name -> its file (one run directory each)
-  bool bad_input = false;
-};
-
-JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShared& shared, nlohmann::json& entry) {
-  const std::string out_root = opt.out_root;
-  std::string run_dir;
-  nlohmann::json metrics;
-  JunitCase c;
-  c.name = fs::path(file).stem().string();
-  c.classname = "omnitwin.check";
-  const std::int64_t t0 = monotonic_ns();
-  try {
-    const Scenario s = load_scenario(file);
-    c.name = s.name;
-    // Each scenario gets its own run directory: two files with one name would overwrite.
-    {
-      const std::lock_guard lock(shared.mutex);
-      if (const auto [it, fresh] = shared.used.emplace(s.name, file); !fresh)
-        throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
-    }
-    RunOptions o;
-    o.out_dir = (fs::path(out_root) / s.name).string();
-    o.interrupt = &g_interrupt;
-    const RunResult r = run_scenario(s, o);
-    run_dir = r.out_dir;
-    metrics = r.metrics;
-    OutputPlan plan;
-    plan.video = opt.video && !g_interrupt.load();
-    plan.video_spec = s.outputs.video;
-    plan.report = opt.report && s.outputs.report;
-    const OutputsResult out = make_run_outputs(r.out_dir, plan, &g_interrupt);
-    for (const std::string& e : out.errors) c.failures.push_back(e);
-    c.passed = r.passed && !r.interrupted;
-    for (const auto& f : r.metrics["expectations"]["failures"]) c.failures.push_back(f.get<std::string>());
-    if (r.interrupted) c.failures.push_back("interrupted");
-    c.system_out = r.metrics.dump(2);
-  } catch (const ScenarioError& e) {
-    c.error = true;
-    c.failures.push_back(e.what());
-  } catch (const RunSetupError& e) {
-    c.error = true;
-    c.failures.push_back(file + ": " + e.what());
-  } catch (const std::exception& e) {
-    c.error = true;
-    c.failures.push_back(std::string("run failed: ") + e.what());
-  }
-  if (c.error && !c.failures.empty() && !c.failures.front().starts_with("run failed: ")) {
-    const std::lock_guard lock(shared.mutex);
-    shared.bad_input = true;
-  }
-  c.time_s = (monotonic_ns() - t0) * 1e-9;
-  entry = index_entry(file, run_dir, c, metrics);
-  return c;
-}
-
-// Runs every file's scenario, `jobs` at a time (each lockstep run is isolated on its own
-// bus, so they cannot disturb each other); prints each verdict as it comes. Results keep
-// the files' order.
-std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const CheckOptions& opt, CheckShared& shared,
-                                  nlohmann::json& index) {
-  std::vector<JunitCase> cases(files.size());
-  std::vector<nlohmann::json> entries(files.size());
-  std::vector<bool> done(files.size(), false);
-  std::atomic<std::size_t> next{0};
-  std::mutex print;
-  const auto worker = [&] {
-    for (std::size_t i = next++; i < files.size() && !g_interrupt.load(); i = next++) {
-      JunitCase c = check_one(files[i], opt, shared, entries[i]);
-      const std::lock_guard lock(print);
-      std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
-      for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
-      std::cout << std::flush;
-      cases[i] = std::move(c);
-      done[i] = true;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int j = 1; j < std::min<int>(opt.jobs, static_cast<int>(files.size())); ++j) pool.emplace_back(worker);
-  worker();
-  for (std::thread& t : pool) t.join();
-  std::vector<JunitCase> ran;
-  for (std::size_t i = 0; i < files.size(); ++i) {
-    if (!done[i]) continue;  // not started: interrupted
-    ran.push_back(std::move(cases[i]));
-    index.push_back(std::move(entries[i]));
-  }
-  return ran;
-}
-
-int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
-  const auto files = scenario_files(paths);
-  if (files.empty()) {
-    std::cerr << "omnitwin check: no scenario files under the given paths\n";
-    return 2;
-  }
-  CheckShared shared;
-  nlohmann::json index = nlohmann::json::array();
-  const std::vector<JunitCase> cases = run_checks(files, opt, shared, index);
-  int passed = 0, failed = 0;
-  for (const JunitCase& c : cases) (c.passed ? passed : failed)++;
-  const bool bad_input = shared.bad_input;
-  // The index first: the summary stays the last line, where CI logs show it.
-  std::string index_error;
-  if (opt.report) {
-    index_error = write_check_index(opt.out_root, "omnitwin check", index);
-    if (index_error.empty()) std::cout << "index: " << (fs::path(opt.out_root) / "index.html").string() << "\n";
-  }
-  std::cout << passed << " passed, " << failed << " failed\n";
-  if (!index_error.empty()) {
-    std::cerr << "omnitwin check: cannot write the index page: " << index_error << "\n";
-    return 3;
-  }
-  if (!opt.junit.empty()) {
-    try {
-      write_junit(opt.junit, "omnitwin check", cases);
-    } catch (const std::exception& e) {
-      std::cerr << "omnitwin check: cannot write the JUnit report: " << e.what() << "\n";
-      return 3;
-    }
-  }
-  if (bad_input) return 2;
-  if (g_interrupt.load()) return 3;
-  return failed ? 1 : 0;
-}
-
 // `omnitwin render RUN_DIR`: the video of a recorded run (and, on request, its report).
 int cmd_render(const std::string& run_dir, const std::string& out, const VideoSpec& v, bool report) {
   if (!fs::is_directory(run_dir) || !fs::exists(fs::path(run_dir) / "trajectory.csv")) {
@@ -605,9 +438,15 @@ int main(int argc, char** argv) {
   check->add_option("--out", co.out_root, "root of the run directories")->capture_default_str();
   check->add_flag("--video", co.video, "render every run's video.mp4 (off by default)");
   check->add_flag("--no-report", check_no_report, "no report.html per run and no index.html");
-  check->add_option("-j,--jobs", co.jobs, "run N scenarios at once (lockstep runs are isolated)")
-      ->check(CLI::Range(1, 64))
-      ->capture_default_str();
+  check->add_option("-j,--jobs", co.jobs, "run N scenarios at once (lockstep runs are isolated; default: the cores)")
+      ->check(CLI::Range(1, 64));
+  std::string check_shard;
+  bool check_merge = false;
+  check->add_option("--shard", check_shard, "run only shard K of N of the files (a CI matrix: K = 1..N)")
+      ->type_name("K/N");
+  check->add_flag("--merge", check_merge,
+                  "the paths are --out folders of shards: join their results into one JUnit report (--junit) "
+                  "and one index page (--out)");
 
   std::string render_dir, render_out;
   VideoSpec rv;
@@ -675,7 +514,16 @@ int main(int argc, char** argv) {
     }
     if (*check) {
       co.report = !check_no_report;
-      return cmd_check(check_paths, co);
+      co.interrupt = &g_interrupt;
+      if (!check_shard.empty() && !parse_shard(check_shard, co.shard_k, co.shard_n)) {
+        std::cerr << "omnitwin check: --shard '" << check_shard << "' is not K/N with 1 <= K <= N <= 1000\n";
+        return 2;
+      }
+      if (check_merge && !check_shard.empty()) {
+        std::cerr << "omnitwin check: --merge joins shards; it takes no --shard\n";
+        return 2;
+      }
+      return check_merge ? cmd_check_merge(check_paths, co) : cmd_check(check_paths, co);
     }
     if (*render) {
       if (rv.width % 2 || rv.height % 2) {

@@ -27,6 +27,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -315,6 +316,70 @@ TEST_F(CliCheck, NoScenariosIsBadUsage) {
   const Finished f = run({"check", (dir_ / "empty").string(), "--out", (dir_ / "runs").string()});
   EXPECT_EQ(f.code, 2);
   EXPECT_TRUE(contains(f.err, "no scenario files")) << f.err;
+}
+
+// Issue 17: a CI matrix. --shard 1/2 and 2/2 over the same paths run every scenario exactly
+// once between them; --merge joins their check.json (after the shard folders were moved, as
+// CI artefacts are) into one JUnit report that an XML parser reads and one index page; the
+// exit code is that of the whole suite.
+TEST_F(CliCheck, ShardsRunEveryScenarioOnceAndMergeJoinsThem) {
+  const fs::path scenarios =
+      scenario_dir(dir_, "scenarios", {"run_short_line.yaml", "run_impossible.yaml", "run_wheel_slip.yaml"});
+  std::multiset<std::string> ran;
+  for (const char* k : {"1", "2"}) {
+    const fs::path out = dir_ / (std::string("shard") + k);
+    const Finished f = run({"check", scenarios.string(), "--shard", std::string(k) + "/2", "-j", "2", "--out",
+                            out.string(), "--no-report"});
+    EXPECT_TRUE(f.code == 0 || f.code == 1) << f.out << f.err;
+    EXPECT_TRUE(contains(f.out, std::string("shard ") + k + "/2: ")) << f.out;
+    const nlohmann::json j = nlohmann::json::parse(read_bytes(out / "check.json"));
+    EXPECT_EQ(j.at("shard"), std::string(k) + "/2");
+    EXPECT_EQ(j.at("files_total"), 3);
+    for (const auto& r : j.at("results")) ran.insert(r.at("scenario").get<std::string>());
+  }
+  EXPECT_EQ(ran, (std::multiset<std::string>{"run_impossible", "run_short_line", "run_wheel_slip"}));
+  // Move both shard folders (CI artefacts land elsewhere), then merge.
+  fs::create_directories(dir_ / "artefacts");
+  for (const char* k : {"1", "2"}) fs::rename(dir_ / (std::string("shard") + k), dir_ / "artefacts" / (std::string("s") + k));
+  const fs::path junit = dir_ / "all.xml";
+  const Finished m = run({"check", "--merge", (dir_ / "artefacts/s1").string(), (dir_ / "artefacts/s2").string(),
+                          "--junit", junit.string(), "--out", (dir_ / "merged").string()});
+  EXPECT_EQ(m.code, 1) << m.out << m.err;  // run_impossible fails
+  EXPECT_EQ(lines_of(m.out).back(), "2 passed, 1 failed");
+  const std::string xml = read_bytes(junit);
+  EXPECT_TRUE(contains(xml, "tests=\"3\" failures=\"1\" errors=\"0\"")) << xml;
+  const std::string parse = "python3 -c \"import sys, xml.etree.ElementTree as E; r = E.parse(sys.argv[1]).getroot(); "
+                            "sys.exit(0 if len(r.findall('.//testcase')) == 3 else 1)\" " + junit.string();
+  EXPECT_EQ(std::system(parse.c_str()), 0) << xml;
+  const std::string index = read_bytes(dir_ / "merged/index.html");
+  EXPECT_TRUE(contains(index, "2 passed, 1 failed")) << index;
+  // The merged results point into the moved shard folders.
+  const nlohmann::json merged = nlohmann::json::parse(read_bytes(dir_ / "merged/check.json"));
+  ASSERT_EQ(merged.at("results").size(), 3u);
+  for (const auto& r : merged.at("results")) {
+    const std::string run_dir = r.at("run_dir").get<std::string>();
+    EXPECT_TRUE(contains(run_dir, "artefacts")) << run_dir;
+    EXPECT_TRUE(fs::is_regular_file(fs::path(run_dir) / "metrics.json")) << run_dir;
+  }
+}
+
+// Bad shard arguments and bad merges are usage errors naming what is wrong.
+TEST_F(CliCheck, BadShardsAndMergesAreBadUsage) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  for (const char* bad : {"3/2", "0/2", "1/0", "1", "a/b", "1/2/3"}) {
+    const Finished f = run({"check", scenarios.string(), "--shard", bad, "--out", (dir_ / "x").string()});
+    EXPECT_EQ(f.code, 2) << bad;
+    EXPECT_TRUE(contains(f.err, "--shard")) << f.err;
+  }
+  fs::create_directories(dir_ / "not_a_shard");
+  Finished f = run({"check", "--merge", (dir_ / "not_a_shard").string(), "--out", (dir_ / "m").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_TRUE(contains(f.err, "no check.json")) << f.err;
+  const Finished one = run({"check", scenarios.string(), "--shard", "1/1", "--out", (dir_ / "s").string(), "--no-report"});
+  ASSERT_EQ(one.code, 0) << one.out << one.err;
+  f = run({"check", "--merge", (dir_ / "s").string(), (dir_ / "s").string(), "--out", (dir_ / "m").string()});
+  EXPECT_EQ(f.code, 2);
+  EXPECT_TRUE(contains(f.err, "'run_short_line' is in two shards")) << f.err;
 }
 
 // ---------------------------------------------------------------------------------------

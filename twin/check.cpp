@@ -1,0 +1,319 @@
+// twin layer — `omnitwin check` (see check.hpp).
+#include "twin/check.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include "twin/clock.hpp"
+#include "twin/junit.hpp"
+#include "twin/run.hpp"
+#include "twin/run_outputs.hpp"
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+bool interrupted(const CheckOptions& opt) { return opt.interrupt != nullptr && opt.interrupt->load(); }
+
+int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
+                 const CheckOptions& opt);
+
+// check.json next to the index page, written whole under a temporary name; "" or why not.
+std::string write_check_json(const std::string& out_root, const std::string& shard, std::size_t files_total,
+                             const nlohmann::json& results) {
+  std::error_code ec;
+  fs::create_directories(out_root, ec);
+  const fs::path file = fs::path(out_root) / "check.json", temp = fs::path(out_root) / ".check.json.part";
+  {
+    std::ofstream f(temp, std::ios::binary | std::ios::trunc);
+    f << nlohmann::json{{"title", "omnitwin check"}, {"shard", shard}, {"files_total", files_total}, {"results", results}}
+             .dump(1, ' ', false, nlohmann::json::error_handler_t::replace)
+      << "\n";
+    f.close();
+    if (!f) return "cannot write " + temp.string();
+  }
+  fs::rename(temp, file, ec);
+  return ec ? "cannot write " + file.string() + ": " + ec.message() : "";
+}
+
+// One scenario's line of the check index (media/report/check_index.py).
+nlohmann::json index_entry(const std::string& file, const std::string& run_dir, const JunitCase& c,
+                           const nlohmann::json& metrics) {
+  nlohmann::json m = nlohmann::json::object();
+  for (const char* k : {"sim_time_s", "wall_time_s", "real_time_factor", "clock", "interrupted"})
+    if (metrics.contains(k)) m[k] = metrics[k];
+  for (const char* k : {"platform", "bus"})
+    if (metrics.contains(k)) m[k] = metrics[k];
+  return {{"scenario", c.name},       {"file", file},
+          {"run_dir", run_dir},      {"passed", c.passed},
+          {"exit_code", c.passed ? 0 : (c.error ? 2 : 1)},
+          {"failures", c.failures},  {"metrics", m},
+          {"time_s", c.time_s},      {"error", c.error},
+          {"classname", c.classname}};
+}
+
+// What the scenarios of one `check` share; guarded by `mutex` when they run in parallel.
+struct CheckShared {
+  std::mutex mutex;
+  std::map<std::string, std::string> used;  // scenario name -> its file (one run directory each)
+  bool bad_input = false;
+};
+
+JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShared& shared, nlohmann::json& entry) {
+  const std::string out_root = opt.out_root;
+  std::string run_dir;
+  nlohmann::json metrics;
+  JunitCase c;
+  c.name = fs::path(file).stem().string();
+  c.classname = "omnitwin.check";
+  const std::int64_t t0 = monotonic_ns();
+  try {
+    const Scenario s = load_scenario(file);
+    c.name = s.name;
+    // Each scenario gets its own run directory: two files with one name would overwrite.
+    {
+      const std::lock_guard lock(shared.mutex);
+      if (const auto [it, fresh] = shared.used.emplace(s.name, file); !fresh)
+        throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
+    }
+    RunOptions o;
+    o.out_dir = (fs::path(out_root) / s.name).string();
+    o.interrupt = opt.interrupt;
+    const RunResult r = run_scenario(s, o);
+    run_dir = r.out_dir;
+    metrics = r.metrics;
+    OutputPlan plan;
+    plan.video = opt.video && !interrupted(opt);
+    plan.video_spec = s.outputs.video;
+    plan.report = opt.report && s.outputs.report;
+    const OutputsResult out = make_run_outputs(r.out_dir, plan, opt.interrupt);
+    for (const std::string& e : out.errors) c.failures.push_back(e);
+    c.passed = r.passed && !r.interrupted;
+    for (const auto& f : r.metrics["expectations"]["failures"]) c.failures.push_back(f.get<std::string>());
+    if (r.interrupted) c.failures.push_back("interrupted");
+    c.system_out = r.metrics.dump(2);
+  } catch (const ScenarioError& e) {
+    c.error = true;
+    c.failures.push_back(e.what());
+  } catch (const RunSetupError& e) {
+    c.error = true;
+    c.failures.push_back(file + ": " + e.what());
+  } catch (const std::exception& e) {
+    c.error = true;
+    c.failures.push_back(std::string("run failed: ") + e.what());
+  }
+  if (c.error && !c.failures.empty() && !c.failures.front().starts_with("run failed: ")) {
+    const std::lock_guard lock(shared.mutex);
+    shared.bad_input = true;
+  }
+  c.time_s = (monotonic_ns() - t0) * 1e-9;
+  entry = index_entry(file, run_dir, c, metrics);
+  entry["run_dir_rel"] = run_dir.empty() ? "" : fs::relative(run_dir, opt.out_root).generic_string();
+  return c;
+}
+
+// Runs every file's scenario, `jobs` at a time (each lockstep run is isolated on its own
+// bus, so they cannot disturb each other; 0 = the machine's cores); prints each verdict as it comes. Results keep
+// the files' order.
+std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const CheckOptions& opt, CheckShared& shared,
+                                  nlohmann::json& index) {
+  std::vector<JunitCase> cases(files.size());
+  std::vector<nlohmann::json> entries(files.size());
+  std::vector<bool> done(files.size(), false);
+  std::atomic<std::size_t> next{0};
+  std::mutex print;
+  const auto worker = [&] {
+    for (std::size_t i = next++; i < files.size() && !interrupted(opt); i = next++) {
+      JunitCase c = check_one(files[i], opt, shared, entries[i]);
+      const std::lock_guard lock(print);
+      std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
+      for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
+      std::cout << std::flush;
+      cases[i] = std::move(c);
+      done[i] = true;
+    }
+  };
+  std::vector<std::thread> pool;
+  const int jobs = opt.jobs > 0 ? opt.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  for (int j = 1; j < std::min<int>(jobs, static_cast<int>(files.size())); ++j) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  std::vector<JunitCase> ran;
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    if (!done[i]) continue;  // not started: interrupted
+    ran.push_back(std::move(cases[i]));
+    index.push_back(std::move(entries[i]));
+  }
+  return ran;
+}
+
+
+// One shard's check.json, its run directories made relative to here; "" or why not.
+std::string read_shard(const std::string& dir, nlohmann::json& results) {
+  const fs::path file = fs::path(dir) / "check.json";
+  std::ifstream f(file, std::ios::binary);
+  if (!f) return file.string() + ": no check.json (is it the --out of an `omnitwin check`?)";
+  try {
+    const nlohmann::json j = nlohmann::json::parse(f);
+    for (nlohmann::json e : j.at("results")) {
+      const std::string rel = e.value("run_dir_rel", "");
+      e["run_dir"] = rel.empty() ? "" : (fs::path(dir) / rel).lexically_normal().string();
+      results.push_back(std::move(e));
+    }
+  } catch (const std::exception& e) {
+    return file.string() + ": " + e.what();
+  }
+  return "";
+}
+
+JunitCase case_of(const nlohmann::json& e) {
+  JunitCase c;
+  c.name = e.value("scenario", "");
+  c.classname = e.value("classname", "omnitwin.check");
+  c.time_s = e.value("time_s", 0.0);
+  c.passed = e.value("passed", false);
+  c.error = e.value("error", false);
+  for (const auto& m : e.value("failures", nlohmann::json::array())) c.failures.push_back(m.get<std::string>());
+  return c;
+}
+
+}  // namespace
+
+// The scenario files under the given paths: files as given, directories searched
+// recursively for *.yaml, in sorted order so reports are stable.
+std::vector<std::string> scenario_files(const std::vector<std::string>& paths) {
+  std::vector<std::string> files;
+  for (const auto& p : paths) {
+    if (!fs::is_directory(p)) {
+      files.push_back(p);
+      continue;
+    }
+    std::vector<std::string> found;
+    for (const auto& e : fs::recursive_directory_iterator(p))
+      if (e.is_regular_file() && (e.path().extension() == ".yaml" || e.path().extension() == ".yml"))
+        found.push_back(e.path().string());
+    std::sort(found.begin(), found.end());
+    files.insert(files.end(), found.begin(), found.end());
+  }
+  return files;
+}
+
+
+
+std::vector<std::string> shard_of(const std::vector<std::string>& files, int k, int n) {
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < files.size(); ++i)
+    if (static_cast<int>(i % static_cast<std::size_t>(n)) == k - 1) out.push_back(files[i]);
+  return out;
+}
+
+bool parse_shard(const std::string& text, int& k, int& n) {
+  const auto slash = text.find('/');
+  if (slash == std::string::npos || slash == 0 || slash + 1 == text.size()) return false;
+  try {
+    std::size_t used_k = 0, used_n = 0;
+    k = std::stoi(text.substr(0, slash), &used_k);
+    n = std::stoi(text.substr(slash + 1), &used_n);
+    if (used_k != slash || used_n != text.size() - slash - 1) return false;
+  } catch (const std::exception&) {
+    return false;
+  }
+  return n >= 1 && n <= 1000 && k >= 1 && k <= n;
+}
+
+int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
+  const auto all = scenario_files(paths);
+  if (all.empty()) {
+    std::cerr << "omnitwin check: no scenario files under the given paths\n";
+    return 2;
+  }
+  const auto files = opt.shard_n > 0 ? shard_of(all, opt.shard_k, opt.shard_n) : all;
+  if (opt.shard_n > 0)
+    std::cout << fmt::format("shard {}/{}: {} of {} scenario files\n", opt.shard_k, opt.shard_n, files.size(), all.size());
+  CheckShared shared;
+  nlohmann::json index = nlohmann::json::array();
+  const std::vector<JunitCase> cases = run_checks(files, opt, shared, index);
+  const std::string shard = opt.shard_n > 0 ? fmt::format("{}/{}", opt.shard_k, opt.shard_n) : "";
+  if (const std::string e = write_check_json(opt.out_root, shard, all.size(), index); !e.empty()) {
+    std::cerr << "omnitwin check: " << e << "\n";
+    return 3;
+  }
+  return finish_check(cases, index, shared.bad_input, opt);
+}
+
+
+int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& opt) {
+  nlohmann::json index = nlohmann::json::array();
+  for (const std::string& d : dirs) {
+    if (const std::string e = read_shard(d, index); !e.empty()) {
+      std::cerr << "omnitwin check --merge: " << e << "\n";
+      return 2;
+    }
+  }
+  std::map<std::string, std::string> seen;  // scenario → the run directory it came from
+  std::vector<JunitCase> cases;
+  bool bad_input = false;
+  for (const auto& e : index) {
+    const std::string name = e.value("scenario", ""), run = e.value("run_dir", "");
+    if (const auto [it, fresh] = seen.emplace(name, run); !fresh) {
+      std::cerr << fmt::format("omnitwin check --merge: scenario '{}' is in two shards ({} and {})\n", name,
+                               it->second, run);
+      return 2;
+    }
+    cases.push_back(case_of(e));
+    bad_input = bad_input || cases.back().error;
+  }
+  std::cout << fmt::format("merged {} results from {} shard folders\n", cases.size(), dirs.size());
+  if (const std::string e = write_check_json(opt.out_root, "", cases.size(), index); !e.empty()) {
+    std::cerr << "omnitwin check --merge: " << e << "\n";
+    return 3;
+  }
+  return finish_check(cases, index, bad_input, opt);
+}
+
+namespace {
+// The index page, the summary line, the JUnit report and the exit code of a check (or merge).
+int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
+                 const CheckOptions& opt) {
+  int passed = 0, failed = 0;
+  for (const JunitCase& c : cases) (c.passed ? passed : failed)++;
+  // The index first: the summary stays the last line, where CI logs show it.
+  std::string index_error;
+  if (opt.report) {
+    index_error = write_check_index(opt.out_root, "omnitwin check", index);
+    if (index_error.empty()) std::cout << "index: " << (fs::path(opt.out_root) / "index.html").string() << "\n";
+  }
+  std::cout << passed << " passed, " << failed << " failed\n";
+  if (!index_error.empty()) {
+    std::cerr << "omnitwin check: cannot write the index page: " << index_error << "\n";
+    return 3;
+  }
+  if (!opt.junit.empty()) {
+    try {
+      write_junit(opt.junit, "omnitwin check", cases);
+    } catch (const std::exception& e) {
+      std::cerr << "omnitwin check: cannot write the JUnit report: " << e.what() << "\n";
+      return 3;
+    }
+  }
+  if (bad_input) return 2;
+  if (interrupted(opt)) return 3;
+  return failed ? 1 : 0;
+}
+
+
+}  // namespace
+
+}  // namespace omnitwin::twin
