@@ -218,4 +218,21 @@ ReportResult write_check_index(const std::string& out_html, const nlohmann::json
   return r;
 }
 
+ReportResult write_sweep_plot(const std::string& csv, const std::string& png, const std::string& x,
+                              const std::string& y, const std::vector<std::string>& params, const ReportTools& tools) {
+  const auto t0 = Clock::now();
+  ReportResult r;
+  try {
+    std::vector<std::string> args = {csv, png, x, y};
+    args.insert(args.end(), params.begin(), params.end());
+    run_script(tools, "sweep_plot.py", args, r);
+    if (r.ok) r.path = png;
+  } catch (const std::exception& e) {
+    r.ok = false;
+    r.error = std::string("sweep plot: ") + e.what();
+  }
+  r.seconds = seconds_since(t0);
+  return r;
+}
+
 }  // namespace omnitwin::media

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -48,5 +49,12 @@ ReportResult write_run_report(const std::string& run_dir, const ReportTools& too
 // Not real-time safe (spawns a process and blocks); thread-safe for distinct out_html.
 ReportResult write_check_index(const std::string& out_html, const nlohmann::json& summary,
                                const ReportTools& tools);
+
+// Writes png, the plot of `omnitwin sweep`: metric y against parameter x from the sweep's
+// table (csv: point, the params, the metrics, passed, exit_code), one line per combination of
+// the other parameters, points whose expectations failed marked (media/report/sweep_plot.py).
+// Not real-time safe (spawns a process and blocks); thread-safe for distinct png.
+ReportResult write_sweep_plot(const std::string& csv, const std::string& png, const std::string& x,
+                              const std::string& y, const std::vector<std::string>& params, const ReportTools& tools);
 
 }  // namespace omnitwin::media

@@ -32,6 +32,7 @@
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
+#include "twin/sweep.hpp"
 
 namespace fs = std::filesystem;
 using namespace omnitwin;
@@ -448,6 +449,15 @@ int main(int argc, char** argv) {
                   "the paths are --out folders of shards: join their results into one JUnit report (--junit) "
                   "and one index page (--out)");
 
+  std::string sweep_spec;
+  SweepOptions so;
+  CLI::App* sweep = app.add_subcommand("sweep", "run a scenario over a parameter grid or random draws; one table and plot");
+  sweep->add_option("spec", sweep_spec, "the sweep file (docs/scenarios.md, \"Sweeps\")")->required();
+  sweep->add_option("--out", so.out, "output folder (default out/sweep/<name>)");
+  sweep->add_option("-j,--jobs", so.jobs, "points at once (default: the cores)")->check(CLI::Range(1, 64));
+  sweep->add_flag("--slurm", so.slurm, "run the points as a Slurm job array (sbatch --wait), then collect");
+  sweep->add_option("--point", so.point, "run only point K (what each Slurm task runs)")->check(CLI::Range(1, 100000));
+
   std::string render_dir, render_out;
   VideoSpec rv;
   bool render_no_inset = false, render_report = false;
@@ -524,6 +534,10 @@ int main(int argc, char** argv) {
         return 2;
       }
       return check_merge ? cmd_check_merge(check_paths, co) : cmd_check(check_paths, co);
+    }
+    if (*sweep) {
+      so.interrupt = &g_interrupt;
+      return cmd_sweep(sweep_spec, so);
     }
     if (*render) {
       if (rv.width % 2 || rv.height % 2) {

@@ -10,15 +10,16 @@
 #include "twin/clock.hpp"
 
 namespace omnitwin::twin {
-namespace {
-
-namespace fs = std::filesystem;
 
 media::ReportTools report_tools() {
   media::ReportTools t;
   t.scripts_dir = report_scripts_dir();
   return t;
 }
+
+namespace {
+
+namespace fs = std::filesystem;
 
 void render_video(const std::string& run_dir, const OutputPlan& plan, const std::atomic<bool>* stop,
                   OutputsResult& r) {

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "media/run_report.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
@@ -45,5 +46,7 @@ std::string write_check_index(const std::string& out_root, const std::string& ti
 
 // Where the report scripts live (the source tree's media/report).
 std::string report_scripts_dir();
+// The report scripts' tools (this build's media/report, Debian's python3).
+media::ReportTools report_tools();
 
 }  // namespace omnitwin::twin

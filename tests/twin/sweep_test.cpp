@@ -1,0 +1,135 @@
+// Tests twin/sweep: a spec's expansion (the grid's cartesian product with the last key fastest,
+// seeded random draws that repeat, both combined), its refusals naming line and key, and
+// `omnitwin sweep` through the real program with -j 2: one run directory and point.json per
+// point, sweep.csv with every parameter and metric, the plot, `--point K` running one point
+// (what a Slurm task does). The Slurm path itself: sweep_slow_test.cpp.
+#include "twin/sweep.hpp"
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <fstream>
+
+#include "tests/twin/cli_support.hpp"
+#include "twin/scenario.hpp"
+
+namespace omnitwin::twin::cli {
+namespace {
+
+using omnitwin::testing::lines_of;
+
+fs::path write_spec(const fs::path& dir, const std::string& name, const std::string& body) {
+  fs::create_directories(dir);
+  fs::copy_file(test_scenario("run_short_line.yaml"), dir / "line.yaml", fs::copy_options::skip_existing);
+  std::ofstream(dir / name) << body;
+  return dir / name;
+}
+
+class Sweep : public CliTest {};
+
+TEST_F(Sweep, GridIsTheCartesianProductLastKeyFastest) {
+  const SweepSpec s = load_sweep(source_path("tests/data/sweeps/short_grid.yaml"));
+  EXPECT_EQ(s.name, "short_grid");
+  ASSERT_EQ(s.points.size(), 4u);
+  EXPECT_EQ(s.params, (std::vector<std::string>{"controller.period", "controller.kp"}));
+  EXPECT_EQ(s.points[0][0].second, "0.005");
+  EXPECT_EQ(s.points[0][1].second, "[2, 2, 2]");
+  EXPECT_EQ(s.points[1][1].second, "[6, 6, 6]");
+  EXPECT_EQ(s.points[2][0].second, "0.010");
+  EXPECT_EQ(s.plot_x, "controller.period");
+  EXPECT_EQ(s.plot_y, "platform.final_error_cm");
+}
+
+TEST_F(Sweep, RandomDrawsAreSeededAndCombineWithTheGrid) {
+  const std::string body = "scenario: line.yaml\n"
+                           "grid: {controller.period: [0.005, 0.010]}\n"
+                           "random:\n  draws: 3\n  seed: 7\n  params:\n"
+                           "    settle: {min: 0.1, max: 0.5}\n"
+                           "    controller.max_speed: {values: [0.3, 0.5]}\n"
+                           "metrics: [platform.final_error_cm]\n";
+  const SweepSpec a = load_sweep(write_spec(dir_ / "a", "r.yaml", body).string());
+  const SweepSpec b = load_sweep(write_spec(dir_ / "b", "r.yaml", body).string());
+  ASSERT_EQ(a.points.size(), 6u);  // 2 grid points × 3 draws
+  EXPECT_EQ(a.points, b.points);   // the same seed, the same draws
+  for (const auto& p : a.points) {
+    ASSERT_EQ(p.size(), 3u);
+    const double settle = std::stod(p[1].second);
+    EXPECT_GE(settle, 0.1);
+    EXPECT_LE(settle, 0.5);
+    EXPECT_TRUE(p[2].second == "0.3" || p[2].second == "0.5") << p[2].second;
+  }
+  EXPECT_EQ(a.points[0][1], a.points[3][1]);  // draw 1 with both grid points
+  const SweepSpec c = load_sweep(write_spec(dir_ / "c", "r.yaml", std::string(body).replace(body.find("seed: 7"), 7, "seed: 8")).string());
+  EXPECT_NE(a.points, c.points);
+}
+
+TEST_F(Sweep, BadSpecsNameTheirLineAndKey) {
+  struct Bad {
+    std::string body, key;
+  };
+  const Bad bad[] = {
+      {"scenario: line.yaml\ngrid: {settle: [1]}\nmetrics: [x]\ncolour: red\n", "colour"},
+      {"scenario: nothere.yaml\ngrid: {settle: [1]}\nmetrics: [x]\n", "scenario"},
+      {"scenario: line.yaml\nmetrics: [x]\n", "grid"},
+      {"scenario: line.yaml\ngrid: {settle: []}\nmetrics: [x]\n", "grid.settle"},
+      {"scenario: line.yaml\ngrid: {settle: [1]}\n", "metrics"},
+      {"scenario: line.yaml\ngrid: {settle: [1]}\nmetrics: [x]\nplot: {x: kp}\n", "plot.x"},
+      {"scenario: line.yaml\nrandom: {draws: 0, params: {settle: {min: 0, max: 1}}}\nmetrics: [x]\n", "random.draws"},
+      {"scenario: line.yaml\nrandom: {draws: 2, params: {settle: {min: 2, max: 1}}}\nmetrics: [x]\n", "random.params.settle"},
+      {"scenario: line.yaml\ngrid: {no_such_key: [1]}\nmetrics: [x]\n", "no_such_key"},
+  };
+  for (const Bad& b : bad) {
+    SCOPED_TRACE(b.body);
+    try {
+      load_sweep(write_spec(dir_ / "bad", "s.yaml", b.body).string());
+      ADD_FAILURE() << "accepted";
+    } catch (const ScenarioError& e) {
+      EXPECT_TRUE(contains(e.key(), b.key)) << e.what();
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "not a ScenarioError: " << e.what();
+    }
+  }
+}
+
+// The whole sweep through the program, two points at a time.
+TEST_F(Sweep, RunsEveryPointAndWritesTheTableAndThePlot) {
+  const fs::path out = dir_ / "out";
+  const Finished f = run({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "-j", "2", "--out", out.string()});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "4 points, 4 ran, 0 failed to run")) << f.out;
+  const auto rows = lines_of(read_bytes(out / "sweep.csv"));
+  ASSERT_EQ(rows.size(), 5u);
+  EXPECT_EQ(rows[0], "point,controller.period,controller.kp,platform.final_error_cm,platform.iae_contour_cm,passed,exit_code");
+  EXPECT_TRUE(rows[2].starts_with("2,\"0.005\",\"[6, 6, 6]\",")) << rows[2];
+  for (int k = 1; k <= 4; ++k) {
+    const fs::path d = out / "points" / fmt::format("{:04d}", k);
+    const nlohmann::json pj = nlohmann::json::parse(read_bytes(d / "point.json"));
+    EXPECT_EQ(pj.at("point"), k);
+    EXPECT_EQ(pj.at("exit_code"), 0);
+    EXPECT_TRUE(fs::is_regular_file(d / "trajectory.csv"));
+  }
+  // kp 6 follows the line more closely than kp 2 (the columns carry each run's own results).
+  const auto final_error = [&](int k) {
+    const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "points" / fmt::format("{:04d}", k) / "metrics.json"));
+    return m.at("platform").at("final_error_cm").get<double>();
+  };
+  EXPECT_LT(final_error(2), final_error(1));
+  EXPECT_TRUE(contains(rows[2], fmt::format("{}", final_error(2)))) << rows[2];
+  EXPECT_GT(fs::file_size(out / "sweep.png"), 1000u);
+}
+
+TEST_F(Sweep, PointRunsOnlyThatPoint) {
+  const fs::path out = dir_ / "one";
+  const Finished f = run({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--point", "3", "--out", out.string()});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  EXPECT_TRUE(fs::is_regular_file(out / "points/0003/point.json"));
+  EXPECT_FALSE(fs::exists(out / "points/0001"));
+  EXPECT_FALSE(fs::exists(out / "sweep.csv"));
+  const Finished g = run({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--point", "5", "--out", out.string()});
+  EXPECT_EQ(g.code, 2);
+  EXPECT_TRUE(contains(g.err, "the sweep has 4 points")) << g.err;
+}
+
+}  // namespace
+}  // namespace omnitwin::twin::cli

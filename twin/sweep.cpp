@@ -1,0 +1,363 @@
+// twin layer — `omnitwin sweep` (see sweep.hpp).
+#include "twin/sweep.hpp"
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "media/run_report.hpp"
+#include "twin/run.hpp"
+#include "twin/run_outputs.hpp"
+#include "twin/scenario.hpp"
+
+extern char** environ;
+
+namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+using Point = std::vector<std::pair<std::string, std::string>>;
+
+[[noreturn]] void bad(const SweepSpec& s, const YAML::Node& n, const std::string& key, const std::string& msg) {
+  throw ScenarioError(s.file, n.IsDefined() ? n.Mark().line + 1 : 0, key, msg);
+}
+
+// A YAML value as the text a --set takes (flow style for lists and maps).
+std::string as_set_value(const YAML::Node& n) {
+  if (n.IsScalar()) return n.Scalar();
+  YAML::Emitter e;
+  e << YAML::Flow << n;
+  return e.c_str();
+}
+
+void only_keys(const SweepSpec& s, const YAML::Node& map, const std::vector<std::string>& keys, const std::string& where) {
+  for (const auto& kv : map) {
+    const std::string k = kv.first.as<std::string>();
+    if (std::find(keys.begin(), keys.end(), k) == keys.end())
+      bad(s, kv.first, where + k, fmt::format("unknown key (expected one of: {})", fmt::join(keys, ", ")));
+  }
+}
+
+// The grid's points: the cartesian product, the last key varying fastest.
+std::vector<Point> grid_points(SweepSpec& s, const YAML::Node& grid) {
+  std::vector<Point> pts{Point{}};
+  if (!grid.IsDefined()) return pts;
+  if (!grid.IsMap() || grid.size() == 0) bad(s, grid, "grid", "expected a mapping of scenario keys to lists of values");
+  for (const auto& kv : grid) {
+    const std::string key = kv.first.as<std::string>();
+    if (!kv.second.IsSequence() || kv.second.size() == 0) bad(s, kv.second, "grid." + key, "expected a non-empty list");
+    s.params.push_back(key);
+    std::vector<Point> next;
+    for (const Point& p : pts)
+      for (const auto& v : kv.second) {
+        Point q = p;
+        q.emplace_back(key, as_set_value(v));
+        next.push_back(std::move(q));
+      }
+    pts = std::move(next);
+  }
+  return pts;
+}
+
+// `draws` seeded draws of the random parameters (none: one empty draw).
+std::vector<Point> random_points(SweepSpec& s, const YAML::Node& r) {
+  if (!r.IsDefined()) return {Point{}};
+  if (!r.IsMap()) bad(s, r, "random", "expected a mapping with draws, seed and params");
+  only_keys(s, r, {"draws", "seed", "params"}, "random.");
+  const int draws = r["draws"].IsDefined() ? r["draws"].as<int>() : 0;
+  if (draws < 1 || draws > 100000) bad(s, r["draws"], "random.draws", "expected 1 … 100000 draws");
+  const std::uint64_t seed = r["seed"].IsDefined() ? r["seed"].as<std::uint64_t>() : 1;
+  const YAML::Node params = r["params"];
+  if (!params.IsDefined() || !params.IsMap() || params.size() == 0)
+    bad(s, params.IsDefined() ? params : r, "random.params", "expected a mapping of keys to ranges");
+  std::mt19937_64 rng(seed);
+  std::vector<Point> pts(static_cast<std::size_t>(draws));
+  for (const auto& kv : params) {
+    const std::string key = kv.first.as<std::string>(), where = "random.params." + key;
+    const YAML::Node d = kv.second;
+    if (!d.IsMap()) bad(s, d, where, "expected {min, max} or {values: [...]}");
+    only_keys(s, d, {"min", "max", "values"}, where + ".");
+    s.params.push_back(key);
+    for (Point& p : pts) {
+      if (d["values"].IsDefined()) {
+        if (!d["values"].IsSequence() || d["values"].size() == 0) bad(s, d["values"], where + ".values", "expected a non-empty list");
+        std::uniform_int_distribution<std::size_t> pick(0, d["values"].size() - 1);
+        p.emplace_back(key, as_set_value(d["values"][pick(rng)]));
+      } else {
+        if (!d["min"].IsDefined() || !d["max"].IsDefined()) bad(s, d, where, "expected {min, max} or {values: [...]}");
+        const double lo = d["min"].as<double>(), hi = d["max"].as<double>();
+        if (!(lo <= hi)) bad(s, d, where, "min must not exceed max");
+        p.emplace_back(key, fmt::format("{:.6g}", std::uniform_real_distribution<double>(lo, hi)(rng)));
+      }
+    }
+  }
+  return pts;
+}
+
+void read_metrics_and_plot(SweepSpec& s, const YAML::Node& root) {
+  const YAML::Node m = root["metrics"];
+  if (!m.IsDefined() || !m.IsSequence() || m.size() == 0)
+    bad(s, m.IsDefined() ? m : root, "metrics", "expected a non-empty list of metric paths");
+  for (const auto& v : m) s.metrics.push_back(v.as<std::string>());
+  s.plot_x = s.params.empty() ? "point" : s.params.front();
+  s.plot_y = s.metrics.front();
+  if (const YAML::Node p = root["plot"]; p.IsDefined()) {
+    only_keys(s, p, {"x", "y"}, "plot.");
+    if (p["x"].IsDefined()) s.plot_x = p["x"].as<std::string>();
+    if (p["y"].IsDefined()) s.plot_y = p["y"].as<std::string>();
+    if (std::find(s.params.begin(), s.params.end(), s.plot_x) == s.params.end())
+      bad(s, p["x"], "plot.x", "'" + s.plot_x + "' is not one of the swept parameters");
+    if (std::find(s.metrics.begin(), s.metrics.end(), s.plot_y) == s.metrics.end())
+      bad(s, p["y"], "plot.y", "'" + s.plot_y + "' is not one of the metrics");
+  }
+}
+
+// A metric of metrics.json by dotted path; empty when absent or not a number/bool/string.
+std::string metric_text(const nlohmann::json& m, const std::string& path) {
+  const nlohmann::json* j = &m;
+  for (std::size_t a = 0; a <= path.size();) {
+    const std::size_t b = std::min(path.find('.', a), path.size());
+    const std::string part = path.substr(a, b - a);
+    if (!j->is_object() || !j->contains(part)) return "";
+    j = &(*j)[part];
+    a = b + 1;
+  }
+  if (j->is_number_float()) return fmt::format("{}", j->get<double>());
+  if (j->is_number() || j->is_boolean()) return j->dump();
+  if (j->is_string()) return j->get<std::string>();
+  return "";
+}
+
+// A CSV field in double quotes, inner quotes doubled (RFC 4180).
+std::string csv_quoted(const std::string& v) {
+  std::string q = "\"";
+  for (const char c : v) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+fs::path point_dir(const fs::path& out, int k) { return out / "points" / fmt::format("{:04d}", k); }
+
+// Runs point k (1-based) into its directory and writes point.json; returns its exit code.
+int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt) {
+  const Point& p = s.points[static_cast<std::size_t>(k - 1)];
+  nlohmann::json pj = {{"point", k}, {"params", nlohmann::json::object()}};
+  for (const auto& [key, v] : p) pj["params"][key] = v;
+  int code = 3;
+  try {
+    std::vector<Override> o;
+    for (const auto& [key, v] : p) o.push_back({key, v});
+    const Scenario sc = load_scenario(s.scenario, o);
+    RunOptions ro;
+    ro.out_dir = point_dir(out, k).string();
+    ro.interrupt = interrupt;
+    const RunResult r = run_scenario(sc, ro);
+    code = r.interrupted ? 3 : r.exit_code;
+    pj["passed"] = r.passed;
+    pj["error"] = r.error;
+  } catch (const ScenarioError& e) {
+    code = 2;
+    pj["error"] = e.what();
+  } catch (const std::exception& e) {
+    pj["error"] = std::string("run failed: ") + e.what();
+  }
+  pj["exit_code"] = code;
+  std::error_code ec;
+  fs::create_directories(point_dir(out, k), ec);
+  std::ofstream(point_dir(out, k) / "point.json") << pj.dump(1) << "\n";
+  return code;
+}
+
+// Every point locally, `jobs` at a time; prints one line per point.
+void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
+  const int n = static_cast<int>(s.points.size());
+  const int jobs = std::min(n, opt.jobs > 0 ? opt.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
+  std::atomic<int> next{1};
+  std::mutex print;
+  auto worker = [&] {
+    for (int k = next++; k <= n && !(opt.interrupt && opt.interrupt->load()); k = next++) {
+      const int code = run_point(s, k, out, opt.interrupt);
+      const std::lock_guard lock(print);
+      std::cout << fmt::format("point {}/{}: exit {}\n", k, n, code) << std::flush;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int j = 1; j < jobs; ++j) pool.emplace_back(worker);
+  worker();
+  for (auto& t : pool) t.join();
+}
+
+int spawn_wait(const std::vector<std::string>& argv) {
+  std::vector<char*> a;
+  for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
+  a.push_back(nullptr);
+  pid_t pid = 0;
+  if (::posix_spawnp(&pid, a[0], nullptr, nullptr, a.data(), environ) != 0) return -1;
+  int st = 0;
+  while (::waitpid(pid, &st, 0) < 0) {
+    if (errno != EINTR) return -1;
+  }
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+// sweep.sbatch (a job array, one task per point) submitted with `sbatch --wait`; "" or why not.
+std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  const fs::path script = out / "sweep.sbatch";
+  {
+    std::ofstream f(script);
+    f << "#!/bin/sh\n"
+      << "#SBATCH --job-name=omnitwin-sweep-" << s.name << "\n"
+      << "#SBATCH --array=1-" << s.points.size() << "\n"
+      << "#SBATCH --cpus-per-task=1\n"
+      << "#SBATCH --output=" << (out / "slurm-%A_%a.out").string() << "\n"
+      << "exec '" << self.string() << "' sweep '" << fs::absolute(s.file).string() << "' --point \"$SLURM_ARRAY_TASK_ID\" --out '"
+      << out.string() << "'\n";
+    if (!f) return "cannot write " + script.string();
+  }
+  std::cout << "submitting " << script.string() << " (" << s.points.size() << " array tasks) and waiting\n" << std::flush;
+  const int rc = spawn_wait({opt.sbatch, "--wait", script.string()});
+  if (rc < 0) return "cannot start '" + opt.sbatch + "' (is Slurm installed? scripts/slurm-local)";
+  if (rc != 0) std::cout << fmt::format("sbatch --wait ended with {} (some tasks failed); collecting what they wrote\n", rc);
+  return "";
+}
+
+// sweep.csv over every point's point.json and metrics.json; returns how many points lack a
+// result or failed to run.
+int write_table(const SweepSpec& s, const fs::path& out) {
+  std::ofstream f(out / "sweep.csv");
+  f << "point";
+  for (const auto& p : s.params) f << "," << p;
+  for (const auto& m : s.metrics) f << "," << m;
+  f << ",passed,exit_code\n";
+  int bad_points = 0;
+  for (std::size_t k = 1; k <= s.points.size(); ++k) {
+    const fs::path d = point_dir(out, static_cast<int>(k));
+    nlohmann::json pj, mj;
+    try {
+      pj = nlohmann::json::parse(std::ifstream(d / "point.json"));
+    } catch (const std::exception&) {
+      pj = {{"exit_code", 3}, {"passed", false}};  // no result: the task never ran
+    }
+    try {
+      mj = nlohmann::json::parse(std::ifstream(d / "metrics.json"));
+    } catch (const std::exception&) {
+      mj = nlohmann::json::object();
+    }
+    const int code = pj.value("exit_code", 3);
+    if (code >= 2) ++bad_points;
+    f << k;
+    for (const auto& [key, v] : s.points[k - 1]) f << "," << csv_quoted(v);
+    for (const auto& m : s.metrics) f << "," << metric_text(mj, m);
+    f << "," << (pj.value("passed", false) ? "true" : "false") << "," << code << "\n";
+  }
+  return bad_points;
+}
+
+SweepSpec load_sweep_tree(const std::string& path);
+
+}  // namespace
+
+SweepSpec load_sweep(const std::string& path) {
+  try {
+    return load_sweep_tree(path);
+  } catch (const YAML::Exception& e) {  // a value of the wrong type (as<int> of a word, …)
+    throw ScenarioError(path, e.mark.line + 1, "", e.msg);
+  }
+}
+
+namespace {
+
+SweepSpec load_sweep_tree(const std::string& path) {
+  SweepSpec s;
+  s.file = path;
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw ScenarioError(path, e.mark.line + 1, "", e.msg);
+  }
+  if (!root.IsMap()) throw ScenarioError(path, 0, "", "expected a mapping at the top level");
+  only_keys(s, root, {"name", "scenario", "grid", "random", "metrics", "plot"}, "");
+  s.name = root["name"].IsDefined() ? root["name"].as<std::string>() : fs::path(path).stem().string();
+  if (!root["scenario"].IsDefined()) bad(s, root, "scenario", "a sweep needs the scenario it varies");
+  s.scenario = (fs::path(path).parent_path() / root["scenario"].as<std::string>()).lexically_normal().string();
+  if (!fs::is_regular_file(s.scenario)) bad(s, root["scenario"], "scenario", "no such file: " + s.scenario);
+  if (!root["grid"].IsDefined() && !root["random"].IsDefined()) bad(s, root, "grid", "a sweep needs grid or random");
+  const auto grid = grid_points(s, root["grid"]);
+  const auto draws = random_points(s, root["random"]);
+  for (const Point& g : grid)
+    for (const Point& r : draws) {
+      Point p = g;
+      p.insert(p.end(), r.begin(), r.end());
+      s.points.push_back(std::move(p));
+    }
+  if (s.points.size() > 100000) bad(s, root, "grid", fmt::format("{} points: more than 100000", s.points.size()));
+  read_metrics_and_plot(s, root);
+  // The first point must load: unknown keys and bad values show now, not in every run.
+  std::vector<Override> first;
+  for (const auto& [key, v] : s.points.front()) first.push_back({key, v});
+  try {
+    (void)load_scenario(s.scenario, first);
+  } catch (const ScenarioError& e) {
+    throw ScenarioError(path, 0, e.key(), std::string("point 1 does not load: ") + e.what());
+  }
+  return s;
+}
+
+}  // namespace
+
+int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
+  SweepSpec s;
+  try {
+    s = load_sweep(spec_path);
+  } catch (const ScenarioError& e) {
+    std::cerr << "omnitwin sweep: " << e.what() << "\n";
+    return 2;
+  }
+  const fs::path out = fs::absolute(opt.out.empty() ? fs::path("out/sweep") / s.name : fs::path(opt.out));
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (opt.point > 0) {
+    if (opt.point > static_cast<int>(s.points.size())) {
+      std::cerr << fmt::format("omnitwin sweep: --point {}: the sweep has {} points\n", opt.point, s.points.size());
+      return 2;
+    }
+    return run_point(s, opt.point, out, opt.interrupt);
+  }
+  std::cout << fmt::format("sweep {}: {} points of {} ({})\n", s.name, s.points.size(), s.scenario,
+                           opt.slurm ? "Slurm job array" : "local");
+  if (opt.slurm) {
+    if (const std::string e = run_slurm(s, out, opt); !e.empty()) {
+      std::cerr << "omnitwin sweep: " << e << "\n";
+      return 3;
+    }
+  } else {
+    run_local(s, out, opt);
+  }
+  const int bad_points = write_table(s, out);
+  std::cout << "table: " << (out / "sweep.csv").string() << "\n";
+  media::ReportTools tools = report_tools();
+  const media::ReportResult plot = media::write_sweep_plot((out / "sweep.csv").string(), (out / "sweep.png").string(),
+                                                           s.plot_x, s.plot_y, s.params, tools);
+  if (plot.ok) std::cout << "plot: " << plot.path << "\n";
+  else std::cerr << "omnitwin sweep: no plot: " << plot.error << "\n";
+  std::cout << fmt::format("{} points, {} ran, {} failed to run\n", s.points.size(), s.points.size() - bad_points, bad_points);
+  if (opt.interrupt && opt.interrupt->load()) return 3;
+  return bad_points > 0 || !plot.ok ? 3 : 0;
+}
+
+}  // namespace omnitwin::twin
