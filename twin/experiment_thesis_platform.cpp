@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "twin/experiment.hpp"
+#include "twin/csv_columns.hpp"
 #include "twin/experiment_thesis.hpp"
 #include "twin/run.hpp"
 #include "twin/scenario.hpp"
@@ -193,27 +194,6 @@ std::string bit_rate_text(const std::vector<Effect>& fast) {
       low.ours[3], low.rate_kbps, others);
 }
 
-// One column of a trajectory.csv by name; throws when the file or the column is missing.
-std::vector<double> trajectory_column(const fs::path& csv, const std::string& name) {
-  std::ifstream in(csv);
-  std::string line;
-  if (!in || !std::getline(in, line)) throw std::runtime_error("cannot read " + csv.string());
-  std::vector<std::string> header;
-  for (std::stringstream hs(line); std::getline(hs, line, ',');) header.push_back(line);
-  const auto at = std::find(header.begin(), header.end(), name);
-  if (at == header.end()) throw std::runtime_error(csv.string() + " has no column " + name);
-  const auto col = static_cast<std::size_t>(at - header.begin());
-  std::vector<double> out;
-  while (std::getline(in, line)) {
-    std::stringstream ls(line);
-    std::string cell;
-    for (std::size_t i = 0; i <= col && std::getline(ls, cell, ','); ++i) {
-    }
-    out.push_back(std::stod(cell));
-  }
-  return out;
-}
-
 // The odometric pose error over time of the first trial without and with sync at `rate_kbps`
 // (clock reading `clock`): t, sync, X, Y and contour error [cm], as figs. 4-21 … 4-28 show it.
 std::string time_csv(const std::vector<Result>& rs, const std::string& clock, int rate_kbps) {
@@ -221,9 +201,9 @@ std::string time_csv(const std::vector<Result>& rs, const std::string& clock, in
   for (const Result& r : rs) {
     if (r.clock.name != clock || r.rate_kbps != rate_kbps) continue;
     const fs::path csv = fs::path(r.run_dir) / "trajectory.csv";
-    const auto t = trajectory_column(csv, "t"), rx = trajectory_column(csv, "ref_x"),
-               ry = trajectory_column(csv, "ref_y"), ox = trajectory_column(csv, "odom_x"),
-               oy = trajectory_column(csv, "odom_y");
+    const CsvColumns tr = read_csv_columns(csv.string());
+    const auto &t = tr.column("t"), &rx = tr.column("ref_x"), &ry = tr.column("ref_y"), &ox = tr.column("odom_x"),
+               &oy = tr.column("odom_y");
     for (std::size_t i = 0; i < t.size(); ++i) {
       const double ex = 100 * (rx[i] - ox[i]), ey = 100 * (ry[i] - oy[i]);
       s += fmt::format("{},{},{:.3f},{:.5f},{:.5f},{:.5f}\n", rate_kbps, r.sync ? 1 : 0, t[i], ex, ey, std::hypot(ex, ey));

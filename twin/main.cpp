@@ -32,6 +32,7 @@
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
+#include "twin/replay.hpp"
 #include "twin/sweep.hpp"
 
 namespace fs = std::filesystem;
@@ -449,6 +450,13 @@ int main(int argc, char** argv) {
                   "the paths are --out folders of shards: join their results into one JUnit report (--junit) "
                   "and one index page (--out)");
 
+  std::string replay_scenario, replay_dir;
+  std::vector<std::string> replay_sets;
+  CLI::App* replay = app.add_subcommand("replay", "physics alone, driven by a recorded run's wheel set-points");
+  replay->add_option("scenario", replay_scenario, "the scenario the run was made from (its parameters)")->required();
+  replay->add_option("run_dir", replay_dir, "the run directory (platform.xml, trajectory.csv)")->required();
+  replay->add_option("--set", replay_sets, "override a scenario key, as for run")->type_name("KEY=VALUE");
+
   std::string sweep_spec;
   SweepOptions so;
   CLI::App* sweep = app.add_subcommand("sweep", "run a scenario over a parameter grid or random draws; one table and plot");
@@ -534,6 +542,11 @@ int main(int argc, char** argv) {
         return 2;
       }
       return check_merge ? cmd_check_merge(check_paths, co) : cmd_check(check_paths, co);
+    }
+    if (*replay) {
+      std::vector<Override> ov;
+      for (const auto& v : replay_sets) ov.push_back(parse_override(v));
+      return cmd_replay(replay_scenario, replay_dir, ov);
     }
     if (*sweep) {
       so.interrupt = &g_interrupt;
