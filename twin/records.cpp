@@ -2,6 +2,8 @@
 #include "twin/records.hpp"
 
 #include <fmt/format.h>
+
+#include <charconv>
 #include <spdlog/spdlog.h>
 
 #include <cerrno>
@@ -106,11 +108,15 @@ bool CsvWriter::row(std::span<const double> values) {
     throw std::invalid_argument(fmt::format("{}: row has {} values, header has {} columns", path_,
                                             values.size(), columns_));
   }
-  // Format into the reused buffer, then one write.
+  // Format into the reused buffer, then one write. std::to_chars with 10 significant digits
+  // writes exactly what "{:.10g}" (printf's %.10g) does, at less than half the cost: at a 1 ms
+  // control period the rows were 8 % of a run's CPU time (issue 17's profile).
   line_.clear();
+  char cell[64];
   for (std::size_t i = 0; i < values.size(); ++i) {
     if (i) line_ += ',';
-    fmt::format_to(std::back_inserter(line_), "{:.10g}", values[i]);
+    const auto r = std::to_chars(cell, cell + sizeof cell, values[i], std::chars_format::general, 10);
+    line_.append(cell, r.ptr);
   }
   line_ += '\n';
   try {
