@@ -95,6 +95,7 @@ struct RunArgs {
   bool dds = false;
   bool loopback = false;         // --loopback: nothing leaves this machine (confine_to_loopback)
   std::string master_cmd;        // --master-cmd "PROGRAM ARGS…"
+  double duration = 0;           // twin --duration S (0: until Ctrl-C, unless --set duration=)
 };
 
 // The run's outputs: the scenario's outputs section, overridden by the command line.
@@ -244,6 +245,12 @@ int cmd_run(const RunArgs& a) {
     o.progress = !a.no_progress && stderr_is_terminal();
     o.interrupt = &g_interrupt;
     o.external_master = a.external_master;
+    // The twin runs until stopped unless a length was asked for (--duration, --set duration=).
+    const bool duration_set = std::any_of(a.sets.begin(), a.sets.end(), [](const std::string& v) {
+      return v.rfind("duration=", 0) == 0;
+    });
+    if (a.external_master && a.duration > 0) s.duration = a.duration;
+    o.until_stopped = a.external_master && a.duration <= 0 && !duration_set;
     if (a.external_master && s.bus.kind == BusKind::ethercat) {
       o.on_bus_ready = [&s](const std::string& iface) {
         std::cout << fmt::format("twin {}: EtherCAT segment of 4 drives; a master connects on {} (Ctrl-C ends)\n",
@@ -429,6 +436,9 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"can", "canopen", "tml", "ethercat", "m3"}));
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
+  twin->add_option("--duration", ta.duration, "end after S seconds (default: run until Ctrl-C or SIGTERM)")
+      ->check(CLI::Range(1e-3, 1e6))
+      ->type_name("S");
   add_output_flags(twin, ta);
 
   std::vector<std::string> check_paths;

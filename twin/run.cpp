@@ -39,6 +39,9 @@
 #include "twin/scheduler.hpp"
 
 namespace omnitwin::twin {
+
+// How long a twin that runs until stopped may run at most [s] (a scenario's own limit).
+constexpr double kUntilStoppedSeconds = 1e6;
 namespace {
 
 namespace fs = std::filesystem;
@@ -113,7 +116,7 @@ class PlatformRun {
     sim_.reset(s.path.x0, s.path.y0, s.path.phi0_deg * kDeg);
     for (int i = 0; i < 4; ++i) chains_[i] = std::make_unique<physics::WheelDriveChain>(s.platform, sim_.wheel_angle(i));
     loop_.reset(controller::Pose2{s.path.x0, s.path.y0, s.path.phi0_deg * kDeg}, counts());
-    end_ = seconds_to_ns(s.duration);
+    end_ = seconds_to_ns(o.until_stopped ? kUntilStoppedSeconds : s.duration);
   }
 
   // The bus network (bus `can` or `ethercat`): built after the platform, whose wheels it
@@ -742,7 +745,7 @@ RunResult PlatformRun::execute() {
   csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "trajectory.csv").string(), trajectory_header());
   bus_csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "bus.csv").string(), bus_header());
   events_ = std::make_unique<EventLog>((fs::path(o_.out_dir) / "events.log").string());
-  if (o_.progress) progress_ = std::make_unique<ProgressBar>(s_.duration, s_.name, true);
+  if (o_.progress && !o_.until_stopped) progress_ = std::make_unique<ProgressBar>(s_.duration, s_.name, true);
   if (o_.observer)
     o_.observer->on_start(RunInfo{s_.name, to_string(s_.bus.kind), to_string(s_.clock), o_.out_dir,
                                   s_.controller.period, s_.duration});
@@ -763,7 +766,10 @@ RunResult PlatformRun::execute() {
   std::unique_ptr<RealtimePacer> realtime;
   if (s_.clock == ClockMode::realtime) {
     const SimTime tm = on_bus() ? master_period_ns() : seconds_to_ns(s_.controller.period);
-    realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(end_ / tm) + 2);
+    // Capacity for the whole run, or an hour for a twin that runs until stopped (beyond that
+    // the lateness samples grow the vector: allocation on the cyclic path, once in a while).
+    const SimTime reserve = o_.until_stopped ? std::min<SimTime>(end_, seconds_to_ns(3600)) : end_;
+    realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(reserve / tm) + 2);
     pacer_ = realtime.get();
     // A master on its own wall clock waits for its frames: answer them as they arrive.
     if (net_ && net_->wake_fd() >= 0) realtime->set_wake(net_->wake_fd(), [this](SimTime t) { net_->on_wake(t); });
@@ -794,7 +800,9 @@ RunResult PlatformRun::execute() {
 }
 
 RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
-  const bool interrupted = o_.interrupt && o_.interrupt->load();
+  // A twin that runs until stopped ends by the signal: that is its normal end.
+  const bool signalled = o_.interrupt && o_.interrupt->load();
+  const bool interrupted = signalled && !o_.until_stopped;
   RunResult r;
   r.out_dir = o_.out_dir;
   r.interrupted = interrupted;
@@ -813,6 +821,13 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
     ex.failures.assign({fmt::format("{} at t = {:.3f} s: expectations not evaluated",
                                     interrupted ? "interrupted" : "failed", ns_to_seconds(sched_.now()))});
   }
+  if (o_.external_master && on_bus() && r.metrics["bus"].value("frames_rx", 0) == 0) {
+    ex.passed = false;
+    ex.failures.push_back(fmt::format("no master connected: no frame reached the twin on {} in {:.1f} s",
+                                      r.metrics["bus"].value("transport", std::string("its transport")),
+                                      ns_to_seconds(sched_.now())));
+  }
+  if (o_.external_master) r.metrics["stopped_by"] = signalled ? "signal" : "duration";
   if (sim_.warning_count() > 0) {
     ex.passed = false;
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));

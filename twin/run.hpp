@@ -46,6 +46,11 @@ struct RunOptions {
   // A bus: the master is someone else's program on the transport (`omnitwin twin`); the twin
   // starts none and runs in realtime.
   bool external_master = false;
+  // With external_master: run until *interrupt is set (SIGINT/SIGTERM), not for the scenario's
+  // duration; that signal is then the normal end (not an interruption: records whole,
+  // expectations judged, exit 0/1). A run in which no master sent a frame fails its
+  // expectations ("no master connected").
+  bool until_stopped = false;
   // Told, once the bus network is up, where a master must connect (the transport spec it
   // should use, e.g. the master's end of a veth pair made for the run). May be empty.
   std::function<void(const std::string& master_iface)> on_bus_ready;

@@ -611,6 +611,52 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
   EXPECT_TRUE(contains(master.err(), "detecting -> running")) << master.err();
 }
 
+// Issue 18: `omnitwin twin` runs until it is stopped, not for the scenario's length, and the
+// signal is its normal end (records whole, expectations judged, exit 0/1, not 3). Here an
+// external master drives it for 3 s; the twin runs on past the scenario's 3.5 s until SIGINT.
+TEST_F(CliCan, TwinRunsUntilStoppedAndTheSignalIsItsNormalEnd) {
+  const fs::path out = dir_ / "until";
+  const std::string spec = "udp:239.74.163.2:47608";
+  const fs::path cfg = dir_ / "master.yaml";
+  std::ofstream(cfg) << "path:\n  segments:\n    - line: {dx: 0.2, duration: 2}\nstartup_timeout: 3\n";
+  Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--out", out.string(),
+              "--no-progress", "--no-video", "--no-report"},
+             work(), io());
+  const auto ready = std::chrono::steady_clock::now() + 20s;
+  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
+  Child master(binary_path("controller/omni-master"),
+               {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "3"}, work(), io(), "m-");
+  EXPECT_EQ(master.wait(20s), 0) << master.err();
+  std::this_thread::sleep_for(1500ms);  // past the scenario's 3.5 s
+  ASSERT_TRUE(twin.running()) << "the twin ended by itself: " << twin.out();
+  twin.signal(SIGINT);
+  const int code = twin.wait(30s);
+  EXPECT_TRUE(code == 0 || code == 1) << code << twin.out() << twin.err();
+  EXPECT_FALSE(contains(twin.out(), "INTERRUPTED")) << twin.out();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("stopped_by"), "signal");
+  EXPECT_FALSE(m.at("interrupted").get<bool>());
+  EXPECT_GT(m.at("sim_time_s").get<double>(), 3.6);
+  EXPECT_GT(m.at("bus").at("frames_rx").get<int>(), 100);
+  for (const auto& f : m.at("expectations").at("failures"))
+    EXPECT_FALSE(contains(f.get<std::string>(), "no master connected")) << f;
+}
+
+// Issue 18: a twin that no master ever talked to fails, saying so (exit 1), also with a
+// length given by --duration.
+TEST_F(CliCan, TwinWithoutAMasterFailsSayingSo) {
+  const fs::path out = dir_ / "nobody";
+  const Finished f = run({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=udp:239.74.163.2:47609",
+                          "--duration", "0.5", "--out", out.string(), "--no-progress", "--no-video", "--no-report"});
+  EXPECT_EQ(f.code, 1) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "FAILED: no master connected: no frame reached the twin on udp:239.74.163.2:47609")) << f.out;
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("stopped_by"), "duration");
+  EXPECT_NEAR(m.at("sim_time_s").get<double>(), 0.5, 0.02);
+}
+
 // Issue 19: the twin killed under an external CAN master on its wall clock. The master
 // notices the silent bus at its next node detection, stops the slaves (NMT stop) and says so.
 TEST_F(CliCan, ExternalMasterNoticesTheTwinVanishing) {
