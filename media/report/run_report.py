@@ -75,6 +75,7 @@ tr.ev-fault td,tr.ev-error td,tr.ev-interrupt td{background:#fbe0e0}
 .scroll{overflow-x:auto}.note{color:#7a4a00}
 .plots img{max-width:100%;display:block;margin:.5em 0 1.2em 0;border:1px solid #ddd}
 video{max-width:100%;border:1px solid #ddd}
+summary{cursor:pointer}summary h2{display:inline}
 code{background:#f4f4f4;padding:0 .2em}
 """
 
@@ -677,14 +678,33 @@ def remove_stale(plots_dir, keep):
             os.remove(path)
 
 
-def plots_section(made, notes):
+HEADLINE_PLOTS = 2  # the path and the pose errors: shown at the top of the page
+
+
+def plots_section(made, notes, title="Plots"):
     """The plots as <img> elements referencing plots/*.png, with notes on missing ones."""
-    parts = ['<h2>Plots</h2><div class="plots">']
+    parts = [f'<h2>{esc(title)}</h2><div class="plots">']
     for name, caption in made:
         parts.append(f'<h3>{esc(caption)}</h3><img src="plots/{href(name)}" alt="{esc(caption)}">')
     parts.append("</div>")
     parts += [f'<p class="note">{esc(n)}</p>' for n in notes]
     return "".join(parts)
+
+
+def video_section(run_dir):
+    """The run's video right under the verdict, or nothing when it was not rendered."""
+    if not os.path.isfile(os.path.join(run_dir, "video.mp4")):
+        return ""
+    return '<video controls preload="metadata" src="video.mp4"></video>'
+
+
+def collapsible(html_text, open_=False):
+    """A section folded under its own <h2> heading (HTML <details>, no script)."""
+    m = re.match(r"<h2>(.*?)</h2>", html_text)
+    if not m:
+        return html_text
+    state = " open" if open_ else ""
+    return f"<details{state}><summary><h2>{m.group(1)}</h2></summary>{html_text[m.end():]}</details>"
 
 
 # ---------------------------------------------------------------------------------------
@@ -715,8 +735,6 @@ def expected_files(bus_kind):
 def files_section(run_dir, bus_kind):
     """Video (embedded when present) and links to the run's files that exist."""
     parts = ["<h2>Files</h2>"]
-    if os.path.isfile(os.path.join(run_dir, "video.mp4")):
-        parts.append('<video controls preload="metadata" src="video.mp4"></video>')
     pcaps = sorted(n for n in os.listdir(run_dir) if re.fullmatch(r"bus-[^/]+\.pcap", n))
     entries = [("video.mp4", "H.264 video of the run")]
     entries += [(p, "bus capture (Wireshark, tshark)") for p in pcaps]
@@ -777,11 +795,17 @@ def build_report(run_dir):
     made, plot_notes = make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind)
     notes = data_notes(traj_problem, traj_rows, bus_problem, run_problem)
     title = first_of("scenario", run, metrics) or os.path.basename(os.path.abspath(run_dir))
+    # What a person wants first: the verdict, the video, the headline plots and the
+    # expectations; the detailed tables below, folded.
     body = [header_section(run_dir, run, metrics, metrics_problem),
             "".join(f'<p class="note">{esc(n)}</p>' for n in notes),
-            expectations_section(run, metrics), metrics_section(metrics),
-            plots_section(made, plot_notes), events_section(events, events_problem),
-            files_section(run_dir, bus_kind)]
+            video_section(run_dir),
+            plots_section(made[:HEADLINE_PLOTS], [], "At a glance"),
+            expectations_section(run, metrics),
+            collapsible(metrics_section(metrics)),
+            collapsible(plots_section(made[HEADLINE_PLOTS:], plot_notes, "More plots"), open_=True),
+            collapsible(events_section(events, events_problem)),
+            collapsible(files_section(run_dir, bus_kind), open_=True)]
     page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>omnitwin run: {esc(title)}</title><style>{CSS}</style></head>\n<body>\n"
             + "\n".join(body) + "\n</body></html>\n")

@@ -192,6 +192,22 @@ TEST(RunReport, LinksOnlyFilesThatExist) {
   write_file(run / "video.mp4", "not really a video");
   const std::string with_video = report_of(run);
   EXPECT_NE(with_video.find(R"(<video controls preload="metadata" src="video.mp4">)"), std::string::npos);
+  // Issue 18: what a person wants first — the verdict, the video, the headline plots, the
+  // expectations — then the detailed tables, folded (<details>, no script).
+  const auto at = [&](const std::string& part) {
+    const auto p = with_video.find(part);
+    EXPECT_NE(p, std::string::npos) << part;
+    return p;
+  };
+  const auto verdict = at("class=\"banner"), video = at("<video"), glance = at("<h2>At a glance</h2>"),
+             expect = at("<h2>Expectations</h2>"), metrics = at("<summary><h2>Metrics</h2></summary>"),
+             events = at("<summary><h2>Events</h2></summary>");
+  EXPECT_LT(verdict, video);
+  EXPECT_LT(video, glance);
+  EXPECT_LT(glance, expect);
+  EXPECT_LT(expect, metrics);
+  EXPECT_LT(metrics, events);
+  EXPECT_EQ(with_video.find("<script"), std::string::npos);
 }
 
 TEST(RunReport, SameInputSameOutput) {
