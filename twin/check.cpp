@@ -85,7 +85,9 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
     // Each scenario gets its own run directory: two files with one name would overwrite.
     {
       const std::lock_guard lock(shared.mutex);
-      if (const auto [it, fresh] = shared.used.emplace(s.name, file); !fresh)
+      // The owner is the first file in order with the name (claimed before any run started),
+      // so which of two files is the duplicate does not depend on the threads' timing.
+      if (const auto it = shared.used.find(s.name); it != shared.used.end() && it->second != file)
         throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
     }
     RunOptions o;
@@ -129,6 +131,14 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
 // the files' order.
 std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const CheckOptions& opt, CheckShared& shared,
                                   nlohmann::json& index) {
+  // Names first, in file order: the first file with a name owns its run directory.
+  for (const auto& f : files) {
+    try {
+      shared.used.emplace(load_scenario(f).name, f);
+    } catch (const std::exception&) {
+      // reported when its turn comes
+    }
+  }
   std::vector<JunitCase> cases(files.size());
   std::vector<nlohmann::json> entries(files.size());
   std::vector<bool> done(files.size(), false);

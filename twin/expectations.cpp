@@ -18,6 +18,11 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
     "iae_x_cm",       "iae_y_cm",       "iae_contour_cm",      "std_x_cm",
     "std_y_cm",       "std_contour_cm", "final_error_cm",      "max_error_cm",
     "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
+// The true pose at the end (platform only): "the platform reached a pose".
+constexpr std::array<std::string_view, 3> kFinalPose = {"final_x_m", "final_y_m", "final_phi_deg"};
+// What the drives did (DriveHistory): how a master commissioning them is judged.
+constexpr std::array<std::string_view, 4> kDriveMetrics = {"all_running_at_s", "stopped_at_s", "faults",
+                                                           "running_at_end"};
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
@@ -33,14 +38,14 @@ constexpr std::array<std::string_view, 21> kBusMetrics = {
 // M-III masters' own counters (master-stats.json: segment losses and returns among them;
 // M-III: exchanges … int_offset_ns, summed over the slaves where per slave; CANopen: syncs …
 // tpdo_rx, with recoveries = drives brought back to OPERATIONAL; TML: answers, axes_lost).
-constexpr std::array<std::string_view, 35> kMasterMetrics = {
+constexpr std::array<std::string_view, 36> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
     "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
     "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s",
     "exchanges",    "retries",          "retry_recovered", "missed",     "late",       "bad",
     "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns",
     "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
-    "tpdo_rx",      "answers",          "axes_lost"};
+    "tpdo_rx",      "answers",          "axes_lost",    "emergencies"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
 // (tec, bus_off_events and error_code serve CANopen too), then TML's three.
 constexpr std::array<std::string_view, 35> kSlaveMetrics = {
@@ -74,7 +79,9 @@ bool is_known_metric(std::string_view path) {
   const auto parts = split_dots(path);
   if (parts.size() == 1) return in(kRunMetrics, parts[0]);
   if (parts.size() == 2) {
+    if (parts[0] == "platform" && in(kFinalPose, parts[1])) return true;
     if (parts[0] == "platform" || parts[0] == "platform_odometry") return in(kPoseMetrics, parts[1]);
+    if (parts[0] == "drives") return in(kDriveMetrics, parts[1]);
     if (parts[0] == "bus") return in(kBusMetrics, parts[1]);
     if (parts[0] == "realtime") return in(kRealtimeMetrics, parts[1]);
     if (parts[0] == "master") return in(kMasterMetrics, parts[1]);

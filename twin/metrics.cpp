@@ -68,4 +68,24 @@ nlohmann::json VelocityErrorStats::to_json() const {
   };
 }
 
+void DriveHistory::add(double t_s, const std::array<DriveStateCode, 4>& states) {
+  int running = 0;
+  for (std::size_t i = 0; i < states.size(); ++i) {
+    const DriveStateCode st = states[i];
+    if (st == DriveStateCode::running || st == DriveStateCode::syncing) ++running;
+    if (st == DriveStateCode::fault && last_[i] != DriveStateCode::fault) ++faults_;
+    last_[i] = st;
+  }
+  running_now_ = running;
+  if (all_running_at_ < 0 && running == static_cast<int>(states.size())) all_running_at_ = t_s;
+  if (all_running_at_ >= 0 && stopped_at_ < 0 && running == 0) stopped_at_ = t_s;
+}
+
+nlohmann::json DriveHistory::to_json() const {
+  return {{"all_running_at_s", all_running_at_},
+          {"stopped_at_s", stopped_at_},
+          {"faults", faults_},
+          {"running_at_end", running_now_}};
+}
+
 }  // namespace omnitwin::twin

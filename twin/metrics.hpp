@@ -8,7 +8,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstddef>
+
+#include "twin/run_state.hpp"
 
 namespace omnitwin::twin {
 
@@ -47,6 +50,25 @@ class VelocityErrorStats {
  private:
   std::size_t n_ = 0;
   double abs_ = 0, sq_ = 0;
+};
+
+// What the drives did over a run, sampled at each control sample: how a master is judged when
+// it commissions them (an external master of `omnitwin twin` above all). A drive counts as
+// running when its state is running or syncing.
+class DriveHistory {
+ public:
+  // One control sample at t [s] with the four drives' states. Real-time safe.
+  void add(double t_s, const std::array<DriveStateCode, 4>& states);
+  // all_running_at_s: the first sample with every drive running (-1: never);
+  // stopped_at_s: the first sample after that with none running (-1: never);
+  // faults: transitions of a drive into fault; running_at_end: drives running at the last
+  // sample. Not real-time safe.
+  nlohmann::json to_json() const;
+
+ private:
+  double all_running_at_ = -1, stopped_at_ = -1;
+  int faults_ = 0, running_now_ = 0;
+  std::array<DriveStateCode, 4> last_{};
 };
 
 }  // namespace omnitwin::twin

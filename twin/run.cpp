@@ -209,6 +209,8 @@ class PlatformRun {
   std::uint64_t records_ = 0;  // control samples recorded
   std::unique_ptr<ProgressBar> progress_;
   PoseErrorStats truth_stats_, odom_stats_;
+  DriveHistory drive_history_;
+  std::array<double, 3> final_pose_{};  // x, y [m], phi [rad] at the last control sample
   std::array<VelocityErrorStats, 4> axis_stats_;
   std::vector<double> row_;
 
@@ -623,6 +625,8 @@ void PlatformRun::record_bus_and_state(SimTime t) {
                    static_cast<double>(st.bus.dropouts), static_cast<double>(st.bus.errors), st.bus.load,
                    static_cast<double>(st.active_faults)});
   for (const DriveSample& d : st.drives) bus_row_.push_back(static_cast<double>(d.state));
+  drive_history_.add(ns_to_seconds(t), {st.drives[0].state, st.drives[1].state, st.drives[2].state, st.drives[3].state});
+  final_pose_ = {st.x, st.y, st.phi};
   note(bus_csv_->row(bus_row_), *bus_csv_);
   if (o_.observer) o_.observer->on_state(st);
 }
@@ -731,6 +735,10 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   m["real_time_factor"] = wall_s > 0 ? sim_s / wall_s : 0.0;
   m["interrupted"] = interrupted;
   m["platform"] = truth_stats_.to_json();
+  m["platform"]["final_x_m"] = final_pose_[0];
+  m["platform"]["final_y_m"] = final_pose_[1];
+  m["platform"]["final_phi_deg"] = final_pose_[2] * 180.0 / std::numbers::pi;
+  m["drives"] = drive_history_.to_json();
   m["platform_odometry"] = odom_stats_.to_json();
   m["axes"] = nlohmann::json::array();
   for (const auto& a : axis_stats_) m["axes"].push_back(a.to_json());

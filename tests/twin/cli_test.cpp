@@ -640,6 +640,13 @@ TEST_F(CliCan, TwinRunsUntilStoppedAndTheSignalIsItsNormalEnd) {
   EXPECT_FALSE(m.at("interrupted").get<bool>());
   EXPECT_GT(m.at("sim_time_s").get<double>(), 3.6);
   EXPECT_GT(m.at("bus").at("frames_rx").get<int>(), 100);
+  // What the master did, for expectations: the drives ran, then it stopped them (NMT stop at
+  // its end); the pose the platform reached.
+  const double running = m.at("drives").at("all_running_at_s").get<double>();
+  EXPECT_GT(running, 0.0) << m.at("drives");
+  EXPECT_GT(m.at("drives").at("stopped_at_s").get<double>(), running) << m.at("drives");
+  EXPECT_EQ(m.at("drives").at("running_at_end"), 0);
+  EXPECT_GT(m.at("platform").at("final_x_m").get<double>(), 0.05);
   for (const auto& f : m.at("expectations").at("failures"))
     EXPECT_FALSE(contains(f.get<std::string>(), "no master connected")) << f;
 }

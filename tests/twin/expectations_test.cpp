@@ -31,7 +31,10 @@ TEST(KnownMetrics, AcceptsTheDocumentedPaths) {
                         "platform.std_contour_cm", "platform.final_error_cm", "platform.max_phi_error_deg",
                         "platform_odometry.iae_contour_cm", "platform_odometry.final_phi_error_deg",
                         "axes.0.iae_velocity_pulse", "axes.3.std_velocity_pulse", "bus.frames_tx",
-                        "bus.dropout_rate", "bus.errors", "realtime.overruns", "realtime.jitter_p99_us"}) {
+                        "bus.dropout_rate", "bus.errors", "realtime.overruns", "realtime.jitter_p99_us",
+                        // issue 18 (what the master did) and issue 20 (emergencies)
+                        "platform.final_x_m", "platform.final_phi_deg", "drives.all_running_at_s",
+                        "drives.stopped_at_s", "drives.faults", "drives.running_at_end", "master.emergencies"}) {
     EXPECT_TRUE(is_known_metric(m)) << m;
   }
 }
@@ -40,7 +43,8 @@ TEST(KnownMetrics, RejectsEverythingElse) {
   for (const char* m : {"", "platform", "platform.final_errr_cm", "axes.4.iae_velocity_pulse",
                         "axes.x.iae_velocity_pulse", "axes.-1.iae_velocity_pulse", "axes.0",
                         "axes.00x.iae_velocity_pulse", "bus.frames_tx.more", "realtime.jitter",
-                        "scenario", "expectations.passed", "platform..iae_x_cm"}) {
+                        "scenario", "expectations.passed", "platform..iae_x_cm",
+                        "platform_odometry.final_x_m", "drives.faultz", "drives"}) {
     EXPECT_FALSE(is_known_metric(m)) << m;
   }
 }

@@ -73,5 +73,25 @@ TEST(VelocityErrorStats, EmptyIsZero) {
   EXPECT_EQ(j["samples"], 0);
 }
 
+// Issue 18: what the drives did. All four running from 0.2 s, drive 3 faults at 0.5 s and
+// again at 0.7 s (two transitions), none running from 0.9 s; two running at the end.
+TEST(DriveHistory, FirstAllRunningStopsAndFaults) {
+  using D = DriveStateCode;
+  DriveHistory h;
+  EXPECT_EQ(h.to_json().at("all_running_at_s"), -1.0);
+  h.add(0.1, {D::waiting, D::running, D::running, D::running});
+  h.add(0.2, {D::running, D::syncing, D::running, D::running});
+  h.add(0.5, {D::running, D::running, D::fault, D::running});
+  h.add(0.6, {D::running, D::running, D::running, D::running});
+  h.add(0.7, {D::running, D::running, D::fault, D::running});
+  h.add(0.9, {D::waiting, D::waiting, D::fault, D::off});
+  h.add(1.0, {D::running, D::running, D::waiting, D::waiting});
+  const auto j = h.to_json();
+  EXPECT_DOUBLE_EQ(j.at("all_running_at_s").get<double>(), 0.2);
+  EXPECT_DOUBLE_EQ(j.at("stopped_at_s").get<double>(), 0.9);
+  EXPECT_EQ(j.at("faults"), 2);
+  EXPECT_EQ(j.at("running_at_end"), 2);
+}
+
 }  // namespace
 }  // namespace omnitwin::twin
