@@ -30,6 +30,15 @@ bool interrupted(const CheckOptions& opt) { return opt.interrupt != nullptr && o
 int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
                  const CheckOptions& opt);
 
+// The output folder exists (made if needed), or why not, as one line for the user.
+std::string make_out_root(const std::string& out_root) {
+  std::error_code ec;
+  fs::create_directories(out_root, ec);
+  if (ec) return "cannot create output folder " + out_root + ": " + ec.message();
+  if (!fs::is_directory(out_root)) return "cannot create output folder " + out_root + ": not a directory";
+  return "";
+}
+
 // check.json next to the index page, written whole under a temporary name; "" or why not.
 std::string write_check_json(const std::string& out_root, const std::string& shard, std::size_t files_total,
                              const nlohmann::json& results) {
@@ -249,6 +258,10 @@ int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
     std::cerr << "omnitwin check: no scenario files under the given paths\n";
     return 2;
   }
+  if (const std::string e = make_out_root(opt.out_root); !e.empty()) {
+    std::cerr << "omnitwin check: " << e << "\n";
+    return 2;
+  }
   const auto files = opt.shard_n > 0 ? shard_of(all, opt.shard_k, opt.shard_n) : all;
   if (opt.shard_n > 0)
     std::cout << fmt::format("shard {}/{}: {} of {} scenario files\n", opt.shard_k, opt.shard_n, files.size(), all.size());
@@ -265,6 +278,10 @@ int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
 
 
 int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& opt) {
+  if (const std::string e = make_out_root(opt.out_root); !e.empty()) {
+    std::cerr << "omnitwin check --merge: " << e << "\n";
+    return 2;
+  }
   nlohmann::json index = nlohmann::json::array();
   for (const std::string& d : dirs) {
     if (const std::string e = read_shard(d, index); !e.empty()) {

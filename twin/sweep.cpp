@@ -331,6 +331,11 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   const fs::path out = fs::absolute(opt.out.empty() ? fs::path("out/sweep") / s.name : fs::path(opt.out));
   std::error_code ec;
   fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) {
+    std::cerr << "omnitwin sweep: cannot create output folder " << out.string() << ": "
+              << (ec ? ec.message() : std::string("not a directory")) << "\n";
+    return 2;
+  }
   if (opt.point > 0) {
     if (opt.point > static_cast<int>(s.points.size())) {
       std::cerr << fmt::format("omnitwin sweep: --point {}: the sweep has {} points\n", opt.point, s.points.size());

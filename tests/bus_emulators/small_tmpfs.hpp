@@ -44,6 +44,11 @@ class SmallTmpfs {
   SmallTmpfs& operator=(const SmallTmpfs&) = delete;
 
   bool mounted() const { return mounted_; }
+  // Remounts it read-only (an unwritable output place: EROFS, which root cannot bypass as it
+  // bypasses permission bits). false when that fails.
+  bool make_read_only() {
+    return mounted_ && ::mount(nullptr, dir_.c_str(), nullptr, MS_REMOUNT | MS_RDONLY, nullptr) == 0;
+  }
   const std::string& skip_reason() const { return reason_; }
   std::filesystem::path operator/(const std::string& name) const { return std::filesystem::path(dir_) / name; }
 

@@ -329,6 +329,33 @@ TEST_F(CliTrust, AForeignDirectoryIsRefused) {
   EXPECT_FALSE(fs::exists(out / "metrics.json"));
 }
 
+// Issue 16 item 5: an output place that cannot be written — a read-only file system (EROFS:
+// root cannot bypass it) or a path through a regular file — is bad input for run, check and
+// sweep: exit 2, one line naming the directory and the reason, nothing half-made left behind.
+TEST_F(CliTrust, AnUnwritableOutputPlaceIsRefusedWithItsReason) {
+  SmallTmpfs disk("64k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  ASSERT_TRUE(disk.make_read_only());
+  const std::string ro = (disk / "runs").string();
+  const Finished r = run({"run", test_scenario("run_short_line.yaml"), "--out", ro, "--no-progress"});
+  EXPECT_EQ(r.code, 2) << r.out << r.err;
+  EXPECT_TRUE(contains(r.err, "cannot create run directory " + ro + ": Read-only file system")) << r.err;
+  EXPECT_EQ(omnitwin::testing::lines_of(r.err).size(), 1u) << r.err;
+  const Finished c = run({"check", test_scenario("run_short_line.yaml"), "--out", ro, "--no-report"});
+  EXPECT_EQ(c.code, 2) << c.out << c.err;
+  EXPECT_TRUE(contains(c.err, "cannot create output folder " + ro + ": Read-only file system")) << c.out << c.err;
+  const Finished w = run({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--out", ro});
+  EXPECT_EQ(w.code, 2) << w.out << w.err;
+  EXPECT_TRUE(contains(w.out + w.err, "Read-only file system")) << w.out << w.err;
+  EXPECT_FALSE(fs::exists(ro));
+  // A path through a regular file.
+  std::ofstream(dir_ / "afile") << "x";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", (dir_ / "afile/run").string(),
+                          "--no-progress"});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "Not a directory")) << f.err;
+}
+
 // A bad option: one line, with the program's prefix.
 TEST_F(CliTrust, ABadOptionIsOneLineWithThePrefix) {
   const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--no-such-option"});
