@@ -111,7 +111,20 @@ class UdpPairTransport final : public Traits::Base {
         case FrameVerdict::foreign: ++stats_.dropped_foreign; continue;
         case FrameVerdict::malformed: ++stats_.dropped_malformed; continue;
       }
-      if (role_ == Role::slaves) remember_sender(from, msg.msg_namelen);
+      if (role_ == Role::slaves) {
+        if (!have_master_) {  // the first sender is the master
+          std::memcpy(&master_, &from, msg.msg_namelen);
+          master_len_ = msg.msg_namelen;
+          have_master_ = true;
+        } else if (msg.msg_namelen != master_len_ || std::memcmp(&master_, &from, master_len_) != 0) {
+          ++stats_.foreign_sender;
+          if (refuse_foreign_) {
+            ++stats_.refused_sender;
+            continue;
+          }
+        }
+        remember_sender(from, msg.msg_namelen);
+      }
       ++stats_.received;
       last_age_ns_ = ReceiveStamp::age_ns(msg);
       return static_cast<int>(size);
@@ -132,6 +145,7 @@ class UdpPairTransport final : public Traits::Base {
   }
   Stats stats() const { return stats_; }
   std::uint16_t local_port() const { return local_port_; }  // the port this socket is bound to
+  void set_refuse_foreign_senders(bool refuse) override { refuse_foreign_ = refuse; }
 
  private:
   // Fills peer_ from spec_; returns the address family.
@@ -183,6 +197,10 @@ class UdpPairTransport final : public Traits::Base {
   sockaddr_storage peer_{};  // master: HOST:PORT; slaves: the last sender
   socklen_t peer_len_ = 0;
   bool have_peer_ = false;
+  sockaddr_storage master_{};  // slaves: the first sender
+  socklen_t master_len_ = 0;
+  bool have_master_ = false;
+  bool refuse_foreign_ = false;
   std::uint16_t local_port_ = 0;
   Stats stats_;
   ReceiveStamp stamp_;

@@ -102,6 +102,7 @@ void EthercatNetwork::open_transport(const Scenario& s) {
   transport_spec_ = line.slaves_spec;
   master_iface_ = line.master_iface.empty() ? line.slaves_spec : line.master_iface;
   transport_ = ethercat::open_transport(transport_spec_, ethercat::Role::slaves);
+  transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
   // A UDP segment on port 0: the master is told the port the slaves' socket was given.
   if (const auto* udp = dynamic_cast<const ethercat::UdpTransport*>(transport_.get()); udp) {
     ethercat::TransportSpec t = ethercat::parse_transport_spec(transport_spec_);
@@ -422,6 +423,8 @@ nlohmann::json EthercatNetwork::bus_metrics(SimTime now) const {
           {"dropout_rate", b.frames_rx > 0 ? static_cast<double>(b.dropouts) / static_cast<double>(b.frames_rx) : 0.0},
           {"errors", b.errors},
           {"lost_frames", lost_frames_},
+          {"foreign_frames", transport_->stats().foreign_sender},  // from a second sender
+          {"refused_frames", transport_->stats().refused_sender},
           {"not_returned", not_returned_},
           {"malformed", malformed()},
           {"send_failures", send_failures_},

@@ -27,11 +27,12 @@ constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
 // M-III's, the last three CANopen's).
-constexpr std::array<std::string_view, 21> kBusMetrics = {
+constexpr std::array<std::string_view, 23> kBusMetrics = {
     "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
     "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",
     "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s",
-    "corrupted_frames", "servos_on_since_s", "emcy", "sdo_aborts", "power_cycles"};
+    "corrupted_frames", "servos_on_since_s", "emcy", "sdo_aborts", "power_cycles",
+    "foreign_frames", "refused_frames"};
 // The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
 // bus ethercat also its own counters (from the master's statistics file).
 // The twin's view (lockstep report, realtime supervision: lost_at_s) and the EtherCAT and

@@ -428,6 +428,7 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   read_number(f, "drive_period", e.drive_period, Bounds::closed(50e-6, 0.01));
   read_integer(f, "counts_per_rev", e.counts_per_rev, Bounds::closed(4, 1 << 24));
   read_bool(f, "dc", e.dc);
+  read_bool(f, "refuse_foreign", e.refuse_foreign);
   if (const YamlField d = f["drift"]; d.exists()) {
     const Bounds b{-1e-3, 1e-3};  // crystal oscillators: within ±1000 ppm
     if (d.node().IsSequence()) {
@@ -565,7 +566,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
     f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
-                  "startup", "master", "seed", "handshake_timeout", "supervision"});
+                  "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_ethercat(f, bus.ethercat, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::m3) {

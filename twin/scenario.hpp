@@ -124,6 +124,9 @@ struct EthercatSpec {
   std::string master;                       // master program; "" = omni-master beside omnitwin
   std::uint64_t seed = 1;                   // random faults (frame loss)
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
+  // Frames from a sender other than the first (the master: another source MAC on raw,
+  // another address on udp) are always counted (bus.foreign_frames); true also refuses them.
+  bool refuse_foreign = false;
 };
 
 // Settings of the `canopen` bus: four single-axis CiA 402 drives as CANopen nodes (one per

@@ -7,7 +7,12 @@
 // 004's PP-TEST, run by `omni-master --script` against the twin alone, reaches its target.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <nlohmann/json.hpp>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <csignal>
@@ -15,6 +20,7 @@
 #include <string>
 #include <thread>
 
+#include "bus_emulators/ethercat/ec_frame.hpp"
 #include "tests/support/veth.hpp"
 #include "tests/twin/cli_support.hpp"
 
@@ -182,6 +188,73 @@ TEST_F(CliEthercat, ExternalMasterNoticesTheTwinVanishing) {
   EXPECT_GT(m.at("lost_frames").get<int>(), 500);
   EXPECT_TRUE(contains(m.at("stop_reason").get<std::string>(), "segment lost")) << m.dump(2);
   EXPECT_TRUE(contains(master.out() + master.err(), "segment lost")) << master.err();
+}
+
+// Issue 16 item 7: the twin takes the first sender as the master. Frames from a second one (a
+// second UDP socket here, as another program on the machine would be) are counted in
+// bus.foreign_frames; with bus.refuse_foreign: true they get no answer and are counted as
+// refused, while the master is answered throughout.
+class ForeignSender : public CliEthercat {
+ protected:
+  struct Peer {
+    int fd = -1;
+    ~Peer() {
+      if (fd >= 0) ::close(fd);
+    }
+  };
+  // One BRD to 127.0.0.1:port from `p`; true when an answer came back within 1 s.
+  static bool exchange(const Peer& p, int port) {
+    std::array<std::uint8_t, omnitwin::ethercat::kMaxPdu> buf{};
+    omnitwin::ethercat::PduBuilder b(buf);
+    const std::uint8_t two[2] = {0, 0};
+    b.add(omnitwin::ethercat::Cmd::brd, 1, 0, 0x0000, 2, two);
+    const std::size_t n = b.finish();
+    sockaddr_in to{};
+    to.sin_family = AF_INET;
+    to.sin_port = htons(static_cast<std::uint16_t>(port));
+    to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::sendto(p.fd, buf.data(), n, 0, reinterpret_cast<const sockaddr*>(&to), sizeof to) != static_cast<ssize_t>(n))
+      return false;
+    pollfd pfd{p.fd, POLLIN, 0};
+    if (::poll(&pfd, 1, 1000) != 1) return false;
+    return ::recv(p.fd, buf.data(), buf.size(), 0) > 0;
+  }
+  nlohmann::json run_with_two_senders(const std::string& refuse, int port, int& master_answers, int& foreign_answers) {
+    const fs::path out = dir_ / ("twin-" + refuse);
+    Child twin({"twin", test_scenario("ethercat_short.yaml"), "--bus", "ethercat", "--set",
+                "bus.transport=udp:127.0.0.1:" + std::to_string(port), "--set", "bus.refuse_foreign=" + refuse,
+                "--out", out.string(), "--no-progress", "--no-video", "--no-report"},
+               work(), io());
+    const auto deadline = std::chrono::steady_clock::now() + 20s;
+    while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(20ms);
+    EXPECT_TRUE(contains(twin.out(), "a master connects on")) << twin.out() << twin.err();
+    Peer master, other;
+    master.fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    other.fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    master_answers = foreign_answers = 0;
+    for (int k = 0; k < 5; ++k) {
+      master_answers += exchange(master, port) ? 1 : 0;
+      foreign_answers += exchange(other, port) ? 1 : 0;
+    }
+    twin.signal(SIGINT);
+    EXPECT_NE(twin.wait(30s), -1);
+    return metrics(out);
+  }
+};
+
+TEST_F(ForeignSender, ASecondSenderIsCountedAndRefusedWhenAsked) {
+  int master = 0, foreign = 0;
+  nlohmann::json m = run_with_two_senders("false", 47621, master, foreign);
+  EXPECT_EQ(master, 5);
+  EXPECT_EQ(foreign, 5);  // counted, still answered
+  EXPECT_EQ(m.at("bus").at("foreign_frames"), 5);
+  EXPECT_EQ(m.at("bus").at("refused_frames"), 0);
+  m = run_with_two_senders("true", 47622, master, foreign);
+  EXPECT_EQ(master, 5);
+  EXPECT_EQ(foreign, 0);
+  EXPECT_EQ(m.at("bus").at("foreign_frames"), 5);
+  EXPECT_EQ(m.at("bus").at("refused_frames"), 5);
 }
 
 }  // namespace

@@ -66,6 +66,10 @@ class EcTransport {
   // The Ethernet header (destination, source, EtherType) of the last PDU receive() returned,
   // as it was on the wire; false for transports without one (udp, mem). For captures.
   virtual bool wire_header(std::array<std::uint8_t, kEthHeaderSize>& /*out*/) const { return false; }
+  // slaves: the first sender is the master; frames from any other sender (another MAC on raw,
+  // another address on udp) are counted (Stats::foreign_sender) and, when refuse is true,
+  // dropped before they are answered or become the reply's address. mem has no senders.
+  virtual void set_refuse_foreign_senders(bool /*refuse*/) {}
   // A descriptor that polls readable (POLLIN) while a PDU may be waiting, for event loops.
   virtual int fd() const = 0;
   // The canonical spec and the role, e.g. "raw:eth1 (master, 00:1b:21:0a:0b:0c)".
@@ -81,6 +85,8 @@ class EcTransport {
     std::uint64_t dropped_overflow = 0;   // mem: the receiving queue was full
     std::uint64_t send_errors = 0;        // refused by the OS, oversized PDU, slaves with no peer yet
     std::uint64_t receive_errors = 0;     // the OS reported a receive error
+    std::uint64_t foreign_sender = 0;     // slaves: frames from a sender other than the first (the master)
+    std::uint64_t refused_sender = 0;     // … of which refused (set_refuse_foreign_senders)
   };
   virtual Stats stats() const = 0;
 };

@@ -95,8 +95,12 @@ class M3Transport {
     std::uint64_t dropped_overflow = 0;   // mem: the receiving queue was full
     std::uint64_t send_errors = 0;        // refused by the OS, bad size, slaves with no peer yet
     std::uint64_t receive_errors = 0;     // the OS reported a receive error
+    std::uint64_t foreign_sender = 0;     // slaves: frames from a sender other than the first (the master)
+    std::uint64_t refused_sender = 0;     // … of which refused (set_refuse_foreign_senders)
   };
   virtual Stats stats() const = 0;
+  // slaves: see EcTransport::set_refuse_foreign_senders.
+  virtual void set_refuse_foreign_senders(bool /*refuse*/) {}
 };
 
 // Set-up errors: a bad spec, a missing interface or privilege, a port in use. The message names

@@ -249,6 +249,29 @@ TEST_F(EcRawTransport, FramesThatAreNotEtherCatType1AreIgnored) {
   EXPECT_EQ(s.dropped_foreign, slaves.kernel_filter() ? 0u : 1u);
 }
 
+// Issue 16 item 7: the first source MAC is the master's; frames from another MAC are counted
+// as foreign and, once refused, dropped without becoming the reply's address.
+TEST_F(EcRawTransport, FramesFromASecondSourceMacAreCountedAndRefusedWhenAsked) {
+  RawTransport slaves(veth_->b(), Role::slaves);
+  Wire wire_a(veth_->a());
+  const Mac other = {0x00, 0x00, 0x5e, 0x00, 0x53, 0x77};
+  const auto p = pdu_of(Cmd::brd, 0x01, 2);
+  std::array<std::uint8_t, kMaxPdu> buf{};
+  wire_a.inject(frame_of(kMasterMac, kEtherType, p));
+  ASSERT_EQ(slaves.receive(buf, 1s), 16);
+  wire_a.inject(frame_of(other, kEtherType, p));
+  ASSERT_EQ(slaves.receive(buf, 1s), 16);  // counted, still delivered
+  EXPECT_EQ(slaves.stats().foreign_sender, 1u);
+  slaves.set_refuse_foreign_senders(true);
+  wire_a.inject(frame_of(other, kEtherType, p));
+  wire_a.inject(frame_of(kMasterMac, kEtherType, p));
+  ASSERT_EQ(slaves.receive(buf, 1s), 16);  // the master's: the foreign one was dropped first
+  EXPECT_EQ(slaves.receive(buf, 100ms), 0);
+  EXPECT_EQ(slaves.stats().foreign_sender, 2u);
+  EXPECT_EQ(slaves.stats().refused_sender, 1u);
+  EXPECT_EQ(slaves.reply_header()[11], kMasterMac[5]);  // replies still go to the master
+}
+
 TEST_F(EcRawTransport, SendErrorsAreCountedNotThrown) {
   RawTransport slaves(veth_->b(), Role::slaves);
   EXPECT_FALSE(slaves.send(pdu_of(Cmd::brd, 1, 2)));  // nothing received yet: nobody to answer
