@@ -154,6 +154,17 @@ int PduBuilder::add_logical(Cmd cmd, std::uint8_t index, std::uint32_t address, 
              static_cast<std::uint16_t>(address >> 16), length, data);
 }
 
+void PduBuilder::rewind(const Mark& m) {
+  if (m.count > count_) return;  // not a mark of this builder's past
+  pos_ = m.pos;
+  count_ = m.count;
+  last_ = m.last;
+  if (count_ > 0) {  // the last datagram kept has no successor any more
+    std::uint8_t* h = buf_.data() + last_;
+    put_u16(h + 6, static_cast<std::uint16_t>(get_u16(h + 6) & ~0x8000));
+  }
+}
+
 std::size_t PduBuilder::finish() {
   if (cap_ < kEcatHeaderSize) return 0;
   const std::size_t len = pos_ - kEcatHeaderSize;

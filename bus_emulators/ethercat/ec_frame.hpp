@@ -143,6 +143,13 @@ class PduBuilder {
   std::size_t datagrams() const { return count_; }
   std::size_t size() const { return pos_; }
   std::size_t room() const;  // data bytes a further datagram could still carry
+  // A point to come back to: rewind(mark()) drops every datagram added since (a caller that
+  // wants a group of datagrams whole or not at all). Real-time safe.
+  struct Mark {
+    std::size_t pos = 0, count = 0, last = 0;
+  };
+  Mark mark() const { return {pos_, count_, last_}; }
+  void rewind(const Mark& m);
 
  private:
   std::span<std::uint8_t> buf_;

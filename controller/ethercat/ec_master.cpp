@@ -117,10 +117,48 @@ void EcMaster::enter(Slave& s, SlaveStep step, SimTime t) {
   }
 }
 
+// Every slave's step datagrams, each step whole or not at all: a large segment's per-slave
+// datagrams do not all fit one frame, and a step sent in part would go wrong (an SII read
+// whose next command was cut off reads the wrong address). The first slave whose step does not
+// fit is rolled back and starts the next frame, so every slave gets its turn. A slave's
+// mailbox datagram goes whole or waits for a later frame on its own: beside a cyclic image
+// that fills the frame (35 drives of 42 bytes) there is no room for mailbox traffic at all.
+// What a fill set on the slave before its datagrams (step_subs, the SII look-ahead, a mailbox
+// job begun) is set again by its next fill.
+void EcMaster::fill_slaves(ec::PduBuilder& b, SimTime t) {
+  const std::size_t n = slaves_.size();
+  std::size_t filled = 0;
+  for (; filled < n; ++filled) {
+    Slave& s = slaves_[(fill_from_ + filled) % n];
+    ec::PduBuilder::Mark mark = b.mark();
+    std::size_t slots = slot_count_;
+    add_failed_ = false;
+    slave_fill(s, b, t);
+    if (add_failed_) {  // its step does not fit: it starts the next frame
+      b.rewind(mark);
+      slot_count_ = slots;
+      break;
+    }
+    if (!mbx_ready(s)) continue;
+    // The mailbox may wait a frame (a cyclic image may leave no room for it): on its own.
+    mark = b.mark();
+    slots = slot_count_;
+    mbx_fill(s, b, t);
+    if (add_failed_) {
+      b.rewind(mark);
+      slot_count_ = slots;
+      s.mbx_read_sent = false;
+    }
+  }
+  fill_from_ = n == 0 ? 0 : (fill_from_ + filled) % n;
+}
+
 bool EcMaster::add(ec::PduBuilder& b, Slot slot, Cmd cmd, std::uint16_t adp, std::uint16_t ado, std::uint16_t len,
                    const void* data) {
-  if (slot_count_ >= slots_.size()) return false;
-  if (b.add(cmd, index_, adp, ado, len, data) < 0) return false;
+  if (slot_count_ >= slots_.size() || b.add(cmd, index_, adp, ado, len, data) < 0) {
+    add_failed_ = true;
+    return false;
+  }
   slots_[slot_count_++] = slot;
   return true;
 }
@@ -195,10 +233,7 @@ void EcMaster::tick(SimTime t) {
     }
     case MasterPhase::sii:
     case MasterPhase::configure:
-      for (auto& s : slaves_) {
-        slave_fill(s, b, t);
-        if (mbx_ready(s)) mbx_fill(s, b, t);
-      }
+      fill_slaves(b, t);
       break;
     case MasterPhase::failed:
       break;

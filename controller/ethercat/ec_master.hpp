@@ -285,6 +285,7 @@ class EcMaster {
   void mbx_reply(Slave& s, const omnitwin::ethercat::Datagram& d, SimTime t);
   bool take_emergency(Slave& s, std::span<const std::uint8_t> mailbox);
   void mbx_poll_fill(Slave& s, omnitwin::ethercat::PduBuilder& b);
+  void fill_slaves(omnitwin::ethercat::PduBuilder& b, SimTime t);
   void finish_job(Slave& s, SdoStatus status);
   void queue_internal(Slave& s, SdoRequest req, SdoCallback cb);
   void start_pdo_read(Slave& s);
@@ -330,6 +331,8 @@ class EcMaster {
   std::string stop_reason_;
   SimTime next_al_check_ = 0;
   std::uint16_t expected_wkc_ = 0;
+  std::size_t fill_from_ = 0;  // the slave the next frame's per-slave datagrams start with
+  bool add_failed_ = false;    // an add() since the last fill_slaves() check did not fit
 
   // DC
   int dc_step_ = 0;               // 0 latch, 1 read, 2 write offsets/delays, 3 SYNC0, 4 done

@@ -345,6 +345,18 @@ TEST(EcMaster, ADriveFaultArrivesAsOneEmergencyAndItsResetAsAnother) {
   EXPECT_EQ(b.master->slave(0).emergencies, 0u);
 }
 
+// A segment whose per-slave configuration datagrams do not fit one frame (32 drives) reaches
+// OP: each slave's datagrams go whole into a frame or wait for the next one. Before, slave
+// 21's EEPROM read was cut off the frame and the start-up failed with an EEPROM read error.
+// One image of 32 × 42 bytes still fits one LRW; the expected WKC is 3 × 32.
+TEST(EcMaster, ASegmentLargerThanOneFramesConfigurationReachesOp) {
+  Bench b(32);
+  ASSERT_TRUE(b.to_op(200000)) << b.master->error() << "\n" << events(*b.master);
+  for (int k = 0; k < 50; ++k) b.step();
+  EXPECT_EQ(b.master->stats().last_wkc, 96);
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);
+}
+
 TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   const auto multi = omnitwin::ethercat::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
   ASSERT_FALSE(multi.empty());
