@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "twin/clock.hpp"
+#include "twin/job_pool.hpp"
 #include "twin/junit.hpp"
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
@@ -151,24 +152,16 @@ std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const C
   std::vector<JunitCase> cases(files.size());
   std::vector<nlohmann::json> entries(files.size());
   std::vector<bool> done(files.size(), false);
-  std::atomic<std::size_t> next{0};
   std::mutex print;
-  const auto worker = [&] {
-    for (std::size_t i = next++; i < files.size() && !interrupted(opt); i = next++) {
-      JunitCase c = check_one(files[i], opt, shared, entries[i]);
-      const std::lock_guard lock(print);
-      std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
-      for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
-      std::cout << std::flush;
-      cases[i] = std::move(c);
-      done[i] = true;
-    }
-  };
-  std::vector<std::thread> pool;
-  const int jobs = opt.jobs > 0 ? opt.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  for (int j = 1; j < std::min<int>(jobs, static_cast<int>(files.size())); ++j) pool.emplace_back(worker);
-  worker();
-  for (std::thread& t : pool) t.join();
+  run_jobs(files.size(), jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
+    JunitCase c = check_one(files[i], opt, shared, entries[i]);
+    const std::lock_guard lock(print);
+    std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
+    for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
+    std::cout << std::flush;
+    cases[i] = std::move(c);
+    done[i] = true;
+  });
   std::vector<JunitCase> ran;
   for (std::size_t i = 0; i < files.size(); ++i) {
     if (!done[i]) continue;  // not started: interrupted

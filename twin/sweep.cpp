@@ -17,6 +17,8 @@
 #include <thread>
 
 #include "media/run_report.hpp"
+#include "twin/expectations.hpp"
+#include "twin/job_pool.hpp"
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
@@ -127,14 +129,8 @@ void read_metrics_and_plot(SweepSpec& s, const YAML::Node& root) {
 
 // A metric of metrics.json by dotted path; empty when absent or not a number/bool/string.
 std::string metric_text(const nlohmann::json& m, const std::string& path) {
-  const nlohmann::json* j = &m;
-  for (std::size_t a = 0; a <= path.size();) {
-    const std::size_t b = std::min(path.find('.', a), path.size());
-    const std::string part = path.substr(a, b - a);
-    if (!j->is_object() || !j->contains(part)) return "";
-    j = &(*j)[part];
-    a = b + 1;
-  }
+  const nlohmann::json* j = find_metric(m, path);  // the same dotted paths as expectations
+  if (j == nullptr) return "";
   if (j->is_number_float()) return fmt::format("{}", j->get<double>());
   if (j->is_number() || j->is_boolean()) return j->dump();
   if (j->is_string()) return j->get<std::string>();
@@ -182,21 +178,14 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
 
 // Every point locally, `jobs` at a time; prints one line per point.
 void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
-  const int n = static_cast<int>(s.points.size());
-  const int jobs = std::min(n, opt.jobs > 0 ? opt.jobs : std::max(1, static_cast<int>(std::thread::hardware_concurrency())));
-  std::atomic<int> next{1};
+  const std::size_t n = s.points.size();
   std::mutex print;
-  auto worker = [&] {
-    for (int k = next++; k <= n && !(opt.interrupt && opt.interrupt->load()); k = next++) {
-      const int code = run_point(s, k, out, opt.interrupt);
-      const std::lock_guard lock(print);
-      std::cout << fmt::format("point {}/{}: exit {}\n", k, n, code) << std::flush;
-    }
-  };
-  std::vector<std::thread> pool;
-  for (int j = 1; j < jobs; ++j) pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
+  run_jobs(n, jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
+    const int k = static_cast<int>(i) + 1;
+    const int code = run_point(s, k, out, opt.interrupt);
+    const std::lock_guard lock(print);
+    std::cout << fmt::format("point {}/{}: exit {}\n", k, n, code) << std::flush;
+  });
 }
 
 int spawn_wait(const std::vector<std::string>& argv) {
@@ -267,20 +256,6 @@ int write_table(const SweepSpec& s, const fs::path& out) {
   return bad_points;
 }
 
-SweepSpec load_sweep_tree(const std::string& path);
-
-}  // namespace
-
-SweepSpec load_sweep(const std::string& path) {
-  try {
-    return load_sweep_tree(path);
-  } catch (const YAML::Exception& e) {  // a value of the wrong type (as<int> of a word, …)
-    throw ScenarioError(path, e.mark.line + 1, "", e.msg);
-  }
-}
-
-namespace {
-
 SweepSpec load_sweep_tree(const std::string& path) {
   SweepSpec s;
   s.file = path;
@@ -319,6 +294,14 @@ SweepSpec load_sweep_tree(const std::string& path) {
 }
 
 }  // namespace
+
+SweepSpec load_sweep(const std::string& path) {
+  try {
+    return load_sweep_tree(path);
+  } catch (const YAML::Exception& e) {  // a value of the wrong type (as<int> of a word, …)
+    throw ScenarioError(path, e.mark.line + 1, "", e.msg);
+  }
+}
 
 int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   SweepSpec s;

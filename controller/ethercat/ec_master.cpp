@@ -128,27 +128,23 @@ void EcMaster::enter(Slave& s, SlaveStep step, SimTime t) {
 void EcMaster::fill_slaves(ec::PduBuilder& b, SimTime t) {
   const std::size_t n = slaves_.size();
   std::size_t filled = 0;
+  // Runs fill; when one of its datagrams did not fit, takes all of them back. Returns whether
+  // they went in.
+  const auto whole = [&](auto&& fill) {
+    const ec::PduBuilder::Mark mark = b.mark();
+    const std::size_t slots = slot_count_;
+    add_failed_ = false;
+    fill();
+    if (!add_failed_) return true;
+    b.rewind(mark);
+    slot_count_ = slots;
+    return false;
+  };
   for (; filled < n; ++filled) {
     Slave& s = slaves_[(fill_from_ + filled) % n];
-    ec::PduBuilder::Mark mark = b.mark();
-    std::size_t slots = slot_count_;
-    add_failed_ = false;
-    slave_fill(s, b, t);
-    if (add_failed_) {  // its step does not fit: it starts the next frame
-      b.rewind(mark);
-      slot_count_ = slots;
-      break;
-    }
-    if (!mbx_ready(s)) continue;
+    if (!whole([&] { slave_fill(s, b, t); })) break;  // its step starts the next frame
     // The mailbox may wait a frame (a cyclic image may leave no room for it): on its own.
-    mark = b.mark();
-    slots = slot_count_;
-    mbx_fill(s, b, t);
-    if (add_failed_) {
-      b.rewind(mark);
-      slot_count_ = slots;
-      s.mbx_read_sent = false;
-    }
+    if (mbx_ready(s) && !whole([&] { mbx_fill(s, b, t); })) s.mbx_read_sent = false;
   }
   fill_from_ = n == 0 ? 0 : (fill_from_ + filled) % n;
 }
@@ -1004,9 +1000,8 @@ void EcMaster::mbx_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
       return;
     }
   }
-  if (s.repeat_pending && !s.mbx_writing) {  // SM1 activate (0x080E): toggle bit 1, keep enable
-    const std::uint8_t act = static_cast<std::uint8_t>(0x01 | (s.repeat_toggle ? 0x00 : 0x02));
-    add(b, {SlotKind::repeat, s.position}, Cmd::fpwr, s.station, kRegSm + 8 + 6, 1, &act);
+  if (s.repeat_pending && !s.mbx_writing) {
+    add_repeat_request(s, b);
     return;
   }
   s.repeat_pending = false;
@@ -1019,12 +1014,17 @@ void EcMaster::mbx_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
   }
 }
 
+// The SM1 repeat request: SM1 activate (0x080E) with bit 1 toggled, enable kept.
+void EcMaster::add_repeat_request(Slave& s, ec::PduBuilder& b) {
+  const std::uint8_t act = static_cast<std::uint8_t>(0x01 | (s.repeat_toggle ? 0x00 : 0x02));
+  add(b, {SlotKind::repeat, s.position}, Cmd::fpwr, s.station, kRegSm + 8 + 6, 1, &act);
+}
+
 // No transfer: read SM1 (or ask for its repeat after a lost read) while mbx_poll is set.
 void EcMaster::mbx_poll_fill(Slave& s, ec::PduBuilder& b) {
   if (!s.mbx_poll) return;
   if (s.repeat_pending) {
-    const std::uint8_t act = static_cast<std::uint8_t>(0x01 | (s.repeat_toggle ? 0x00 : 0x02));
-    add(b, {SlotKind::repeat, s.position}, Cmd::fpwr, s.station, kRegSm + 8 + 6, 1, &act);
+    add_repeat_request(s, b);
     return;
   }
   if (add(b, {SlotKind::mbx, s.position}, Cmd::fprd, s.station, s.sii.mbx_in_start, s.sii.mbx_in_size))

@@ -285,6 +285,7 @@ class EcMaster {
   void mbx_reply(Slave& s, const omnitwin::ethercat::Datagram& d, SimTime t);
   bool take_emergency(Slave& s, std::span<const std::uint8_t> mailbox);
   void mbx_poll_fill(Slave& s, omnitwin::ethercat::PduBuilder& b);
+  void add_repeat_request(Slave& s, omnitwin::ethercat::PduBuilder& b);
   void fill_slaves(omnitwin::ethercat::PduBuilder& b, SimTime t);
   void finish_job(Slave& s, SdoStatus status);
   void queue_internal(Slave& s, SdoRequest req, SdoCallback cb);

@@ -13,25 +13,16 @@
 # (start to exit, as `time` measures it). The in-run factor (metrics.json real_time_factor:
 # the run loop alone, without start-up and closing) is given beside it.
 set -euo pipefail
-root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-build="${OMNITWIN_BUILD_DIR:-$root/build}"
+# shellcheck source=tests/bench/cli_common.sh
+source "$(dirname "${BASH_SOURCE[0]}")/cli_common.sh"
 out_md="${1:-$build/bench/cli.md}"
 reps="${REPS:-3}"
 work="$(mktemp -d /tmp/omnitwin-bench-cli-XXXXXX)"
 trap 'rm -rf "$work"' EXIT
-omnitwin="$build/twin/omnitwin"
-scenario="$root/models/scenarios/thesis_line.yaml"
-buses=(direct can canopen tml ethercat m3)
 
 now_ns() { date +%s%N; }
 median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 metric() { python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(m.get(sys.argv[2], 'nan'))" "$1" "$2"; }
-
-# The thesis's CAN slaves run their velocity loop on their own 10 ms timer; at a 1 ms controller
-# period they must run it at 1 ms too, or the master finds no feedback and stops.
-extra_sets() {
-  if [ "$1" = can ] && [ "$2" = 0.001 ]; then echo "--set platform.velocity_loop.period=0.001"; fi
-}
 
 # One timed run: prints "wall_s sim_s in_run_rtf exit_code" or "refused <why>". Exit 1 (the
 # scenario's expectations failed) is a timed run all the same; 2 and 3 are not.

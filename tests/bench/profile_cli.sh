@@ -12,8 +12,8 @@
 #
 #   tests/bench/profile_cli.sh [PERIOD] [OUT.md]   (default build/bench/profile.md)
 set -euo pipefail
-root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-build="${OMNITWIN_BUILD_DIR:-$root/build}"
+# shellcheck source=tests/bench/cli_common.sh
+source "$(dirname "${BASH_SOURCE[0]}")/cli_common.sh"
 period="${1:-0.001}"
 out_md="${2:-$build/bench/profile.md}"
 work="$(mktemp -d /tmp/omnitwin-profile-XXXXXX)"
@@ -21,11 +21,10 @@ trap 'rm -rf "$work"' EXIT
 command -v perf >/dev/null || { echo "profile_cli.sh: needs perf (Debian: linux-perf)" >&2; exit 2; }
 
 rows=""
-for bus in direct can canopen tml ethercat m3; do
-  sets=(--set controller.period="$period")
-  if [ "$bus" = can ] && [ "$period" = 0.001 ]; then sets+=(--set platform.velocity_loop.period=0.001); fi
-  perf record -q -F 1999 -o "$work/$bus.data" -- "$build/twin/omnitwin" run "$root/models/scenarios/thesis_line.yaml" \
-    --bus "$bus" "${sets[@]}" --out "$work/$bus" --no-video --no-report --no-progress > "$work/$bus.log" 2>&1 || true
+for bus in "${buses[@]}"; do
+  # shellcheck disable=SC2046
+  perf record -q -F 1999 -o "$work/$bus.data" -- "$omnitwin" run "$scenario" \
+    --bus "$bus" --set controller.period="$period" $(extra_sets "$bus" "$period") --out "$work/$bus" --no-video --no-report --no-progress > "$work/$bus.log" 2>&1 || true
   rtf=$(sed -n 's/.*(\([0-9.]*\)x real time).*/\1/p' "$work/$bus.log" | head -1)
   perf report -i "$work/$bus.data" --no-children --sort comm,dso --stdio -g none 2>/dev/null |
     grep -E '^ +[0-9.]+%' > "$work/$bus.txt" || true

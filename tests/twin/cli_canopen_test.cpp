@@ -116,9 +116,7 @@ TEST_F(CliCanopen, AnExternalMasterOnTheWallClockRunsTheTwinsDrives) {
   Child twin({"twin", test_scenario("canopen_short.yaml"), "--bus", "canopen", "--set", "bus.transport=" + iface, "--set",
               "duration=30", "--out", (dir_ / "twin").string(), "--no-progress"},
              work(), io());
-  const auto deadline = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("waiting for a master");
   ASSERT_TRUE(contains(twin.out(), "CANopen bus of 4 CiA 402 drives (nodes 1-4) on " + iface)) << twin.out() << twin.err();
   const fs::path stats = dir_ / "master-stats.json";
   Child master(binary_path("controller/omni-master"),

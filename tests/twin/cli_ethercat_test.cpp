@@ -144,9 +144,7 @@ TEST_F(CliEthercat, PpTestScriptReachesItsTarget) {
               "bus.transport=" + iface, "--set", "duration=60", "--out", (dir_ / "twin").string(), "--no-progress"},
              work(), io());
   // The twin says where a master connects once its segment is up.
-  const auto deadline = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("a master connects on");
   ASSERT_TRUE(contains(twin.out(), "a master connects on " + iface)) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--bus", "ethercat", "--iface", iface, "--config",
@@ -168,9 +166,7 @@ TEST_F(CliEthercat, ExternalMasterNoticesTheTwinVanishing) {
   Child twin({"twin", test_scenario("ethercat_short.yaml"), "--bus", "ethercat", "--set",
               "bus.transport=" + iface, "--set", "duration=60", "--out", (dir_ / "twin").string(), "--no-progress"},
              work(), io());
-  const auto deadline = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("a master connects on");
   ASSERT_TRUE(contains(twin.out(), "a master connects on " + iface)) << twin.out() << twin.err();
   const fs::path stats = dir_ / "master-stats.json";
   Child master(binary_path("controller/omni-master"),
@@ -225,9 +221,7 @@ class ForeignSender : public CliEthercat {
                 "bus.transport=udp:127.0.0.1:" + std::to_string(port), "--set", "bus.refuse_foreign=" + refuse,
                 "--out", out.string(), "--no-progress", "--no-video", "--no-report"},
                work(), io());
-    const auto deadline = std::chrono::steady_clock::now() + 20s;
-    while (!contains(twin.out(), "a master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
-      std::this_thread::sleep_for(20ms);
+    twin.wait_for_output("a master connects on");
     EXPECT_TRUE(contains(twin.out(), "a master connects on")) << twin.out() << twin.err();
     Peer master, other;
     master.fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);

@@ -157,9 +157,7 @@ TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   Child twin({"twin", test_scenario("m3_short.yaml"), "--bus", "m3", "--set", "bus.transport=" + iface, "--set",
               "duration=30", "--out", (dir_ / "twin").string(), "--no-progress"},
              work(), io());
-  const auto deadline = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "a C1 master connects on") && twin.running() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("a C1 master connects on");
   ASSERT_TRUE(contains(twin.out(), "a C1 master connects on " + iface)) << twin.out() << twin.err();
   const fs::path stats = dir_ / "master-stats.json";
   Child master(binary_path("controller/omni-master"),

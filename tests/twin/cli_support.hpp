@@ -114,6 +114,15 @@ class Child {
   std::string out() const { return read_bytes(out_); }
   std::string err() const { return read_bytes(err_); }
 
+  // Waits up to `limit` until stdout holds `text` (e.g. the twin's "waiting for a master"
+  // line), or the child ends. Returns whether stdout holds it.
+  bool wait_for_output(const std::string& text, std::chrono::milliseconds limit = std::chrono::seconds(20)) {
+    const auto deadline = std::chrono::steady_clock::now() + limit;
+    while (out().find(text) == std::string::npos && running() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(20ms);
+    return out().find(text) != std::string::npos;
+  }
+
  private:
   // Collects the child if it has ended; keeps its exit code (128 + N for signal N).
   bool reap(int flags) {

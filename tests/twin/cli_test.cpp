@@ -591,9 +591,7 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
              work(), io());
   // The master starts once the twin is up (on a loaded machine building the model takes a
   // while), and the twin outlives the master's 3 s.
-  const auto ready = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("waiting for a master");
   ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "3"}, work(), io(), "m-");
@@ -622,9 +620,7 @@ TEST_F(CliCan, TwinRunsUntilStoppedAndTheSignalIsItsNormalEnd) {
   Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--out", out.string(),
               "--no-progress", "--no-video", "--no-report"},
              work(), io());
-  const auto ready = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("waiting for a master");
   ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "3"}, work(), io(), "m-");
@@ -676,9 +672,7 @@ TEST_F(CliCan, ExternalMasterNoticesTheTwinVanishing) {
   Child twin({"twin", test_scenario("run_short_line.yaml"), "--set", "bus.transport=" + spec, "--set", "duration=30",
               "--out", out.string(), "--no-progress"},
              work(), io());
-  const auto ready = std::chrono::steady_clock::now() + 20s;
-  while (!contains(twin.out(), "waiting for a master") && twin.running() && std::chrono::steady_clock::now() < ready)
-    std::this_thread::sleep_for(20ms);
+  twin.wait_for_output("waiting for a master");
   ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
   Child master(binary_path("controller/omni-master"),
                {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "4"}, work(), io(), "m-");

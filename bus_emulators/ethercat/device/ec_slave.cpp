@@ -152,7 +152,6 @@ void DriveSlave::bind_multiaxis_axis(int a) {
 void DriveSlave::bind_sync_params(std::uint16_t index, SmSyncParams& p) {
   OdObject* o = od_.find(index);
   if (!o) return;  // an ESI without the object: nothing to feed
-  p.min_cycle = DcClock::kMinSyncCycleNs;
   od_.bind(index, 1, p.sync_mode);
   od_.bind(index, 2, p.cycle_time);
   od_.bind(index, 3, p.shift_time);
@@ -448,7 +447,6 @@ void DriveSlave::power_cycle(SimTime t) {
   if (auto* e = od_.entry(0x1018, 4)) e->set_int(static_cast<std::int64_t>(cfg_.serial));
   sync_out_ = SmSyncParams{};
   sync_in_ = SmSyncParams{};
-  sync_out_.min_cycle = sync_in_.min_cycle = DcClock::kMinSyncCycleNs;
   sync_mode_written_out_ = sync_mode_written_in_ = false;
   outputs_fresh_ = false;
   last_cycle_ = -1;

@@ -105,7 +105,7 @@ struct SmSyncParams {
   std::uint16_t sync_mode = 0;
   std::uint32_t cycle_time = 0, shift_time = 0;
   std::uint16_t supported = 0x0005;
-  std::uint32_t min_cycle = 0, calc_copy = 0;
+  std::uint32_t min_cycle = DcClock::kMinSyncCycleNs, calc_copy = 0;
   std::uint16_t get_cycle = 0;
   std::uint32_t delay = 0, sync0_cycle = 0;
   std::uint16_t sm_missed = 0, too_small = 0, shift_short = 0;

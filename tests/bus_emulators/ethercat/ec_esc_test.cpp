@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "bus_emulators/ethercat/ec_registers.hpp"
+#include "tests/bus_emulators/ethercat/ec_register_bytes.hpp"
 
 namespace omnitwin::ethercat {
 namespace {
@@ -73,28 +74,8 @@ class App : public EscApplication {
   void on_sync1(SimTime t) override { sync1_at.push_back(t); }
 };
 
-std::vector<std::uint8_t> sm_bytes(std::uint16_t start, std::uint16_t len, std::uint8_t control, bool enable) {
-  std::vector<std::uint8_t> v(8, 0);
-  put_u16(v.data(), start);
-  put_u16(v.data() + 2, len);
-  v[4] = control;
-  v[6] = enable ? 1 : 0;
-  return v;
-}
-
-std::vector<std::uint8_t> fmmu_bytes(std::uint32_t log, std::uint16_t len, std::uint8_t sbit, std::uint8_t ebit,
-                                     std::uint16_t phys, std::uint8_t pbit, std::uint8_t type) {
-  std::vector<std::uint8_t> v(16, 0);
-  put_u32(v.data(), log);
-  put_u16(v.data() + 4, len);
-  v[6] = sbit;
-  v[7] = ebit;
-  put_u16(v.data() + 8, phys);
-  v[10] = pbit;
-  v[11] = type;
-  v[12] = 1;
-  return v;
-}
+using ec_test::fmmu_bytes;
+using ec_test::sm_bytes;
 
 void go(Esc& e, AlState s, SimTime t = 0) { apwr(e, reg::kAlControl, le16(static_cast<std::uint16_t>(s)), t); }
 

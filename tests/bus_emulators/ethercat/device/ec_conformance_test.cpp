@@ -21,6 +21,7 @@
 
 #include "bus_emulators/ethercat/ec_chain.hpp"
 #include "bus_emulators/ethercat/ec_frame.hpp"
+#include "tests/bus_emulators/ethercat/ec_register_bytes.hpp"
 
 namespace omnitwin::ethercat {
 namespace {
@@ -80,22 +81,10 @@ class Segment {
   }
 
   static Bytes sm(std::uint16_t start, std::uint16_t len, std::uint8_t control, bool enable) {
-    Bytes b(8, 0);
-    put_u16(b.data(), start);
-    put_u16(b.data() + 2, len);
-    b[4] = control;
-    b[6] = enable ? 1 : 0;
-    return b;
+    return ec_test::sm_bytes(start, len, control, enable);
   }
   static Bytes fmmu(std::uint32_t logical, std::uint16_t len, std::uint16_t phys, std::uint8_t type) {
-    Bytes b(16, 0);
-    put_u32(b.data(), logical);
-    put_u16(b.data() + 4, len);
-    b[7] = 7;
-    put_u16(b.data() + 8, phys);
-    b[11] = type;
-    b[12] = 1;
-    return b;
+    return ec_test::fmmu_bytes(logical, len, phys, type);
   }
   void mailbox_sms(int i) {
     fpwr(i, 0x0800, sm(0x1000, 128, 0x26, true));
@@ -363,11 +352,8 @@ TEST(EcConformance, BitGranularFmmuMovesOnlyItsBit) {
   Segment seg(1);
   ASSERT_TRUE(seg.to_safeop(0));
   seg.fpwr(0, 0x1400, {0xFF});
-  Bytes f = Segment::fmmu(0x00020000, 1, 0x1400, 3);  // read and write
-  f[6] = 4;   // logical start bit
-  f[7] = 4;   // logical end bit
-  f[10] = 4;  // physical start bit
-  seg.fpwr(0, 0x0620, f);
+  // Logical bits 4 … 4 onto physical bit 4, read and write.
+  seg.fpwr(0, 0x0620, ec_test::fmmu_bytes(0x00020000, 1, 4, 4, 0x1400, 4, 3));
   EXPECT_EQ(seg.logical(Cmd::lwr, 0x00020000, {0x00}).wkc, 1);
   EXPECT_EQ(seg.fprd(0, 0x1400, 1).data[0], 0xEF);
   seg.fpwr(0, 0x1400, {0x10});

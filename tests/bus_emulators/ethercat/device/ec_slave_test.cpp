@@ -17,6 +17,7 @@
 
 #include "bus_emulators/ethercat/device/ec_sii.hpp"
 #include "bus_emulators/ethercat/ec_frame.hpp"
+#include "tests/bus_emulators/ethercat/ec_register_bytes.hpp"
 
 namespace omnitwin::ethercat {
 namespace {
@@ -70,24 +71,10 @@ class Master {
     return {Bytes(v.datagrams[0].data(), v.datagrams[0].data() + v.datagrams[0].length()), v.datagrams[0].wkc()};
   }
   static Bytes sm(std::uint16_t start, std::uint16_t len, std::uint8_t control, bool enable) {
-    Bytes b(8, 0);
-    put_u16(b.data(), start);
-    put_u16(b.data() + 2, len);
-    b[4] = control;
-    b[6] = enable ? 1 : 0;
-    return b;
+    return ec_test::sm_bytes(start, len, control, enable);
   }
   static Bytes fmmu(std::uint32_t logical, std::uint16_t len, std::uint16_t phys, std::uint8_t type) {
-    Bytes b(16, 0);
-    put_u32(b.data(), logical);
-    put_u16(b.data() + 4, len);
-    b[6] = 0;
-    b[7] = 7;
-    put_u16(b.data() + 8, phys);
-    b[10] = 0;
-    b[11] = type;
-    b[12] = 1;
-    return b;
+    return ec_test::fmmu_bytes(logical, len, phys, type);
   }
   // Writes AL control and returns AL status (state | 0x10 error).
   std::uint16_t request(std::uint16_t state) {
