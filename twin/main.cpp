@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
@@ -34,6 +35,11 @@
 #include "twin/scenario.hpp"
 #include "twin/replay.hpp"
 #include "twin/sweep.hpp"
+#include "twin/web/web_observer.hpp"
+#include "twin/web/web_samples.hpp"
+#include "twin/web/web_scene.hpp"
+#include "twin/web/web_server.hpp"
+#include "physics/platform_sim.hpp"
 
 namespace fs = std::filesystem;
 using namespace omnitwin;
@@ -96,6 +102,8 @@ struct RunArgs {
   bool loopback = false;         // --loopback: nothing leaves this machine (confine_to_loopback)
   std::string master_cmd;        // --master-cmd "PROGRAM ARGS…"
   double duration = 0;           // twin --duration S (0: until Ctrl-C, unless --set duration=)
+  std::string web;               // --web [ADDR:]PORT: the live view in a browser
+  bool web_wait = false;         // --web-wait: the run starts once a page has opened the view
 };
 
 // The run's outputs: the scenario's outputs section, overridden by the command line.
@@ -236,6 +244,25 @@ void print_summary(const RunResult& r) {
     if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
 }
 
+// --web: the view's server, started before the run (its URL on stderr). Null and a message
+// on stderr when it cannot start; the caller ends with exit 2.
+std::unique_ptr<WebServer> start_web_view(const RunArgs& a, const Scenario& s, const std::string& out_dir) {
+  try {
+    const WebSettings ws = parse_web_address(a.web);
+    const physics::PlatformSim model(s.platform);
+    auto web = std::make_unique<WebServer>(ws, web_scene(model.model()));
+    web->set_info(info_json(RunInfo{s.name, to_string(s.bus.kind), to_string(s.clock), out_dir, s.controller.period,
+                                    s.duration},
+                            false));
+    web->start();
+    std::cerr << "web view: " << web->url() << "\n" << std::flush;
+    return web;
+  } catch (const std::exception& e) {
+    std::cerr << "omnitwin: " << e.what() << "\n";
+    return nullptr;
+  }
+}
+
 int cmd_run(const RunArgs& a) {
   try {
     Scenario s = load_scenario(a.scenario, collect_overrides(a));
@@ -301,10 +328,37 @@ int cmd_run(const RunArgs& a) {
         std::cerr << "omnitwin: " << a.scenario << ": outputs.dds: " << e.what() << "\n";
         return 2;
       }
-      o.observer = dds.get();
     }
+    std::unique_ptr<WebServer> web;
+    std::unique_ptr<WebRunObserver> web_observer;
+    if (!a.web.empty()) {
+      if (!(web = start_web_view(a, s, o.out_dir))) return 2;
+      web_observer = std::make_unique<WebRunObserver>(*web);
+      if (a.web_wait) {
+        std::cerr << "  the run starts when a page opens " << web->url() << " (--web-wait)\n" << std::flush;
+        if (!web->wait_for_client(&g_interrupt)) {
+          std::cerr << "omnitwin: interrupted before a page opened the view; nothing was run\n";
+          return 3;
+        }
+      }
+    } else if (a.web_wait) {
+      std::cerr << "omnitwin: --web-wait needs --web [ADDR:]PORT\n";
+      return 2;
+    }
+    ObserverFan observers;
+    observers.add(dds.get());
+    observers.add(web_observer.get());
+    if (!observers.empty()) o.observer = &observers;
     const RunResult r = run_scenario(s, o);
     print_summary(r);
+    if (web) {
+      // Let open pages receive the end of the run before the records are turned into outputs.
+      web->wait_streams_drained(3.0);
+      const WebRunObserver::Stats st = web_observer->stats();
+      const WebServer::Stats ws = web->stats();
+      std::cout << fmt::format("  web view: {} samples published, {} lost (ring full), {} pages opened\n",
+                               st.published, st.ring_full, ws.streams_opened);
+    }
     if (dds) {
       const DdsPublisher::Stats st = dds->stats();
       std::cout << fmt::format("  DDS: {} states published, {} dropped, {} events\n", st.published, st.dropped,
@@ -329,6 +383,30 @@ int cmd_run(const RunArgs& a) {
   } catch (const std::exception& e) {
     std::cerr << "omnitwin: run failed: " << e.what() << "\n";
     return 3;
+  }
+}
+
+// `omnitwin view RUN_DIR`: the browser view of a recorded run, served until Ctrl-C or
+// SIGTERM (the normal end: exit 0).
+int cmd_view(const std::string& run_dir, const std::string& address) {
+  if (!fs::is_directory(run_dir) || !fs::exists(fs::path(run_dir) / "trajectory.csv")) {
+    std::cerr << "omnitwin view: " << run_dir << " is not a run directory (no trajectory.csv)\n";
+    return 2;
+  }
+  try {
+    const WebSettings ws = parse_web_address(address);
+    WebServer web(ws, web_scene_from_file((fs::path(run_dir) / "platform.xml").string()));
+    web.serve_recorded(recorded_run_json(run_dir, 25.0), fs::absolute(run_dir).string());
+    web.start();
+    std::cerr << "web view: " << web.url() << "\n  the recorded run " << run_dir << "; Ctrl-C ends\n" << std::flush;
+    while (!g_interrupt.load()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    return 0;
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "omnitwin view: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "omnitwin view: " << e.what() << "\n";
+    return 2;
   }
 }
 
@@ -395,7 +473,11 @@ void add_output_flags(CLI::App* cmd, RunArgs& a) {
   cmd->add_flag("--dds", a.dds, "publish the run on DDS (outputs.dds sets domain, interface, rate)");
   cmd->add_flag("--loopback", a.loopback,
                 "keep everything on this machine: the bus's UDP on lo, DDS on lo (docs/reliability.md)");
+  cmd->add_option("--web", a.web, "serve the live view on [ADDR:]PORT (loopback unless ADDR; 0: any free port)")
+      ->type_name("[ADDR:]PORT");
+  cmd->add_flag("--web-wait", a.web_wait, "with --web: start the run once a page has opened the view");
 }
+
 
 }  // namespace
 
@@ -489,6 +571,13 @@ int main(int argc, char** argv) {
   render->add_flag("--report", render_report, "also (re)write report.html");
 
   EchoOptions eo;
+  std::string view_dir, view_web = "127.0.0.1:8765";
+  CLI::App* view = app.add_subcommand("view", "serve a recorded run in the browser: 3D, plots, video on one timeline");
+  view->add_option("run_dir", view_dir, "run directory (written by omnitwin run or twin)")->required();
+  view->add_option("--web", view_web, "serve on [ADDR:]PORT (loopback unless ADDR; 0: any free port)")
+      ->type_name("[ADDR:]PORT")
+      ->capture_default_str();
+
   CLI::App* echo = app.add_subcommand("echo", "print what a run publishes on DDS (docs/protocols/dds.md)");
   echo->add_option("--topic", eo.topic, "all, or state|odom|joint_states|cmd_vel|drives|bus|events|clock or a topic name")
       ->capture_default_str();
@@ -571,6 +660,7 @@ int main(int argc, char** argv) {
       return cmd_render(render_dir, render_out, rv, render_report);
     }
     if (*echo) return cmd_echo(eo);
+    if (*view) return cmd_view(view_dir, view_web);
     if (*model) return cmd_model(model_scenario, model_variant, model_out);
     if (*experiment) {
       ExperimentOptions eo(exp_out, exp_quick);

@@ -76,14 +76,6 @@ std::vector<std::string> bus_header() {
   return h;
 }
 
-// The event log's kinds as the observers' event kinds.
-RunEventKind event_kind(std::string_view kind) {
-  if (kind == "start") return RunEventKind::start;
-  if (kind == "fault") return RunEventKind::fault;
-  if (kind == "end" || kind == "interrupt" || kind == "error") return RunEventKind::end;
-  return RunEventKind::info;
-}
-
 std::string fault_target(const FaultSpec& f) {
   if (f.kind == FaultSpec::Kind::wheel_slip) return fmt::format("wheel {}", f.wheel + 1);
   if (f.kind == FaultSpec::Kind::link_break) return f.wheel == 0 ? "master" : fmt::format("after slave {}", f.wheel);
@@ -633,7 +625,7 @@ void PlatformRun::record_bus_and_state(SimTime t) {
 
 bool PlatformRun::log_event(SimTime t, std::string_view kind, std::string_view text) {
   const bool ok = events_->log(ns_to_seconds(t), kind, text);
-  if (o_.observer) o_.observer->on_event(RunEvent{t, event_kind(kind), std::string(kind), std::string(text)});
+  if (o_.observer) o_.observer->on_event(RunEvent{t, run_event_kind(kind), std::string(kind), std::string(text)});
   return ok;
 }
 

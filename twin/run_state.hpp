@@ -10,6 +10,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 namespace omnitwin::twin {
 
@@ -87,6 +88,14 @@ inline const char* to_string(DriveStateCode c) {
     case DriveStateCode::fault: return "fault";
   }
   return "?";
+}
+
+// The observers' event kind of an events.log line's kind column ("start", "master", "bus"…).
+inline RunEventKind run_event_kind(std::string_view log_kind) {
+  if (log_kind == "start") return RunEventKind::start;
+  if (log_kind == "fault") return RunEventKind::fault;
+  if (log_kind == "end" || log_kind == "interrupt" || log_kind == "error") return RunEventKind::end;
+  return RunEventKind::info;
 }
 
 inline const char* to_string(RunEventKind k) {

@@ -1,0 +1,104 @@
+// twin/web — the HTTP server of the browser view (cpp-httplib, Debian's libcpp-httplib-dev):
+// the page and its libraries (media/web, three.js and uPlot from npm), the platform's scene,
+// and the run's data. A live run streams as Server-Sent Events on /api/stream: every message
+// is kept in a history that each new page gets first, so a page opened mid-run (or after a
+// reconnect) draws the run from its start. A recorded run (`omnitwin view`) is one JSON
+// document on /api/run, with the run directory (its video) under /run/.
+//
+// The server runs on its own threads (httplib's pool); nothing here is called from a run's
+// cyclic path: the live observer (web_observer) decimates and batches on its own thread.
+// URLs and messages: docs/web-view.md.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace httplib {
+class Server;
+}
+
+namespace omnitwin::twin {
+
+struct WebSettings {
+  std::string host = "127.0.0.1";  // loopback unless the user names another address
+  int port = 0;                    // 0: the system picks a free port (printed in url())
+  std::string assets_dir;          // media/web: index.html, view.js, node_modules/
+};
+
+// "[ADDR:]PORT" (e.g. "8080", "0.0.0.0:8080", "127.0.0.1:0"), with the assets directory filled
+// from default_web_assets_dir(). Throws std::invalid_argument saying what is wrong.
+WebSettings parse_web_address(const std::string& spec);
+
+// $OMNITWIN_WEB_DIR, else the source tree's media/web.
+std::string default_web_assets_dir();
+
+class WebServer {
+ public:
+  // Checks the assets (index.html and the npm libraries: run `scripts/bootstrap build`) and
+  // binds (url() is then known); start() serves. Throws std::runtime_error saying which asset
+  // is missing or why the address cannot be bound.
+  WebServer(const WebSettings& settings, nlohmann::json scene);
+  void start();
+  ~WebServer();
+  WebServer(const WebServer&) = delete;
+  WebServer& operator=(const WebServer&) = delete;
+
+  // "http://HOST:PORT/".
+  std::string url() const;
+
+  // Live mode: what /api/info answers (a live run's info; "started" false until it runs).
+  void set_info(nlohmann::json info);
+  // Appends one SSE message (event name, JSON data) to the history and wakes the streams.
+  // Thread-safe; allocates (never call it from a run's cyclic path).
+  void publish(const std::string& event, const nlohmann::json& data);
+  // No more messages: each stream ends once it has sent the whole history.
+  void close_streams();
+  // Waits until every open stream has sent the whole history, or timeout_s passed.
+  void wait_streams_drained(double timeout_s);
+  // Blocks until a page has opened /api/stream (true), or *interrupt is set (false).
+  bool wait_for_client(const std::atomic<bool>* interrupt);
+
+  // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video).
+  // Before start().
+  void serve_recorded(nlohmann::json run, const std::string& run_dir);
+
+  struct Stats {
+    std::uint64_t messages = 0;      // published
+    std::uint64_t bytes = 0;         // published (SSE text)
+    std::uint64_t streams_opened = 0;
+    std::uint64_t history_dropped = 0;  // oldest messages dropped over the history cap
+  };
+  Stats stats() const;
+
+ private:
+  bool stream_chunk(std::uint64_t& cursor, std::string& out);
+  void add_routes();
+
+  WebSettings settings_;
+  std::unique_ptr<httplib::Server> http_;
+  std::thread listener_;
+  int port_ = 0;
+
+  mutable std::mutex mu_;
+  std::condition_variable changed_;
+  nlohmann::json info_ = nlohmann::json::object();
+  std::string scene_;                // serialized once
+  std::string recorded_;             // /api/run, serialized once
+  std::vector<std::string> history_;  // SSE messages; history_[0] is message number base_
+  std::uint64_t base_ = 0;
+  std::size_t history_bytes_ = 0;
+  bool closed_ = false;
+  bool stopping_ = false;
+  int open_streams_ = 0;
+  Stats stats_;
+};
+
+}  // namespace omnitwin::twin
