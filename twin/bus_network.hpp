@@ -133,6 +133,13 @@ class BusNetwork {
   // Time the wire or segment has been busy since the start [ns] (load = Δbusy / Δt).
   virtual std::int64_t wire_busy_ns() const = 0;
   virtual DriveStateCode drive_state(int axis0) const = 0;
+  // drive_state in the protocol's own words (DriveSample::comm_state, device_state): static
+  // strings, "" where a layer does not exist. Real-time safe.
+  struct DriveDetail {
+    const char* comm = "";
+    const char* device = "";
+  };
+  virtual DriveDetail drive_detail(int /*axis0*/) const { return {}; }
   virtual WheelRecord wheel_record(int axis0) const = 0;
 };
 

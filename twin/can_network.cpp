@@ -282,6 +282,13 @@ DriveStateCode OmniCanNetwork::drive_state(int axis0) const {
   return DriveStateCode::waiting;
 }
 
+BusNetwork::DriveDetail OmniCanNetwork::drive_detail(int axis0) const {
+  const auto i = static_cast<std::size_t>(axis0);
+  if (!powered_[i]) return {"off", ""};
+  if (wire_.bus().error_state(bus_node(axis0)) == can::ErrorState::bus_off) return {"bus-off", ""};
+  return {omni::to_string(slaves_[i]->state()), ""};
+}
+
 WheelRecord OmniCanNetwork::wheel_record(int axis0) const {
   const omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(axis0)];
   const physics::WheelDriveSample& w = sl.drive_chain().last();

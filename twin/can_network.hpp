@@ -105,6 +105,7 @@ class OmniCanNetwork final : public BusNetwork {
   BusSample bus_sample() const override;
   std::int64_t wire_busy_ns() const override { return wire_.bus().stats().busy_ns; }
   DriveStateCode drive_state(int axis0) const override;
+  DriveDetail drive_detail(int axis0) const override;
   // The slave's held command, counter, PI and DA (output = DA code). Real-time safe.
   WheelRecord wheel_record(int axis0) const override;
 

@@ -76,6 +76,12 @@ bool CanopenNetwork::drive_running(int axis0) const {
   return d.node().state() == canopen::NmtState::operational && d.drive().state() == drive::State::operation_enabled;
 }
 
+BusNetwork::DriveDetail CanopenNetwork::drive_detail(int axis0) const {
+  if (!powered(axis0)) return {"off", ""};
+  const canopen::DriveNode& d = *drives_[static_cast<std::size_t>(axis0)];
+  return {canopen::to_string(d.node().state()), drive::to_string(d.drive().state())};
+}
+
 std::string CanopenNetwork::drive_protocol_state(int axis0) const {
   return fmt::format("NMT {}", powered(axis0) ? canopen::to_string(drives_[static_cast<std::size_t>(axis0)]->node().state()) : "off");
 }

@@ -48,6 +48,7 @@ class CanopenNetwork final : public CanDriveNetwork {
     drives_[static_cast<std::size_t>(axis0)]->on_bus_off_recovered(t);  // EMCY 0x8140, error behaviour
   }
   bool drive_running(int axis0) const override;
+  DriveDetail drive_detail(int axis0) const override;
   std::string drive_protocol_state(int axis0) const override;
   void on_master_frame(const can::Frame& f, SimTime end) override;
   nlohmann::json drive_json(int axis0) const override;

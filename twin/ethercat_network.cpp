@@ -395,6 +395,12 @@ DriveStateCode EthercatNetwork::drive_state(int axis0) const {
   return from_al(slaves_[k]->esc().al_state(), slaves_[k]->axis(0).state(), powered_[k]);
 }
 
+BusNetwork::DriveDetail EthercatNetwork::drive_detail(int axis0) const {
+  const auto k = static_cast<std::size_t>(axis0);
+  if (!powered_[k]) return {"off", ""};
+  return {ethercat::to_string(slaves_[k]->esc().al_state()), drive::to_string(slaves_[k]->axis(0).state())};
+}
+
 WheelRecord EthercatNetwork::wheel_record(int axis0) const {
   const ethercat::DriveSlave& sl = *slaves_[static_cast<std::size_t>(axis0)];
   const drive::Objects& o = sl.axis(0).objects();

@@ -87,6 +87,7 @@ class EthercatNetwork final : public BusNetwork {
   BusSample bus_sample() const override;
   std::int64_t wire_busy_ns() const override { return busy_ns_; }
   DriveStateCode drive_state(int axis0) const override;
+  DriveDetail drive_detail(int axis0) const override;
   WheelRecord wheel_record(int axis0) const override;
 
   const ethercat::DriveSlave& slave(int axis0) const { return *slaves_[static_cast<std::size_t>(axis0)]; }

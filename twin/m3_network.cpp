@@ -289,6 +289,22 @@ DriveStateCode M3Network::drive_state(int axis0) const {
   return connected && servo.servo_on() ? DriveStateCode::running : DriveStateCode::waiting;
 }
 
+BusNetwork::DriveDetail M3Network::drive_detail(int axis0) const {
+  if (!powered_[static_cast<std::size_t>(axis0)]) return {"off", ""};
+  const m3::SlaveLink& l = segment_->link(axis0);
+  const m3::ServoProfile& servo = segment_->servo(axis0);
+  const char* comm = "phase 1";
+  switch (l.phase()) {
+    case m3::Phase::p1: comm = "phase 1"; break;
+    case m3::Phase::p2: comm = "phase 2"; break;
+    case m3::Phase::p3: comm = "phase 3"; break;
+    case m3::Phase::p5: comm = "phase 5"; break;
+  }
+  if (l.comm_alarm() != m3::CommAlarm::normal) comm = m3::to_string(l.comm_alarm());
+  const char* device = servo.device_alarm() ? "alarm" : servo.servo_on() ? "servo on" : "servo off";
+  return {comm, device};
+}
+
 WheelRecord M3Network::wheel_record(int axis0) const {
   const m3::ServoProfile& servo = segment_->servo(axis0);
   const drive::Objects& o = servo.drive().objects();

@@ -84,6 +84,7 @@ class M3Network final : public BusNetwork {
   BusSample bus_sample() const override;
   std::int64_t wire_busy_ns() const override { return segment_->busy_ns(); }
   DriveStateCode drive_state(int axis0) const override;
+  DriveDetail drive_detail(int axis0) const override;
   WheelRecord wheel_record(int axis0) const override;
 
   const m3::M3Segment& segment() const { return *segment_; }

@@ -600,6 +600,10 @@ void PlatformRun::record_bus_and_state(SimTime t) {
     DriveSample& d = st.drives[i];
     d.node = on_bus() ? net_->wheel_record(static_cast<int>(i)).node : 0;
     d.state = on_bus() ? net_->drive_state(static_cast<int>(i)) : DriveStateCode::running;
+    if (on_bus()) {
+      const BusNetwork::DriveDetail dd = net_->drive_detail(static_cast<int>(i));
+      d.comm_state = dd.comm, d.device_state = dd.device;
+    }
     d.command_rad_s = w[0], d.setpoint_rad_s = w[7];
     d.dac_code = static_cast<std::int32_t>(w[6]);
     d.encoder_count = static_cast<std::int64_t>(w[3]);

@@ -31,6 +31,11 @@ struct DriveSample {
   double setpoint_rad_s = 0;         // the velocity loop's output to the motor [rad/s]
   std::int32_t dac_code = 0;         // 12-bit DA code
   std::int64_t encoder_count = 0;    // HCTL-2032 count
+  // The same state in the protocol's own words, for live views (static strings, "" where a
+  // layer does not exist): the communication layer (EtherCAT AL state, CANopen NMT state,
+  // M-III phase, Omni slave state) and the drive layer (CiA 402 state, servo on/off).
+  const char* comm_state = "";
+  const char* device_state = "";
 };
 
 struct BusSample {

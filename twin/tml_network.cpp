@@ -49,6 +49,12 @@ bool TmlNetwork::drive_running(int axis0) const {
   return drives_[static_cast<std::size_t>(axis0)]->drive().core().state() == drive::State::operation_enabled;
 }
 
+BusNetwork::DriveDetail TmlNetwork::drive_detail(int axis0) const {
+  if (!powered(axis0)) return {"off", ""};
+  const tml::TmlDrive& d = drives_[static_cast<std::size_t>(axis0)]->drive();
+  return {(d.srl() & tml::bits::srl_axis_on) ? "axis on" : "axis off", drive::to_string(d.core().state())};
+}
+
 std::string TmlNetwork::drive_protocol_state(int axis0) const {
   if (!powered(axis0)) return "off";
   const tml::TmlDrive& d = drives_[static_cast<std::size_t>(axis0)]->drive();

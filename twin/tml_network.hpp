@@ -28,6 +28,7 @@ class TmlNetwork final : public CanDriveNetwork {
   const drive::Cia402Drive& drive_core(int axis0) const override { return drives_[static_cast<std::size_t>(axis0)]->drive().core(); }
   void drive_power(int axis0, bool on, SimTime t) override;
   bool drive_running(int axis0) const override;
+  DriveDetail drive_detail(int axis0) const override;
   std::string drive_protocol_state(int axis0) const override;
   nlohmann::json drive_json(int axis0) const override;
 

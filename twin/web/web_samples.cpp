@@ -93,7 +93,11 @@ json sample_json(const StateSample& s) {
     wheels.push_back({{"angle", num(s.wheel_angle[i])}, {"speed", num(s.wheel_speed[i])},
                       {"cmd", num(s.wheel_cmd[i])}, {"torque", num(s.wheel_torque[i])}});
     const DriveSample& d = s.drives[i];
-    drives.push_back({{"node", d.node}, {"state", to_string(d.state)}, {"command", num(d.command_rad_s)},
+    drives.push_back({{"node", d.node},
+                      {"state", to_string(d.state)},
+                      {"comm", d.comm_state ? d.comm_state : ""},
+                      {"device", d.device_state ? d.device_state : ""},
+                      {"command", num(d.command_rad_s)},
                       {"setpoint", num(d.setpoint_rad_s)}});
   }
   return {{"t", static_cast<double>(s.t_ns) * 1e-9},

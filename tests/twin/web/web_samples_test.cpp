@@ -27,6 +27,8 @@ TEST(WebSamples, StateSampleAsJsonWithUnknownsAsNull) {
   s.wheel_torque[2] = 0.75;
   s.drives[3].node = 4;
   s.drives[3].state = DriveStateCode::fault;
+  s.drives[3].comm_state = "SAFE-OP";
+  s.drives[3].device_state = "fault";
   s.bus.has_frames = true;
   s.bus.frames_tx = 1000;
   s.bus.load = 0.07;
@@ -40,6 +42,9 @@ TEST(WebSamples, StateSampleAsJsonWithUnknownsAsNull) {
   EXPECT_DOUBLE_EQ(j["wheels"][2]["torque"].get<double>(), 0.75);
   EXPECT_EQ(j["drives"][3]["state"], "fault");
   EXPECT_EQ(j["drives"][3]["node"], 4);
+  EXPECT_EQ(j["drives"][3]["comm"], "SAFE-OP");  // the protocol's own words
+  EXPECT_EQ(j["drives"][3]["device"], "fault");
+  EXPECT_EQ(j["drives"][0]["comm"], "");
   EXPECT_EQ(j["bus"]["tx"], 1000);
   EXPECT_DOUBLE_EQ(j["bus"]["load"].get<double>(), 0.07);
   EXPECT_EQ(j["faults"], 2);
