@@ -314,6 +314,21 @@ export class Scene3D {
     this.requestRender();
   }
 
+  // One frame now with everything drawn (the reference marker and the paths too, which show
+  // nothing yet): the driver compiles a shader when it is first drawn, which is slow in
+  // software WebGL and must not happen when the first data arrive.
+  renderNow() {
+    const markerShown = this.refMarker ? this.refMarker.visible : false;
+    if (this.refMarker) this.refMarker.visible = true;
+    const paths = Object.values(this.paths || {});
+    for (const p of paths) p.geometry.setDrawRange(0, 2);
+    this.renderer.render(this.world, this.camera);
+    for (const p of paths) p.geometry.setDrawRange(0, p.n);
+    if (this.refMarker) this.refMarker.visible = markerShown;
+    this.renderer.render(this.world, this.camera);
+    this.frames++;
+  }
+
   requestRender() {
     if (this._raf) return;
     this._raf = requestAnimationFrame(() => {

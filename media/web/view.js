@@ -626,14 +626,23 @@ async function main() {
   if (state.mode === 'recorded') {
     const run = await getJSON('/api/run');
     loadRecorded(run);
+    await scenePromise;
   } else {
     state.mode = 'live';
     setText($('#mode'), 'live');
     $('#timeline').disabled = true;
     $('#play').disabled = true;
+    // The 3D view is built and drawn once before the stream opens: with --web-wait the run
+    // starts when it opens, and the first frame's shader compilation would compete with it.
+    try {
+      await scenePromise;
+      scene.renderNow();
+      await new Promise((r) => requestAnimationFrame(() => r()));
+    } catch (err) {
+      console.warn('omnitwin view: live without the 3D view', err.message);
+    }
     startLive();
   }
-  await scenePromise;
 }
 
 main().catch((err) => {
