@@ -1,0 +1,105 @@
+// Tests the CLI's browser view (twin/main.cpp: --web, --web-wait, `omnitwin view`) through the
+// real program and real HTTP on loopback: bad addresses and flags refused with exit 2, the
+// twin for an external master streaming its run (info, samples with the drives' protocol
+// states, the end) to a page, and `omnitwin view` serving a recorded run until SIGTERM
+// (exit 0). The page itself is tested in a browser (tests/media/web).
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <csignal>
+#include <regex>
+
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::twin {
+namespace {
+
+using namespace omnitwin::twin::cli;  // Child, CliTest, fs, the path helpers
+
+class CliWeb : public CliTest {
+ protected:
+  // The port of the "web view: http://127.0.0.1:PORT/" line on the child's stderr (0: none
+  // within 20 s).
+  static int web_port(Child& c) {
+    const std::regex line(R"(web view: http://127\.0\.0\.1:(\d+)/)");
+    for (int i = 0; i < 1000 && c.running(); ++i) {
+      std::smatch m;
+      const std::string err = c.err();
+      if (std::regex_search(err, m, line)) return std::stoi(m[1]);
+      std::this_thread::sleep_for(20ms);
+    }
+    return 0;
+  }
+};
+
+TEST_F(CliWeb, RefusesBadAddressesAndAWaitWithoutAView) {
+  const std::string scenario = source_path("models/scenarios/thesis_line.yaml");
+  Finished f = run({"run", scenario, "--web", "localhost:http", "--no-progress"});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "want [ADDR:]PORT")) << f.err;
+  f = run({"run", scenario, "--web-wait", "--no-progress"});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "--web-wait needs --web")) << f.err;
+  f = run({"view", work().string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "not a run directory")) << f.err;
+  EXPECT_FALSE(fs::exists(work() / "out"));  // nothing was run
+}
+
+// The twin waits for an external master (none comes); a page that opens mid-run gets the run
+// from its start, the drives in the protocol's words, and the end with the verdict.
+TEST_F(CliWeb, TwinStreamsItsRunToAPage) {
+  const fs::path out = dir_ / "twin", scenario = dir_ / "bare.yaml";
+  std::ofstream(scenario) << "name: bare\nplatform: {variant: capsule}\n";
+  Child c({"twin", scenario.string(), "--bus", "canopen", "--set", "bus.transport=udp:239.74.163.2:47613", "--duration",
+           "1.5", "--out", out.string(), "--no-progress", "--no-video", "--no-report", "--web", "127.0.0.1:0"},
+          work(), io());
+  const int port = web_port(c);
+  ASSERT_GT(port, 0) << c.err();
+  httplib::Client http("127.0.0.1", port);
+  http.set_read_timeout(20, 0);
+  std::string stream;
+  auto r = http.Get("/api/stream", [&](const char* d, std::size_t n) {
+    stream.append(d, n);
+    return true;
+  });
+  ASSERT_TRUE(r) << httplib::to_string(r.error());
+  EXPECT_EQ(c.wait(30s), 1) << c.out() << c.err();  // no master connected
+  EXPECT_TRUE(contains(stream, "event: info\ndata: {")) << stream.substr(0, 300);
+  EXPECT_TRUE(contains(stream, R"("started":true)"));
+  EXPECT_TRUE(contains(stream, R"("bus":"canopen")"));
+  EXPECT_TRUE(contains(stream, "event: samples\ndata: [{"));
+  EXPECT_TRUE(contains(stream, R"("t":0.0,)")) << "the page got the run from its start";
+  EXPECT_TRUE(contains(stream, R"("comm":"pre_operational")")) << "CANopen drives wait in NMT pre-operational";
+  EXPECT_TRUE(contains(stream, "event: end\ndata: {"));
+  EXPECT_TRUE(contains(stream, R"("passed":false)"));
+  EXPECT_TRUE(contains(stream, "no master connected"));
+  EXPECT_TRUE(contains(c.out(), "web view: ")) << c.out();
+}
+
+TEST_F(CliWeb, ViewServesARecordedRunUntilSigterm) {
+  const fs::path out = dir_ / "rec", scenario = dir_ / "still.yaml";
+  std::ofstream(scenario) << "name: still\nplatform: {variant: capsule}\nduration: 2\n";
+  const Finished f = run({"run", scenario.string(), "--bus", "direct", "--out", out.string(), "--no-progress",
+                          "--no-video", "--no-report"});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  Child c({"view", out.string(), "--web", "127.0.0.1:0"}, work(), io());
+  const int port = web_port(c);
+  ASSERT_GT(port, 0) << c.err();
+  httplib::Client http("127.0.0.1", port);
+  auto r = http.Get("/api/run");
+  ASSERT_TRUE(r);
+  const nlohmann::json run = nlohmann::json::parse(r->body);
+  EXPECT_EQ(run["info"]["mode"], "recorded");
+  EXPECT_TRUE(run["info"]["video"].is_null());  // this run has none
+  EXPECT_GE(run["samples"].size(), 50u);        // 2 s at 25 samples per second
+  EXPECT_EQ(run["end"]["passed"], true);
+  r = http.Get("/api/scene");
+  ASSERT_TRUE(r);
+  EXPECT_GT(nlohmann::json::parse(r->body)["geoms"].size(), 10u);
+  c.signal(SIGTERM);
+  EXPECT_EQ(c.wait(10s), 0) << c.err();
+}
+
+}  // namespace
+}  // namespace omnitwin::twin
