@@ -45,6 +45,9 @@ struct BusSample {
   std::uint64_t dropouts = 0;
   std::uint64_t errors = 0;
   double load = 0;                   // bus busy fraction over the last control period [0, 1]
+  // EtherCAT: the working counter of the process data (logical datagrams) in the last cyclic
+  // frame the segment returned, as the master checks it; -1 on buses without one.
+  std::int32_t wkc = -1;
 };
 
 struct StateSample {

@@ -197,7 +197,7 @@ const driveRows = [1, 2, 3, 4].map((i) => {
   return { node: tr.querySelector('.node'), state: tr.querySelector('.state'), cmd: tr.querySelector('.cmd'), speed: tr.querySelector('.speed'), torque: tr.querySelector('.torque'), proto, words: proto && proto.querySelector('.words') };
 });
 const busEl = {};
-for (const k of ['tx', 'rx', 'errors', 'dropouts', 'load', 'faults']) busEl[k] = document.querySelector(`#bus .${k}`);
+for (const k of ['tx', 'rx', 'errors', 'dropouts', 'load', 'wkc', 'faults']) busEl[k] = document.querySelector(`#bus .${k}`);
 
 function showSample(s, t) {
   state.displayT = t;
@@ -241,6 +241,7 @@ function showSample(s, t) {
   setText(busEl.dropouts, fmtInt(b.dropouts));
   setText(busEl.load, fin(b.load) ? `${(b.load * 100).toFixed(2)} %` : '–');
   setText(busEl.faults, fmtInt(s.faults));
+  setText(busEl.wkc, fmtInt(b.wkc));
   busEl.errors.classList.toggle('nonzero', fin(b.errors) && b.errors > 0);
   busEl.dropouts.classList.toggle('nonzero', fin(b.dropouts) && b.dropouts > 0);
   busEl.faults.classList.toggle('nonzero', fin(s.faults) && s.faults > 0);

@@ -110,6 +110,12 @@ TEST_F(EthercatNetworkTest, MasterBringsTheFourDrivesToOpOverTheSegment) {
   EXPECT_EQ(b.frames_rx, sent_);
   EXPECT_EQ(b.dropouts, 0u);
   EXPECT_GE(b.frames_tx + 1, b.frames_rx);
+  EXPECT_EQ(b.wkc, 12);  // the process data's WKC as the master saw it (LRW: 3 per slave)
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_STREQ(net_->drive_detail(i).comm, "OP") << "slave " << i + 1;
+    // This master takes the segment to OP and enables no drive: CiA 402 stays where it starts.
+    EXPECT_STREQ(net_->drive_detail(i).device, "switch on disabled") << "slave " << i + 1;
+  }
   const nlohmann::json m = net_->bus_metrics(sched_.now());
   EXPECT_EQ(m.at("name"), "ethercat");
   EXPECT_EQ(m.at("transport"), "mem:ecnet-op");
@@ -129,6 +135,7 @@ TEST_F(EthercatNetworkTest, LinkBreakDropsTheWkcAndTheSlavesComeBack) {
   net_->apply_fault(f, true, sched_.now());
   run_until(1.3);
   EXPECT_GT(master_->stats().wkc_errors, 0u);
+  EXPECT_LT(net_->bus_sample().wkc, 12);  // the live view sees the WKC drop too
   // Slaves 3 and 4 lost their outputs: watchdog, SAFE-OP with 0x001B; 1 and 2 run on.
   EXPECT_EQ(esc(0).al_state(), ethercat::AlState::op);
   EXPECT_EQ(esc(1).al_state(), ethercat::AlState::op);
@@ -153,6 +160,7 @@ TEST_F(EthercatNetworkTest, PowerLossTakesTheSlaveOffAndItReturnsInItsPowerOnSta
   net_->apply_fault(f, true, sched_.now());
   run_until(1.2);
   EXPECT_EQ(net_->drive_state(1), DriveStateCode::off);
+  EXPECT_STREQ(net_->drive_detail(1).comm, "off");
   EXPECT_DOUBLE_EQ(speed_[1], 0.0);  // the amplifier lost its setpoint
   net_->apply_fault(f, false, sched_.now());
   EXPECT_EQ(esc(1).al_state(), ethercat::AlState::init);  // power-on state

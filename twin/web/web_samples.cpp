@@ -20,8 +20,9 @@ namespace fs = std::filesystem;
 json num(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 json bus_json(const BusSample& b) {
-  return {{"has_frames", b.has_frames}, {"tx", b.frames_tx}, {"rx", b.frames_rx},
-          {"dropouts", b.dropouts},     {"errors", b.errors}, {"load", num(b.load)}};
+  return {{"has_frames", b.has_frames}, {"tx", b.frames_tx},     {"rx", b.frames_rx},
+          {"dropouts", b.dropouts},     {"errors", b.errors},    {"load", num(b.load)},
+          {"wkc", b.wkc >= 0 ? json(b.wkc) : json(nullptr)}};
 }
 
 json read_json_file(const fs::path& p) {

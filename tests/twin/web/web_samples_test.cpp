@@ -32,6 +32,7 @@ TEST(WebSamples, StateSampleAsJsonWithUnknownsAsNull) {
   s.bus.has_frames = true;
   s.bus.frames_tx = 1000;
   s.bus.load = 0.07;
+  s.bus.wkc = 12;
   s.active_faults = 2;
   const json j = sample_json(s);
   EXPECT_DOUBLE_EQ(j["t"].get<double>(), 1.25);
@@ -47,6 +48,8 @@ TEST(WebSamples, StateSampleAsJsonWithUnknownsAsNull) {
   EXPECT_EQ(j["drives"][0]["comm"], "");
   EXPECT_EQ(j["bus"]["tx"], 1000);
   EXPECT_DOUBLE_EQ(j["bus"]["load"].get<double>(), 0.07);
+  EXPECT_EQ(j["bus"]["wkc"], 12);
+  EXPECT_TRUE(sample_json(StateSample{})["bus"]["wkc"].is_null());  // a bus without a WKC
   EXPECT_EQ(j["faults"], 2);
   EXPECT_EQ(j.dump().find("NaN"), std::string::npos);
 }
