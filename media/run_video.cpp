@@ -274,6 +274,12 @@ VideoResult render_frames(Recording& rec, SceneRenderer& renderer, VideoEncoder&
     encoder.add_frame(renderer.render(rec.at(k / o.fps)).data());
     if (o.progress) o.progress(k + 1, total);
   }
+  if (res.stopped_early && encoder.frames() == 0) {
+    // Stopped before the first frame: an MP4 of no frames is no video (players and ffmpeg
+    // reject it); the encoder, never closed, removes its .part file.
+    res.path.clear();
+    return res;
+  }
   encoder.close();  // trailer, then the rename: the file under out_file is whole or absent
   res.frames = encoder.frames();
   res.duration_s = encoder.duration_s();

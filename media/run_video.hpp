@@ -36,7 +36,7 @@ struct VideoOptions {
 };
 
 struct VideoResult {
-  std::string path;          // the MP4 written
+  std::string path;          // the MP4 written ("" when stopped before its first frame)
   int frames = 0;            // frames encoded
   double duration_s = 0;     // frames / fps [s]
   bool stopped_early = false;  // `stop` was set before the last frame

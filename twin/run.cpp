@@ -422,6 +422,15 @@ void PlatformRun::on_master_bus(SimTime t) {
   const simclock::WaitStatus st = net_->answers_inside_tick()
                                       ? clock_server_->grant(g, d, timeout, &PlatformRun::answer_sent, this)
                                       : clock_server_->grant(g, d, timeout);
+  if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
+    // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
+    // but always the run's end: in lockstep nothing else answers the ticks.
+    master_lost_ns_ = t;
+    master_lost_why_ = fmt::format("the master process ended ({}) before answering tick {}", master_->describe_exit(),
+                                   g.tick);
+    note(log_event(t, "master", "lost: " + master_lost_why_), *events_);
+    return fail("master lost: " + master_lost_why_);
+  }
   if (st != simclock::WaitStatus::ok)
     return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),
                             master_->running() ? "still running" : master_->describe_exit()));

@@ -200,8 +200,20 @@ class Runner {
     const controller::WheelCounts c = counts();
     for (std::size_t i = 0; i < 4; ++i) target_[i] = c[i];
     command({0, 0, 0, 0});
-    spdlog::error("{} platform loop stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero",
-                  stamp(t), k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
+    spdlog::error("{} {} stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero", stamp(t),
+                  loop_ ? "platform loop" : "servos", k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
+  }
+  // Without a platform loop (servos only, commissioning): running once every servo is on;
+  // then a lost axis (the line gone, a servo off) stops them all, as the loop would.
+  void supervise_axes(SimTime t) {
+    if (!started_) {
+      for (const auto& a : axes_)
+        if (a.step() != AxisStep::running) return;
+      started_ = true;
+      spdlog::info("{} all {} servos on", stamp(t), axes_.size());
+      return;
+    }
+    if (const int k = lost_axis(); k >= 0) halt(k, t);
   }
   // The path starts once every servo on the line is on (the extra axes too: the line is
   // commissioned as a whole).
@@ -225,7 +237,8 @@ class Runner {
     return true;
   }
   void platform(SimTime t) {
-    if (!loop_ || failed() || halted_) return;
+    if (failed() || halted_) return;
+    if (!loop_) return supervise_axes(t);
     if (!started_ && !begin(t)) return;
     if (const int k = lost_axis(); k >= 0) return halt(k, t);
     if (finished_) return command({0, 0, 0, 0});

@@ -146,6 +146,18 @@ TEST_F(RunVideo, StopRequestFinalisesAShorterPlayableFile) {
   EXPECT_NEAR(s.duration_s, 0.8, 0.01);
 }
 
+// Issue 16's signal torture found it: a stop before the first frame left an MP4 of no frames,
+// which ffmpeg rejects. Now there is no video at all, and no .part file.
+TEST_F(RunVideo, StopRequestBeforeTheFirstFrameLeavesNoVideo) {
+  std::atomic<bool> stop{true};
+  const VideoResult r = render_run(run_dir(), out(), small(), &stop);
+  EXPECT_TRUE(r.stopped_early);
+  EXPECT_EQ(r.frames, 0);
+  EXPECT_TRUE(r.path.empty());
+  EXPECT_FALSE(fs::exists(out()));
+  EXPECT_FALSE(fs::exists(dir_ / ".video.mp4.part"));
+}
+
 TEST_F(RunVideo, StopRequestsThatKeepComingWhileFinalisingCannotCutTheFile) {
   std::atomic<bool> stop{false};
   std::atomic<bool> done{false};
