@@ -211,7 +211,9 @@ TEST_P(CliMasterFault, EndsWithTheDocumentedCodeAndValidRecords) {
   for (const char* rec : {"trajectory.csv", "bus.csv"}) EXPECT_EQ(csv_problem(out / rec), "");
   for (const auto& e : fs::directory_iterator(out)) {
     EXPECT_FALSE(e.path().filename().string().ends_with(".part")) << e.path();
-    if (e.path().extension() == ".pcap") EXPECT_TRUE(command_ok("tshark -r '" + e.path().string() + "'")) << e.path();
+    if (e.path().extension() == ".pcap") {
+      EXPECT_TRUE(command_ok("tshark -r '" + e.path().string() + "'")) << e.path();
+    }
   }
   std::this_thread::sleep_for(100ms);
   EXPECT_TRUE(processes_naming(out).empty()) << "a process of the run survived it";
