@@ -1,17 +1,13 @@
 // tests/bench/web_attach.mjs — one browser on a run's live view, for bench_web.sh: opens the
-// page in headless Chromium (Debian's, driven by puppeteer-core), stays until the page says
-// the run ended, and prints what the page received and drew ("samples N frames N").
+// page in headless Chromium (Debian's, driven by puppeteer-core, as the browser tests do),
+// stays until the page says the run ended, and prints what the page received and drew
+// ("samples N frames N").
 //   node web_attach.mjs URL [TIMEOUT_S]
-const puppeteer = (await import(new URL('../../media/web/node_modules/puppeteer-core/lib/esm/puppeteer/puppeteer-core.js',
-                                        import.meta.url))).default;
+import { launchBrowser } from '../media/web/browser_support.mjs';
+
 const [url, timeoutS = '120'] = process.argv.slice(2);
-const browser = await puppeteer.launch({
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium', headless: true,
-  args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-});
+const { browser, page } = await launchBrowser();
 try {
-  const page = await browser.newPage();
-  await page.setViewport({width: 1280, height: 800});
   await page.goto(url, {waitUntil: 'load'});
   await page.waitForFunction(() => window.omnitwinView && window.omnitwinView.ended,
                              {timeout: Number(timeoutS) * 1000, polling: 200});

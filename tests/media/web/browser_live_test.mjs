@@ -15,136 +15,26 @@
 // (window.omnitwinView.history). With `-- --clock realtime` the run lasts its simulated
 // duration and every check sees it live.
 // Exit status 0: passed; 1: a check failed; 2: usage.
-import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 
-const PUPPETEER = new URL('../../../media/web/node_modules/puppeteer-core/lib/esm/puppeteer/puppeteer-core.js', import.meta.url);
-const NAME = 'browser_live_test';
+import { harness, sleep, withTimeout } from './browser_support.mjs';
 
-// ------------------------------------------------------------------ arguments
-function parseArgs(argv) {
-  const opts = {};
-  const extra = [];
-  for (let i = 0; i < argv.length; i++) {
-    const a = argv[i];
-    if (a === '--') { extra.push(...argv.slice(i + 1)); break; }
-    if (!a.startsWith('--') || i + 1 >= argv.length) usage(`bad argument: ${a}`);
-    opts[a.slice(2)] = argv[++i];
-  }
-  return { opts, extra };
-}
-function usage(msg) {
-  if (msg) console.error(`${NAME}: ${msg}`);
-  console.error('usage: browser_live_test.mjs --omnitwin PATH --scenario FILE --bus NAME --out DIR --artefacts DIR [--timeout S] [-- EXTRA]');
-  process.exit(2);
-}
-const { opts, extra } = parseArgs(process.argv.slice(2));
-for (const k of ['omnitwin', 'scenario', 'bus', 'out', 'artefacts']) if (!opts[k]) usage(`--${k} is required`);
-const timeoutS = Number(opts.timeout || 180);
-if (!(timeoutS > 0)) usage('--timeout must be a positive number of seconds');
-
-// ------------------------------------------------------------------ reporting and cleanup
-const t0 = Date.now();
-const log = (...a) => console.log(`[${NAME} ${((Date.now() - t0) / 1000).toFixed(2)}s]`, ...a);
-let failures = 0;
-let warnings = 0;
-function check(cond, what, detail = '') {
-  if (cond) { log(`ok    ${what}${detail ? ` (${detail})` : ''}`); return true; }
-  failures++;
-  log(`FAIL  ${what}${detail ? ` (${detail})` : ''}`);
-  return false;
-}
-function must(cond, what, detail) { if (!check(cond, what, detail)) throw new Error(`cannot go on: ${what}`); }
-function warn(what) { warnings++; log(`WARN  ${what}`); }
-
-let child = null;
-let childExit = null;
-let browser = null;
-const childOutput = [];
-function killChild(signal = 'SIGKILL') {
-  if (child && child.exitCode === null && child.signalCode === null) { try { child.kill(signal); } catch { /* gone */ } }
-}
-function killBrowser() {
-  const p = browser && browser.process();
-  if (p && p.exitCode === null) { try { p.kill('SIGKILL'); } catch { /* gone */ } }
-}
-process.on('exit', () => { killChild(); killBrowser(); });
-for (const sig of ['SIGINT', 'SIGTERM']) process.on(sig, () => { log(`${sig}: stopping`); process.exit(1); });
-const overall = setTimeout(() => {
-  log(`FAIL  the whole test took longer than --timeout ${timeoutS} s`);
-  dumpChild();
-  process.exit(1);
-}, timeoutS * 1000);
-
-function dumpChild() {
-  if (!childOutput.length) return;
-  console.log(`---- omnitwin output (last lines) ----\n${childOutput.slice(-60).join('\n')}\n----`);
-}
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-function withTimeout(promise, ms, what) {
-  let timer;
-  return Promise.race([promise, new Promise((_, rej) => { timer = setTimeout(() => rej(new Error(`timed out after ${ms / 1000} s: ${what}`)), ms); })])
-    .finally(() => clearTimeout(timer));
-}
-
-// ------------------------------------------------------------------ the child (omnitwin run --web)
-function startChild() {
-  const args = ['run', opts.scenario, '--bus', opts.bus, '--out', opts.out, '--no-video', '--no-progress',
-    '--web', '127.0.0.1:0', '--web-wait', ...extra];
-  log(`starting: ${opts.omnitwin} ${args.join(' ')}`);
-  child = spawn(opts.omnitwin, args, { stdio: ['ignore', 'pipe', 'pipe'] });
-  childExit = new Promise((resolve) => {
-    child.on('error', (err) => { childOutput.push(`(spawn error: ${err.message})`); resolve({ code: null, signal: null, error: err }); });
-    child.on('exit', (code, signal) => resolve({ code, signal }));
-  });
-  let url = null;
-  const urlPromise = new Promise((resolve, reject) => {
-    const onLine = (stream) => {
-      let buf = '';
-      return (chunk) => {
-        buf += chunk.toString();
-        let nl;
-        while ((nl = buf.indexOf('\n')) >= 0) {
-          const line = buf.slice(0, nl).replace(/\r$/, '');
-          buf = buf.slice(nl + 1);
-          childOutput.push(`${stream}: ${line}`);
-          if (childOutput.length > 400) childOutput.splice(0, 100);
-          const m = /web view: (https?:\/\/\S+)/.exec(line);
-          if (m && !url) { url = m[1]; resolve(url); }
-        }
-      };
-    };
-    child.stdout.on('data', onLine('stdout'));
-    child.stderr.on('data', onLine('stderr'));
-    childExit.then((e) => { if (!url) reject(new Error(`omnitwin ended before printing "web view: URL" (exit ${e.code}, signal ${e.signal}${e.error ? `, ${e.error.message}` : ''})`)); });
-  });
-  return withTimeout(urlPromise, 60000, 'the "web view: URL" line of omnitwin');
-}
+const h = harness('browser_live_test',
+  'browser_live_test.mjs --omnitwin PATH --scenario FILE --bus NAME --out DIR --artefacts DIR [--timeout S] [-- EXTRA]',
+  ['omnitwin', 'scenario', 'bus', 'out', 'artefacts'], 180);
+const { opts, extra, timeoutS, log, check, must, warn } = h;
 
 // ------------------------------------------------------------------ the test
 async function main() {
-  const { default: puppeteer } = await import(PUPPETEER.href);
   fs.mkdirSync(opts.artefacts, { recursive: true });
   const shot = path.join(opts.artefacts, `live-${opts.bus}.png`);
 
-  const url = await startChild();
+  const url = await h.startOmnitwin(['run', opts.scenario, '--bus', opts.bus, '--out', opts.out, '--no-video', '--no-progress',
+    '--web', '127.0.0.1:0', '--web-wait', ...extra]);
   log(`web view at ${url}`);
 
-  browser = await puppeteer.launch({
-    executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-    headless: true,
-    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-  });
-  const page = await browser.newPage();
-  await page.setViewport({ width: 1280, height: 800 });
-  const pageErrors = [];
-  page.on('pageerror', (err) => { pageErrors.push(`pageerror: ${err.message}`); log(`page error: ${err.message}`); });
-  page.on('console', (msg) => {
-    const where = msg.location() && msg.location().url ? ` [${msg.location().url}]` : '';
-    if (msg.type() === 'error') { pageErrors.push(`console error: ${msg.text()}${where}`); log(`console error: ${msg.text()}${where}`); }
-    else if (msg.type() === 'warn' || msg.type() === 'warning') log(`console warning: ${msg.text()}`);
-  });
+  const { page, errors: pageErrors } = await h.launchBrowser();
   const ms = timeoutS * 1000;
   const text = (sel) => page.$eval(sel, (el) => el.textContent.trim());
   const view = (fn, ...args) => page.evaluate(fn, ...args);
@@ -263,7 +153,7 @@ async function main() {
   check(Math.abs(mid.x - mid.sx) < 0.02, 'seek after the end: #pose data-x matches the history', `${mid.x} vs ${mid.sx}`);
 
   // the page must not reconnect: no new stream, no errors while omnitwin exits
-  const exit = await withTimeout(childExit, 60000, 'omnitwin to exit after the run');
+  const exit = await withTimeout(h.childExit, 60000, 'omnitwin to exit after the run');
   log(`omnitwin exited: code ${exit.code}, signal ${exit.signal}`);
   await sleep(1500);
   check(exit.code === 0, 'omnitwin exits 0 (expectations passed)', `code ${exit.code}`);
@@ -271,23 +161,4 @@ async function main() {
   check(pageErrors.length === 0, 'no page errors and no console errors', pageErrors.slice(0, 5).join(' | '));
 }
 
-let code = 0;
-try {
-  await main();
-} catch (err) {
-  failures++;
-  log(`FAIL  ${err && err.stack ? err.stack : err}`);
-} finally {
-  clearTimeout(overall);
-  if (browser) await browser.close().catch(() => {});
-  killBrowser();
-  if (child && child.exitCode === null && child.signalCode === null) {
-    killChild('SIGTERM');
-    await Promise.race([childExit, sleep(3000)]);
-    killChild('SIGKILL');
-  }
-  if (failures) dumpChild();
-  code = failures ? 1 : 0;
-  log(failures ? `FAILED (${failures} failed, ${warnings} warnings)` : `PASSED (${warnings} warnings)`);
-}
-process.exit(code);
+await h.run(main);

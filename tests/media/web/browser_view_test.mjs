@@ -7,128 +7,22 @@
 //   node browser_view_test.mjs --omnitwin PATH --run-dir DIR --artefacts DIR [--timeout S]
 //
 // Exit status 0: passed; 1: a check failed; 2: usage.
-import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 
-const PUPPETEER = new URL('../../../media/web/node_modules/puppeteer-core/lib/esm/puppeteer/puppeteer-core.js', import.meta.url);
-const NAME = 'browser_view_test';
+import { harness, sleep } from './browser_support.mjs';
 
-// ------------------------------------------------------------------ arguments
-function usage(msg) {
-  if (msg) console.error(`${NAME}: ${msg}`);
-  console.error('usage: browser_view_test.mjs --omnitwin PATH --run-dir DIR --artefacts DIR [--timeout S]');
-  process.exit(2);
-}
-const opts = {};
-{
-  const argv = process.argv.slice(2);
-  for (let i = 0; i < argv.length; i++) {
-    const a = argv[i];
-    if (a === '--') break;
-    if (!a.startsWith('--') || i + 1 >= argv.length) usage(`bad argument: ${a}`);
-    opts[a.slice(2)] = argv[++i];
-  }
-}
-for (const k of ['omnitwin', 'run-dir', 'artefacts']) if (!opts[k]) usage(`--${k} is required`);
-const timeoutS = Number(opts.timeout || 120);
-if (!(timeoutS > 0)) usage('--timeout must be a positive number of seconds');
-
-// ------------------------------------------------------------------ reporting and cleanup
-const t0 = Date.now();
-const log = (...a) => console.log(`[${NAME} ${((Date.now() - t0) / 1000).toFixed(2)}s]`, ...a);
-let failures = 0;
-function check(cond, what, detail = '') {
-  log(`${cond ? 'ok  ' : 'FAIL'}  ${what}${detail ? ` (${detail})` : ''}`);
-  if (!cond) failures++;
-  return !!cond;
-}
-function must(cond, what, detail) { if (!check(cond, what, detail)) throw new Error(`cannot go on: ${what}`); }
-
-let child = null;
-let childExit = null;
-let browser = null;
-const childOutput = [];
-function killChild(signal = 'SIGKILL') {
-  if (child && child.exitCode === null && child.signalCode === null) { try { child.kill(signal); } catch { /* gone */ } }
-}
-function killBrowser() {
-  const p = browser && browser.process();
-  if (p && p.exitCode === null) { try { p.kill('SIGKILL'); } catch { /* gone */ } }
-}
-process.on('exit', () => { killChild(); killBrowser(); });
-for (const sig of ['SIGINT', 'SIGTERM']) process.on(sig, () => { log(`${sig}: stopping`); process.exit(1); });
-const overall = setTimeout(() => {
-  log(`FAIL  the whole test took longer than --timeout ${timeoutS} s`);
-  dumpChild();
-  process.exit(1);
-}, timeoutS * 1000);
-
-function dumpChild() {
-  if (!childOutput.length) return;
-  console.log(`---- omnitwin output (last lines) ----\n${childOutput.slice(-60).join('\n')}\n----`);
-}
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-function withTimeout(promise, ms, what) {
-  let timer;
-  return Promise.race([promise, new Promise((_, rej) => { timer = setTimeout(() => rej(new Error(`timed out after ${ms / 1000} s: ${what}`)), ms); })])
-    .finally(() => clearTimeout(timer));
-}
-
-// ------------------------------------------------------------------ the child (omnitwin view --web)
-function startChild() {
-  const args = ['view', opts['run-dir'], '--web', '127.0.0.1:0'];
-  log(`starting: ${opts.omnitwin} ${args.join(' ')}`);
-  child = spawn(opts.omnitwin, args, { stdio: ['ignore', 'pipe', 'pipe'] });
-  childExit = new Promise((resolve) => {
-    child.on('error', (err) => { childOutput.push(`(spawn error: ${err.message})`); resolve({ code: null, signal: null, error: err }); });
-    child.on('exit', (code, signal) => resolve({ code, signal }));
-  });
-  let url = null;
-  const urlPromise = new Promise((resolve, reject) => {
-    const onLine = (stream) => {
-      let buf = '';
-      return (chunk) => {
-        buf += chunk.toString();
-        let nl;
-        while ((nl = buf.indexOf('\n')) >= 0) {
-          const line = buf.slice(0, nl).replace(/\r$/, '');
-          buf = buf.slice(nl + 1);
-          childOutput.push(`${stream}: ${line}`);
-          if (childOutput.length > 400) childOutput.splice(0, 100);
-          const m = /web view: (https?:\/\/\S+)/.exec(line);
-          if (m && !url) { url = m[1]; resolve(url); }
-        }
-      };
-    };
-    child.stdout.on('data', onLine('stdout'));
-    child.stderr.on('data', onLine('stderr'));
-    childExit.then((e) => { if (!url) reject(new Error(`omnitwin ended before printing "web view: URL" (exit ${e.code}, signal ${e.signal}${e.error ? `, ${e.error.message}` : ''})`)); });
-  });
-  return withTimeout(urlPromise, 60000, 'the "web view: URL" line of omnitwin');
-}
+const h = harness('browser_view_test', 'browser_view_test.mjs --omnitwin PATH --run-dir DIR --artefacts DIR [--timeout S]',
+  ['omnitwin', 'run-dir', 'artefacts'], 120);
+const { opts, timeoutS, log, check, must } = h;
 
 // ------------------------------------------------------------------ the test
 async function main() {
-  const { default: puppeteer } = await import(PUPPETEER.href);
   fs.mkdirSync(opts.artefacts, { recursive: true });
-  const url = await startChild();
+  const url = await h.startOmnitwin(['view', opts['run-dir'], '--web', '127.0.0.1:0']);
   log(`web view at ${url}`);
 
-  browser = await puppeteer.launch({
-    executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-    headless: true,
-    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-  });
-  const page = await browser.newPage();
-  await page.setViewport({ width: 1280, height: 800 });
-  const pageErrors = [];
-  page.on('pageerror', (err) => { pageErrors.push(`pageerror: ${err.message}`); log(`page error: ${err.message}`); });
-  page.on('console', (msg) => {
-    const where = msg.location() && msg.location().url ? ` [${msg.location().url}]` : '';
-    if (msg.type() === 'error') { pageErrors.push(`console error: ${msg.text()}${where}`); log(`console error: ${msg.text()}${where}`); }
-    else if (msg.type() === 'warn' || msg.type() === 'warning') log(`console warning: ${msg.text()}`);
-  });
+  const { page, errors: pageErrors } = await h.launchBrowser();
   const ms = timeoutS * 1000;
   const text = (sel) => page.$eval(sel, (el) => el.textContent.trim());
   const view = (fn, ...args) => page.evaluate(fn, ...args);
@@ -229,27 +123,8 @@ async function main() {
   check(!afterPlay.playing && afterPlay.paused, '#play again: paused');
 
   check(pageErrors.length === 0, 'no page errors and no console errors', pageErrors.slice(0, 5).join(' | '));
-  const early = await Promise.race([childExit, sleep(10)]);
+  const early = await Promise.race([h.childExit, sleep(10)]);
   check(early === undefined, 'omnitwin view still serving at the end', early ? `exited ${early.code}` : '');
 }
 
-let code = 0;
-try {
-  await main();
-} catch (err) {
-  failures++;
-  log(`FAIL  ${err && err.stack ? err.stack : err}`);
-} finally {
-  clearTimeout(overall);
-  if (browser) await browser.close().catch(() => {});
-  killBrowser();
-  if (child && child.exitCode === null && child.signalCode === null) {
-    killChild('SIGTERM');
-    await Promise.race([childExit, sleep(3000)]);
-    killChild('SIGKILL');
-  }
-  if (failures) dumpChild();
-  code = failures ? 1 : 0;
-  log(failures ? `FAILED (${failures} failed)` : 'PASSED');
-}
-process.exit(code);
+await h.run(main);
