@@ -16,15 +16,12 @@
 #include <csignal>
 #include <cstdlib>
 #include <random>
-#include <regex>
 
 #include "tests/twin/cli_support.hpp"
 
 namespace {
 
 using namespace omnitwin::twin::cli;
-
-const char* const kOwnCanBus = "bus.transport=udp:239.74.163.2:0";  // a free port per run
 
 std::string thesis_line() { return source_path("models/scenarios/thesis_line.yaml"); }
 
@@ -55,8 +52,6 @@ std::string csv_problem(const fs::path& f) {
   return "";
 }
 
-bool command_ok(const std::string& cmd) { return std::system((cmd + " >/dev/null 2>&1").c_str()) == 0; }
-
 // The pids of processes whose command line names `dir` (the run's master and report name
 // the run directory); the test process itself excluded.
 std::vector<int> processes_naming(const fs::path& dir) {
@@ -83,12 +78,9 @@ std::vector<std::string> record_problems(const fs::path& out) {
   for (const auto& e : fs::directory_iterator(out)) {
     const std::string name = e.path().filename().string();
     if (name.ends_with(".part")) p.push_back(name + " left under a temporary name");
-    if (name.ends_with(".pcap") && !command_ok("tshark -r '" + e.path().string() + "'"))
-      p.push_back(name + " does not read to its end in tshark");
+    if (name.ends_with(".pcap") && !capture_reads(e.path())) p.push_back(name + " does not read to its end in tshark");
   }
-  if (fs::exists(out / "video.mp4") && !command_ok("ffmpeg -v error -xerror -i '" + (out / "video.mp4").string() +
-                                                   "' -f null -"))
-    p.push_back("video.mp4 does not decode");
+  if (fs::exists(out / "video.mp4") && !video_decodes(out / "video.mp4")) p.push_back("video.mp4 does not decode");
   if (fs::exists(out / "report.html") && !contains(read_bytes(out / "report.html"), "</html>"))
     p.push_back("report.html is cut short");
   if (fs::exists(out / "metrics.json.tmp")) p.push_back("metrics.json.tmp left");
@@ -159,18 +151,6 @@ std::string fault_name(const ::testing::TestParamInfo<MasterFault>& i) {
   return i.param.bus + "_" + i.param.clock + "_" + (i.param.sig == SIGKILL ? "killed" : "stopped");
 }
 
-// The master's pid, from the run's event log while it is written.
-pid_t master_pid(const fs::path& run_dir, Child& c) {
-  const fs::path log = run_dir / ".events.log.part";
-  std::smatch m;
-  for (int i = 0; i < 3000 && c.running(); ++i) {
-    const std::string text = read_bytes(log);
-    if (std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)"))) return static_cast<pid_t>(std::stol(m[1]));
-    std::this_thread::sleep_for(5ms);
-  }
-  return -1;
-}
-
 class CliMasterFault : public CliTest, public ::testing::WithParamInterface<MasterFault> {};
 
 TEST_P(CliMasterFault, EndsWithTheDocumentedCodeAndValidRecords) {
@@ -209,12 +189,11 @@ TEST_P(CliMasterFault, EndsWithTheDocumentedCodeAndValidRecords) {
     EXPECT_EQ(m.at("master").at("lost"), true) << m.at("master").dump();
   }
   for (const char* rec : {"trajectory.csv", "bus.csv"}) EXPECT_EQ(csv_problem(out / rec), "");
-  for (const auto& e : fs::directory_iterator(out)) {
-    EXPECT_FALSE(e.path().filename().string().ends_with(".part")) << e.path();
+  EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
+  for (const auto& e : fs::directory_iterator(out))
     if (e.path().extension() == ".pcap") {
-      EXPECT_TRUE(command_ok("tshark -r '" + e.path().string() + "'")) << e.path();
+      EXPECT_TRUE(capture_reads(e.path())) << e.path();
     }
-  }
   std::this_thread::sleep_for(100ms);
   EXPECT_TRUE(processes_naming(out).empty()) << "a process of the run survived it";
 }

@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <regex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -187,6 +188,55 @@ inline fs::path scenario_dir(const TempDir& dir, const std::string& name, const 
   fs::create_directories(d);
   for (const auto& f : files) fs::copy_file(test_scenario(f), d / f);
   return d;
+}
+
+// ---------------------------------------------------------------------------------------
+// Helpers: a run's records and processes (cli_trust_test.cpp, cli_signals_slow_test.cpp)
+
+// A realtime CAN run keeps the scenario's bus (python-can's group and port, for anyone to
+// join); tests that run side by side under ctest -j take a free port each instead, or one
+// run's master keeps the other's supervision content.
+inline const char* const kOwnCanBus = "bus.transport=udp:239.74.163.2:0";
+
+// Files of the run directory left under a temporary name only.
+inline std::vector<std::string> part_files(const fs::path& dir) {
+  std::vector<std::string> parts;
+  if (!fs::exists(dir)) return parts;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.path().filename().string().ends_with(".part")) parts.push_back(e.path().filename().string());
+  return parts;
+}
+
+// ffmpeg decodes every frame of `file` without an error.
+inline bool video_decodes(const fs::path& file) {
+  const std::string cmd = "ffmpeg -v error -xerror -i '" + file.string() + "' -f null - >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+// tshark reads the capture to its end.
+inline bool capture_reads(const fs::path& file) {
+  const std::string cmd = "tshark -r '" + file.string() + "' >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+// Waits until `file` holds `text` (or the child ends / 60 s pass).
+inline bool wait_for_text(const fs::path& file, const std::string& text, Child& c) {
+  for (int i = 0; i < 6000; ++i) {
+    if (contains(read_bytes(file), text)) return true;
+    if (!c.running()) return contains(read_bytes(file), text);
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+// The master's pid, from the run's event log while it is written (.events.log.part).
+inline pid_t master_pid(const fs::path& run_dir, Child& c) {
+  const fs::path log = run_dir / ".events.log.part";
+  if (!wait_for_text(log, "started (pid ", c)) return -1;
+  std::smatch m;
+  const std::string text = read_bytes(log);
+  if (!std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)"))) return -1;
+  return static_cast<pid_t>(std::stol(m[1]));
 }
 
 }  // namespace omnitwin::twin::cli

@@ -14,7 +14,6 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include <regex>
 
 #include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/twin/cli_support.hpp"
@@ -24,52 +23,6 @@ namespace {
 using namespace omnitwin::twin::cli;
 using omnitwin::testing::SmallTmpfs;
 
-
-// A realtime CAN run keeps the scenario's bus (python-can's group and port, for anyone to
-// join); tests that run side by side under ctest -j take a free port each instead, or one
-// run's master keeps the other's supervision content.
-const char* const kOwnCanBus = "bus.transport=udp:239.74.163.2:0";
-
-// No file of the run directory is left under a temporary name only... unless named.
-std::vector<std::string> part_files(const fs::path& dir) {
-  std::vector<std::string> parts;
-  if (!fs::exists(dir)) return parts;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.path().filename().string().ends_with(".part")) parts.push_back(e.path().filename().string());
-  return parts;
-}
-
-// ffmpeg decodes every frame of `file` without an error.
-bool video_decodes(const fs::path& file) {
-  const std::string cmd = "ffmpeg -v error -xerror -i '" + file.string() + "' -f null - >/dev/null 2>&1";
-  return std::system(cmd.c_str()) == 0;
-}
-
-// tshark reads the capture to its end.
-bool capture_reads(const fs::path& file) {
-  const std::string cmd = "tshark -r '" + file.string() + "' >/dev/null 2>&1";
-  return std::system(cmd.c_str()) == 0;
-}
-
-// Waits until `file` holds `text` (or the child ends / 60 s pass).
-bool wait_for_text(const fs::path& file, const std::string& text, Child& c) {
-  for (int i = 0; i < 6000; ++i) {
-    if (contains(read_bytes(file), text)) return true;
-    if (!c.running()) return contains(read_bytes(file), text);
-    std::this_thread::sleep_for(10ms);
-  }
-  return false;
-}
-
-// The master's pid, from the run's event log while it is written (.events.log.part).
-pid_t master_pid(const fs::path& run_dir, Child& c) {
-  const fs::path log = run_dir / ".events.log.part";
-  if (!wait_for_text(log, "started (pid ", c)) return -1;
-  std::smatch m;
-  const std::string text = read_bytes(log);
-  if (!std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)"))) return -1;
-  return static_cast<pid_t>(std::stol(m[1]));
-}
 
 class CliTrust : public CliTest {
  protected:
@@ -239,7 +192,9 @@ TEST_F(CliTrust, SigintWhileReportingGivesExit3) {
   const nlohmann::json m = metrics(out);
   EXPECT_EQ(m.at("interrupted"), true);
   EXPECT_TRUE(part_files(out).empty()) << part_files(out).front();
-  if (fs::exists(out / "report.html")) EXPECT_TRUE(contains(read_bytes(out / "report.html"), "</html>"));
+  if (fs::exists(out / "report.html")) {
+    EXPECT_TRUE(contains(read_bytes(out / "report.html"), "</html>"));
+  }
 }
 
 // A CAN run stopped by SIGINT: every record opens (CSV, JSON, the capture in tshark).
@@ -273,7 +228,9 @@ TEST_F(CliTrust, FullDiskDuringTheRunGivesExit3AndNoPartialRecord) {
   EXPECT_TRUE(contains(f.out, "MISSING") || contains(f.out, "PARTIAL")) << f.out;
   // Whatever is under a final name is whole: the JSON files parse.
   for (const char* json : {"metrics.json", "run.json"})
-    if (fs::exists(out / json)) EXPECT_NO_THROW(nlohmann::json::parse(read_bytes(out / json))) << json;
+    if (fs::exists(out / json)) {
+      EXPECT_NO_THROW(nlohmann::json::parse(read_bytes(out / json))) << json;
+    }
 }
 
 // A disk that fills up while the video is written: exit 3, no video.mp4, the error named.
