@@ -159,23 +159,8 @@ void EthercatNetwork::process_frame(Pending& p) {
     ++not_returned_;
     return;
   }
-  note_process_wkc(pdu);
   // Back at the master after the line's round trip (plus any delay fault).
   send_reply(p, chain_.last_return_time() + std::llround(delay_ns_));
-}
-
-// The process data's working counter of a returned frame (its logical datagrams), for the
-// live view; frames without process data (mailbox, configuration) leave it as it was.
-void EthercatNetwork::note_process_wkc(std::span<std::uint8_t> pdu) {
-  ethercat::PduView v;
-  if (ethercat::parse_pdu(pdu, v) != ethercat::PduError::ok) return;
-  std::int32_t wkc = -1;
-  for (std::size_t i = 0; i < v.count; ++i) {
-    const ethercat::Cmd c = v.datagrams[i].cmd();
-    if (c == ethercat::Cmd::lrd || c == ethercat::Cmd::lwr || c == ethercat::Cmd::lrw)
-      wkc = std::max(wkc, 0) + v.datagrams[i].wkc();
-  }
-  if (wkc >= 0) process_wkc_ = wkc;
 }
 
 // One record of the capture: with the addresses the frame carried when the transport knows them.
@@ -402,7 +387,7 @@ BusSample EthercatNetwork::bus_sample() const {
   b.frames_rx = from_transport_;
   b.dropouts = lost_frames_ + not_returned_;
   b.errors = malformed() + send_failures_ + overflow_;
-  b.wkc = process_wkc_;
+  b.wkc = chain_.last_process_wkc();
   return b;
 }
 

@@ -108,7 +108,6 @@ class EthercatNetwork final : public BusNetwork {
 
   void open_transport(const Scenario& s);
   void take_frame(const std::uint8_t* pdu, std::size_t size, SimTime t);
-  void note_process_wkc(std::span<std::uint8_t> pdu);
   void process_frame(Pending& p);
   void send_reply(const Pending& p, SimTime t);
   void capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir);
@@ -147,7 +146,6 @@ class EthercatNetwork final : public BusNetwork {
   int loss_burst_ = 1, loss_left_ = 0;
   double delay_ns_ = 0;
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
-  std::int32_t process_wkc_ = -1;   // the last returned frame's process-data WKC (live view)
   std::uint64_t lost_frames_ = 0, not_returned_ = 0, send_failures_ = 0, overflow_ = 0;
   std::int64_t busy_ns_ = 0;
   SimTime op_since_ns_ = -1;

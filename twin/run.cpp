@@ -609,7 +609,7 @@ void PlatformRun::record_bus_and_state(SimTime t) {
     DriveSample& d = st.drives[i];
     d.node = on_bus() ? net_->wheel_record(static_cast<int>(i)).node : 0;
     d.state = on_bus() ? net_->drive_state(static_cast<int>(i)) : DriveStateCode::running;
-    if (on_bus()) {
+    if (on_bus() && o_.observer) {  // only live views show them
       const BusNetwork::DriveDetail dd = net_->drive_detail(static_cast<int>(i));
       d.comm_state = dd.comm, d.device_state = dd.device;
     }

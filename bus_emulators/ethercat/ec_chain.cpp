@@ -75,7 +75,17 @@ bool EscChain::process(std::span<std::uint8_t> pdu, SimTime t) noexcept {
   }
   last_return_ = a;
   ++stats_.returned;
+  note_process_wkc(v);
   return true;
+}
+
+void EscChain::note_process_wkc(const PduView& v) noexcept {
+  std::int32_t wkc = -1;
+  for (std::size_t k = 0; k < v.count; ++k) {
+    const Cmd c = v.datagrams[k].cmd();
+    if (c == Cmd::lrd || c == Cmd::lwr || c == Cmd::lrw) wkc = std::max(wkc, 0) + v.datagrams[k].wkc();
+  }
+  if (wkc >= 0) last_process_wkc_ = wkc;
 }
 
 SimTime EscChain::next_event_time() const noexcept {

@@ -41,10 +41,14 @@ class EscChain {
   int reachable() const;                              // slaves the frame reaches
   Esc& esc(int i) { return *escs_[static_cast<std::size_t>(i)]; }
   SimTime last_return_time() const { return last_return_; }  // frame back at the master
+  // The working counter of the process data (logical datagrams: LRD, LWR, LRW, summed) in the
+  // last returned frame that carried any, as a master checks it; -1 before the first.
+  std::int32_t last_process_wkc() const { return last_process_wkc_; }
   const Stats& stats() const { return stats_; }
 
  private:
   void update_links();
+  void note_process_wkc(const PduView& v) noexcept;
   bool cable_ok(int c) const;  // cable in front of slave c
 
   std::vector<Esc*> escs_;
@@ -52,6 +56,7 @@ class EscChain {
   std::vector<SimTime> arrive_;
   int break_at_ = -1;
   SimTime last_return_ = 0;
+  std::int32_t last_process_wkc_ = -1;
   Stats stats_;
 };
 
