@@ -18,6 +18,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -26,7 +27,7 @@
 
 namespace omnitwin::twin {
 
-// A live consumer of the run (DDS). Called on the run's own thread: on_state at every
+// A live consumer of the run (DDS, the web view). Called on the run's own thread: on_state at every
 // control sample from the cyclic path, so it must be real-time safe (copy and return; never
 // block, never allocate); the others are called rarely and may allocate.
 class RunObserver {
@@ -37,6 +38,30 @@ class RunObserver {
   virtual void on_event(const RunEvent& e) = 0;
   // The run's end, with what metrics.json holds.
   virtual void on_end(const nlohmann::json& metrics) = 0;
+};
+
+// Hands each observer call to several observers (DDS and the web view at once).
+class ObserverFan : public RunObserver {
+ public:
+  void add(RunObserver* o) {
+    if (o) all_.push_back(o);
+  }
+  bool empty() const { return all_.empty(); }
+  void on_start(const RunInfo& i) override {
+    for (auto* o : all_) o->on_start(i);
+  }
+  void on_state(const StateSample& s) override {
+    for (auto* o : all_) o->on_state(s);
+  }
+  void on_event(const RunEvent& e) override {
+    for (auto* o : all_) o->on_event(e);
+  }
+  void on_end(const nlohmann::json& m) override {
+    for (auto* o : all_) o->on_end(m);
+  }
+
+ private:
+  std::vector<RunObserver*> all_;
 };
 
 struct RunOptions {

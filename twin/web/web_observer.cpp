@@ -30,7 +30,6 @@ void WebRunObserver::on_start(const RunInfo& info) {
 
 void WebRunObserver::on_state(const StateSample& s) {
   if (!decimator_.take(s.t_ns)) return;
-  offered_.fetch_add(1, std::memory_order_relaxed);
   if (!ring_.push(s)) ring_full_.fetch_add(1, std::memory_order_relaxed);
 }
 
@@ -75,7 +74,7 @@ void WebRunObserver::flush() {
 }
 
 WebRunObserver::Stats WebRunObserver::stats() const {
-  return {offered_.load(), published_.load(), ring_full_.load()};
+  return {published_.load(), ring_full_.load()};
 }
 
 }  // namespace omnitwin::twin

@@ -32,7 +32,8 @@ class WebRunObserver : public RunObserver {
   void on_end(const nlohmann::json& metrics) override;
 
   struct Stats {
-    std::uint64_t offered = 0, published = 0, ring_full = 0;
+    std::uint64_t published = 0;  // samples handed to the server
+    std::uint64_t ring_full = 0;  // samples lost: the pump fell behind
   };
   Stats stats() const;
 
@@ -47,31 +48,7 @@ class WebRunObserver : public RunObserver {
   std::vector<RunEvent> events_;
   std::thread pump_;
   std::atomic<bool> stop_{false};
-  std::atomic<std::uint64_t> offered_{0}, published_{0}, ring_full_{0};
-};
-
-// Hands each observer call to several observers (DDS and the web view at once).
-class ObserverFan : public RunObserver {
- public:
-  void add(RunObserver* o) {
-    if (o) all_.push_back(o);
-  }
-  bool empty() const { return all_.empty(); }
-  void on_start(const RunInfo& i) override {
-    for (auto* o : all_) o->on_start(i);
-  }
-  void on_state(const StateSample& s) override {
-    for (auto* o : all_) o->on_state(s);
-  }
-  void on_event(const RunEvent& e) override {
-    for (auto* o : all_) o->on_event(e);
-  }
-  void on_end(const nlohmann::json& m) override {
-    for (auto* o : all_) o->on_end(m);
-  }
-
- private:
-  std::vector<RunObserver*> all_;
+  std::atomic<std::uint64_t> published_{0}, ring_full_{0};
 };
 
 }  // namespace omnitwin::twin
