@@ -159,7 +159,8 @@ class PlatformRun {
   void note_report(const simclock::MasterReport& r, SimTime t);
   void fail(std::string why);
   void supervise_master(SimTime t);
-  void master_lost(SimTime t, std::string why);
+  // always_fail: the run ends whatever on_master_loss says (lockstep: nobody answers ticks).
+  void master_lost(SimTime t, std::string why, bool always_fail = false);
   std::vector<std::string> expected_records() const;
   controller::Pose2 bus_reference(SimTime t) const;
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
@@ -425,11 +426,8 @@ void PlatformRun::on_master_bus(SimTime t) {
   if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
     // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
     // but always the run's end: in lockstep nothing else answers the ticks.
-    master_lost_ns_ = t;
-    master_lost_why_ = fmt::format("the master process ended ({}) before answering tick {}", master_->describe_exit(),
-                                   g.tick);
-    note(log_event(t, "master", "lost: " + master_lost_why_), *events_);
-    return fail("master lost: " + master_lost_why_);
+    return master_lost(
+        t, fmt::format("the master process ended ({}) before answering tick {}", master_->describe_exit(), g.tick), true);
   }
   if (st != simclock::WaitStatus::ok)
     return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),
@@ -474,11 +472,11 @@ void PlatformRun::supervise_master(SimTime t) {
     master_lost(t, fmt::format("no frame from the master within {:.1f} s of its start", handshake_timeout_s_));
 }
 
-void PlatformRun::master_lost(SimTime t, std::string why) {
+void PlatformRun::master_lost(SimTime t, std::string why, bool always_fail) {
   master_lost_ns_ = t;
   master_lost_why_ = why;
   note(log_event(t, "master", "lost: " + why), *events_);
-  if (s_.bus.supervision.on_master_loss == SupervisionSpec::OnLoss::fail) fail("master lost: " + why);
+  if (always_fail || s_.bus.supervision.on_master_loss == SupervisionSpec::OnLoss::fail) fail("master lost: " + why);
 }
 
 void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
