@@ -10,7 +10,6 @@
 
 #include <cerrno>
 #include <cstring>
-#include <numeric>
 
 namespace omnitwin::twin {
 
@@ -20,10 +19,52 @@ std::int64_t monotonic_ns() {
   return static_cast<std::int64_t>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
 }
 
-RealtimePacer::RealtimePacer(SimTime tick_period, std::size_t expected_ticks)
-    : tick_period_(tick_period) {
-  lateness_us_.reserve(expected_ticks + 16);
+std::size_t LatenessHistogram::bin_of(std::uint64_t us) noexcept {
+  if (us < kExactUs) return static_cast<std::size_t>(us);
+  const int e = 63 - __builtin_clzll(us);  // us in [2^e, 2^(e+1)), e ≥ 11
+  const std::size_t octave = static_cast<std::size_t>(e) - 11;
+  if (octave >= kOctaves) return kBins - 1;
+  const std::size_t sub = static_cast<std::size_t>(us >> (e - 6)) & (kSubBins - 1);
+  return kExactUs + octave * kSubBins + sub;
 }
+
+std::uint64_t LatenessHistogram::upper_edge_us(std::size_t bin) noexcept {
+  if (bin < kExactUs) return bin + 1;
+  const std::size_t octave = (bin - kExactUs) / kSubBins, sub = (bin - kExactUs) % kSubBins;
+  const int shift = static_cast<int>(octave) + 11 - 6;  // bin width 2^(e-6)
+  return (static_cast<std::uint64_t>(kSubBins + sub + 1)) << shift;
+}
+
+void LatenessHistogram::add(std::int64_t late_ns) noexcept {
+  const std::int64_t ns = std::max<std::int64_t>(late_ns, 0);
+  ++bins_[bin_of(static_cast<std::uint64_t>(ns / 1000))];
+  ++count_;
+  sum_ns_ += ns;
+  max_ns_ = std::max(max_ns_, ns);
+}
+
+void LatenessHistogram::clear() noexcept {
+  bins_.fill(0);
+  count_ = 0;
+  sum_ns_ = max_ns_ = 0;
+}
+
+double LatenessHistogram::mean_us() const {
+  return count_ ? static_cast<double>(sum_ns_) * 1e-3 / static_cast<double>(count_) : 0.0;
+}
+
+double LatenessHistogram::quantile_us(double q) const {
+  if (count_ == 0) return 0.0;
+  const auto rank = std::min<std::uint64_t>(count_ - 1, static_cast<std::uint64_t>(std::clamp(q, 0.0, 1.0) * count_));
+  std::uint64_t seen = 0;
+  for (std::size_t i = 0; i < kBins; ++i) {
+    seen += bins_[i];
+    if (seen > rank) return std::min(static_cast<double>(upper_edge_us(i)), max_us());
+  }
+  return max_us();
+}
+
+RealtimePacer::RealtimePacer(SimTime tick_period) : tick_period_(tick_period) {}
 
 namespace {
 constexpr int kFifoPriority = 40;  // above ordinary work, below the kernel's own threads
@@ -94,23 +135,43 @@ void RealtimePacer::wait_waking(std::int64_t deadline) {
   }
 }
 
+void RealtimePacer::set_window(SimTime length, std::function<void(const LatenessWindow&)> sink) {
+  window_length_ = length;
+  window_sink_ = std::move(sink);
+}
+
+void RealtimePacer::flush_window() {
+  if (!window_sink_ || window_.count() == 0) return;
+  const LatenessWindow w{window_start_,         window_.count(),         window_overruns_,     window_.mean_us(),
+                         window_.quantile_us(0.5), window_.quantile_us(0.99), window_.max_us()};
+  window_.clear();
+  window_overruns_ = 0;
+  window_sink_(w);
+}
+
 void RealtimePacer::tick(SimTime t) {
   const std::int64_t late = monotonic_ns() - (wall_start_ + t);
-  if (tick_overran(late, tick_period_)) ++overruns_;
-  lateness_us_.push_back(static_cast<double>(std::max<std::int64_t>(late, 0)) * 1e-3);
+  const bool overran = tick_overran(late, tick_period_);
+  if (overran) ++overruns_;
+  lateness_.add(late);
+  if (window_length_ <= 0) return;
+  // A tick beyond the open window closes it; the next window starts where this tick falls.
+  if (t >= window_start_ + window_length_) {
+    flush_window();
+    window_start_ = t - t % window_length_;
+  }
+  window_.add(late);
+  if (overran) ++window_overruns_;
 }
 
 RealtimeStats RealtimePacer::stats() const {
   RealtimeStats s;
   s.scheduling = scheduling_;
-  s.ticks = lateness_us_.size();
+  s.ticks = lateness_.count();
   s.overruns = overruns_;
-  if (lateness_us_.empty()) return s;
-  std::vector<double> sorted = lateness_us_;
-  std::sort(sorted.begin(), sorted.end());
-  s.jitter_mean_us = std::accumulate(sorted.begin(), sorted.end(), 0.0) / sorted.size();
-  s.jitter_p99_us = sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(0.99 * sorted.size()))];
-  s.jitter_max_us = sorted.back();
+  s.jitter_mean_us = lateness_.mean_us();
+  s.jitter_p99_us = lateness_.quantile_us(0.99);
+  s.jitter_max_us = lateness_.max_us();
   return s;
 }
 

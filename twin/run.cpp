@@ -76,6 +76,11 @@ std::vector<std::string> bus_header() {
   return h;
 }
 
+// realtime.csv: one row per second of sim time (docs/run-directory.md).
+std::vector<std::string> realtime_header() {
+  return {"t", "ticks", "overruns", "late_mean_us", "late_p50_us", "late_p99_us", "late_max_us"};
+}
+
 std::string fault_target(const FaultSpec& f) {
   if (f.kind == FaultSpec::Kind::wheel_slip) return fmt::format("wheel {}", f.wheel + 1);
   if (f.kind == FaultSpec::Kind::link_break) return f.wheel == 0 ? "master" : fmt::format("after slave {}", f.wheel);
@@ -194,6 +199,7 @@ class PlatformRun {
   // Records and indices.
   std::unique_ptr<CsvWriter> csv_;
   std::unique_ptr<CsvWriter> bus_csv_;
+  std::unique_ptr<CsvWriter> realtime_csv_;  // realtime runs: tick lateness per second
   std::unique_ptr<EventLog> events_;
   std::vector<double> bus_row_;
   StateSample state_{};
@@ -777,11 +783,15 @@ RunResult PlatformRun::execute() {
   std::unique_ptr<RealtimePacer> realtime;
   if (s_.clock == ClockMode::realtime) {
     const SimTime tm = on_bus() ? master_period_ns() : seconds_to_ns(s_.controller.period);
-    // Capacity for the whole run, or an hour for a twin that runs until stopped (beyond that
-    // the lateness samples grow the vector: allocation on the cyclic path, once in a while).
-    const SimTime reserve = o_.until_stopped ? std::min<SimTime>(end_, seconds_to_ns(3600)) : end_;
-    realtime = std::make_unique<RealtimePacer>(tm, static_cast<std::size_t>(reserve / tm) + 2);
+    realtime = std::make_unique<RealtimePacer>(tm);
     pacer_ = realtime.get();
+    // Lateness per second of sim time, so a long run shows when it was late (a soak's trend).
+    realtime_csv_ = std::make_unique<CsvWriter>((fs::path(o_.out_dir) / "realtime.csv").string(), realtime_header());
+    realtime->set_window(kNsPerSecond, [this](const LatenessWindow& w) {
+      const std::array<double, 7> row{ns_to_seconds(w.start), static_cast<double>(w.ticks), static_cast<double>(w.overruns),
+                                      w.mean_us, w.p50_us, w.p99_us, w.max_us};
+      note(realtime_csv_->row(row), *realtime_csv_);
+    });
     // A master on its own wall clock waits for its frames: answer them as they arrive.
     if (net_ && net_->wake_fd() >= 0) realtime->set_wake(net_->wake_fd(), [this](SimTime t) { net_->on_wake(t); });
   } else if (vtime_server_) {
@@ -805,6 +815,7 @@ RunResult PlatformRun::execute() {
     if (error_.empty()) error_ = e.what();
   }
   const double wall_s = (monotonic_ns() - wall0) * 1e-9;
+  if (realtime) realtime->flush_window();
   if (progress_) progress_->finish();
   stop_master();
   return finish(wall_s, realtime.get());
@@ -864,6 +875,7 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   };
   close_record(csv_.get());
   close_record(bus_csv_.get());
+  close_record(realtime_csv_.get());
   close_record(events_.get());
   if (on_bus()) {
     if (std::string why = net_->close_pcap(); !why.empty() && error_.empty()) error_ = why;
@@ -892,6 +904,7 @@ std::vector<std::string> PlatformRun::expected_records() const {
   std::vector<std::string> names{"run.json", "platform.xml", "trajectory.csv", "bus.csv", "events.log", "metrics.json"};
   if (on_bus()) names.push_back(fmt::format("bus-{}.pcap", net_->wire_name()));
   if (master_) names.push_back("master.log");
+  if (realtime_csv_) names.push_back("realtime.csv");
   return names;
 }
 
