@@ -51,6 +51,20 @@ void CanWire::submit_from_far(const can::Frame& f, SimTime t) {
   if (bus_.submit(kFar, f, stamp) != can::SubmitStatus::queued) ++refused_from_far_;
 }
 
+void CanWire::take_from_far(const can::TimedFrame& r, SimTime t) {
+  if (r.sender != 0) {
+    if (master_sender_ == 0) master_sender_ = r.sender;  // the first sender is the master
+    if (r.sender != master_sender_) {
+      ++foreign_frames_;
+      if (s_.bus.can.refuse_foreign) {
+        ++refused_foreign_;
+        return;
+      }
+    }
+  }
+  submit_from_far(r.frame, t);
+}
+
 void CanWire::flush_transport() {
   if (pending_.empty()) return;
   const std::size_t sent = transport_->send_many(pending_);
@@ -65,7 +79,7 @@ bool CanWire::drain_transport(std::uint64_t count, SimTime t, std::chrono::milli
   while (from_transport_ < count) {
     if (auto r = transport_->receive()) {
       ++from_transport_;
-      submit_from_far(r->frame, t);
+      take_from_far(*r, t);
       continue;
     }
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
@@ -79,7 +93,7 @@ int CanWire::poll_transport(SimTime t) {
   while (auto r = transport_->receive()) {
     ++from_transport_;
     ++n;
-    submit_from_far(r->frame, t);
+    take_from_far(*r, t);
   }
   return n;
 }
@@ -163,6 +177,8 @@ nlohmann::json CanWire::metrics(const char* name, SimTime now) const {
           {"bus_off_events", bus_off_events_},
           {"load", bus_.bus_load(now)},
           {"refused_from_transport", refused_from_far_},
+          {"foreign_frames", foreign_frames_},   // from a transport sender other than the master
+          {"refused_frames", refused_foreign_},  // … of which kept off the wire (bus.refuse_foreign)
           {"transport_rx_malformed", malformed_rx()},
           {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)
           {"pcap_frames", pcap_ ? pcap_->written() : 0}};

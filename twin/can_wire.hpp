@@ -97,6 +97,9 @@ class CanWire {
     bool active = false;
   };
 
+  // A frame from the transport: counted when its sender is not the master's (the first
+  // sender seen), kept off the wire when the scenario refuses foreign senders, else queued.
+  void take_from_far(const can::TimedFrame& r, SimTime t);
   void submit_from_far(const can::Frame& f, SimTime t);
   bool lose(int target);
   std::uint64_t malformed_rx() const;
@@ -112,6 +115,8 @@ class CanWire {
   std::vector<can::TimedFrame> pending_;
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
+  std::uint64_t master_sender_ = 0;                  // the first sender seen (0: none yet)
+  std::uint64_t foreign_frames_ = 0, refused_foreign_ = 0;
 };
 
 }  // namespace omnitwin::twin

@@ -26,7 +26,8 @@ constexpr std::array<std::string_view, 4> kDriveMetrics = {"all_running_at_s", "
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
-// M-III's, the last three CANopen's).
+// M-III's, the next three CANopen's; foreign_frames and refused_frames EtherCAT's and the
+// CAN family's over UDP).
 constexpr std::array<std::string_view, 23> kBusMetrics = {
     "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
     "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",

@@ -62,6 +62,7 @@ void M3Network::open_transport(const Scenario& s) {
   veth_ = line.veth;
   transport_spec_ = line.slaves_spec;
   transport_ = m3::open_transport(transport_spec_, m3::Role::slaves);
+  transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
   // UDP on port 0: the master is told the port the slaves' socket was given.
   master_iface_ = line.master_iface.empty() ? transport_->spec() : line.master_iface;
 }
@@ -336,6 +337,8 @@ nlohmann::json M3Network::bus_metrics(SimTime now) const {
           {"lost_frames", lost_},
           {"corrupted_frames", corrupted_},
           {"malformed", ts.dropped_malformed},
+          {"foreign_frames", ts.foreign_sender},  // from a sender other than the first (the master)
+          {"refused_frames", ts.refused_sender},  // … of which dropped (bus.refuse_foreign)
           {"send_failures", segment_->send_failures()},
           {"overflow", segment_->line().overflow()},
           {"load", sim_s > 0 ? static_cast<double>(segment_->busy_ns()) * 1e-9 / sim_s : 0.0},

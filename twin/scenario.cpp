@@ -372,6 +372,7 @@ void read_can_wire(const YamlField& f, CanSpec& c) {
   int seed = static_cast<int>(c.seed);
   if (read_integer(f, "seed", seed, Bounds::non_negative())) c.seed = static_cast<std::uint64_t>(seed);
   read_number(f, "handshake_timeout", c.handshake_timeout, Bounds::positive());
+  read_bool(f, "refuse_foreign", c.refuse_foreign);
 }
 
 void read_can(const YamlField& f, CanSpec& c) {
@@ -521,6 +522,7 @@ void read_m3(const YamlField& f, M3Spec& m) {
   int seed = static_cast<int>(m.seed);
   if (read_integer(f, "seed", seed, Bounds::non_negative())) m.seed = static_cast<std::uint64_t>(seed);
   read_number(f, "handshake_timeout", m.handshake_timeout, Bounds::positive());
+  read_bool(f, "refuse_foreign", m.refuse_foreign);
 }
 
 // bus.supervision: how a realtime run watches the master it started.
@@ -548,19 +550,19 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   if (!settings) return bus;
   if (bus.kind == BusKind::can) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval", "missing_command",
-                  "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision"});
+                  "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_can(f, bus.can);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::canopen) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
                   "eds", "mode", "cycle", "sync_producer", "drive_period", "counts_per_rev", "heartbeat_ms", "drift",
-                  "startup"});
+                  "startup", "refuse_foreign"});
     read_can_wire(f, bus.can);
     read_canopen(f, bus.canopen, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::tml) {
     f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
-                  "protocol", "cycle", "drive_period", "counts_per_rev", "drift", "startup"});
+                  "protocol", "cycle", "drive_period", "counts_per_rev", "drift", "startup", "refuse_foreign"});
     read_can_wire(f, bus.can);
     read_tml(f, bus.tml);
     read_supervision(f["supervision"], bus.supervision);
@@ -572,7 +574,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   } else if (bus.kind == BusKind::m3) {
     f.allow_keys({"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "communication", "mode", "topology", "stations",
                   "cable_m", "response_us", "margin_us", "drive_period", "counts_per_rev", "startup", "master",
-                  "seed", "handshake_timeout", "supervision"});
+                  "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_m3(f, bus.m3);
     read_supervision(f["supervision"], bus.supervision);
   } else {

@@ -99,6 +99,10 @@ struct CanSpec {
   std::string master;                         // master program; "" = omni-master beside omnitwin
   std::uint64_t seed = 1;                     // random faults (frame loss, jitter)
   double handshake_timeout = 10.0;            // [s] the master must answer a tick within
+  // Frames from a transport sender other than the first (the master) are always counted
+  // (bus.foreign_frames); true also keeps them off the wire (bus.refused_frames). UDP and mem
+  // only: SocketCAN names no sender.
+  bool refuse_foreign = false;
 };
 
 // Settings of the `ethercat` bus: four single-axis CiA 402 drives (one per wheel) on one
@@ -192,6 +196,9 @@ struct M3Spec {
   std::string master;                       // master program; "" = omni-master beside omnitwin
   std::uint64_t seed = 1;                   // random faults (frame loss, corruption)
   double handshake_timeout = 10.0;          // [s] the master must answer a tick within
+  // Frames from a sender other than the first (the master) are always counted
+  // (bus.foreign_frames); true also drops them (bus.refused_frames), as on bus ethercat.
+  bool refuse_foreign = false;
   double margin(bool realtime) const { return margin_us >= 0 ? margin_us : realtime ? 80.0 : 1.0; }
 };
 

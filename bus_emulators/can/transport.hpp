@@ -50,6 +50,11 @@ struct TimedFrame {
   // `timestamp` field, seconds on the wire; mem: as passed to send()); SocketCAN: the
   // kernel's receive time (CLOCK_REALTIME) when available, else 0.
   std::int64_t timestamp_ns = 0;
+  // Who sent it, where the transport can tell (nonzero): UDP its source address and port,
+  // mem the sending transport. 0 on SocketCAN: a CAN frame names no sender, and the kernel
+  // does not say which socket sent it. Receivers count frames from other senders than the
+  // one they expect (twin: bus.foreign_frames); set by receive(), ignored by send_many().
+  std::uint64_t sender = 0;
 };
 
 struct TransportStats {

@@ -81,7 +81,7 @@ bool MemTransport::send(const Frame& f, std::int64_t timestamp_ns) {
   }
   {
     std::lock_guard lock(hub_->mu);
-    const TimedFrame tf{f, timestamp_ns};
+    const TimedFrame tf{f, timestamp_ns, reinterpret_cast<std::uintptr_t>(this)};
     for (MemTransport* m : hub_->members)
       if (m != this) m->deliver(tf);
   }

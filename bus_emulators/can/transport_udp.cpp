@@ -335,6 +335,24 @@ bool UdpTransport::send(const Frame& f, std::int64_t timestamp_ns) {
   return true;
 }
 
+namespace {
+// A nonzero key for a datagram's source address and port: IPv4 exactly (address, port and
+// bit 48), IPv6 as a 64-bit FNV-1a hash of address and port with bit 63 set.
+std::uint64_t sender_key(const sockaddr_storage& from) {
+  if (from.ss_family == AF_INET) {
+    const auto& a = reinterpret_cast<const sockaddr_in&>(from);
+    return (std::uint64_t{1} << 48) | (std::uint64_t{ntohl(a.sin_addr.s_addr)} << 16) | ntohs(a.sin_port);
+  }
+  const auto& a = reinterpret_cast<const sockaddr_in6&>(from);
+  std::uint64_t h = 1469598103934665603ull;
+  const auto mix = [&h](std::uint8_t b) { h = (h ^ b) * 1099511628211ull; };
+  for (std::uint8_t b : a.sin6_addr.s6_addr) mix(b);
+  mix(static_cast<std::uint8_t>(a.sin6_port & 0xff));
+  mix(static_cast<std::uint8_t>(a.sin6_port >> 8));
+  return h | (std::uint64_t{1} << 63);
+}
+}  // namespace
+
 bool UdpTransport::is_own(const sockaddr_storage& from) const {
   const std::uint16_t port = from.ss_family == AF_INET6 ? reinterpret_cast<const sockaddr_in6&>(from).sin6_port
                                                         : reinterpret_cast<const sockaddr_in&>(from).sin_port;
@@ -382,7 +400,7 @@ std::optional<TimedFrame> UdpTransport::receive() {
         ++stats_.frames_rx;
         const double ns = d.timestamp * 1e9;
         const std::int64_t ts = std::isfinite(ns) && std::fabs(ns) < 9.2e18 ? std::llround(ns) : 0;
-        return TimedFrame{d.frame, ts};
+        return TimedFrame{d.frame, ts, sender_key(rx_from_[k])};
       }
       case msgpack_wire::DecodeStatus::wrong_dlc: ++stats_.wrong_dlc_rx; break;
       case msgpack_wire::DecodeStatus::bad_id: ++stats_.bad_id_rx; break;

@@ -2,7 +2,9 @@
 // reaches the transport when it completes (at once, or held for flush_transport() in lockstep),
 // a frame from the far side does not go back and is handed to the protocol, frames from the
 // transport enter the wire at t + T_pre, frame loss and delay act and are counted, the
-// metrics count what happened. Over the in-process `mem:` transport.
+// metrics count what happened; frames from a second transport sender are counted and, when the
+// scenario refuses foreign senders, kept off the wire (over mem: and over real UDP multicast).
+// Over the in-process `mem:` transport unless a test says otherwise.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -29,6 +31,11 @@ Scenario scenario(const std::string& bus) {
   return s;
 }
 
+Scenario with_refuse(Scenario s, bool refuse) {
+  s.bus.can.refuse_foreign = refuse;
+  return s;
+}
+
 can::Frame frame(std::uint32_t id) {
   can::Frame f;
   f.id = id;
@@ -38,7 +45,7 @@ can::Frame frame(std::uint32_t id) {
 }
 
 struct Wire {
-  explicit Wire(bool batch) : s(scenario(name)), far(name), wire(s, 2, batch) {
+  explicit Wire(bool batch, bool refuse = false) : s(with_refuse(scenario(name), refuse)), far(name), wire(s, 2, batch) {
     wire.bus().on_tx_done([this](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) {
       if (wire.completed(n, f, t)) from_far.push_back(t.end_ns);
     });
@@ -108,6 +115,54 @@ TEST(CanWire, FrameLossAndDelayActAndAreCounted) {
   EXPECT_EQ(w.wire.apply_delay(delay, true, "axis 1"), "delay of axis 1 +2 ms jitter 0 ms (begins)");
   EXPECT_EQ(w.wire.extra_delay(0), 2'000'000);
   EXPECT_EQ(w.wire.extra_delay(1), 0);
+}
+
+
+// The first sender is the master; a second one (a python-can script, a stray node) is counted,
+// and refused only when the scenario asks.
+TEST(CanWire, ASecondSenderIsCountedAndRefusedWhenAsked) {
+  for (bool refuse : {false, true}) {
+    Wire w(false, refuse);
+    can::MemTransport stranger(w.name);
+    ASSERT_TRUE(w.far.send(frame(0x000)));      // the master first
+    ASSERT_TRUE(stranger.send(frame(0x001)));   // then someone else
+    ASSERT_TRUE(stranger.send(frame(0x001)));
+    ASSERT_TRUE(w.far.send(frame(0x202)));
+    ASSERT_TRUE(w.wire.drain_transport(4, 0, std::chrono::milliseconds(1000)));
+    w.wire.bus().advance(10'000'000);
+    const auto m = w.wire.metrics("can", 10'000'000);
+    EXPECT_EQ(m["frames_rx"], 4) << refuse;
+    EXPECT_EQ(m["foreign_frames"], 2) << refuse;
+    EXPECT_EQ(m["refused_frames"], refuse ? 2 : 0);
+    EXPECT_EQ(w.at_node.size(), refuse ? 2u : 4u) << "what reached node 1";
+  }
+}
+
+// The same over UDP multicast, where the sender is the datagram's source address and port.
+TEST(CanWire, ASecondUdpSenderIsCountedAndRefused) {
+  const std::string spec = "udp:239.74.164.9:0?ttl=0&iface=lo";
+  Scenario s = scenario("unused");
+  s.bus.can.refuse_foreign = true;
+  s.bus.can.transport = spec;
+  CanWire wire(s, 2, false);
+  std::vector<SimTime> at_node;
+  wire.bus().on_tx_done([&](can::BusNode n, const can::Frame& f, const can::FrameTiming& t) { wire.completed(n, f, t); });
+  wire.bus().on_deliver([&](can::BusNode r, const can::Frame&, const can::FrameTiming& t) {
+    if (r == 1) at_node.push_back(t.end_ns);
+  });
+  const std::string bound = wire.transport().spec();  // names the port chosen at open
+  auto master = can::open_transport(bound);
+  auto stranger = can::open_transport(bound);
+  ASSERT_TRUE(master->send(frame(0x000)));
+  ASSERT_TRUE(wire.drain_transport(1, 0, std::chrono::milliseconds(2000)));
+  ASSERT_TRUE(stranger->send(frame(0x001)));
+  ASSERT_TRUE(master->send(frame(0x202)));
+  ASSERT_TRUE(wire.drain_transport(3, 0, std::chrono::milliseconds(2000)));
+  wire.bus().advance(10'000'000);
+  const auto m = wire.metrics("can", 10'000'000);
+  EXPECT_EQ(m["foreign_frames"], 1);
+  EXPECT_EQ(m["refused_frames"], 1);
+  EXPECT_EQ(at_node.size(), 2u);
 }
 
 }  // namespace

@@ -4,7 +4,8 @@
 # sees the master's command frames and the slaves' feedback, its node-detection request is
 # answered by the master and all four slaves, and an NMT stop it sends is obeyed: the slaves
 # stop sending feedback (metrics.json: all stopped), the master stops commanding and logs the
-# stop (master.log: in real time it keeps its own clock and does not report to the twin).
+# stop (master.log: in real time it keeps its own clock and does not report to the twin), and
+# the twin counts python-can's two frames as a foreign sender's (bus.foreign_frames).
 #
 # Usage: python_can_interop_test.py OMNITWIN SCENARIO PORT
 import json
@@ -93,7 +94,12 @@ def main():
     states = [s["state"] for s in m["slaves"]]
     if any(s != "stopped" for s in states):
         fail(f"slave states {states}, expected all stopped")
-    print("PASS: python-can saw the bus, detection answered, NMT stop obeyed by master and slaves")
+    # python-can is a second sender on the twin's transport: its two frames are counted (and,
+    # without bus.refuse_foreign, obeyed as above).
+    if m["bus"].get("foreign_frames") != 2 or m["bus"].get("refused_frames") != 0:
+        fail(f"foreign/refused frames {m['bus'].get('foreign_frames')}/{m['bus'].get('refused_frames')}, expected 2/0")
+    print("PASS: python-can saw the bus, detection answered, NMT stop obeyed by master and slaves; "
+          "its 2 frames counted as a foreign sender's")
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@
 // receive() removes the padding; a frame with a bad FCS goes out and arrives untouched; neither
 // end receives its own frames; frames of another EtherType and what cannot be a frame are
 // dropped and counted; a frame's age (the kernel's receive stamp) says how long it waited before
-// receive(); set-up errors (missing interface, not Ethernet, missing privilege) name the spec. Needs root for veth pairs and raw sockets (CI runs as root); skips with the reason
+// receive(); a second sender counted and refused when asked; set-up errors (missing interface, not Ethernet, missing privilege) name the spec. Needs root for veth pairs and raw sockets (CI runs as root); skips with the reason
 // otherwise.
 #include "bus_emulators/mechatrolink3/transport/m3_transport_raw.hpp"
 
@@ -186,6 +186,27 @@ TEST_F(M3RawTransport, FramesOnTheWireAreTheEncapsulationAndPaddingIsRemoved) {
   wire_a.inject(ethernet(kEtherType, detect, kMinEthFrame + 4));
   ASSERT_EQ(slaves.receive(buf, 1s), 9);
   EXPECT_TRUE(std::equal(detect.begin(), detect.end(), buf.begin()));
+}
+
+// The slaves take the first source MAC as the master's; frames from another station's MAC
+// (a C2 master, 02h) are counted as foreign and, when asked, refused.
+TEST_F(M3RawTransport, ASecondSenderIsCountedAndRefusedWhenAsked) {
+  for (bool refuse : {false, true}) {
+    RawTransport master(veth_->a(), Role::master);
+    RawTransport slaves(veth_->b(), Role::slaves);
+    slaves.set_refuse_foreign_senders(refuse);
+    Wire wire_a(veth_->a());
+    std::array<std::uint8_t, kMaxFrame> buf{};
+    ASSERT_TRUE(master.send(command()));
+    ASSERT_GT(slaves.receive(buf, 1s), 0);
+    wire_a.inject(encapsulated(frame_of(FrameType::cyclic_command, kFirstSlave, 0x02, 16)));
+    ASSERT_TRUE(master.send(command()));
+    int got = 0;
+    while (slaves.receive(buf, 200ms) > 0) ++got;
+    EXPECT_EQ(got, refuse ? 1 : 2) << refuse;
+    EXPECT_EQ(slaves.stats().foreign_sender, 1u) << refuse;
+    EXPECT_EQ(slaves.stats().refused_sender, refuse ? 1u : 0u);
+  }
 }
 
 TEST_F(M3RawTransport, ACorruptedFrameGoesOutAndArrivesUntouched) {
