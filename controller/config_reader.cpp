@@ -1,5 +1,6 @@
 // controller layer — configuration-file reading helpers; see config_reader.hpp.
 #include "controller/config_reader.hpp"
+#include "controller/yaml_document.hpp"
 
 #include <fmt/format.h>
 
@@ -105,20 +106,19 @@ std::string resolve(const std::string& base, const std::string& p) {
 }
 
 YAML::Node load_document(std::string_view yaml, const std::string& file) {
-  YAML::Node doc;
-  std::vector<YAML::Node> docs;
+  YamlDocument d;
   try {
-    // All documents, so one after a '---' is refused rather than silently dropped.
-    docs = YAML::LoadAll(std::string(yaml));
+    // Every document counted, so one after a '---' is refused rather than silently dropped.
+    d = load_yaml_document(yaml);
   } catch (const YAML::Exception& e) {
     if (e.mark.is_null()) throw ConfigFileError(fmt::format("{}: {}", file, e.msg));
     throw ConfigFileError(fmt::format("{}:{}: {}", file, e.mark.line + 1, e.msg));
   }
-  if (docs.size() > 1) {
-    throw ConfigFileError(fmt::format("{}:{}: {} YAML documents; a configuration file holds one", file,
-                                      docs[1].Mark().is_null() ? 0 : docs[1].Mark().line + 1, docs.size()));
-  }
-  if (!docs.empty()) doc = docs[0];
+  const int line = d.second.is_null() ? 0 : d.second.line + 1;
+  if (d.stray) throw ConfigFileError(fmt::format("{}:{}: not YAML: a ',' outside any [ ] or {{ }}", file, line));
+  if (d.count > 1)
+    throw ConfigFileError(fmt::format("{}:{}: {} YAML documents; a configuration file holds one", file, line, d.count));
+  const YAML::Node doc = d.node;
   if (!doc.IsDefined() || doc.IsNull()) throw ConfigFileError(fmt::format("{}: empty configuration", file));
   return doc;
 }

@@ -5,6 +5,7 @@
 // so the first problem names its file, line and dotted key. Dumping writes the same keys
 // back with round-trip number formatting.
 #include "controller/master_config.hpp"
+#include "controller/yaml_document.hpp"
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
@@ -343,14 +344,13 @@ MasterConfigError::MasterConfigError(std::string file, int line, std::string key
 MasterConfig parse_master_config(std::string_view yaml, const std::string& file) {
   YAML::Node root;
   try {
-    // All documents, so one after a '---' is refused rather than silently dropped.
-    const std::vector<YAML::Node> docs = YAML::LoadAll(std::string(yaml));
-    if (docs.size() > 1) {
-      const YAML::Mark m = docs[1].Mark();
-      throw MasterConfigError(file, m.is_null() ? 0 : m.line + 1, "",
-                              std::to_string(docs.size()) + " YAML documents; a configuration file holds one");
-    }
-    if (!docs.empty()) root = docs[0];
+    // Every document counted, so one after a '---' is refused rather than silently dropped.
+    const YamlDocument d = load_yaml_document(yaml);
+    const int line = d.second.is_null() ? 0 : d.second.line + 1;
+    if (d.stray) throw MasterConfigError(file, line, "", "not YAML: a ',' outside any [ ] or { }");
+    if (d.count > 1)
+      throw MasterConfigError(file, line, "", std::to_string(d.count) + " YAML documents; a configuration file holds one");
+    root = d.node;
   } catch (const YAML::Exception& e) {
     throw MasterConfigError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
   }

@@ -12,8 +12,11 @@
 
 #include <charconv>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <optional>
 
+#include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
 #include "twin/yaml_schema.hpp"
 
@@ -72,20 +75,21 @@ long parse_index(const std::string& s) {
 // document ('---' and anything after it) is an error, not silently ignored: yaml-cpp's
 // LoadFile reads the first document only, whatever follows.
 YAML::Node load_yaml_file(const std::string& file) {
-  std::vector<YAML::Node> docs;
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw ScenarioError(file, 0, "", "cannot open the file");
+  const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  controller::YamlDocument d;
   try {
-    docs = YAML::LoadAllFromFile(file);
+    d = controller::load_yaml_document(text);
   } catch (const YAML::Exception& e) {
     throw ScenarioError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
   }
-  if (docs.empty()) return YAML::Node();
-  if (docs.size() > 1) {
-    const YAML::Mark m = docs[1].Mark();
-    throw ScenarioError(file, m.is_null() ? 0 : m.line + 1, "",
-                        fmt::format("{} YAML documents; a file holds one (remove the '---' and what follows)",
-                                    docs.size()));
-  }
-  return docs[0];
+  const int line = d.second.is_null() ? 0 : d.second.line + 1;
+  if (d.stray) throw ScenarioError(file, line, "", "not YAML: a ',' outside any [ ] or { }");
+  if (d.count > 1)
+    throw ScenarioError(file, line, "",
+                        fmt::format("{} YAML documents; a file holds one (remove the '---' and what follows)", d.count));
+  return d.node;
 }
 
 // ---------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ namespace omnitwin::testing {
 
 struct ScenarioMutant {
   std::string name;  // source file stem, kind and index: what a failure message shows
-  std::string kind;  // truncate, wrong_type, delete_line, duplicate_line, unknown_key, tab, open_flow, garbage, empty
+  std::string kind;  // truncate, wrong_type, delete_line, duplicate_line, unknown_key, tab, open_flow, garbage, empty, stray_comma
   std::string text;  // the file's bytes
 };
 
@@ -118,6 +118,9 @@ inline std::vector<ScenarioMutant> scenario_mutants(std::size_t count, std::uint
   std::vector<ScenarioMutant> out;
   out.push_back({"empty", "empty", ""});
   out.push_back({"only_comment", "empty", "# nothing here\n"});
+  // A stray ',' at the top: yaml-cpp 0.7's LoadAll never returned on these (fuzz/scenario_fuzz).
+  out.push_back({"stray_comma", "stray_comma", ","});
+  out.push_back({"stray_comma_first", "stray_comma", ",\n" + texts[0]});
   while (out.size() < count) {
     const std::size_t fi = pick(files.size());
     const std::string& text = texts[fi];
