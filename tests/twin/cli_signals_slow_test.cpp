@@ -240,8 +240,13 @@ TEST_P(CliTwinKilled, TheMasterStopsAndSaysSo) {
   EXPECT_EQ(master.wait(40s), 0) << master.out() << master.err();
   ASSERT_TRUE(fs::exists(stats)) << master.out() << master.err();
   const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
-  EXPECT_TRUE(contains(master.err(), "lost")) << "the master does not say what happened\n" << master.err();
-  if (e.bus == "m3") {
+  // TML says which axis "stopped answering"; the others name the lost node or axis.
+  EXPECT_TRUE(contains(master.err(), e.bus == "tml" ? "stopped answering" : "lost"))
+      << "the master does not say what happened\n" << master.err();
+  if (e.bus == "tml") {
+    EXPECT_EQ(s.at("phase"), "stopped") << s.dump(1);
+    EXPECT_GE(s.at("axes_lost").get<int>(), 1) << s.dump(1);
+  } else if (e.bus == "m3") {
     EXPECT_EQ(s.at("state"), "stopped") << s.dump(1);
     EXPECT_EQ(s.at("platform_stopped"), true);
     EXPECT_GE(s.at("lost_axis").get<int>(), 1);
@@ -251,11 +256,13 @@ TEST_P(CliTwinKilled, TheMasterStopsAndSaysSo) {
 }
 
 INSTANTIATE_TEST_SUITE_P(
-    CanopenAndM3, CliTwinKilled,
+    CanopenM3AndTml, CliTwinKilled,
     ::testing::Values(ExternalMaster{"canopen", "canopen_short.yaml", "waiting for a master", "udp:239.74.163.2:47723",
                                      "tests/data/canopen/drives_only.yaml"},
                       ExternalMaster{"m3", "m3_short.yaml", "a C1 master connects on", "udp:127.0.0.1:47724",
-                                     "tests/data/m3/servos_only.yaml"}),
+                                     "tests/data/m3/servos_only.yaml"},
+                      ExternalMaster{"tml", "tml_short.yaml", "waiting for a master", "udp:239.74.163.2:47725",
+                                     "tests/data/tml/drives_only.yaml"}),
     [](const ::testing::TestParamInfo<ExternalMaster>& i) { return i.param.bus; });
 
 }  // namespace
