@@ -10,8 +10,8 @@
 // Both run cycles of simulated time after the start-up (the servos are on and turning): 1 ms,
 // or the shortest whole number of ms the segment's plan fits (62 slaves: counter cycle_ms);
 // items_per_second = cycles per wall second; the counter ns_per_slave = wall time per cycle
-// divided by N. Not a CLI figure: the M-III bus has no `omnitwin run --bus m3` yet
-// (docs/protocols/mechatrolink3.md); run with `build/tests/bench/bench_m3_cycle`.
+// divided by N. In process, not a CLI figure (`omnitwin run --bus m3` is timed by
+// tests/bench/bench_cli.sh); run with `build/tests/bench/bench_m3_cycle` (scripts/bench does).
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
