@@ -248,11 +248,11 @@ FrameOutcome OmniMaster::handle_parameter(const omni::ParameterSetup& p) {
 // ---------------------------------------------------------------------------------------
 // Timer interrupt
 
-void OmniMaster::on_tick(std::int64_t now_ns) {
+void OmniMaster::on_tick(std::int64_t now_ns, bool late) {
   ++stats_.ticks;
   switch (state_) {
     case MasterState::detecting: detecting_tick(now_ns); break;
-    case MasterState::running: running_tick(now_ns); break;
+    case MasterState::running: running_tick(now_ns, late); break;
     case MasterState::waiting:
     case MasterState::stopped:
     case MasterState::finished: break;  // nothing is sent
@@ -274,10 +274,12 @@ void OmniMaster::detecting_tick(std::int64_t now_ns) {
   send_detection_request();  // answers accumulate over the start-up rounds
 }
 
-void OmniMaster::running_tick(std::int64_t now_ns) {
+void OmniMaster::running_tick(std::int64_t now_ns, bool late) {
   if (origin_ns_ < 0) {
     origin_ns_ = now_ns;  // the first running tick is path time 0
     fresh_feedback_.fill(false);
+  } else if (late) {
+    ++stats_.late_ticks;  // the master's own lateness: no slave is judged on it
   } else if (!feedback_ok() || !detection_round_ok()) {
     return;  // a watchdog stopped the slaves
   }
@@ -287,7 +289,7 @@ void OmniMaster::running_tick(std::int64_t now_ns) {
   }
   send_command(t);
   // Node detection between two samples: after this sample's command.
-  if (detection_due()) {
+  if (detection_due() && !(late && round_open_)) {  // a late tick leaves the open round open
     answered_.fill(false);
     round_open_ = true;
     send_detection_request();

@@ -89,6 +89,7 @@ struct OmniMasterStats {
   std::uint64_t detection_requests = 0;    // detection requests sent (start-up and running)
   std::uint64_t detection_rounds = 0;      // running rounds whose answers were checked
   std::uint64_t detection_misses = 0;      // slave-rounds without an answer
+  std::uint64_t late_ticks = 0;            // running ticks the loop ran half a period late or more (no watchdog judged them)
   std::uint64_t detection_answers = 0;     // slave answers received
   std::uint64_t pc_detections_answered = 0;  // our answers (0x002 remote) to requests heard
   std::uint64_t parameters_forwarded = 0;  // PC 0x702 type 0x0C fanned out to the four slaves
@@ -127,8 +128,11 @@ class OmniMaster {
   // if a watchdog fired or the path and settle time are over) the 0x102 command from
   // PlatformLoop::step(t − origin, counts), then the detection request when due. A frame
   // refused by the transport during detecting/running ends the tick with bus_error.
+  // `late`: the loop runs this tick half a period or more after its deadline (the master's
+  // own process did not run in time); such a tick judges no slave: no watchdog counts it and
+  // an open detection round stays open, since the slaves had no fair period to answer.
   // Real-time safe.
-  void on_tick(std::int64_t now_ns);
+  void on_tick(std::int64_t now_ns, bool late = false);
 
   // Process exit: NMT stop all unless already stopped or finished (see shutdown). RT-safe.
   void shutdown();
@@ -171,7 +175,7 @@ class OmniMaster {
   FrameOutcome handle_parameter(const omni::ParameterSetup& p);
 
   void detecting_tick(std::int64_t now_ns);
-  void running_tick(std::int64_t now_ns);
+  void running_tick(std::int64_t now_ns, bool late);
   bool feedback_ok();            // false: feedback_missing ran
   bool detection_round_ok();     // false: node_missing ran
   bool detection_due() const;

@@ -546,6 +546,37 @@ TEST(OmniMaster, RejectsABadConfiguration) {
   EXPECT_THROW(OmniMaster(c, [](const Frame&) { return true; }), MasterConfigError);
 }
 
+// A tick the loop ran late (the master's own process stalled: half a period or more) judges
+// no slave: the open round stays open and no request replaces it, feedback misses are not
+// counted. Found by the CAN soak, where a host stall read as "none of the slaves answered".
+TEST(OmniMaster, ALateTickJudgesNoSlaveAndKeepsTheRoundOpen) {
+  Harness h(line_config());
+  h.start();
+  h.tick();  // origin tick: command + request
+  h.take();
+  // The master's process stalls: the slaves have answered nothing yet when the late tick runs.
+  h.master.on_tick(h.now, /*late=*/true);
+  h.now += kPeriodNs;
+  EXPECT_EQ(h.master.report().state, MasterState::running);
+  const auto late = h.take();
+  EXPECT_EQ(late.size(), 1u) << "the command only: the open round keeps its request";
+  EXPECT_EQ(h.master.stats().late_ticks, 1u);
+  EXPECT_EQ(h.master.stats().detection_misses, 0u);
+  // The answers and feedback then come; the next tick on time finds the round complete.
+  h.feedback_all({0, 0, 0, 0});
+  h.answer_all();
+  h.tick();
+  EXPECT_EQ(h.master.report().state, MasterState::running);
+  EXPECT_EQ(h.master.stats().detection_misses, 0u);
+  // Without the late flag the same silence stops the system at once (the thesis's rule).
+  Harness strict(line_config());
+  strict.start();
+  strict.tick();
+  strict.take();
+  strict.tick();
+  EXPECT_EQ(strict.master.report().reason, StopReason::node_missing);
+}
+
 TEST(OmniMaster, AWholeBusGoingSilentStopsAtTheNextRoundAndCountsEverySlaveMissing) {
   Harness h(line_config());
   h.start();
