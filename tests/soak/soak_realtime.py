@@ -8,9 +8,13 @@
 #     the last third's median p99 no more than 1.5 × the first third's + 50 µs;
 #   - frames: zero lost (and no malformed, refused or not-returned frames, per bus);
 #   - the run ends by itself (exit 0 or 1: the soak scenario has no expectations), the master
-#     is never lost, and no tick overran.
+#     is never lost, says no warning or error in master.log (a lost node or segment, a stopped
+#     platform), and no tick overran.
 # Writes SUMMARY.json and a Markdown table (per minute) to --out; prints the verdict and
 # exits 0 (held), 1 (a bound broken) or 2 (could not run).
+#
+# --no-timing-bounds reports lateness without judging it (the short run in the default tests,
+# which ctest runs beside other tests).
 #
 # Usage: soak_realtime.py OMNITWIN --bus can|ethercat --duration S [--warmup S] [--sample S]
 #                         [--out DIR] [--params PLATFORM.yaml] [--set KEY=VALUE …]
@@ -132,6 +136,9 @@ def main():
     ap.add_argument("--out")
     ap.add_argument("--params", default=os.path.join(ROOT, "models/platform/omni4.yaml"))
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to omnitwin run")
+    ap.add_argument("--no-timing-bounds", action="store_true",
+                    help="report lateness but judge only memory, frames and the master (for runs beside other "
+                         "tests: with both cores busy this VM delays even SCHED_FIFO threads by milliseconds)")
     a = ap.parse_args()
     # A CAN-family soak gets a UDP port of its own: anything else on the default group and
     # port (another realtime run, a python-can script) would be a foreign sender on its bus.
@@ -187,7 +194,7 @@ def main():
         if mg >= 0.01:
             problems.append(f"master RSS grew {mg:.2%} after the warm-up ({m_first} → {m_last} KiB)")
     p99s = [m["p99_us"] for m in minutes]
-    if p99s:
+    if p99s and not a.no_timing_bounds:
         med = statistics.median(p99s)
         bound = max(3 * med, med + 500)
         worst = max(minutes, key=lambda m: m["p99_us"])
@@ -202,8 +209,19 @@ def main():
         if v:
             problems.append(f"bus.{k} = {v}")
     rt = metrics.get("realtime", {})
-    if rt.get("overruns", 0):
+    if rt.get("overruns", 0) and not a.no_timing_bounds:
         problems.append(f"{rt['overruns']} ticks overran")
+    # The master's own account: a warning or error (a lost node or segment, a stopped
+    # platform) means the run did not hold, whatever the twin's counters say.
+    try:
+        with open(os.path.join(run_dir, "master.log")) as f:
+            master_log = f.read().splitlines()
+    except OSError:
+        master_log = ["(no master.log)"]
+    alarms = [l for l in master_log if ": warning: " in l or ": error: " in l]
+    for line in alarms[:5]:
+        problems.append(f"master: {line}")
+    stalls = sum(1 for r in rows if float(r["late_max_us"]) >= 10_000)
     if metrics.get("master", {}).get("lost"):
         problems.append(f"master lost: {metrics['master'].get('lost_reason')}")
     if metrics.get("sim_time_s", 0) < a.duration - 1:
@@ -214,7 +232,8 @@ def main():
         "twin_rss_kib": {"at_warmup": t_first, "end": t_last, "growth": tg, "samples": twin_rss},
         "master_rss_kib": {"at_warmup": m_first, "end": m_last, "growth": mg, "samples": master_rss},
         "realtime": rt, "bus_counters": losses, "frames_tx": metrics.get("bus", {}).get("frames_tx"),
-        "frames_rx": metrics.get("bus", {}).get("frames_rx"), "minutes": minutes, "problems": problems,
+        "frames_rx": metrics.get("bus", {}).get("frames_rx"), "seconds_with_a_10ms_stall": stalls,
+        "master_alarms": alarms, "minutes": minutes, "problems": problems,
     }
     with open(os.path.join(out, "SUMMARY.json"), "w") as f:
         json.dump(summary, f, indent=1)
@@ -226,7 +245,8 @@ def main():
     print(f"soak {a.bus}: {a.duration:.0f} s realtime in {wall:.0f} s wall, exit {rc}; "
           f"RSS twin {t_first}→{t_last} KiB ({(tg or 0):+.2%}), master {m_first}→{m_last} KiB ({(mg or 0):+.2%}); "
           f"lateness p99 {rt.get('jitter_p99_us')} µs, max {rt.get('jitter_max_us')} µs, overruns {rt.get('overruns')}; "
-          f"frames tx {summary['frames_tx']} rx {summary['frames_rx']}, losses {losses}; records in {out}")
+          f"frames tx {summary['frames_tx']} rx {summary['frames_rx']}, losses {losses}; "
+          f"seconds with a tick 10 ms late or more: {stalls}; master alarms: {len(alarms)}; records in {out}")
     for pr in problems:
         print("FAIL: " + pr)
     print("soak: held" if not problems else f"soak: {len(problems)} bound(s) broken")
