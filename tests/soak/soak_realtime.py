@@ -5,11 +5,12 @@
 #     seconds, may not grow by 1 % or more between the end of the warm-up and the end;
 #   - timing: tick lateness per minute (from the run's realtime.csv, one row per second) must
 #     stay level: no minute's median p99 above max(3 × the run's median, median + 500 µs), and
-#     the last third's median p99 no more than 1.5 × the first third's + 50 µs;
+#     the last third's median p99 no more than 1.5 × the first third's + 50 µs; at most 1 tick
+#     in 10,000 overran (half a period late);
 #   - frames: zero lost (and no malformed, refused or not-returned frames, per bus);
 #   - the run ends by itself (exit 0 or 1: the soak scenario has no expectations), the master
-#     is never lost, says no warning or error in master.log (a lost node or segment, a stopped
-#     platform), and no tick overran.
+#     is never lost and says no warning or error in master.log (a lost node or segment, a
+#     stopped platform).
 # Writes SUMMARY.json and a Markdown table (per minute) to --out; prints the verdict and
 # exits 0 (held), 1 (a bound broken) or 2 (could not run).
 #
@@ -209,8 +210,10 @@ def main():
         if v:
             problems.append(f"bus.{k} = {v}")
     rt = metrics.get("realtime", {})
-    if rt.get("overruns", 0) and not a.no_timing_bounds:
-        problems.append(f"{rt['overruns']} ticks overran")
+    # A soak looks for trends (leaks, drift), not for the host's single hiccups: overruns are
+    # bounded at 1 in 10,000 ticks (a shared 2-core VM stalls now and then for a few ms).
+    if rt.get("overruns", 0) > rt.get("ticks", 0) / 10_000 and not a.no_timing_bounds:
+        problems.append(f"{rt['overruns']} ticks overran (more than 1 in 10,000)")
     # The master's own account: a warning or error (a lost node or segment, a stopped
     # platform) means the run did not hold, whatever the twin's counters say.
     try:
