@@ -64,12 +64,15 @@ void append_header(std::string& out, const PlatformParams& p) {
          std::string(to_string(p.sim.variant)) + " --out FILE -->\n";
   out += "  <compiler angle=\"radian\"/>\n";
   // Settings measured to work on MuJoCo 2.2.2 (facts/platform.md).
+  // Both variants use the pyramidal cone: the capsule's anisotropic friction works in it too,
+  // at half the constraint cost of the elliptic cone (measured, docs/platform.md).
   out += "  <option timestep=\"" + num(p.sim.timestep) +
-         "\" integrator=\"Euler\" solver=\"Newton\" cone=\"" +
-         (rollers ? "pyramidal" : "elliptic") + "\" noslip_iterations=\"0\"" +
+         "\" integrator=\"Euler\" solver=\"Newton\" cone=\"pyramidal\" noslip_iterations=\"0\"" +
          // 58 dofs is just under MuJoCo's automatic dense threshold (60); the tree-shaped
          // model is cheaper sparse: -18 % per step, results identical to every digit.
-         (rollers ? " jacobian=\"sparse\"" : "") + "/>\n";
+         (rollers ? std::string(" jacobian=\"sparse\"")
+                  : " tolerance=\"" + num(p.capsule.solver_tolerance) + "\"") +
+         "/>\n";
   // Generous buffers: at most ~16 contacts (64 pyramid rows) are ever active.
   out += "  <size njmax=\"600\" nconmax=\"150\"/>\n";
 }
@@ -192,16 +195,22 @@ void append_wheel_rollers(std::string& out, const PlatformParams& p, int wheel0)
 }
 
 void append_wheel_capsule(std::string& out, const PlatformParams& p, int wheel0) {
-  const double half = 0.01, r = p.geometry.r;  // facts: half-length 0.01 m along the axle
+  // The contact capsule: short, centred on the effective contact line (wheel frame +x is the
+  // radial axle, so a negative offset moves it toward the platform centre).
+  const double half = p.capsule.half_length, c = p.capsule.contact_offset, r = p.geometry.r;
   // Same total wheel mass as the roller variant: hub plus all rollers.
   const double mass = p.geometry.hub_mass + p.rollers.rows * p.rollers.per_row * p.rollers.mass;
   out += "        <geom name=\"" + wheel_name("tyre", wheel0) +
-         "\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" fromto=\"" +
-         nums({-half, 0, 0, half, 0, 0}) + "\" size=\"" + num(r) + "\" mass=\"" + num(mass) +
+         "\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" group=\"3\" fromto=\"" +
+         nums({c - half, 0, 0, c + half, 0, 0}) + "\" size=\"" + num(r) + "\" mass=\"" + num(mass) +
          "\" rgba=\"" + kWheelRgba[wheel0] + "\"/>\n";
+  // What a camera shows: a wheel of the real width (no mass, no contact), and a spoke.
+  const double w = p.geometry.wheel_width;
+  out += "        <geom name=\"" + wheel_name("rim", wheel0) + "\" class=\"visual\" type=\"cylinder\" fromto=\"" +
+         nums({-w / 2, 0, 0, w / 2, 0, 0}) + "\" size=\"" + num(r) + "\" rgba=\"" + kWheelRgba[wheel0] + "\"/>\n";
   out += "        <geom name=\"" + wheel_name("spoke", wheel0) +
-         "\" class=\"visual\" type=\"box\" pos=\"" + nums({0, 0, r}) + "\" size=\"" +
-         nums({half, 0.004, 0.0008}) + "\" rgba=\"0.1 0.1 0.1 1\"/>\n";
+         "\" class=\"visual\" type=\"box\" pos=\"" + nums({w / 2, 0, 0}) + "\" size=\"" +
+         nums({0.001, 0.9 * r, 0.004}) + "\" rgba=\"0.1 0.1 0.1 1\"/>\n";
 }
 
 // The wheel's place on the chassis: its frame turned by alpha about z, so +x is the radial

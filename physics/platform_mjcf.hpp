@@ -6,8 +6,10 @@
 // them in step). Two variants (facts/platform.md, measured on MuJoCo 2.2.2):
 //  - rollers: per wheel `rows` x `per_row` passive capsule rollers on hinges along the wheel
 //    tangent; omni motion comes from contact alone. Euler, Newton, pyramidal cone.
-//  - capsule: one capsule per wheel along the axle with an explicit floor-wheel <pair> whose
-//    friction is tiny along the axle and full in the rolling direction. Elliptic cone.
+//  - capsule (the fast model): one short capsule per wheel along the axle, on the roller
+//    model's effective contact line, with an explicit floor-wheel <pair> whose friction is
+//    tiny along the axle and full in the rolling direction. Pyramidal cone, Newton tolerance
+//    capsule.solver_tolerance; within 0.5 % of the roller model's twist (docs/platform.md).
 //
 // Naming contract (PlatformSim resolves these, hand-written models must follow it too):
 // body "chassis" with freejoint "root"; bodies and hinge joints "wheel1".."wheel4" (axis

@@ -15,7 +15,7 @@ namespace omnitwin::physics {
 // Which MJCF the generator produces from the parameters.
 enum class ModelVariant {
   rollers,  // passive capsule rollers on hinges: omni motion from contact alone (reference)
-  capsule,  // one capsule per wheel + anisotropic-friction floor pair: cheap, for sweeps
+  capsule,  // the fast model: one short capsule per wheel + anisotropic-friction floor pair
 };
 
 struct GeometryParams {
@@ -43,6 +43,18 @@ struct RollerParams {
   double damping = 0.0;       // hinge damping [N·m·s/rad]
   double friction_torque = 0.0;  // dry friction of each roller's bearing [N·m]: the rollers'
                                  // rolling resistance (0 = free rollers)
+};
+
+// The fast model (variant "capsule"): one short capsule per wheel stands for the whole roller
+// ring. Its contact sits on the roller model's effective contact line, so both models turn the
+// same wheel rotation into the same platform twist (docs/platform.md, "The fast model").
+struct CapsuleParams {
+  double half_length = 0.0005;  // along the axle [m]: short, so its two contacts coincide and
+                                // do not scrub against each other when the platform turns
+  double contact_offset = -0.001;  // contact line along the axle, + outward [m]: the roller
+                                   // model's load-weighted harmonic contact radius is
+                                   // L - 1.0 mm (its inner row carries more when turning)
+  double solver_tolerance = 1e-5;  // MuJoCo Newton tolerance [-] (MuJoCo's default 1e-8)
 };
 
 struct FloorParams {
@@ -126,6 +138,7 @@ struct PlatformParams {
   std::string source = "built-in defaults";  // file the values came from (for messages)
   GeometryParams geometry;
   RollerParams rollers;
+  CapsuleParams capsule;
   FloorParams floor;
   MotorParams motor;
   DriverParams driver;

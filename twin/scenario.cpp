@@ -190,7 +190,7 @@ std::string apply_override(YAML::Node& root, const Override& o) {
 
 // The sections of a parameter file (models/platform/omni4.yaml).
 std::vector<std::string_view> param_sections() {
-  return {"geometry", "rollers", "floor", "motor", "driver", "dac", "encoder", "velocity_loop", "sim"};
+  return {"geometry", "rollers", "capsule", "floor", "motor", "driver", "dac", "encoder", "velocity_loop", "sim"};
 }
 
 // The field that last set geometry.r or rollers.radius in one layer (for the cross-check).
@@ -230,6 +230,13 @@ void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
   read_number(s, "mass", r.mass, Bounds::positive());
   read_number(s, "damping", r.damping, Bounds::non_negative());
   read_number(s, "friction_torque", r.friction_torque, Bounds::non_negative());
+}
+
+void read_capsule(const YamlField& s, physics::CapsuleParams& c) {
+  s.allow_keys({"half_length", "contact_offset", "solver_tolerance"});
+  read_number(s, "half_length", c.half_length, Bounds::positive());
+  read_number(s, "contact_offset", c.contact_offset, Bounds::closed(-0.05, 0.05));
+  read_number(s, "solver_tolerance", c.solver_tolerance, Bounds::open_closed(0, 1e-2));
 }
 
 void read_floor(const YamlField& s, physics::FloorParams& f) {
@@ -302,6 +309,7 @@ void apply_param_sections(const YamlField& map, physics::PlatformParams& p) {
   ParamTrace t;
   read_geometry(map["geometry"], p.geometry, t);
   read_rollers(map["rollers"], p.rollers, t);
+  read_capsule(map["capsule"], p.capsule);
   read_floor(map["floor"], p.floor);
   read_motor(map["motor"], p.motor);
   for (const char* name : {"driver", "dac", "encoder", "velocity_loop"}) {

@@ -123,12 +123,35 @@ TEST_F(PlatformMjcf, WheelHingesPointRadiallyOutward) {
 TEST_F(PlatformMjcf, CapsuleVariantUsesAnisotropicFloorPairs) {
   mjModel* m = compile(platform_mjcf(params(ModelVariant::capsule)));
   ASSERT_NE(m, nullptr);
-  EXPECT_EQ(m->opt.cone, mjCONE_ELLIPTIC);
+  EXPECT_EQ(m->opt.cone, mjCONE_PYRAMIDAL);
+  EXPECT_DOUBLE_EQ(m->opt.tolerance, 1e-5);
   ASSERT_EQ(m->npair, 4);
   for (int p = 0; p < 4; ++p) {
     EXPECT_EQ(m->pair_dim[p], 3);
     EXPECT_DOUBLE_EQ(m->pair_friction[5 * p + 0], 0.001);  // along the axle
     EXPECT_DOUBLE_EQ(m->pair_friction[5 * p + 1], 0.9);    // rolling direction
+  }
+  mj_deleteModel(m);
+}
+
+TEST_F(PlatformMjcf, FastModelContactSitsOnTheEffectiveContactLineAndIsHiddenFromCameras) {
+  PlatformParams p = params(ModelVariant::capsule);
+  p.capsule.half_length = 0.002;
+  p.capsule.contact_offset = -0.003;
+  mjModel* m = compile(platform_mjcf(p));
+  ASSERT_NE(m, nullptr);
+  for (int w = 1; w <= 4; ++w) {
+    const int g = mj_name2id(m, mjOBJ_GEOM, ("tyre" + std::to_string(w)).c_str());
+    ASSERT_GE(g, 0);
+    EXPECT_EQ(m->geom_type[g], mjGEOM_CAPSULE);
+    EXPECT_NEAR(m->geom_size[3 * g + 0], 0.05, 1e-12);   // the wheel radius
+    EXPECT_NEAR(m->geom_size[3 * g + 1], 0.002, 1e-12);  // half-length along the axle
+    EXPECT_NEAR(m->geom_pos[3 * g + 0], -0.003, 1e-12);  // wheel frame +x is the radial axle
+    EXPECT_EQ(m->geom_group[g], 3);                      // MuJoCo hides group 3 by default
+    // The drawn wheel: the real width, no mass, no contact.
+    const int rim = mj_name2id(m, mjOBJ_GEOM, ("rim" + std::to_string(w)).c_str());
+    ASSERT_GE(rim, 0);
+    EXPECT_EQ(m->geom_contype[rim] | m->geom_conaffinity[rim], 0);
   }
   mj_deleteModel(m);
 }

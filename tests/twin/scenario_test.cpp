@@ -167,6 +167,9 @@ TEST(Scenario, ParameterFileValuesLandInPlatformParams) {
   EXPECT_DOUBLE_EQ(p.rollers.coverage_deg, 12);
   EXPECT_DOUBLE_EQ(p.rollers.mass, 0.02);
   EXPECT_DOUBLE_EQ(p.rollers.damping, 2.0e-5);
+  EXPECT_DOUBLE_EQ(p.capsule.half_length, 0.002);
+  EXPECT_DOUBLE_EQ(p.capsule.contact_offset, 0.001);
+  EXPECT_DOUBLE_EQ(p.capsule.solver_tolerance, 1.0e-7);
   EXPECT_DOUBLE_EQ(p.floor.friction, 0.8);
   EXPECT_DOUBLE_EQ(p.floor.lateral_friction, 0.002);
   EXPECT_DOUBLE_EQ(p.floor.slip_gain, 0.9);
@@ -209,6 +212,9 @@ TEST(Scenario, Omni4FileEqualsBuiltInDefaults) {
   EXPECT_EQ(p.rollers.coverage_deg, d.rollers.coverage_deg);
   EXPECT_EQ(p.rollers.mass, d.rollers.mass);
   EXPECT_EQ(p.rollers.damping, d.rollers.damping);
+  EXPECT_EQ(p.capsule.half_length, d.capsule.half_length);
+  EXPECT_EQ(p.capsule.contact_offset, d.capsule.contact_offset);
+  EXPECT_EQ(p.capsule.solver_tolerance, d.capsule.solver_tolerance);
   EXPECT_EQ(p.floor.friction, d.floor.friction);
   EXPECT_EQ(p.floor.lateral_friction, d.floor.lateral_friction);
   EXPECT_EQ(p.floor.slip_gain, d.floor.slip_gain);
