@@ -24,12 +24,13 @@ struct Registered {
 };
 
 // The registry: one row per `omnitwin experiment NAME`.
-std::array<Registered, 5> registry() {
+std::array<Registered, 6> registry() {
   return {{{"can-timing", run_can_timing},
            {"can-dropout", run_can_dropout},
            {"thesis-platform", run_thesis_platform},
            {"m3-cycle", run_m3_cycle},
-           {"thesis-calibrate", run_thesis_calibrate}}};
+           {"thesis-calibrate", run_thesis_calibrate},
+           {"fast-model", run_fast_model}}};
 }
 
 // `text` as one single-quoted shell word.

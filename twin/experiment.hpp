@@ -16,7 +16,11 @@
 #include <utility>
 #include <vector>
 
+#include "twin/scenario.hpp"
+
 namespace omnitwin::twin {
+
+struct CsvColumns;
 
 struct ExperimentOptions {
   ExperimentOptions(std::string out = {}, bool quick_run = false) : out_dir(std::move(out)), quick(quick_run) {}
@@ -43,12 +47,45 @@ int run_experiment(const std::string& name, const ExperimentOptions& options);
 std::vector<std::string> experiment_names();
 
 // The experiments themselves (registered under "can-timing", "can-dropout", "thesis-platform",
-// "m3-cycle", "thesis-calibrate").
+// "m3-cycle", "thesis-calibrate", "fast-model").
 int run_can_timing(const ExperimentOptions& options);
 int run_can_dropout(const ExperimentOptions& options);
 int run_thesis_platform(const ExperimentOptions& options);
 int run_m3_cycle(const ExperimentOptions& options);
 int run_thesis_calibrate(const ExperimentOptions& options);
+int run_fast_model(const ExperimentOptions& options);
+
+// ---- the fast-model comparison (experiment_fast_model.cpp) ----
+
+// How closely one run's platform follows another's, from their trajectory.csv records.
+struct TwistAgreement {
+  // RMS over windows of |mean twist difference| / RMS of |mean reference twist|, twist =
+  // (vx, vy, L·wz) [-]; the windows average out the roller model's ripple.
+  double twist_error = 0;
+  double final_pose_diff_m = 0;  // |Δ(x, y)| + L·|Δphi| at the last common sample [m]
+  double path_m = 0;             // the reference's travel, Σ |Δ(x, y)| + L·|Δphi| [m]
+  int windows = 0;
+};
+// Compares the common samples of two trajectories (columns t, x, y, phi, vx, vy, wz) in windows of
+// window_s; wheel_distance_m is L. Throws std::runtime_error for files without those columns or
+// with fewer than two rows.
+TwistAgreement twist_agreement(const CsvColumns& ref, const CsvColumns& fast, double wheel_distance_m,
+                               double window_s);
+
+inline constexpr double kFastModelTwistBound = 0.005;  // issue 17: within 0.5 % of the reference
+
+struct FastModelRow {
+  std::string scenario;  // the file's stem
+  std::string config;    // which fast configuration (set by the caller)
+  TwistAgreement agreement;
+  double rtf_reference = 0, rtf_fast = 0;  // medians of the timed runs
+  int exit_reference = 0, exit_fast = 0;   // of the last runs (1: the scenario's expectations failed)
+};
+// Runs `scenario` on bus direct in lockstep on the reference and on the fast model, `reps` times
+// interleaved, into dir/reference and dir/fast, with `fast_overrides` applied to the fast runs
+// only; compares the last pair. Throws what load_scenario and run_scenario throw.
+FastModelRow compare_fast_model(const std::string& scenario, const std::filesystem::path& dir, int reps,
+                                const std::vector<Override>& fast_overrides = {});
 
 // ---- the m3-cycle verification: one configuration run on the in-process M-III rig ----
 

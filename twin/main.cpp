@@ -594,7 +594,7 @@ int main(int argc, char** argv) {
   bool exp_quick = false;
   int exp_budget = 0;
   CLI::App* experiment = app.add_subcommand("experiment", "run one of the seeds' experiments (docs/experiments.md)");
-  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform | m3-cycle | thesis-calibrate")
+  experiment->add_option("name", exp_name, "can-timing | can-dropout | thesis-platform | m3-cycle | thesis-calibrate | fast-model")
       ->required();
   experiment->add_option("--out", exp_out, "output folder (default out/<name>/)");
   experiment->add_flag("--quick", exp_quick, "fewer configurations (a smoke run; the same checks)");

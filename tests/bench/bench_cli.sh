@@ -20,8 +20,6 @@ reps="${REPS:-3}"
 work="$(mktemp -d /tmp/omnitwin-bench-cli-XXXXXX)"
 trap 'rm -rf "$work"' EXIT
 
-now_ns() { date +%s%N; }
-median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 metric() { python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(m.get(sys.argv[2], 'nan'))" "$1" "$2"; }
 
 # One timed run: prints "wall_s sim_s in_run_rtf exit_code" or "refused <why>". Exit 1 (the

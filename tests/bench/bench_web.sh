@@ -18,7 +18,6 @@ read -r -a web_buses <<< "${BUSES:-can ethercat}"
 work="$(mktemp -d /tmp/omnitwin-bench-web-XXXXXX)"
 trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$work"' EXIT
 
-median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }
 metric() { python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(m.get(sys.argv[2], 'nan'))" "$1" "$2"; }
 
 # One run without the view: its in-run real-time factor.

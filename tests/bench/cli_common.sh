@@ -12,3 +12,7 @@ buses=(direct can canopen tml ethercat m3)
 extra_sets() {
   if [ "$1" = can ] && [ "$2" = 0.001 ]; then echo "--set platform.velocity_loop.period=0.001"; fi
 }
+
+# Wall clock in ns, and the median of numbers on stdin (one per line).
+now_ns() { date +%s%N; }
+median() { sort -g | awk '{a[NR] = $1} END {print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2}'; }

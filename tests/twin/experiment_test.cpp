@@ -59,7 +59,7 @@ bool matplotlib_available() { return std::system("/usr/bin/python3 -c 'import ma
 
 TEST(Experiment, RegistryListsEveryExperimentAndRejectsUnknownNames) {
   const std::vector<std::string> names = experiment_names();
-  EXPECT_EQ(names, (std::vector<std::string>{"can-timing", "can-dropout", "thesis-platform", "m3-cycle", "thesis-calibrate"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"can-timing", "can-dropout", "thesis-platform", "m3-cycle", "thesis-calibrate", "fast-model"}));
   omnitwin::testing::TempDir dir("omnitwin-exp");
   EXPECT_EQ(run_experiment("no-such-experiment", {dir.path().string(), true}), kExperimentUnknown);
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));  // nothing written for an unknown name
