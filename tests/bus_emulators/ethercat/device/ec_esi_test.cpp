@@ -135,7 +135,7 @@ TEST(EcEsi, ShippedMultiAxisFile) {
   const EsiObject* map = d.object(0x1600);
   ASSERT_NE(map, nullptr);
   EXPECT_EQ(map->entries[1].access, od_access::read_all);  // fixed mapping
-  EXPECT_EQ(d.sms[3].start, 0x1200);
+  EXPECT_EQ(d.sms[3].start, 0x1300);  // past SM2's three 96-byte buffers (0x1100 … 0x121F)
 }
 
 TEST(EcEsi, ArraysRestrictionsAndDecimalIds) {
