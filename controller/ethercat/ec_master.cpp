@@ -211,9 +211,13 @@ void EcMaster::tick(SimTime t) {
       dc_fill(b);
       break;
     case MasterPhase::running: {
-      const std::uint16_t len = static_cast<std::uint16_t>(image_.size());
+      // Overlapped: each slave's outputs at the start of its range (the rest is its inputs' room).
+      if (overlapped_)
+        for (const auto& s : slaves_) std::memcpy(wire_.data() + s.out_logical, image_.data() + s.out_offset, s.out_bytes);
+      const std::vector<std::uint8_t>& data = overlapped_ ? wire_ : image_;
+      const std::uint16_t len = static_cast<std::uint16_t>(data.size());
       if (len > 0) {
-        if (b.add_logical(Cmd::lrw, index_, config_.logical_base, len, image_.data()) >= 0) {
+        if (b.add_logical(Cmd::lrw, index_, config_.logical_base, len, data.data()) >= 0) {
           slots_[slot_count_++] = {SlotKind::lrw};
           lrw_out_ = true;
         }
@@ -325,7 +329,11 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
       }
       case SlotKind::lrw: {
         ++stats_.cycles;
-        std::memcpy(image_.data() + out_total_, d.data() + out_total_, in_total_);
+        if (overlapped_) {
+          for (const auto& s : slaves_) std::memcpy(image_.data() + s.in_offset, d.data() + s.in_logical, s.in_bytes);
+        } else {
+          std::memcpy(image_.data() + out_total_, d.data() + out_total_, in_total_);
+        }
         stats_.last_wkc = d.wkc();
         stats_.expected_wkc = expected_wkc_;
         cyclic_wkc(d.wkc(), true, t);
@@ -465,7 +473,7 @@ void EcMaster::lose_segment(SimTime t) {
 }
 
 // ---------------------------------------------------------------------------------------
-// layout: outputs of every slave, then inputs; expected WKC
+// layout: outputs of every slave, then inputs (on the wire too, or overlapped); expected WKC
 
 void EcMaster::layout() {
   std::uint32_t out = 0, in = 0;
@@ -484,10 +492,27 @@ void EcMaster::layout() {
   }
   out_total_ = out;
   in_total_ = in;
-  if (out + in + 2 + ec::kDatagramHeaderSize + ec::kWkcSize + 64 > ec::kMaxPdu) {
-    fail(fmt::format("process image of {} bytes does not fit one frame", out + in));
+  // Room a frame leaves for the LRW's data: the EtherCAT header, the datagram's header and
+  // WKC, and 64 bytes for what rides along (FRMW 0x0910, BRD 0x0130, a mailbox datagram).
+  const auto fits = [](std::uint32_t bytes) {
+    return bytes + 2 + ec::kDatagramHeaderSize + ec::kWkcSize + 64 <= ec::kMaxPdu;
+  };
+  std::uint32_t shared = 0;
+  for (const auto& s : slaves_) shared += std::max(s.out_bytes, s.in_bytes);
+  overlapped_ = config_.image_layout == ImageLayout::overlapped ||
+                (config_.image_layout == ImageLayout::automatic && !fits(out + in));
+  if (!fits(overlapped_ ? shared : out + in)) {
+    fail(fmt::format("process image of {} bytes does not fit one frame{}", overlapped_ ? shared : out + in,
+                     overlapped_ ? " even overlapped" : ""));
     return;
   }
+  std::uint32_t at = 0;
+  for (auto& s : slaves_) {
+    s.out_logical = overlapped_ ? at : s.out_offset;
+    s.in_logical = overlapped_ ? at : s.in_offset;
+    at += std::max(s.out_bytes, s.in_bytes);
+  }
+  wire_.assign(overlapped_ ? shared : 0, 0);
   image_.assign(out + in, 0);
   int wkc = 0;
   for (const auto& s : slaves_) wkc += (s.out_bytes ? 2 : 0) + (s.in_bytes ? 1 : 0);
@@ -502,7 +527,8 @@ void EcMaster::layout() {
       if (at && at->output) write_entry(*at, bytes_value(st.data, false));
     }
   }
-  emit(fmt::format("process image: {} output bytes, {} input bytes, expected WKC {}", out, in, wkc));
+  emit(fmt::format("process image: {} output bytes, {} input bytes{}, expected WKC {}", out, in,
+                   overlapped_ ? fmt::format(", overlapped in {} bytes", shared) : std::string(), wkc));
 }
 
 std::optional<EntryLocation> EcMaster::find_entry(int position, std::uint16_t index, std::uint8_t sub) const {
@@ -714,11 +740,11 @@ void EcMaster::slave_fill(Slave& s, ec::PduBuilder& b, SimTime t) {
       int fmmu = 0;
       if (s.out_bytes) {
         const std::uint16_t start = sm_bytes(sm_index(s, 3, 2), s.out_bytes, 0x64);
-        fmmu_bytes(fmmu++, config_.logical_base + s.out_offset, s.out_bytes, start, 0x02);
+        fmmu_bytes(fmmu++, config_.logical_base + s.out_logical, s.out_bytes, start, 0x02);
       }
       if (s.in_bytes) {
         const std::uint16_t start = sm_bytes(sm_index(s, 4, 3), s.in_bytes, 0x20);
-        fmmu_bytes(fmmu++, config_.logical_base + s.in_offset, s.in_bytes, start, 0x01);
+        fmmu_bytes(fmmu++, config_.logical_base + s.in_logical, s.in_bytes, start, 0x01);
       }
       s.step_subs = sub;
       if (sub == 0) {

@@ -39,7 +39,8 @@
 // The mailbox (CoE SDO) is served per slave alongside its steps: one mailbox datagram per
 // slave per frame (write SM0, then poll SM1; a lost read asks the slave to repeat its reply
 // through the SM1 repeat bit), internal requests (start-up SDOs, PDO mapping)
-// before the user's SDO queue. Cyclic process data: one LRW over the whole image (+ FRMW
+// before the user's SDO queue. Cyclic process data: one LRW over the whole image (laid out
+// separate or overlapped, EcMasterConfig::image_layout) (+ FRMW
 // 0x0910 to the reference clock when DC is on), expected WKC = 2 × slaves with outputs +
 // slaves with inputs. After the first OP, every al_check_every_ns a BRD 0x0130 rides along:
 // a slave that is not in OP (or shows the error bit) while the WKC is still right — e.g. one
@@ -107,6 +108,8 @@ struct StartupSdo {
   std::vector<std::uint8_t> data;   // little endian, its size is the object's size
 };
 
+enum class ImageLayout : std::uint8_t { automatic, separate, overlapped };
+
 struct EcMasterConfig {
   std::vector<DeviceDescription> devices;  // ESI descriptions the slaves are matched against
   SimTime cycle_ns = 1'000'000;            // tick period [ns] (DC SYNC0 cycle)
@@ -122,6 +125,12 @@ struct EcMasterConfig {
   int segment_loss_cycles = 10;            // consecutive cycles without any WKC → segment lost (0 = off)
   SimTime al_check_every_ns = 100'000'000; // BRD 0x0130 with the cyclic frame this often [ns]
   std::uint32_t logical_base = 0x00010000; // logical address of the image
+  // How the LRW lays the image out on the wire. separate: every slave's outputs, then every
+  // slave's inputs (out + in bytes). overlapped: each slave's outputs and inputs share one
+  // logical range of max(out, in) bytes — its ESC writes the outputs first and puts its inputs
+  // in their place (facts/ethercat.md, LRW) — so twice the axes fit one frame. automatic:
+  // separate while that fits one frame, else overlapped.
+  ImageLayout image_layout = ImageLayout::automatic;
 };
 
 // Where a PDO entry sits in the logical image.
@@ -140,6 +149,7 @@ struct SlaveStatus {
   bool pdo_from_coe = false;               // mapping read over CoE (else SII/ESI)
   std::uint32_t out_offset = 0, out_bytes = 0;  // byte offsets within the image
   std::uint32_t in_offset = 0, in_bytes = 0;
+  std::uint32_t out_logical = 0, in_logical = 0;  // offsets from logical_base on the wire
   AlState al_state = AlState::init;        // last AL status read (INIT until read)
   std::uint16_t al_code = 0;               // last AL status code read (0x0134)
   SlaveStep step = SlaveStep::sii_cmd;
@@ -209,6 +219,9 @@ class EcMaster {
   std::span<std::uint8_t> image() { return image_; }
   std::span<const std::uint8_t> image() const { return image_; }
   std::uint32_t output_bytes() const { return out_total_; }
+  // The layout the image took (separate until the layout is done) and the LRW's data length.
+  bool image_overlapped() const { return overlapped_; }
+  std::uint32_t lrw_bytes() const { return static_cast<std::uint32_t>(overlapped_ ? wire_.size() : image_.size()); }
   std::optional<EntryLocation> find_entry(int position, std::uint16_t index, std::uint8_t sub) const;
   std::int64_t read_entry(const EntryLocation& at, bool is_signed) const;
   void write_entry(const EntryLocation& at, std::int64_t value);
@@ -321,8 +334,10 @@ class EcMaster {
   std::uint8_t index_ = 0;        // datagram index of the outstanding frame's first datagram
   bool reset_ok_ = false;
 
-  std::vector<std::uint8_t> image_;
+  std::vector<std::uint8_t> image_;   // outputs of every slave, then inputs (entry offsets)
   std::uint32_t out_total_ = 0, in_total_ = 0;
+  bool overlapped_ = false;           // the LRW carries wire_, not image_
+  std::vector<std::uint8_t> wire_;    // overlapped: the LRW's data, one range per slave
   bool layout_done_ = false;
   bool operational_once_ = false;
   int wkc_bad_run_ = 0;

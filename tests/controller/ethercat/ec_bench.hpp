@@ -100,4 +100,58 @@ struct Bench {
   }
 };
 
+// A segment of seed 001's multi-axis slaves (models/ethercat/omnitwin_multiaxis.xml): `axes`
+// axis cards in all, 8 per slave and the rest on the last (100 axes: 12 × 8 + 4), our master
+// core in-process at `cycle` with distributed clocks, each card's drive stepped at rest by its
+// slave's firmware cycle (SYNC0). One step() = the line to t (SYNC0 pulses), one master tick,
+// the frame through the chain and back. The 100-axis segment of issue 17, item 4.
+struct MultiAxisSegment {
+  std::vector<ec::DeviceDescription> devices =
+      ec::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
+  std::vector<std::unique_ptr<ec::DriveSlave>> slaves;
+  ec::EscChain chain;
+  std::unique_ptr<me::EcMaster> master;
+  std::vector<std::uint8_t> frame;
+  bool sent = false;
+  me::SimTime t = 0;
+  me::SimTime cycle = 100'000;
+
+  MultiAxisSegment(int axes, me::SimTime cycle_ns, me::EcMasterConfig cfg = {}) : cycle(cycle_ns) {
+    for (int left = axes, i = 0; left > 0; left -= 8, ++i) {
+      ec::DriveSlaveConfig sc;
+      sc.axes = left < 8 ? left : 8;
+      sc.serial = static_cast<std::uint32_t>(1 + i);
+      sc.drive.period_s = static_cast<double>(cycle_ns) * 1e-9;
+      slaves.push_back(std::make_unique<ec::DriveSlave>(devices.front(), sc));
+      ec::DriveSlave* sl = slaves.back().get();
+      sl->set_cycle_hook([sl](me::SimTime at) {
+        for (int a = 0; a < sl->axes(); ++a) sl->axis(a).step(at, omnitwin::drive::Feedback{});
+      });
+      chain.add(&sl->esc());
+    }
+    cfg.devices = devices;
+    cfg.cycle_ns = cycle_ns;
+    cfg.dc = true;
+    cfg.expected_slaves = static_cast<int>(slaves.size());
+    master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
+      frame.assign(pdu.begin(), pdu.end());
+      sent = true;
+      return true;
+    });
+  }
+
+  void step() {
+    for (auto& s : slaves) s->cycle(t);  // mailbox replies (process data runs on SYNC0 once DC is on)
+    chain.advance(t);
+    sent = false;
+    master->tick(t);
+    if (sent && chain.process(frame, t)) master->on_frame(frame, t + cycle / 2);
+    t += cycle;
+  }
+  bool to_op(int max_steps) {
+    for (int k = 0; k < max_steps && !master->operational() && master->phase() != me::MasterPhase::failed; ++k) step();
+    return master->operational();
+  }
+};
+
 }  // namespace ecbench

@@ -385,6 +385,48 @@ TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   EXPECT_EQ(m.slave(0).esi->product_code, 0x00000801u);
 }
 
+// Issue 17, item 4: seed 001's 100 axes (12 slaves of 8 cards and one of 4, 12 bytes per card
+// each way) are 2,400 image bytes, more than a frame holds; laid out overlapped (each slave's
+// outputs and inputs on one logical range) they are 1,200 and cycle in one LRW at 100 µs. Every
+// status module lands at its own slave's place (an idle slot k reports card k + 1), and a
+// command written for the last slave's first slot reaches that slave alone.
+TEST(EcMaster, AHundredAxesCycleInOneOverlappedLrwAndEachModuleLandsAtItsSlave) {
+  ecbench::MultiAxisSegment seg(100, 100'000);
+  ASSERT_EQ(seg.slaves.size(), 13u);
+  ASSERT_TRUE(seg.to_op(400000)) << seg.master->error() << "\n" << events(*seg.master);
+  EXPECT_TRUE(seg.master->image_overlapped());
+  EXPECT_EQ(seg.master->lrw_bytes(), 1200u);
+  EXPECT_EQ(seg.master->output_bytes(), 1200u);
+  // The last slave, slot 0: card 3, velocity mode with the handshake bit toggled.
+  const auto& last = seg.master->slave(12);
+  ASSERT_EQ(last.out_bytes, 48u);
+  auto img = seg.master->image();
+  img[last.out_offset] = 3;
+  img[last.out_offset + 1] = 0x82;  // mode 2, handshake bit 15
+  for (int k = 0; k < 200; ++k) seg.step();
+  EXPECT_EQ(seg.master->stats().last_wkc, 39);  // 3 per slave: outputs written, inputs read
+  EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
+  EXPECT_EQ(seg.master->stats().lost_frames, 0u);
+  for (int p = 0; p < 13; ++p) {
+    const auto& s = seg.master->slave(p);
+    for (std::uint32_t k = 0; k < s.in_bytes / 12; ++k) {
+      const std::uint8_t card = seg.master->image()[s.in_offset + 12 * k];
+      EXPECT_EQ(card, p == 12 && k == 0 ? 3 : k + 1) << "slave " << p << " slot " << k;
+    }
+  }
+  EXPECT_EQ(seg.master->image()[last.in_offset + 1] & 0x7F, 2);  // card 3 runs velocity mode
+}
+
+// Forced to the separate layout, the same segment cannot start: the image does not fit.
+TEST(EcMaster, AHundredAxesLaidOutSeparatelyAreRefusedAsTooLargeForAFrame) {
+  EcMasterConfig cfg;
+  cfg.image_layout = ImageLayout::separate;
+  ecbench::MultiAxisSegment seg(100, 100'000, cfg);
+  EXPECT_FALSE(seg.to_op(400000));
+  EXPECT_EQ(seg.master->phase(), MasterPhase::failed);
+  EXPECT_NE(seg.master->error().find("2400 bytes does not fit one frame"), std::string::npos) << seg.master->error();
+}
+
 TEST(EcMaster, PoweredOffDcSlaveRejoinsDistributedClocks) {
   EcMasterConfig cfg;
   cfg.dc = true;
