@@ -545,7 +545,22 @@ void Esc::logical(Datagram& d, SimTime t, bool& did_read, bool& did_write) {
       // Byte-aligned spans (every FMMU a master lays out for byte-sized PDOs) move byte by
       // byte with the same checks; bit-granular ones bit by bit.
       const bool bytes = (s.physical_bit & 7) == 0 && (s.frame_bit & 7) == 0 && (s.bits & 7) == 0;
-      for (std::uint32_t k = 0; bytes && k < s.bits / 8; ++k) {
+      // The common case in one block: a byte span in process RAM (every byte writable) inside
+      // at most one SyncManager, whose buffer moves the whole span by the same amount.
+      const auto& h0 = sms_[static_cast<std::size_t>(hit[0])].reg;
+      const bool block = bytes && pa >= kProcessRam &&
+                         (hits == 0 || (hits == 1 && pa >= h0.start && pa + pn <= static_cast<std::uint32_t>(h0.start) + h0.length));
+      const std::uint32_t p0 = block ? target(pa) : 0;
+      const bool fast = block && p0 + pn <= mem_.size();
+      if (fast) {
+        std::uint8_t* fb = data + (s.frame_bit >> 3);
+        if (writing) {
+          std::memcpy(mem_.data() + p0, fb, pn);
+        } else {
+          std::memcpy(fb, mem_.data() + p0, pn);
+        }
+      }
+      for (std::uint32_t k = 0; bytes && !fast && k < s.bits / 8; ++k) {
         const std::uint32_t x = (s.physical_bit >> 3) + k;
         const std::uint32_t p = target(x);
         if (p >= mem_.size()) continue;
