@@ -10,12 +10,25 @@
 // wall second; ns_per_slave = wall time per cycle / N; the counter max_slaves_1ms = how many
 // such slaves one core could cycle in 1 ms at this cost (1 ms / ns_per_slave). In process, not
 // a CLI figure: it is the bus model's share of a run (docs/benchmarks.md explains the split).
-// 35 or more drives would not fit one LRW image (our master's one frame per cycle). This
-// benchmark found that 22 or more did not even start (fixed: EcMaster::fill_slaves).
+// From 35 drives on the image no longer fits one LRW laid out separately; the master then
+// overlaps it (EcMasterConfig::image_layout), which holds up to 59 of these drives
+// (24 bytes each). This benchmark found that 22 or more did not even start (fixed:
+// EcMaster::fill_slaves). BM_Segment100Lockstep / BM_Segment100Realtime: seed 001's 100 axes.
 // Run with `build/tests/bench/bench_ec_scaling` (scripts/bench does).
 #include <benchmark/benchmark.h>
 
+#include <pthread.h>
+#include <sched.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <vector>
+
+#include "bus_emulators/ethercat/transport/ec_transport.hpp"
+#include "tests/bench/ec_chain_thread.hpp"
 #include "tests/controller/ethercat/ec_bench.hpp"
+#include "tests/support/veth.hpp"
 
 namespace {
 
@@ -63,8 +76,141 @@ void BM_EcDrivesOnly(benchmark::State& state) {
   counters(state, n);
 }
 
-BENCHMARK(BM_EcDrivesOnly)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32);
-BENCHMARK(BM_EcCycle)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32);
+BENCHMARK(BM_EcDrivesOnly)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48);
+BENCHMARK(BM_EcCycle)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48);
+
+// ---- seed 001's 100 axes: 13 multi-axis slaves (12 × 8 cards + 4), one overlapped LRW ----
+
+constexpr ecbench::me::SimTime k100us = 100'000;
+constexpr int kAxes = 100;
+
+std::unique_ptr<ecbench::MultiAxisSegment> segment100(benchmark::State& state, ecbench::me::SimTime cycle = k100us) {
+  auto seg = std::make_unique<ecbench::MultiAxisSegment>(kAxes, cycle);
+  if (!seg->to_op(400000)) {
+    state.SkipWithError(("the 100-axis segment did not reach OP: " + seg->master->error()).c_str());
+    return nullptr;
+  }
+  return seg;
+}
+
+// Lockstep: 60 s of simulated time (600,000 cycles of 100 µs) in process — the master's tick,
+// the frame through 13 ESCs and back, 1,300 firmware cycles of 100 axes per 100 ms — timed;
+// beside it, in the same iteration, the baseline: the same 100 drives stepped 600,000 times with
+// no bus. rtf = 60 s / wall; bus_share = (segment − drives) / segment.
+void BM_Segment100Lockstep(benchmark::State& state) {
+  auto seg = segment100(state);
+  if (!seg) return;
+  const int cycles = static_cast<int>(state.range(0));
+  double seg_s = 0, drives_s = 0;
+  for (auto _ : state) {
+    auto t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < cycles; ++k) seg->step();
+    seg_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < cycles; ++k)
+      for (auto& sl : seg->slaves)
+        for (int a = 0; a < sl->axes(); ++a) sl->axis(a).step(seg->t + k * k100us, omnitwin::drive::Feedback{});
+    drives_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  const double sim_s = static_cast<double>(cycles) * 1e-4 * static_cast<double>(state.iterations());
+  state.counters["rtf"] = sim_s / seg_s;
+  state.counters["rtf_drives_only"] = sim_s / drives_s;
+  state.counters["us_per_cycle"] = seg_s / (sim_s / 1e-4) * 1e6;
+  state.counters["bus_share"] = (seg_s - drives_s) / seg_s;
+  state.counters["wkc_errors"] = static_cast<double>(seg->master->stats().wkc_errors);
+  state.counters["lost_frames"] = static_cast<double>(seg->master->stats().lost_frames);
+  state.counters["last_wkc"] = seg->master->stats().last_wkc;
+  state.counters["lrw_bytes"] = seg->master->lrw_bytes();
+}
+
+// Realtime: the same segment served on its own SCHED_FIFO thread on end b of a veth pair (what
+// the twin's segment does per frame), our master core on this thread (SCHED_FIFO) on end a,
+// paced by clock_nanosleep to absolute deadlines every state.range(1) µs (100: the seed's cycle;
+// 250, 500, 1000: what this machine holds) for state.range(0) seconds. Per cycle:
+// tick → send → wait for the answer until the next deadline → on_frame. Counters: frames sent,
+// lost (the master's own count: not back by the next tick), wkc_errors, turnaround p50/p99/max
+// (send → answer), late_starts (a cycle that began half a period or more after its deadline)
+// and the worst start lateness; fifo = 1 when both threads got SCHED_FIFO.
+void BM_Segment100Realtime(benchmark::State& state) {
+  if (const auto why = omnitwin::testing::VethPair::unavailable_reason()) {
+    state.SkipWithError(why->c_str());
+    return;
+  }
+  const ecbench::me::SimTime cycle = state.range(1) * 1000;
+  auto seg = segment100(state, cycle);
+  if (!seg) return;
+  sched_param sp{};
+  sp.sched_priority = 40;
+  const bool fifo = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0;
+  omnitwin::testing::VethPair veth;
+  const std::int64_t seconds = state.range(0);
+  std::vector<double> turn_us;
+  std::uint64_t late_starts = 0, sent = 0;
+  double worst_late_us = 0;
+  bool chain_fifo = false;
+  for (auto _ : state) {
+    ecbench::ChainThread chain(seg->chain, seg->t, "raw:" + veth.b(), 40);
+    auto master = omnitwin::ethercat::open_transport("raw:" + veth.a(), omnitwin::ethercat::Role::master);
+    std::vector<std::uint8_t> buf(omnitwin::ethercat::kMaxPdu);
+    const std::int64_t cycles = seconds * 1'000'000'000 / cycle;
+    turn_us.reserve(static_cast<std::size_t>(cycles));
+    timespec next{};
+    clock_gettime(CLOCK_MONOTONIC, &next);
+    const auto start = std::chrono::steady_clock::now();
+    for (std::int64_t k = 0; k < cycles; ++k) {
+      next.tv_nsec += cycle;
+      if (next.tv_nsec >= 1'000'000'000) next.tv_nsec -= 1'000'000'000, ++next.tv_sec;
+      clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr);
+      timespec now{};
+      clock_gettime(CLOCK_MONOTONIC, &now);
+      const double late_us = static_cast<double>((now.tv_sec - next.tv_sec) * 1'000'000'000 + now.tv_nsec - next.tv_nsec) / 1e3;
+      worst_late_us = std::max(worst_late_us, late_us);
+      late_starts += late_us * 1e3 >= static_cast<double>(cycle) / 2;
+      const auto t = seg->t + std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
+      seg->sent = false;
+      seg->master->tick(t);
+      if (!seg->sent) continue;
+      const auto t0 = std::chrono::steady_clock::now();
+      master->send(seg->frame);
+      ++sent;
+      // Wait for the answer until the next deadline at most. An answer that came after its
+      // deadline is still queued: handed to the master (which counts it stray), and the wait
+      // goes on for this cycle's.
+      const auto deadline = std::chrono::steady_clock::now() + std::chrono::nanoseconds(cycle) -
+                            std::chrono::nanoseconds(static_cast<std::int64_t>(late_us * 1e3));
+      const std::uint64_t before = seg->master->stats().frames_received;
+      while (seg->master->stats().frames_received == before) {
+        const auto left = deadline - std::chrono::steady_clock::now();
+        if (left <= std::chrono::nanoseconds(0)) break;
+        const int n = master->receive(buf, left);
+        if (n <= 0) break;
+        const auto t1 = std::chrono::steady_clock::now();
+        seg->master->on_frame(std::span<std::uint8_t>(buf.data(), static_cast<std::size_t>(n)),
+                              seg->t + std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - start).count());
+        if (seg->master->stats().frames_received != before)
+          turn_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      }
+    }
+    chain_fifo = chain.fifo();
+  }
+  std::sort(turn_us.begin(), turn_us.end());
+  const auto pct = [&](int p) { return turn_us.empty() ? -1.0 : turn_us[std::min(turn_us.size() - 1, turn_us.size() * p / 100)]; };
+  const auto& st = seg->master->stats();
+  state.counters["frames_sent"] = static_cast<double>(sent);
+  state.counters["lost_frames"] = static_cast<double>(st.lost_frames);
+  state.counters["stray_frames"] = static_cast<double>(st.stray_frames);
+  state.counters["wkc_errors"] = static_cast<double>(st.wkc_errors);
+  state.counters["turnaround_p50_us"] = pct(50);
+  state.counters["turnaround_p99_us"] = pct(99);
+  state.counters["turnaround_max_us"] = turn_us.empty() ? -1.0 : turn_us.back();
+  state.counters["late_starts"] = static_cast<double>(late_starts);
+  state.counters["worst_late_us"] = worst_late_us;
+  state.counters["operational"] = seg->master->operational();
+  state.counters["fifo"] = fifo && chain_fifo;
+}
+
+BENCHMARK(BM_Segment100Lockstep)->Arg(600000)->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_Segment100Realtime)->Args({60, 100})->Args({20, 250})->Args({20, 500})->Args({20, 1000})->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 }  // namespace
 

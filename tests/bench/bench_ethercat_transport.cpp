@@ -56,6 +56,7 @@
 #include "bus_emulators/ethercat/transport/ec_echo.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
 #include "controller/ethercat/ec_master.hpp"
+#include "tests/bench/ec_chain_thread.hpp"
 #include "tests/support/veth.hpp"
 
 namespace {
@@ -242,45 +243,6 @@ std::pair<std::vector<std::uint8_t>, std::uint16_t> chain_pdu(const Segment& seg
   return {};
 }
 
-// What the twin's segment does with each frame in realtime, on its own thread: receive on the
-// slaves-role transport, run the line to the frame's instant (SYNC0 pulses), pass the frame
-// through the slaves, send it back. Simulated time = the set-up's OP instant + wall time since.
-class ChainThread {
- public:
-  ChainThread(Segment& seg, const std::string& spec)
-      : seg_(seg), transport_(ethercat::open_transport(spec, ethercat::Role::slaves)) {
-    thread_ = std::thread([this] { serve(); });
-  }
-  ~ChainThread() {
-    stop_.store(true, std::memory_order_relaxed);
-    thread_.join();
-  }
-  ChainThread(const ChainThread&) = delete;
-  ChainThread& operator=(const ChainThread&) = delete;
-
- private:
-  void serve() {
-    std::array<std::uint8_t, ethercat::kMaxPdu> buf{};
-    const auto t0 = std::chrono::steady_clock::now();
-    const SimTime base = seg_.t;
-    while (!stop_.load(std::memory_order_relaxed)) {
-      const int n = transport_->receive(buf, 20ms);
-      if (n < 0) break;
-      if (n == 0) continue;
-      const SimTime t = base + std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                   std::chrono::steady_clock::now() - t0).count();
-      seg_.chain.advance(t);
-      const std::span<std::uint8_t> pdu(buf.data(), static_cast<std::size_t>(n));
-      if (seg_.chain.process(pdu, t)) transport_->send(pdu);
-    }
-  }
-
-  Segment& seg_;
-  std::unique_ptr<ethercat::EcTransport> transport_;
-  std::atomic<bool> stop_{false};
-  std::thread thread_;
-};
-
 // One timed round trip of `pdu` through `master`; nullopt when no answer of its size came back.
 std::optional<double> round_trip_us(ethercat::EcTransport& master, std::span<const std::uint8_t> pdu,
                                     std::span<std::uint8_t> buf) {
@@ -316,8 +278,8 @@ void BM_ChainRoundTrip(benchmark::State& state) {
   testing::VethPair chain_veth, echo_veth;
   ethercat::EchoThread echo("raw:" + echo_veth.b());
   auto echo_master = ethercat::open_transport("raw:" + echo_veth.a(), ethercat::Role::master);
-  std::optional<ChainThread> chain;
-  chain.emplace(seg, "raw:" + chain_veth.b());
+  std::optional<ecbench::ChainThread> chain;
+  chain.emplace(seg.chain, seg.t, "raw:" + chain_veth.b());
   auto chain_master = ethercat::open_transport("raw:" + chain_veth.a(), ethercat::Role::master);
 
   std::vector<std::uint8_t> buf(ethercat::kMaxPdu);
