@@ -25,7 +25,7 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
   c.file = file;
   const Members top(file, root, "",
                     {"esi", "cycle", "dc", "expected_slaves", "startup", "wheels", "wheel_mode", "wheel_counts_per_rev",
-                     "platform", "user_pdo", "segment_loss_cycles"});
+                     "platform", "user_pdo", "segment_loss_cycles", "segment_loss_ms"});
   const Val* esi = top.get("esi");
   if (!esi) fail(file, root, "esi", "required (the ESI files describing the slaves)");
   if (esi->node.IsScalar()) {
@@ -59,6 +59,11 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
     const std::int64_t v = integer(file, *n, "segment_loss_cycles");
     if (v < 0 || v > 100000) fail(file, *n, "segment_loss_cycles", "must be in 0..100000 (0 = off)");
     c.segment_loss_cycles = static_cast<int>(v);
+  }
+  if (const Val* n = top.get("segment_loss_ms")) {
+    const std::int64_t v = integer(file, *n, "segment_loss_ms");
+    if (v < 0 || v > 100000) fail(file, *n, "segment_loss_ms", "must be in 0..100000");
+    c.segment_loss_ms = static_cast<int>(v);
   }
   if (const Val* n = top.get("startup")) {
     if (!n->node.IsSequence()) fail(file, *n, "startup", "expected a list");
@@ -160,6 +165,7 @@ EcMasterConfig make_master_config(const EcConfig& c) {
   m.startup = c.startup;
   m.expected_slaves = c.expected_slaves;
   m.segment_loss_cycles = c.segment_loss_cycles;
+  m.segment_loss_ns = static_cast<SimTime>(c.segment_loss_ms) * 1'000'000;
   return m;
 }
 

@@ -2,7 +2,8 @@
 // controller/master_config for `omni-master --bus ethercat`.
 //
 // It names the ESI files to load, the cycle, distributed clocks (on/off, SYNC0 shift), the
-// segment watch (segment_loss_cycles: silent cycles before leaving OP), the start-up SDOs per
+// segment watch (segment_loss_cycles and segment_loss_ms: silent cycles, and how long at least,
+// before leaving OP), the start-up SDOs per
 // slave (e.g. 0x6060 = 9 for CSV), which (slave, channel) drives each of the
 // four wheels, how wheel speeds go out (CSV target velocity or CSP target position) and the
 // wheel encoder counts per revolution, and the platform loop. The file is read with yaml-cpp.
@@ -45,6 +46,7 @@ struct EcConfig {
   // Consecutive cycles without any WKC (frame lost or untouched) before the master declares
   // the segment lost, leaves OP and stops its drives; 0 = never.
   int segment_loss_cycles = 10;
+  int segment_loss_ms = 10;  // …and at least this long (EcMasterConfig::segment_loss_ns)
   std::vector<StartupSdo> startup;         // position -1 = every slave
   bool has_wheels = false;                 // `wheels` given: the platform loop runs
   std::array<AxisRef, 4> wheels{};         // wheel i+1 → axis

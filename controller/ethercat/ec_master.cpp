@@ -453,7 +453,15 @@ void EcMaster::cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t) {
   if (wkc_bad_run_ >= config_.wkc_loss_cycles) {
     for (auto& s : slaves_) s.check = s.step == SlaveStep::op;
   }
-  if (config_.segment_loss_cycles > 0 && silent_run_ == config_.segment_loss_cycles && !segment_lost_) lose_segment(t);
+  if (config_.segment_loss_cycles > 0 && silent_run_ >= segment_loss_threshold() && !segment_lost_) lose_segment(t);
+}
+
+// Silent cycles that make a lost segment: segment_loss_cycles, and enough of them to span
+// segment_loss_ns.
+int EcMaster::segment_loss_threshold() const {
+  const SimTime cycle = std::max<SimTime>(1, config_.cycle_ns);
+  const auto span = static_cast<int>((config_.segment_loss_ns + cycle - 1) / cycle);
+  return std::max(config_.segment_loss_cycles, span);
 }
 
 // The whole segment went silent: leave OP in our own view; the offline probes look for it.

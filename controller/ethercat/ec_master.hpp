@@ -47,7 +47,7 @@
 // that fell to SAFE-OP by its watchdog — is found by the same AL status reads.
 // Once supervising, a cyclic frame that does not come back by the next tick is a cycle with
 // WKC 0: counted as a lost frame AND a WKC error. segment_loss_cycles consecutive cycles
-// without any WKC (lost, or WKC 0: no slave touched the frame) mean the segment is gone: the
+// (and segment_loss_ns) without any WKC (lost, or WKC 0: no slave touched the frame) mean the segment is gone: the
 // master leaves OP in its own view (every slave → offline, operational() false,
 // segment_lost() true, stop_reason() says why, one event line), and the offline probes bring
 // the slaves back through INIT → OP if the segment returns (segment_lost() false again once
@@ -123,6 +123,10 @@ struct EcMasterConfig {
   SimTime probe_every_ns = 50'000'000;        // an offline slave is probed this often [ns]
   int wkc_loss_cycles = 3;                 // consecutive WKC mismatches → find the missing slave
   int segment_loss_cycles = 10;            // consecutive cycles without any WKC → segment lost (0 = off)
+  // …and at least this long [ns]: at short cycles a host stall of a few ms is not a lost
+  // segment (the slaves' SM watchdogs, 100 ms, keep them in OP through it). At cycles of 1 ms
+  // and longer the cycle count decides, as before.
+  SimTime segment_loss_ns = 10'000'000;
   SimTime al_check_every_ns = 100'000'000; // BRD 0x0130 with the cyclic frame this often [ns]
   std::uint32_t logical_base = 0x00010000; // logical address of the image
   // How the LRW lays the image out on the wire. separate: every slave's outputs, then every
@@ -308,6 +312,7 @@ class EcMaster {
   void after_frame(SimTime t, bool from_frame);
   void cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t);
   void lose_segment(SimTime t);
+  int segment_loss_threshold() const;
   void layout();
   void dc_fill(omnitwin::ethercat::PduBuilder& b);
   void dc_reply(const omnitwin::ethercat::Datagram& d, int slave, int sub, SimTime t);

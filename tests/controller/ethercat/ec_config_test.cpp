@@ -83,6 +83,7 @@ TEST(EcConfig, MinimalFileHasDefaults) {
   EXPECT_EQ(c.wheel_mode, WheelMode::csv);
   EXPECT_EQ(c.expected_slaves, -1);
   EXPECT_EQ(c.segment_loss_cycles, 10);
+  EXPECT_EQ(c.segment_loss_ms, 10);
 }
 
 TEST(EcConfig, SegmentLossCyclesReachTheCore) {
@@ -92,6 +93,11 @@ TEST(EcConfig, SegmentLossCyclesReachTheCore) {
   EcConfig loaded = parse_ec_config("esi: [models/ethercat/omnitwin_drive.xml]\nsegment_loss_cycles: 7\n", "m.yaml",
                                     OMNITWIN_SOURCE_DIR);
   EXPECT_EQ(make_master_config(loaded).segment_loss_cycles, 7);
+  EcConfig timed = parse_ec_config("esi: [models/ethercat/omnitwin_drive.xml]\nsegment_loss_ms: 25\n", "m.yaml",
+                                   OMNITWIN_SOURCE_DIR);
+  EXPECT_EQ(timed.segment_loss_ms, 25);
+  EXPECT_EQ(make_master_config(timed).segment_loss_ns, 25'000'000);
+  EXPECT_EQ(error_of("esi: a.xml\nsegment_loss_ms: -2\n"), "t.yaml:2: segment_loss_ms: must be in 0..100000");
   EXPECT_EQ(error_of("esi: a.xml\nsegment_loss_cycles: -1\n"),
             "t.yaml:2: segment_loss_cycles: must be in 0..100000 (0 = off)");
 }

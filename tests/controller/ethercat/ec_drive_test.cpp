@@ -141,6 +141,7 @@ TEST(EcDrive, LostSegmentQuickStopsEveryAxisAndTheyStayStoppedWhenItReturns) {
   EcMasterConfig cfg;
   cfg.startup.push_back(StartupSdo{-1, 0x6060, 0, {9}});  // CSV
   cfg.segment_loss_cycles = 3;
+  cfg.segment_loss_ns = 0;  // the cycle count alone (1 ms cycles)
   cfg.probe_every_ns = 10'000'000;
   Bench b(4, cfg);
   ASSERT_TRUE(b.to_op()) << b.master->error();

@@ -530,6 +530,7 @@ TEST(EcMaster, SlaveWithoutCoeIsLaidOutFromItsSiiPdoCategories) {
 TEST(EcMaster, SegmentCutOffLeavesOpAfterTheConfiguredCyclesAndCountsEveryLostCycle) {
   EcMasterConfig cfg;
   cfg.segment_loss_cycles = 5;
+  cfg.segment_loss_ns = 0;  // the cycle count alone (1 ms cycles)
   cfg.probe_every_ns = 10'000'000;
   Bench b(4, cfg);
   ASSERT_TRUE(b.to_op()) << b.master->error();
@@ -558,9 +559,31 @@ TEST(EcMaster, SegmentCutOffLeavesOpAfterTheConfiguredCyclesAndCountsEveryLostCy
   EXPECT_EQ(b.master->stats().segment_losses, 1u) << "one loss, logged once";
 }
 
+// At short cycles a host stall of a few ms is not a lost segment: 10 silent cycles of 100 µs
+// (1 ms) keep the master in OP, 10 ms (segment_loss_ns, the default) do not.
+TEST(EcMaster, AtShortCyclesTheSegmentIsLostOnlyAfterSegmentLossNs) {
+  EcMasterConfig cfg;
+  cfg.cycle_ns = 100'000;
+  Bench b(4, cfg);
+  ASSERT_TRUE(b.to_op(200000)) << b.master->error();
+  for (int k = 0; k < 20; ++k) b.step();
+  b.drop_next = 20;  // 2 ms without an answer
+  for (int k = 0; k < 40; ++k) b.step();
+  EXPECT_FALSE(b.master->segment_lost()) << events(*b.master);
+  EXPECT_TRUE(b.master->operational());
+  EXPECT_EQ(b.master->stats().segment_losses, 0u);
+  b.drop_next = 1'000'000;
+  for (int k = 0; k < 99; ++k) b.step();  // 99 × 100 µs: still short of 10 ms
+  EXPECT_FALSE(b.master->segment_lost());
+  b.step();
+  b.step();
+  EXPECT_TRUE(b.master->segment_lost()) << events(*b.master);
+}
+
 TEST(EcMaster, LostSegmentComesBackThroughTheOfflineProbes) {
   EcMasterConfig cfg;
   cfg.segment_loss_cycles = 3;
+  cfg.segment_loss_ns = 0;  // the cycle count alone (1 ms cycles)
   cfg.probe_every_ns = 10'000'000;
   Bench b(4, cfg);
   ASSERT_TRUE(b.to_op()) << b.master->error();
@@ -583,6 +606,7 @@ TEST(EcMaster, LostSegmentComesBackThroughTheOfflineProbes) {
 TEST(EcMaster, PoweredOffSegmentIsLostAndBackWhenPoweredOn) {
   EcMasterConfig cfg;
   cfg.segment_loss_cycles = 4;
+  cfg.segment_loss_ns = 0;  // the cycle count alone (1 ms cycles)
   cfg.probe_every_ns = 10'000'000;
   Bench b(4, cfg);
   ASSERT_TRUE(b.to_op()) << b.master->error();
@@ -599,6 +623,7 @@ TEST(EcMaster, PoweredOffSegmentIsLostAndBackWhenPoweredOn) {
 TEST(EcMaster, FramesComingBackUntouchedAreASilentSegmentToo) {
   EcMasterConfig cfg;
   cfg.segment_loss_cycles = 4;
+  cfg.segment_loss_ns = 0;  // the cycle count alone (1 ms cycles)
   Bench b(4, cfg);
   ASSERT_TRUE(b.to_op()) << b.master->error();
   // A link closed right at the master's port: every frame returns as sent, WKC 0.
