@@ -127,6 +127,14 @@ void DriveSlave::build_od() {
     for (int a = 0; a < axes(); ++a) bind_cia402_axis(a);
   } else {
     for (int a = 0; a < axes(); ++a) bind_multiaxis_axis(a);
+    // The modules' entries, looked up once: the dictionary is complete here and never grows
+    // afterwards, so the firmware cycle reads them without a search.
+    modules_.assign(static_cast<std::size_t>(axes()), {});
+    for (int k = 0; k < axes(); ++k)
+      for (std::uint8_t sub = 1; sub <= 4; ++sub) {
+        modules_[static_cast<std::size_t>(k)][sub - 1u] = od_.entry(static_cast<std::uint16_t>(kCmdModule + 0x10 * k), sub);
+        modules_[static_cast<std::size_t>(k)][sub + 3u] = od_.entry(static_cast<std::uint16_t>(kStatusModule + 0x10 * k), sub);
+      }
     if (auto* e = od_.entry(kRxAssign, 0)) e->set_int(axes());
     if (auto* e = od_.entry(kTxAssign, 0)) e->set_int(axes());
   }
@@ -563,11 +571,11 @@ void DriveSlave::pack_inputs() noexcept {
 
 void DriveSlave::multiaxis_commands() noexcept {
   for (int k = 0; k < axes(); ++k) {
-    const auto ci = static_cast<std::uint16_t>(kCmdModule + 0x10 * k);
-    const OdEntry* h = od_.entry(ci, 1);
-    const OdEntry* c = od_.entry(ci, 2);
-    const OdEntry* v1 = od_.entry(ci, 3);
-    const OdEntry* v2 = od_.entry(ci, 4);
+    const auto& m = modules_[static_cast<std::size_t>(k)];
+    const OdEntry* h = m[0];
+    const OdEntry* c = m[1];
+    const OdEntry* v1 = m[2];
+    const OdEntry* v2 = m[3];
     if (!h || !c || !v1 || !v2) continue;
     const auto hdr = static_cast<std::uint16_t>(h->as_int());
     const auto ctl = static_cast<std::uint16_t>(c->as_int());
@@ -631,11 +639,11 @@ void DriveSlave::multiaxis_commands() noexcept {
 
 void DriveSlave::multiaxis_status() noexcept {
   for (int k = 0; k < axes(); ++k) {
-    const auto si = static_cast<std::uint16_t>(kStatusModule + 0x10 * k);
-    OdEntry* h = od_.entry(si, 1);
-    OdEntry* sw = od_.entry(si, 2);
-    OdEntry* v1 = od_.entry(si, 3);
-    OdEntry* v2 = od_.entry(si, 4);
+    const auto& m = modules_[static_cast<std::size_t>(k)];
+    OdEntry* h = m[4];
+    OdEntry* sw = m[5];
+    OdEntry* v1 = m[6];
+    OdEntry* v2 = m[7];
     if (!h || !sw || !v1 || !v2) continue;
     const Card& slot = cards_[static_cast<std::size_t>(k)];
     const int ci = slot.card >= 0 ? slot.card : k;

@@ -49,6 +49,7 @@
 // allocate and never throws.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -215,6 +216,8 @@ class DriveSlave final : public EscApplication {
     bool mode_pending = false;
   };
   std::vector<Card> cards_;
+  // multiaxis: per slot its command module's entries (subs 1-4), then its status module's.
+  std::vector<std::array<OdEntry*, 8>> modules_;
   CycleHook hook_;
   DriveSlaveStats stats_;
   SmSyncParams sync_out_, sync_in_;
