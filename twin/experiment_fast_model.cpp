@@ -39,31 +39,33 @@ TwistAgreement twist_agreement(const CsvColumns& ref, const CsvColumns& fast, do
   const double period = t[1] - t[0];
   const std::size_t w = std::max<std::size_t>(1, static_cast<std::size_t>(std::llround(window_s / period)));
   const double L = wheel_distance_m;
-  // Every column both files need, looked up first so a file without one is refused whatever
-  // its length.
-  for (const CsvColumns* c : {&ref, &fast})
-    for (const char* name : {"x", "y", "phi", "vx", "vy", "wz"}) (void)c->column(name);
+  // The columns both files need, looked up once (a file without one is refused whatever its
+  // length).
+  struct Cols {
+    const std::vector<double>&x, &y, &phi, &vx, &vy, &wz;
+  };
+  const auto cols = [](const CsvColumns& c) {
+    return Cols{c.column("x"), c.column("y"), c.column("phi"), c.column("vx"), c.column("vy"), c.column("wz")};
+  };
+  const Cols r = cols(ref), f = cols(fast);
   // The mean twist (vx, vy, L·wz) of samples [a, a + w) of one run.
-  auto mean_twist = [&](const CsvColumns& c, std::size_t a) {
-    const auto &vx = c.column("vx"), &vy = c.column("vy"), &wz = c.column("wz");
+  auto mean_twist = [&](const Cols& c, std::size_t a) {
     double m[3] = {0, 0, 0};
-    for (std::size_t i = a; i < a + w; ++i) m[0] += vx[i], m[1] += vy[i], m[2] += L * wz[i];
+    for (std::size_t i = a; i < a + w; ++i) m[0] += c.vx[i], m[1] += c.vy[i], m[2] += L * c.wz[i];
     return std::array<double, 3>{m[0] / w, m[1] / w, m[2] / w};
   };
   TwistAgreement out;
   double diff2 = 0, ref2 = 0;
   for (std::size_t a = 0; a + w <= n; a += w, ++out.windows) {
-    const auto r = mean_twist(ref, a), f = mean_twist(fast, a);
-    for (int k = 0; k < 3; ++k) diff2 += (f[k] - r[k]) * (f[k] - r[k]), ref2 += r[k] * r[k];
+    const auto mr = mean_twist(r, a), mf = mean_twist(f, a);
+    for (int k = 0; k < 3; ++k) diff2 += (mf[k] - mr[k]) * (mf[k] - mr[k]), ref2 += mr[k] * mr[k];
   }
   out.twist_error = ref2 > 0 ? std::sqrt(diff2 / ref2) : 0.0;
   // The pose the reference travelled (translation plus L·rotation) and where the two ended.
-  const auto &x = ref.column("x"), &y = ref.column("y"), &phi = ref.column("phi");
   for (std::size_t i = 1; i < n; ++i)
-    out.path_m += std::hypot(x[i] - x[i - 1], y[i] - y[i - 1]) + L * std::abs(phi[i] - phi[i - 1]);
+    out.path_m += std::hypot(r.x[i] - r.x[i - 1], r.y[i] - r.y[i - 1]) + L * std::abs(r.phi[i] - r.phi[i - 1]);
   const std::size_t e = n - 1;
-  out.final_pose_diff_m = std::hypot(fast.column("x")[e] - x[e], fast.column("y")[e] - y[e]) +
-                          L * std::abs(fast.column("phi")[e] - phi[e]);
+  out.final_pose_diff_m = std::hypot(f.x[e] - r.x[e], f.y[e] - r.y[e]) + L * std::abs(f.phi[e] - r.phi[e]);
   return out;
 }
 
