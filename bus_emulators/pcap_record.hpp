@@ -8,11 +8,13 @@
 // removed when the file is opened. The first write error (ENOSPC: a full disk) is kept as a
 // status: later records are refused, close() removes the .part file (freeing the space the
 // run's other records still need) and leaves DIR/NAME absent; ok()/error() say what happened.
-// dump() and flush() never throw and allocate nothing: the cyclic path may call them.
+// dump() and flush() never throw and make no system call: the file is write-behind
+// (write_behind.hpp), so a disk that throttles or stalls writers never stalls the cyclic path
+// that calls them. flush() is a record boundary: the .part file holds whole records up to it
+// within the writer's period (20 ms), and a write error shows at a later dump/flush or close.
 #pragma once
 
 #include <pcap/pcap.h>
-#include <unistd.h>
 
 #include <cerrno>
 #include <cstdint>
@@ -21,6 +23,8 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+
+#include "bus_emulators/write_behind.hpp"
 
 namespace omnitwin::bus_emulators {
 
@@ -50,21 +54,22 @@ inline std::string pcap_part_path(const std::string& path) {
 // One capture file: DIR/.NAME.part while written, DIR/NAME once closed complete (see above).
 class PcapFile {
  public:
-  // Removes a stale `path`, creates its .part file with a nanosecond-precision header for
-  // `linktype` and flushes the header. buffer_bytes > 0 sets the stdio buffer size. Throws
-  // std::runtime_error naming `path` when the file cannot be created.
+  // Removes a stale `path`, creates its .part file (write-behind, fsynced on close) with a
+  // nanosecond-precision header for `linktype` and flushes the header. buffer_bytes > 0 sets
+  // the stdio buffer size. Throws std::runtime_error naming `path` when it cannot be created.
   PcapFile(const std::string& path, int linktype, std::size_t buffer_bytes)
       : path_(path), part_(pcap_part_path(path)) {
     std::error_code ec;
     std::filesystem::remove(path_, ec);  // an older capture must not pass for this run's
     pcap_ = pcap_open_dead_with_tstamp_precision(linktype, 65535, PCAP_TSTAMP_PRECISION_NANO);
     if (!pcap_) throw std::runtime_error("pcap: pcap_open_dead failed for " + path_);
-    FILE* f = std::fopen(part_.c_str(), "wb");
-    if (!f) open_failed("cannot create", std::strerror(errno), nullptr);
-    if (buffer_bytes > 0) std::setvbuf(f, nullptr, _IOFBF, buffer_bytes);
-    dumper_ = pcap_dump_fopen(pcap_, f);
-    if (!dumper_) open_failed("cannot write", pcap_geterr(pcap_), f);
-    if (!flush()) open_failed("cannot write", std::strerror(err_), nullptr);
+    if (!file_.open(part_, "wb", WriteBehindOptions{.fsync_on_close = true}))
+      open_failed("cannot create", std::strerror(errno));
+    if (buffer_bytes > 0) std::setvbuf(file_.stream(), nullptr, _IOFBF, buffer_bytes);
+    // The dumper is the stream itself (libpcap casts it); file_ owns and closes it.
+    dumper_ = pcap_dump_fopen(pcap_, file_.stream());
+    if (!dumper_) open_failed("cannot write", pcap_geterr(pcap_));
+    if (!flush()) open_failed("cannot write", std::strerror(err_));
   }
   ~PcapFile() { close(); }
   PcapFile(const PcapFile&) = delete;
@@ -78,10 +83,11 @@ class PcapFile {
     return true;
   }
 
-  // Hands buffered records to the kernel: the .part file is valid afterwards. RT-safe.
+  // A record boundary: hands buffered records to the writer thread, which writes them within
+  // its period; the .part file is valid up to them then. RT-safe.
   bool flush() {
     if (!dumper_ || err_ != 0) return false;
-    if (pcap_dump_flush(dumper_) != 0) return fail(errno, "cannot write");
+    if (!file_.commit()) return fail(errno, "cannot write");
     return true;
   }
 
@@ -89,8 +95,8 @@ class PcapFile {
   // the .part file. Idempotent. True when the final file is in place.
   bool close() {
     if (dumper_) {
-      if (flush() && ::fsync(::fileno(pcap_dump_file(dumper_))) != 0) fail(errno, "cannot sync");
-      pcap_dump_close(dumper_);  // closes the FILE too
+      // Waits for the writer thread, fsyncs, closes (pcap_dump_close would be fclose alone).
+      if (file_.close() != 0) fail(errno, "cannot write or sync");
       dumper_ = nullptr;
       if (err_ == 0 && std::rename(part_.c_str(), path_.c_str()) != 0) fail(errno, "cannot rename to the final name");
       if (err_ != 0) std::remove(part_.c_str());
@@ -123,9 +129,9 @@ class PcapFile {
   }
 
   // Releases what the constructor opened and throws naming the file.
-  [[noreturn]] void open_failed(const char* what, const std::string& why, FILE* f) {
-    if (dumper_) pcap_dump_close(dumper_);
-    if (f) std::fclose(f);
+  [[noreturn]] void open_failed(const char* what, const std::string& why) {
+    dumper_ = nullptr;
+    file_.close();
     pcap_close(pcap_);
     std::remove(part_.c_str());
     throw std::runtime_error("pcap: " + std::string(what) + " " + path_ + " (as " + part_ + "): " + why);
@@ -133,6 +139,7 @@ class PcapFile {
 
   std::string path_, part_;
   pcap_t* pcap_ = nullptr;
+  WriteBehindFile file_;
   pcap_dumper_t* dumper_ = nullptr;
   int err_ = 0;
   const char* what_ = "";

@@ -43,13 +43,23 @@ std::string csv_cell(const std::string& s) {
 // ---------------------------------------------------------------------------------------
 // CheckedFile
 
-CheckedFile::CheckedFile(std::string path, const char* mode) : path_(std::move(path)) {
+CheckedFile::CheckedFile(std::string path, const char* mode, bool write_behind) : path_(std::move(path)) {
+  if (write_behind) {
+    behind_ = std::make_unique<bus_emulators::WriteBehindFile>();
+    if (!behind_->open(path_, mode)) fail("cannot create", errno);
+    f_ = behind_->stream();
+    return;
+  }
   f_ = std::fopen(path_.c_str(), mode);
   if (f_ == nullptr) fail("cannot create", errno);
 }
 
 CheckedFile::~CheckedFile() {
-  if (f_ != nullptr) std::fclose(f_);
+  if (behind_) {
+    behind_->close();
+  } else if (f_ != nullptr) {
+    std::fclose(f_);
+  }
 }
 
 void CheckedFile::fail(const char* what, int err) {
@@ -68,7 +78,9 @@ void CheckedFile::write(std::string_view text) {
 void CheckedFile::flush() {
   if (f_ == nullptr) return;
   errno = 0;
-  if (std::fflush(f_) != 0) fail("cannot write", errno != 0 ? errno : EIO);
+  // Write-behind: a record boundary, handed to the writer thread (no system call).
+  const bool ok = behind_ ? behind_->commit() : std::fflush(f_) == 0;
+  if (!ok) fail("cannot write", errno != 0 ? errno : EIO);
 }
 
 void CheckedFile::close() {
@@ -78,7 +90,9 @@ void CheckedFile::close() {
   f_ = nullptr;
   errno = 0;
   const bool bad = std::ferror(f) != 0;
-  if (std::fclose(f) != 0 || bad) fail("cannot write", errno != 0 ? errno : EIO);
+  // Write-behind: close() waits for the writer thread and reports its first error.
+  const bool closed = behind_ ? behind_->close() == 0 : std::fclose(f) == 0;
+  if (!closed || bad) fail("cannot write", errno != 0 ? errno : EIO);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -89,7 +103,7 @@ CsvWriter::CsvWriter(const std::string& dir, const std::string& name,
     : CsvWriter((fs::path(dir) / name).string(), header) {}
 
 CsvWriter::CsvWriter(const std::string& path, const std::vector<std::string>& header)
-    : path_(path), file_(temp_path_for(path_), "wb"), columns_(header.size()) {
+    : path_(path), file_(temp_path_for(path_), "wb", true), columns_(header.size()) {
   std::string line;
   for (std::size_t i = 0; i < header.size(); ++i) line += (i ? "," : "") + csv_cell(header[i]);
   file_.write(line + "\n");
@@ -164,7 +178,7 @@ void write_json_atomic(const std::string& path, const nlohmann::json& j) {
 // ---------------------------------------------------------------------------------------
 // EventLog
 
-EventLog::EventLog(const std::string& path) : path_(path), file_(temp_path_for(path), "wb") {}
+EventLog::EventLog(const std::string& path) : path_(path), file_(temp_path_for(path), "wb", true) {}
 
 EventLog::~EventLog() {
   try {

@@ -5,12 +5,18 @@
 // directory is atomic), and every write is checked so a full disk or an unwritable
 // directory is a clear std::runtime_error naming the path rather than a silently short
 // file. Numbers are formatted with fmt ("{:.10g}"), so identical runs give identical bytes.
-// None of this is real-time safe (file I/O); the run loop calls it at control-sample rate.
+// The run loop writes the CSVs and the event log at control-sample rate: those files are
+// write-behind (bus_emulators/write_behind.hpp), so a row costs a copy into memory and a disk
+// that throttles writers (much dirty page cache) does not stall a realtime loop; a write
+// error then shows at a later row, flush or close. One-shot documents are written plainly.
 #pragma once
 
 #include <nlohmann/json.hpp>
 
+#include "bus_emulators/write_behind.hpp"
+
 #include <cstdio>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -19,10 +25,11 @@
 namespace omnitwin::twin {
 
 // A C stdio file whose every operation is checked; errors throw std::runtime_error naming
-// the path. Closed (without throwing) by the destructor.
+// the path. Closed (without throwing) by the destructor. write_behind: bytes reach the disk
+// from a thread of the file's own (see above); close() waits for them and reports its errors.
 class CheckedFile {
  public:
-  CheckedFile(std::string path, const char* mode);
+  CheckedFile(std::string path, const char* mode, bool write_behind = false);
   ~CheckedFile();
   CheckedFile(const CheckedFile&) = delete;
   CheckedFile& operator=(const CheckedFile&) = delete;
@@ -39,6 +46,7 @@ class CheckedFile {
 
   std::string path_;
   std::FILE* f_ = nullptr;
+  std::unique_ptr<bus_emulators::WriteBehindFile> behind_;  // set: f_ is its stream
   bool failed_ = false;
 };
 
@@ -87,7 +95,8 @@ void write_text_atomic(const std::string& path, std::string_view text);
 void write_json_atomic(const std::string& path, const nlohmann::json& j);
 
 // The run's event log (DIR/events.log): one line per event, "%12.6f  %-10s  %s" (sim time
-// [s], kind, message), flushed per line so the log survives a crash. Like every record it is
+// [s], kind, message), committed per line, so it reaches the file within the write-behind
+// period (20 ms) and survives a crash but for that. Like every record it is
 // written as DIR/.events.log.part (read that one while a run is going) and renamed by close().
 class EventLog {
  public:

@@ -415,7 +415,7 @@ void PlatformRun::on_master_bus(SimTime t) {
   pacer_->tick(t);
   net_->advance(t);
   if (!vtime_pacer_) net_->flush_transport();  // lockstep: this tick's slave frames, before the grant counts them
-  net_->flush_pcap();  // once per tick: a kill loses at most one tick of capture
+  net_->flush_pcap();  // a record boundary per tick; write-behind: a kill loses the last 20 ms
   if (std::string why = net_->pcap_error(); !why.empty()) return fail(why);  // a full disk
   if (vtime_pacer_) return;  // the master's waits pace the run (VtimePacer)
   if (!clock_server_) return supervise_master(t);  // realtime: the master keeps its own time

@@ -5,9 +5,11 @@
 // nanosecond timestamps (the twin's clock is integer nanoseconds; the file gets the
 // nanosecond pcap magic). The capture is written as DIR/.NAME.part and renamed to DIR/NAME
 // by close() (or the destructor) only when every write succeeded (bus_emulators/pcap_record:
-// PcapFile); a stale DIR/NAME is removed at open. Every record is flushed to the kernel as it
-// is written (flush_each_packet), so a run killed by SIGKILL leaves a valid .part file holding
-// every frame written so far, and never a file under the final name. A write error (a full
+// PcapFile); a stale DIR/NAME is removed at open. Every record is a record boundary as it is
+// written (flush_each_packet): the file is write-behind (bus_emulators/write_behind), so the
+// record reaches the file within the writer thread's 20 ms period, and a run killed by
+// SIGKILL leaves a valid .part file holding every frame written up to that period before the
+// kill, and never a file under the final name. A write error (a full
 // disk) is a status, not an exception: write() returns false from then on, ok()/error() say
 // why, and close() removes the .part file, so that DIR/NAME stays absent.
 //

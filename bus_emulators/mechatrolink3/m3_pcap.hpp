@@ -43,7 +43,7 @@ inline constexpr std::size_t kMaxEthFrame = bus_emulators::EthernetCapture::kMax
 class PcapWriter : public bus_emulators::EthernetCapture {
  public:
   struct Options {
-    bool flush_each_frame = false;  // true: every record reaches the kernel at once
+    bool flush_each_frame = false;  // true: every record is flushed (on disk within 20 ms)
     std::size_t buffer_bytes = 64 * 1024;
   };
 

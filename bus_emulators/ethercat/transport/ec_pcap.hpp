@@ -15,13 +15,14 @@
 // renamed to DIR/NAME by close() (or the destructor) only when every write succeeded
 // (bus_emulators/pcap_record: PcapFile); a stale DIR/NAME is removed at open. Buffered (a
 // 64 KiB stdio buffer by default; one EtherCAT cycle is one or two records): the .part file
-// is valid after every flush(); the file header is flushed when it is opened, so an empty
+// is valid up to each flush() once the write-behind thread wrote it (within 20 ms,
+// bus_emulators/write_behind); the file header is flushed when it is opened, so an empty
 // capture is valid too. A run that must survive SIGKILL sets flush_each_frame (or flushes
 // per tick) and finds the capture in the .part file; SIGINT/SIGTERM end the run normally and
 // the destructor closes and renames it (as bus_emulators/can/can_pcap).
 //
 // write() and flush() never throw and allocate nothing (the record buffer is a member), so the
-// cyclic path may call them; a full stdio buffer costs one write(2). A write error (a full
+// cyclic path may call them; a full stdio buffer costs a copy, never a write(2). A write error (a full
 // disk) is a status: write() and flush() return false from then on, ok()/error() say why,
 // and close() removes the .part file, so that DIR/NAME stays absent.
 #pragma once
@@ -49,7 +50,7 @@ class PcapWriter : public bus_emulators::EthernetCapture {
  public:
   struct Options {
     Mac master_mac = kDefaultMasterMac;  // source of out frames (a raw master: its NIC's MAC)
-    bool flush_each_frame = false;       // true: every record reaches the kernel at once
+    bool flush_each_frame = false;       // true: every record is flushed (on disk within 20 ms)
     std::size_t buffer_bytes = 64 * 1024;
   };
 

@@ -12,6 +12,8 @@
 #include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/support/mujoco_fixture.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "tests/support/capture_count.hpp"
+#include "tests/support/eventually.hpp"
 
 #include <gtest/gtest.h>
 #include <pcap/pcap.h>
@@ -180,15 +182,16 @@ TEST(M3Pcap, FileIsValidAfterEveryFlushWhileOpen) {
   TempDir dir("m3-pcap");
   PcapWriter w((dir / "c.pcap").string());
   const std::string part = w.part_path();
-  EXPECT_TRUE(read_capture(part).empty());  // header already on disk
+  // The header, then each flush, reaches the .part file within the writer's period.
+  EXPECT_TRUE(omnitwin::testing::eventually([&] { return omnitwin::testing::capture_records(part) == 0; }));
   const Bytes sync = frame(FrameType::sync, kBroadcast, kC1Master, 8);
   for (int i = 0; i < 10; ++i) w.write_frame(sync, i * 1'000'000, Direction::out);
   ASSERT_TRUE(w.flush());
-  EXPECT_EQ(read_capture(part).size(), 10u);
+  EXPECT_TRUE(omnitwin::testing::eventually([&] { return omnitwin::testing::capture_records(part) == 10; }));
   const Bytes rsp = frame(FrameType::cyclic_response, kC1Master, 0x03, 16);
   for (int i = 0; i < 5; ++i) w.write_frame(rsp, 20'000'000 + i, Direction::back);
   ASSERT_TRUE(w.flush());
-  EXPECT_EQ(read_capture(part).size(), 15u);
+  EXPECT_TRUE(omnitwin::testing::eventually([&] { return omnitwin::testing::capture_records(part) == 15; }));
 }
 
 TEST(M3Pcap, FinalNameAppearsOnlyOnClose) {
@@ -202,7 +205,7 @@ TEST(M3Pcap, FinalNameAppearsOnlyOnClose) {
     w.write_frame(frame(FrameType::sync, kBroadcast, kC1Master, 8), 1, Direction::out);
     ASSERT_TRUE(w.flush());
     EXPECT_FALSE(std::filesystem::exists(path));
-    EXPECT_EQ(read_capture(part).size(), 1u);
+    EXPECT_TRUE(omnitwin::testing::eventually([&] { return omnitwin::testing::capture_records(part.string()) == 1; }));
   }  // the destructor closes and renames
   EXPECT_FALSE(std::filesystem::exists(part));
   EXPECT_EQ(read_capture(path).size(), 1u);
@@ -244,7 +247,7 @@ TEST(M3Pcap, FlushEachFrameWritesThroughWithoutFlushCalls) {
   o.flush_each_frame = true;
   PcapWriter w((dir / "d.pcap").string(), o);
   w.write_frame(frame(FrameType::sync, kBroadcast, kC1Master, 8), 1, Direction::out);
-  EXPECT_EQ(read_capture(w.part_path()).size(), 1u);
+  EXPECT_TRUE(omnitwin::testing::eventually([&] { return omnitwin::testing::capture_records(w.part_path()) == 1; }));
 }
 
 TEST(M3Pcap, OpeningAMissingFolderThrowsNamingThePath) {
