@@ -4,6 +4,8 @@
 // std::to_chars (locale-independent, 10 significant digits) so the text is deterministic.
 #include "physics/platform_mjcf.hpp"
 
+#include "physics/wheel_contact.hpp"
+
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -74,7 +76,9 @@ void append_header(std::string& out, const PlatformParams& p) {
                   : " tolerance=\"" + num(p.capsule.solver_tolerance) + "\"") +
          "/>\n";
   // Generous buffers: at most ~16 contacts (64 pyramid rows) are ever active.
-  out += "  <size njmax=\"600\" nconmax=\"150\"/>\n";
+  // The fast model marks its wheel capsules for the single centre contact (user[0]).
+  const bool centre = !rollers && p.capsule.centre_contact;
+  out += std::string("  <size njmax=\"600\" nconmax=\"150\"") + (centre ? " nuser_geom=\"1\"" : "") + "/>\n";
 }
 
 void append_visual_and_assets(std::string& out) {
@@ -203,6 +207,7 @@ void append_wheel_capsule(std::string& out, const PlatformParams& p, int wheel0)
   out += "        <geom name=\"" + wheel_name("tyre", wheel0) +
          "\" type=\"capsule\" contype=\"0\" conaffinity=\"0\" group=\"3\" fromto=\"" +
          nums({c - half, 0, 0, c + half, 0, 0}) + "\" size=\"" + num(r) + "\" mass=\"" + num(mass) +
+         (p.capsule.centre_contact ? "\" user=\"" + num(kCentreContactMarker) : std::string()) +
          "\" rgba=\"" + kWheelRgba[wheel0] + "\"/>\n";
   // What a camera shows: a wheel of the real width (no mass, no contact), and a spoke.
   const double w = p.geometry.wheel_width;

@@ -55,6 +55,8 @@ struct CapsuleParams {
                                    // model's load-weighted harmonic contact radius is
                                    // L - 1.0 mm (its inner row carries more when turning)
   double solver_tolerance = 1e-5;  // MuJoCo Newton tolerance [-] (MuJoCo's default 1e-8)
+  bool centre_contact = true;  // one contact per wheel at the capsule's centre instead of
+                               // MuJoCo's two at its ends (physics/wheel_contact.hpp)
 };
 
 struct FloorParams {

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "physics/platform_mjcf.hpp"
+#include "physics/wheel_contact.hpp"
 
 namespace omnitwin::physics {
 namespace {
@@ -28,6 +29,7 @@ struct VfsDeleter {
 
 // Compiles MJCF text through MuJoCo's virtual file system; throws with MuJoCo's message.
 mjModel* load_from_text(const std::string& xml) {
+  install_wheel_contact();  // the fast model's marked capsules need it; others are unchanged
   const char* name = "omni4_generated.xml";
   std::unique_ptr<mjVFS, VfsDeleter> vfs(new mjVFS);
   mj_defaultVFS(vfs.get());
@@ -98,6 +100,7 @@ bool collides(const mjModel* m, int g) {
 namespace {
 
 mjModel* load_from_file(const std::string& mjcf_path) {
+  install_wheel_contact();
   std::array<char, kErrLen> err{};
   mjModel* m = mj_loadXML(mjcf_path.c_str(), nullptr, err.data(), kErrLen);
   if (!m) {

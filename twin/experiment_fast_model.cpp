@@ -135,8 +135,8 @@ std::string markdown(const std::vector<FastModelRow>& rows, int reps, bool accur
       "# fast-model: the capsule model against the roller model\n\n"
       "`omnitwin experiment fast-model`: each scenario on bus direct in lockstep on the reference (variant "
       "`rollers`, 48 rollers on hinges) and on the fast model (variant `capsule`: one short capsule per wheel "
-      "on the reference's effective contact line, anisotropic floor friction, pyramidal cone, Newton "
-      "tolerance 1e-5; docs/platform.md), at the reference's 1 ms step and at a 2 ms step "
+      "on the reference's effective contact line, one floor contact at its centre, anisotropic floor "
+      "friction, pyramidal cone, Newton tolerance 1e-5; docs/platform.md), at the reference's 1 ms step and at a 2 ms step "
       "(`--set platform.sim.timestep=0.002`). " +
       fmt::format("{} interleaved run(s) per model; real-time factor = simulated s / wall s of the whole run "
                   "(model compile, physics, drive chains, master, records; no video), median.\n\n",

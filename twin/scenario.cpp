@@ -233,10 +233,11 @@ void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
 }
 
 void read_capsule(const YamlField& s, physics::CapsuleParams& c) {
-  s.allow_keys({"half_length", "contact_offset", "solver_tolerance"});
+  s.allow_keys({"half_length", "contact_offset", "solver_tolerance", "centre_contact"});
   read_number(s, "half_length", c.half_length, Bounds::positive());
   read_number(s, "contact_offset", c.contact_offset, Bounds::closed(-0.05, 0.05));
   read_number(s, "solver_tolerance", c.solver_tolerance, Bounds::open_closed(0, 1e-2));
+  read_bool(s, "centre_contact", c.centre_contact);
 }
 
 void read_floor(const YamlField& s, physics::FloorParams& f) {

@@ -170,6 +170,7 @@ TEST(Scenario, ParameterFileValuesLandInPlatformParams) {
   EXPECT_DOUBLE_EQ(p.capsule.half_length, 0.002);
   EXPECT_DOUBLE_EQ(p.capsule.contact_offset, 0.001);
   EXPECT_DOUBLE_EQ(p.capsule.solver_tolerance, 1.0e-7);
+  EXPECT_FALSE(p.capsule.centre_contact);
   EXPECT_DOUBLE_EQ(p.floor.friction, 0.8);
   EXPECT_DOUBLE_EQ(p.floor.lateral_friction, 0.002);
   EXPECT_DOUBLE_EQ(p.floor.slip_gain, 0.9);
@@ -215,6 +216,7 @@ TEST(Scenario, Omni4FileEqualsBuiltInDefaults) {
   EXPECT_EQ(p.capsule.half_length, d.capsule.half_length);
   EXPECT_EQ(p.capsule.contact_offset, d.capsule.contact_offset);
   EXPECT_EQ(p.capsule.solver_tolerance, d.capsule.solver_tolerance);
+  EXPECT_EQ(p.capsule.centre_contact, d.capsule.centre_contact);
   EXPECT_EQ(p.floor.friction, d.floor.friction);
   EXPECT_EQ(p.floor.lateral_friction, d.floor.lateral_friction);
   EXPECT_EQ(p.floor.slip_gain, d.floor.slip_gain);
