@@ -30,6 +30,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -40,6 +41,11 @@ struct WriteBehindOptions {
   bool fsync_on_close = false;           // fsync(2) before close(2)
   std::chrono::milliseconds period{20};  // the writer's longest sleep
   std::size_t wake_bytes = 64 * 1024;    // staged bytes that are committed and written at once
+  // Optional, run on the writer thread: turns the bytes the caller wrote (in, n) into the
+  // bytes the file gets, appended to `out` (e.g. binary rows into CSV text, so formatting
+  // leaves the caller's loop too). Called with whatever was committed, which may end inside
+  // one of the caller's records: an encoder keeps such a tail for its next call.
+  std::function<void(const char* in, std::size_t n, std::vector<char>& out)> encode;
 };
 
 // One write-behind file. States: closed (default, or after close()) → open (open() succeeded:
@@ -66,6 +72,7 @@ class WriteBehindFile {
     staging_.reserve(opt_.wake_bytes + 16 * 1024);  // steady state: no allocation per write
     front_.reserve(256 * 1024);
     back_.reserve(256 * 1024);
+    if (opt_.encode) encoded_.reserve(1024 * 1024);
     if (!start_thread()) return abandon(errno);
     const cookie_io_functions_t io{nullptr, &WriteBehindFile::cookie_write, nullptr, nullptr};
     f_ = fopencookie(this, append ? "a" : "w", io);
@@ -190,7 +197,13 @@ class WriteBehindFile {
         front_.swap(back_);
         last = closing_;
       }
-      if (const int err = write_all(back_.data(), back_.size()); err != 0 && err_ == 0) err_ = err;
+      const std::vector<char>* bytes = &back_;
+      if (opt_.encode && !back_.empty()) {
+        encoded_.clear();
+        opt_.encode(back_.data(), back_.size(), encoded_);
+        bytes = &encoded_;
+      }
+      if (const int err = write_all(bytes->data(), bytes->size()); err != 0 && err_ == 0) err_ = err;
       back_.clear();
       if (last) return;  // close() handed over the final bytes before it asked
     }
@@ -221,6 +234,7 @@ class WriteBehindFile {
   std::condition_variable cv_;
   std::vector<char> front_;  // under m_: committed, not yet taken by the thread
   std::vector<char> back_;   // the thread's: being written
+  std::vector<char> encoded_;  // the thread's: back_ after opt_.encode
   bool closing_ = false;     // under m_
   std::atomic<int> err_{0};  // the first write error (set by the thread)
   bool failed_ = false;      // the thread's: a write failed, drop the rest

@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -28,6 +29,58 @@ void rename_checked(const std::string& from, const std::string& to) {
   std::error_code ec;
   fs::rename(from, to, ec);
   if (ec) throw std::runtime_error(fmt::format("cannot rename '{}' to '{}': {}", from, to, ec.message()));
+}
+
+// One CSV line: each value as "{:.10g}" (std::to_chars with 10 significant digits writes
+// exactly what printf's %.10g does, at less than half the cost), comma-separated.
+void append_csv_line(std::vector<char>& out, const double* v, std::size_t n) {
+  char cell[64];
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i) out.push_back(',');
+    const auto r = std::to_chars(cell, cell + sizeof cell, v[i], std::chars_format::general, 10);
+    out.insert(out.end(), cell, r.ptr);
+  }
+  out.push_back('\n');
+}
+
+// A CSV file's staged form, turned into text on its writer thread: 'H', a 4-byte length and
+// the header line; or 'R' and one row's doubles. At a 1 ms control period formatting the rows
+// was the largest cost of the run loop after the physics (issue 17's profile); here the loop
+// copies the numbers and the other core formats them. Whatever a hand-over cuts off at its
+// end waits in `pending` for the next.
+struct CsvEncoder {
+  std::size_t columns;
+  std::vector<char> pending;
+
+  void operator()(const char* in, std::size_t n, std::vector<char>& out) {
+    pending.insert(pending.end(), in, in + n);
+    const std::size_t row_bytes = 1 + columns * sizeof(double);
+    std::size_t at = 0;
+    std::vector<double> v(columns);
+    while (at < pending.size()) {
+      if (pending[at] == 'H') {
+        std::uint32_t len = 0;
+        if (pending.size() - at < 1 + sizeof len) break;
+        std::memcpy(&len, pending.data() + at + 1, sizeof len);
+        if (pending.size() - at < 1 + sizeof len + len) break;
+        const char* text = pending.data() + at + 1 + sizeof len;
+        out.insert(out.end(), text, text + len);
+        at += 1 + sizeof len + len;
+      } else {
+        if (pending.size() - at < row_bytes) break;
+        std::memcpy(v.data(), pending.data() + at + 1, columns * sizeof(double));
+        append_csv_line(out, v.data(), columns);
+        at += row_bytes;
+      }
+    }
+    pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(at));
+  }
+};
+
+bus_emulators::WriteBehindOptions csv_options(std::size_t columns) {
+  bus_emulators::WriteBehindOptions o;
+  o.encode = CsvEncoder{columns, {}};
+  return o;
 }
 
 // A CSV header cell: quoted (with doubled quotes) only when it needs to be.
@@ -52,6 +105,12 @@ CheckedFile::CheckedFile(std::string path, const char* mode, bool write_behind) 
   }
   f_ = std::fopen(path_.c_str(), mode);
   if (f_ == nullptr) fail("cannot create", errno);
+}
+
+CheckedFile::CheckedFile(std::string path, const char* mode, bus_emulators::WriteBehindOptions options)
+    : path_(std::move(path)), behind_(std::make_unique<bus_emulators::WriteBehindFile>()) {
+  if (!behind_->open(path_, mode, options)) fail("cannot create", errno);
+  f_ = behind_->stream();
 }
 
 CheckedFile::~CheckedFile() {
@@ -103,10 +162,14 @@ CsvWriter::CsvWriter(const std::string& dir, const std::string& name,
     : CsvWriter((fs::path(dir) / name).string(), header) {}
 
 CsvWriter::CsvWriter(const std::string& path, const std::vector<std::string>& header)
-    : path_(path), file_(temp_path_for(path_), "wb", true), columns_(header.size()) {
+    : path_(path), file_(temp_path_for(path_), "wb", csv_options(header.size())), columns_(header.size()) {
   std::string line;
   for (std::size_t i = 0; i < header.size(); ++i) line += (i ? "," : "") + csv_cell(header[i]);
-  file_.write(line + "\n");
+  line += "\n";
+  const auto len = static_cast<std::uint32_t>(line.size());
+  std::string staged = "H";
+  staged.append(reinterpret_cast<const char*>(&len), sizeof len);
+  file_.write(staged + line);
 }
 
 CsvWriter::~CsvWriter() {
@@ -122,17 +185,10 @@ bool CsvWriter::row(std::span<const double> values) {
     throw std::invalid_argument(fmt::format("{}: row has {} values, header has {} columns", path_,
                                             values.size(), columns_));
   }
-  // Format into the reused buffer, then one write. std::to_chars with 10 significant digits
-  // writes exactly what "{:.10g}" (printf's %.10g) does, at less than half the cost: at a 1 ms
-  // control period the rows were 8 % of a run's CPU time (issue 17's profile).
-  line_.clear();
-  char cell[64];
-  for (std::size_t i = 0; i < values.size(); ++i) {
-    if (i) line_ += ',';
-    const auto r = std::to_chars(cell, cell + sizeof cell, values[i], std::chars_format::general, 10);
-    line_.append(cell, r.ptr);
-  }
-  line_ += '\n';
+  // The numbers as they are ('R' and the doubles, into the reused buffer), one write: the
+  // writer thread formats them (CsvEncoder).
+  line_.assign(1, 'R');
+  line_.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(double));
   try {
     file_.write(line_);
   } catch (const std::runtime_error& e) {

@@ -30,6 +30,8 @@ namespace omnitwin::twin {
 class CheckedFile {
  public:
   CheckedFile(std::string path, const char* mode, bool write_behind = false);
+  // Write-behind with an encoder that the writer thread applies to what write() staged.
+  CheckedFile(std::string path, const char* mode, bus_emulators::WriteBehindOptions options);
   ~CheckedFile();
   CheckedFile(const CheckedFile&) = delete;
   CheckedFile& operator=(const CheckedFile&) = delete;
@@ -84,7 +86,7 @@ class CsvWriter {
   CheckedFile file_;
   std::size_t columns_;
   std::size_t rows_ = 0;
-  std::string line_;  // reused per row
+  std::string line_;  // reused per row: its staged form (see records.cpp, CsvEncoder)
   std::string error_;
 };
 
