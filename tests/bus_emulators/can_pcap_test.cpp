@@ -123,7 +123,7 @@ TEST_F(CanPcap, AKilledWriterLeavesAReadablePartFileAndNoFinalFile) {
     PcapWriter w(path);
     for (int i = 0; i < 3; ++i) w.write(make_data(static_cast<std::uint32_t>(0x100 + i), {static_cast<std::uint8_t>(i)}), i);
     // The file is write-behind: what was flushed one writer period (20 ms) before a kill is kept.
-    ::usleep(200'000);
+    ::usleep(500'000);  // a loaded CI machine may be slow to run the writer thread
     ::raise(SIGKILL);  // harsher than SIGINT: no handler, no destructor, no atexit
     ::_exit(0);
   }
