@@ -139,8 +139,9 @@ bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
   return o.errors.empty();
 }
 
-// metrics.json of a run that ended before a signal came while its video or report was
-// made: `interrupted` becomes true, with the phase, and the verdict is no longer a pass.
+// metrics.json of a run whose loop ended before a signal came (while its records were closed
+// or its video or report made): `interrupted` becomes true, with the phase "outputs", and the
+// verdict is no longer a pass.
 void mark_interrupted_after_run(const std::string& run_dir) {
   const fs::path file = fs::path(run_dir) / "metrics.json";
   std::ifstream in(file);
@@ -351,7 +352,12 @@ int cmd_run(const RunArgs& a) {
     observers.add(dds.get());
     observers.add(web_observer.get());
     if (!observers.empty()) o.observer = &observers;
+    // A signal the run loop no longer saw (it came while the run closed its records) must not
+    // be lost: counted from here, it makes an interruption after the run (below). Until
+    // stopped, the first signal is the run's normal end.
+    const int signals_before_run = g_signals.load();
     const RunResult r = run_scenario(s, o);
+    const int signals_in_run = o.until_stopped ? g_signals.load() : signals_before_run;
     print_summary(r);
     if (web) {
       // Let open pages receive the end of the run before the records are turned into outputs.
@@ -366,13 +372,12 @@ int cmd_run(const RunArgs& a) {
       std::cout << fmt::format("  DDS: {} states published, {} dropped, {} events\n", st.published, st.dropped,
                                st.events);
     }
-    const int signals_in_run = g_signals.load();
     const bool outputs_ok = make_outputs(r.out_dir, output_plan(a, s));
-    // A signal after the run's end (video, report) is an interruption too: say so in
-    // metrics.json and end with exit 3, as for one during the run.
+    // A signal after the run loop's end (closing the records, video, report) is an
+    // interruption too: say so in metrics.json and end with exit 3, as for one during the run.
     if (!r.interrupted && g_signals.load() > signals_in_run) {
       mark_interrupted_after_run(r.out_dir);
-      std::cout << "  INTERRUPTED while making the video or the report (the run itself had ended)\n";
+      std::cout << "  INTERRUPTED after the run loop had ended (closing the records, the video or the report)\n";
       return 3;
     }
     return r.exit_code == 0 && !outputs_ok ? 3 : r.exit_code;

@@ -104,8 +104,11 @@ TEST_P(CliSignals, TwentyRandomMomentsLeaveValidRecordsAndNoProcess) {
   ASSERT_TRUE(fs::exists(dir_ / "whole/video.mp4") && fs::exists(dir_ / "whole/report.html"));
   std::mt19937 rng(seed() + static_cast<std::uint32_t>(std::hash<std::string>{}(bus) & 0xffff));
   std::uniform_real_distribution<double> moment(0.0, 1.05 * span_s);
+  // Twenty signals must land inside a run. The moments are drawn from one run's length,
+  // measured while other tests may load the machine: later runs can be shorter, so a moment
+  // after a run's end is drawn again (at most 60 draws).
   int interrupted = 0, finished_first = 0;
-  for (int k = 0; k < 20; ++k) {
+  for (int k = 0; k < 60 && interrupted < 20; ++k) {
     const double at = moment(rng);
     const int sig = (rng() & 1) ? SIGINT : SIGTERM;
     const std::string what = "seed " + std::to_string(seed()) + ", " + bus + " case " + std::to_string(k) + ": " +
@@ -129,7 +132,7 @@ TEST_P(CliSignals, TwentyRandomMomentsLeaveValidRecordsAndNoProcess) {
     std::cout << "  " << what << ": exit " << code << "\n";
   }
   std::cout << bus << ": " << interrupted << " interrupted, " << finished_first << " finished before the signal\n";
-  EXPECT_GE(interrupted, 15);
+  EXPECT_EQ(interrupted, 20);
 }
 
 INSTANTIATE_TEST_SUITE_P(EveryBus, CliSignals, ::testing::Values("direct", "can", "canopen", "tml", "ethercat", "m3"),
