@@ -176,7 +176,10 @@ class Subscription {
 Subscription::Subscription(dds_entity_t participant, const std::vector<TopicInfo>& topics)
     : waitset_(dds_create_waitset(participant)) {
   if (waitset_.get() < 0) throw_dds("create_waitset", waitset_.release());
-  const DdsQos state = state_qos(32), events = event_qos(kEventHistory);
+  // Up to 1024 unread states per reader: a lockstep run publishes faster than real time
+  // (about a state per wall millisecond on the thesis line), and an echo that a loaded
+  // machine leaves unscheduled for tens of milliseconds must not lose them to a shallow cache.
+  const DdsQos state = state_qos(1024), events = event_qos(kEventHistory);
   for (const TopicInfo& t : topics) {
     const bool is_events = t.short_name == "events";
     const dds_entity_t topic = create_topic(participant, t);
