@@ -51,12 +51,13 @@ void append_csv_line(std::vector<char>& out, const double* v, std::size_t n) {
 struct CsvEncoder {
   std::size_t columns;
   std::vector<char> pending;
+  std::vector<double> v;  // one row, copied out of `pending` (which need not be aligned)
 
   void operator()(const char* in, std::size_t n, std::vector<char>& out) {
     pending.insert(pending.end(), in, in + n);
     const std::size_t row_bytes = 1 + columns * sizeof(double);
     std::size_t at = 0;
-    std::vector<double> v(columns);
+    v.resize(columns);
     while (at < pending.size()) {
       if (pending[at] == 'H') {
         std::uint32_t len = 0;
@@ -79,7 +80,7 @@ struct CsvEncoder {
 
 bus_emulators::WriteBehindOptions csv_options(std::size_t columns) {
   bus_emulators::WriteBehindOptions o;
-  o.encode = CsvEncoder{columns, {}};
+  o.encode = CsvEncoder{columns, {}, {}};
   return o;
 }
 
@@ -96,20 +97,14 @@ std::string csv_cell(const std::string& s) {
 // ---------------------------------------------------------------------------------------
 // CheckedFile
 
-CheckedFile::CheckedFile(std::string path, const char* mode, bool write_behind) : path_(std::move(path)) {
-  if (write_behind) {
-    behind_ = std::make_unique<bus_emulators::WriteBehindFile>();
-    if (!behind_->open(path_, mode)) fail("cannot create", errno);
-    f_ = behind_->stream();
-    return;
-  }
+CheckedFile::CheckedFile(std::string path, const char* mode) : path_(std::move(path)) {
   f_ = std::fopen(path_.c_str(), mode);
   if (f_ == nullptr) fail("cannot create", errno);
 }
 
-CheckedFile::CheckedFile(std::string path, const char* mode, bus_emulators::WriteBehindOptions options)
+CheckedFile::CheckedFile(std::string path, const char* mode, const bus_emulators::WriteBehindOptions& behind)
     : path_(std::move(path)), behind_(std::make_unique<bus_emulators::WriteBehindFile>()) {
-  if (!behind_->open(path_, mode, options)) fail("cannot create", errno);
+  if (!behind_->open(path_, mode, behind)) fail("cannot create", errno);
   f_ = behind_->stream();
 }
 
@@ -234,7 +229,7 @@ void write_json_atomic(const std::string& path, const nlohmann::json& j) {
 // ---------------------------------------------------------------------------------------
 // EventLog
 
-EventLog::EventLog(const std::string& path) : path_(path), file_(temp_path_for(path), "wb", true) {}
+EventLog::EventLog(const std::string& path) : path_(path), file_(temp_path_for(path), "wb", bus_emulators::WriteBehindOptions{}) {}
 
 EventLog::~EventLog() {
   try {

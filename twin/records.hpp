@@ -4,7 +4,7 @@
 // and JSON writers write "DIR/.NAME.part" and rename it to NAME on close (rename within one
 // directory is atomic), and every write is checked so a full disk or an unwritable
 // directory is a clear std::runtime_error naming the path rather than a silently short
-// file. Numbers are formatted with fmt ("{:.10g}"), so identical runs give identical bytes.
+// file. Numbers are formatted as printf's "%.10g", so identical runs give identical bytes.
 // The run loop writes the CSVs and the event log at control-sample rate: those files are
 // write-behind (bus_emulators/write_behind.hpp), so a row costs a copy into memory and a disk
 // that throttles writers (much dirty page cache) does not stall a realtime loop; a write
@@ -25,13 +25,14 @@
 namespace omnitwin::twin {
 
 // A C stdio file whose every operation is checked; errors throw std::runtime_error naming
-// the path. Closed (without throwing) by the destructor. write_behind: bytes reach the disk
-// from a thread of the file's own (see above); close() waits for them and reports its errors.
+// the path. Closed (without throwing) by the destructor.
 class CheckedFile {
  public:
-  CheckedFile(std::string path, const char* mode, bool write_behind = false);
-  // Write-behind with an encoder that the writer thread applies to what write() staged.
-  CheckedFile(std::string path, const char* mode, bus_emulators::WriteBehindOptions options);
+  // A plain stdio file.
+  CheckedFile(std::string path, const char* mode);
+  // Write-behind: bytes reach the disk from a thread of the file's own (see above), through
+  // the options' encoder if it has one; close() waits for them and reports their errors.
+  CheckedFile(std::string path, const char* mode, const bus_emulators::WriteBehindOptions& behind);
   ~CheckedFile();
   CheckedFile(const CheckedFile&) = delete;
   CheckedFile& operator=(const CheckedFile&) = delete;
