@@ -170,10 +170,15 @@ void EcMaster::tick(SimTime t) {
     // A lost mailbox read may have emptied SM1: ask the slave to repeat its reply.
     for (auto& s : slaves_)
       if (s.mbx_read_sent && (s.job || s.mbx_poll)) s.repeat_pending = true;
-    // A cyclic frame that never came back is a cycle without any WKC.
-    if (lrw_out_) cyclic_wkc(0, false, t);
   }
-  lrw_out_ = false;
+  // Further cyclic frames that are not back: lost too.
+  if (groups_out_ > 0) {
+    stats_.lost_frames += static_cast<std::uint64_t>(groups_out_);
+    std::fill(group_out_.begin(), group_out_.end(), std::uint8_t{0});
+    groups_out_ = 0;
+  }
+  // A cycle with a frame that never came back: the WKC of the frames that did (0 if none).
+  if (cycle_parts_ > 0) close_cycle(false, t);
   for (auto& s : slaves_) s.mbx_read_sent = false;
   if (phase_ == MasterPhase::failed) return;
   for (auto& s : slaves_) slave_timeouts(s, t);
@@ -181,8 +186,10 @@ void EcMaster::tick(SimTime t) {
   after_frame(t, false);  // progress that needs no reply (every slave waiting at a barrier)
   if (phase_ == MasterPhase::failed) return;
 
-  ++index_;
+  index_ = static_cast<std::uint8_t>(index_ + index_stride_);
+  index_stride_ = 1;
   slot_count_ = 0;
+  bool lrw_added = false;
   ec::PduBuilder b(tx_);
   switch (phase_) {
     case MasterPhase::count:
@@ -208,18 +215,18 @@ void EcMaster::tick(SimTime t) {
       }
       break;
     case MasterPhase::dc:
-      dc_fill(b);
+      dc_fill(b, t);
       break;
     case MasterPhase::running: {
-      // Overlapped: each slave's outputs at the start of its range (the rest is its inputs' room).
-      if (overlapped_)
-        for (const auto& s : slaves_) std::memcpy(wire_.data() + s.out_logical, image_.data() + s.out_offset, s.out_bytes);
-      const std::vector<std::uint8_t>& data = overlapped_ ? wire_ : image_;
-      const std::uint16_t len = static_cast<std::uint16_t>(data.size());
-      if (len > 0) {
-        if (b.add_logical(Cmd::lrw, index_, config_.logical_base, len, data.data()) >= 0) {
+      // The first group's LRW (the whole image when it fits one frame).
+      if (!groups_.empty() && groups_[0].bytes > 0) {
+        const CyclicGroup& g = groups_[0];
+        copy_outputs(g);
+        const std::uint8_t* data = wire_.empty() ? image_.data() : wire_.data() + g.logical;
+        const auto len = static_cast<std::uint16_t>(g.bytes);
+        if (b.add_logical(Cmd::lrw, index_, config_.logical_base + g.logical, len, data) >= 0) {
           slots_[slot_count_++] = {SlotKind::lrw};
-          lrw_out_ = true;
+          lrw_added = true;
         }
       }
       if (config_.dc && dc_ref_ >= 0) {
@@ -245,7 +252,89 @@ void EcMaster::tick(SimTime t) {
     awaiting_ = true;
   } else {
     ++stats_.send_failures;
+    return;
   }
+  if (!lrw_added) return;
+  cycle_parts_ = 1;
+  cycle_back_ = 0;
+  cycle_wkc_ = 0;
+  send_groups();
+}
+
+// Overlapped or in several frames: each slave's outputs of group g at its place in wire_ (for
+// overlapped ranges, the start; the rest is its inputs' room). Real-time safe.
+void EcMaster::copy_outputs(const CyclicGroup& g) {
+  if (wire_.empty()) return;
+  for (int i = g.first; i < g.first + g.count; ++i) {
+    const Slave& s = slaves_[static_cast<std::size_t>(i)];
+    std::memcpy(wire_.data() + s.out_logical, image_.data() + s.out_offset, s.out_bytes);
+  }
+}
+
+// The further groups' frames, one LRW each, right behind the tick's frame (index_ + g).
+void EcMaster::send_groups() {
+  for (std::size_t g = 1; g < groups_.size(); ++g) {
+    const CyclicGroup& grp = groups_[g];
+    copy_outputs(grp);
+    ec::PduBuilder b(group_tx_);
+    const auto index = static_cast<std::uint8_t>(index_ + g);
+    if (b.add_logical(Cmd::lrw, index, config_.logical_base + grp.logical, static_cast<std::uint16_t>(grp.bytes),
+                      wire_.data() + grp.logical) < 0)
+      continue;  // cannot happen: layout() sized every group to a frame
+    const std::size_t n = b.finish();
+    if (send_(std::span<const std::uint8_t>(group_tx_.data(), n))) {
+      ++stats_.frames_sent;
+      group_out_[g] = 1;
+      ++groups_out_;
+      ++cycle_parts_;
+    } else {
+      ++stats_.send_failures;
+    }
+  }
+  index_stride_ = static_cast<std::uint8_t>(std::max<std::size_t>(1, groups_.size()));
+}
+
+// One group's LRW came back: its slaves' inputs into the image, its WKC into the cycle's.
+void EcMaster::take_group(const CyclicGroup& g, const ec::Datagram& d, SimTime t) {
+  if (wire_.empty()) {
+    std::memcpy(image_.data() + out_total_, d.data() + out_total_, in_total_);
+  } else {
+    for (int i = g.first; i < g.first + g.count; ++i) {
+      const Slave& s = slaves_[static_cast<std::size_t>(i)];
+      std::memcpy(image_.data() + s.in_offset, d.data() + (s.in_logical - g.logical), s.in_bytes);
+    }
+  }
+  cycle_wkc_ += d.wkc();
+  if (++cycle_back_ == cycle_parts_) close_cycle(true, t);
+}
+
+// A further group's frame (one LRW at index_ + g, g ≥ 1, still out)? Takes it and says so.
+bool EcMaster::on_group_frame(const ec::PduView& v, SimTime t) {
+  if (v.count != 1 || v.datagrams[0].cmd() != Cmd::lrw) return false;
+  const ec::Datagram& d = v.datagrams[0];
+  const std::size_t g = static_cast<std::uint8_t>(d.index() - index_);
+  if (g == 0 || g >= groups_.size() || !group_out_[g] || d.length() != groups_[g].bytes) return false;
+  group_out_[g] = 0;
+  --groups_out_;
+  ++stats_.frames_received;
+  if (d.irq() & kEventSm1)  // someone has mail: read every idle mailbox until it is empty
+    for (auto& s : slaves_)
+      if (!s.job && mbx_ready(s)) s.mbx_poll = true;
+  take_group(groups_[g], d, t);
+  return true;
+}
+
+// The cycle is over: every LRW back (returned) or the next tick came first. Judges its WKC.
+void EcMaster::close_cycle(bool returned, SimTime t) {
+  const auto wkc = static_cast<std::uint16_t>(cycle_wkc_);
+  cycle_parts_ = cycle_back_ = 0;
+  cycle_wkc_ = 0;
+  if (returned) {
+    ++stats_.cycles;
+    stats_.last_wkc = wkc;
+    stats_.expected_wkc = expected_wkc_;
+  }
+  cyclic_wkc(wkc, returned, t);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -253,8 +342,12 @@ void EcMaster::tick(SimTime t) {
 
 void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
   ec::PduView v;
-  if (ec::parse_pdu(pdu, v) != ec::PduError::ok || !awaiting_ || v.count != slot_count_ ||
-      v.datagrams[0].index() != index_) {
+  if (ec::parse_pdu(pdu, v) != ec::PduError::ok) {
+    ++stats_.stray_frames;
+    return;
+  }
+  if (groups_out_ > 0 && on_group_frame(v, t)) return;
+  if (!awaiting_ || v.count != slot_count_ || v.datagrams[0].index() != index_) {
     ++stats_.stray_frames;
     return;
   }
@@ -327,18 +420,9 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
         }
         break;
       }
-      case SlotKind::lrw: {
-        ++stats_.cycles;
-        if (overlapped_) {
-          for (const auto& s : slaves_) std::memcpy(image_.data() + s.in_offset, d.data() + s.in_logical, s.in_bytes);
-        } else {
-          std::memcpy(image_.data() + out_total_, d.data() + out_total_, in_total_);
-        }
-        stats_.last_wkc = d.wkc();
-        stats_.expected_wkc = expected_wkc_;
-        cyclic_wkc(d.wkc(), true, t);
+      case SlotKind::lrw:
+        if (cycle_parts_ > 0) take_group(groups_[0], d, t);
         break;
-      }
       case SlotKind::frmw:
         break;
       case SlotKind::al_brd: {
@@ -406,6 +490,7 @@ void EcMaster::after_frame(SimTime t, bool from_frame) {
       if (config_.dc) {
         phase_ = MasterPhase::dc;
         dc_step_ = 0;
+        dc_from_ = 0;
         dc_ok_ = true;
       } else {
         phase_ = MasterPhase::running;
@@ -481,7 +566,8 @@ void EcMaster::lose_segment(SimTime t) {
 }
 
 // ---------------------------------------------------------------------------------------
-// layout: outputs of every slave, then inputs (on the wire too, or overlapped); expected WKC
+// layout: outputs of every slave, then inputs in the image; on the wire separate or overlapped,
+// in as many frames as it takes; expected WKC
 
 void EcMaster::layout() {
   std::uint32_t out = 0, in = 0;
@@ -500,27 +586,57 @@ void EcMaster::layout() {
   }
   out_total_ = out;
   in_total_ = in;
-  // Room a frame leaves for the LRW's data: the EtherCAT header, the datagram's header and
-  // WKC, and 64 bytes for what rides along (FRMW 0x0910, BRD 0x0130, a mailbox datagram).
-  const auto fits = [](std::uint32_t bytes) {
-    return bytes + 2 + ec::kDatagramHeaderSize + ec::kWkcSize + 64 <= ec::kMaxPdu;
-  };
-  std::uint32_t shared = 0;
-  for (const auto& s : slaves_) shared += std::max(s.out_bytes, s.in_bytes);
+  // Room a frame leaves for an LRW's data: the EtherCAT header, the datagram's header and WKC.
+  // The tick's own frame keeps 64 bytes more for what rides along (FRMW 0x0910, BRD 0x0130, a
+  // mailbox datagram).
+  const std::uint32_t room_further = ec::kMaxPdu - 2 - ec::kDatagramHeaderSize - ec::kWkcSize;
+  const std::uint32_t room_first = room_further - 64;
+  const auto room = [&](std::size_t group) { return group == 0 ? room_first : room_further; };
   overlapped_ = config_.image_layout == ImageLayout::overlapped ||
-                (config_.image_layout == ImageLayout::automatic && !fits(out + in));
-  if (!fits(overlapped_ ? shared : out + in)) {
-    fail(fmt::format("process image of {} bytes does not fit one frame{}", overlapped_ ? shared : out + in,
-                     overlapped_ ? " even overlapped" : ""));
+                (config_.image_layout == ImageLayout::automatic && out + in > room_first);
+  // Consecutive slaves share a frame while their bytes fit it; a slave's data is never split.
+  groups_.clear();
+  std::uint32_t at = 0;
+  for (std::size_t i = 0; i < slaves_.size(); ++i) {
+    const Slave& s = slaves_[i];
+    const std::uint32_t need = overlapped_ ? std::max(s.out_bytes, s.in_bytes) : s.out_bytes + s.in_bytes;
+    if (groups_.empty() || groups_.back().bytes + need > room(groups_.size() - 1)) {
+      if (need > room(groups_.size())) {
+        fail(fmt::format("slave {}'s process data of {} bytes does not fit one frame", s.position, need));
+        return;
+      }
+      groups_.push_back({at, 0, static_cast<int>(i), 0});
+    }
+    groups_.back().bytes += need;
+    ++groups_.back().count;
+    at += need;
+  }
+  if (static_cast<int>(groups_.size()) > std::max(1, config_.max_cyclic_frames)) {
+    fail(fmt::format("process image of {} bytes{} needs {} frames, more than max_cyclic_frames {}", at,
+                     overlapped_ ? " (overlapped)" : "", groups_.size(), config_.max_cyclic_frames));
     return;
   }
-  std::uint32_t at = 0;
-  for (auto& s : slaves_) {
-    s.out_logical = overlapped_ ? at : s.out_offset;
-    s.in_logical = overlapped_ ? at : s.in_offset;
-    at += std::max(s.out_bytes, s.in_bytes);
+  // Each group on the wire: overlapped, one range per slave; separate, its slaves' outputs then
+  // their inputs. One separate group is the image itself (outputs of all, then inputs).
+  for (const CyclicGroup& g : groups_) {
+    std::uint32_t outs = 0;
+    for (int i = g.first; i < g.first + g.count; ++i) outs += slaves_[static_cast<std::size_t>(i)].out_bytes;
+    std::uint32_t o = g.logical, in_at = g.logical + outs;
+    for (int i = g.first; i < g.first + g.count; ++i) {
+      Slave& s = slaves_[static_cast<std::size_t>(i)];
+      s.out_logical = o;
+      s.in_logical = overlapped_ ? o : in_at;
+      o += overlapped_ ? std::max(s.out_bytes, s.in_bytes) : s.out_bytes;
+      in_at += overlapped_ ? 0 : s.in_bytes;
+    }
   }
-  wire_.assign(overlapped_ ? shared : 0, 0);
+  group_out_.assign(groups_.size(), 0);
+  groups_out_ = 0;
+  if (overlapped_ || groups_.size() > 1) {
+    wire_.assign(at, 0);
+  } else {
+    wire_.clear();
+  }
   image_.assign(out + in, 0);
   int wkc = 0;
   for (const auto& s : slaves_) wkc += (s.out_bytes ? 2 : 0) + (s.in_bytes ? 1 : 0);
@@ -535,8 +651,9 @@ void EcMaster::layout() {
       if (at && at->output) write_entry(*at, bytes_value(st.data, false));
     }
   }
-  emit(fmt::format("process image: {} output bytes, {} input bytes{}, expected WKC {}", out, in,
-                   overlapped_ ? fmt::format(", overlapped in {} bytes", shared) : std::string(), wkc));
+  emit(fmt::format("process image: {} output bytes, {} input bytes{}{}, expected WKC {}", out, in,
+                   overlapped_ ? fmt::format(", overlapped in {} bytes", at) : std::string(),
+                   groups_.size() > 1 ? fmt::format(", {} frames per cycle", groups_.size()) : std::string(), wkc));
 }
 
 std::optional<EntryLocation> EcMaster::find_entry(int position, std::uint16_t index, std::uint8_t sub) const {
@@ -1231,50 +1348,73 @@ void EcMaster::finish_pdo_read(Slave& s) {
 // slave i = (round trip at the reference − round trip at i) / 2, offset so that every slave's
 // system time equals the reference's local time, then SYNC0 (cycle, start time, activation).
 
-void EcMaster::dc_fill(ec::PduBuilder& b) {
-  switch (dc_step_) {
-    case 0: {
-      std::uint8_t z[4]{};
-      add(b, {SlotKind::dc, -1, 0}, Cmd::bwr, 0, kRegDcRecv, 4, z);
+// The DC set-up's datagrams for this tick: step 0 one BWR; steps 1–3 a few per DC slave, as
+// many slaves (each whole) as fit the frame from dc_from_ on — a long segment takes a step in
+// several frames (3 datagrams per slave: 21 slaves fill the 64 a frame may chain).
+void EcMaster::dc_fill(ec::PduBuilder& b, SimTime t) {
+  dc_last_ = -1;
+  if (dc_step_ == 0) {
+    std::uint8_t z[4]{};
+    add(b, {SlotKind::dc, -1, 0}, Cmd::bwr, 0, kRegDcRecv, 4, z);
+    return;
+  }
+  if (dc_step_ == 3 && dc_from_ == 0) {
+    // One SYNC0 start for every slave: 20 ms after the reference's system time now (as read in
+    // step 1, advanced by the time since), on a cycle boundary, plus the shift.
+    const auto cycle = static_cast<std::uint64_t>(config_.cycle_ns);
+    std::uint64_t start = dc_ref_time_ + static_cast<std::uint64_t>(std::max<SimTime>(0, t - dc_read_t_)) + 20'000'000;
+    if (cycle) start = (start / cycle + 1) * cycle;
+    dc_start_ = static_cast<std::uint64_t>(static_cast<std::int64_t>(start) + config_.sync0_shift_ns);
+  }
+  for (std::size_t i = dc_from_; i < slaves_.size(); ++i) {
+    const Slave& s = slaves_[i];
+    if (!s.dc) continue;
+    const ec::PduBuilder::Mark mark = b.mark();
+    const std::size_t slots = slot_count_;
+    add_failed_ = false;
+    dc_fill_slave(b, s);
+    if (add_failed_) {  // this slave starts the next frame
+      b.rewind(mark);
+      slot_count_ = slots;
       break;
     }
+    dc_last_ = s.position;
+  }
+  if (dc_last_ < 0) {  // no DC slave left from dc_from_ on: the step is done
+    if (dc_step_ == 1 && dc_ref_ < 0) dc_step_ = 3;  // no DC slave at all
+    ++dc_step_;
+    dc_from_ = 0;
+  }
+}
+
+// One slave's datagrams of DC step 1 (read the latched port times, its local receive time and
+// system time), 2 (write its offset and delay) or 3 (SYNC0 cycle, start, activation).
+void EcMaster::dc_fill_slave(ec::PduBuilder& b, const Slave& s) {
+  switch (dc_step_) {
     case 1:
-      for (const auto& s : slaves_) {
-        if (!s.dc) continue;
-        add(b, {SlotKind::dc, s.position, 0}, Cmd::fprd, s.station, kRegDcRecv, 16);
-        add(b, {SlotKind::dc, s.position, 1}, Cmd::fprd, s.station, kRegDcRecvLocal, 8);
-        add(b, {SlotKind::dc, s.position, 2}, Cmd::fprd, s.station, kRegDcSysTime, 8);
-      }
+      add(b, {SlotKind::dc, s.position, 0}, Cmd::fprd, s.station, kRegDcRecv, 16);
+      add(b, {SlotKind::dc, s.position, 1}, Cmd::fprd, s.station, kRegDcRecvLocal, 8);
+      add(b, {SlotKind::dc, s.position, 2}, Cmd::fprd, s.station, kRegDcSysTime, 8);
       break;
-    case 2:
-      for (const auto& s : slaves_) {
-        if (!s.dc) continue;
-        std::uint8_t o[8], dl[4];
-        const std::int64_t off = static_cast<std::int64_t>(dc_local_[dc_ref_]) + s.dc_delay_ns -
-                                 static_cast<std::int64_t>(dc_local_[s.position]);
-        put_u64(o, static_cast<std::uint64_t>(off));
-        put_u32(dl, static_cast<std::uint32_t>(s.dc_delay_ns));
-        add(b, {SlotKind::dc, s.position, 0}, Cmd::fpwr, s.station, kRegDcOffset, 8, o);
-        add(b, {SlotKind::dc, s.position, 1}, Cmd::fpwr, s.station, kRegDcDelay, 4, dl);
-      }
+    case 2: {
+      std::uint8_t o[8], dl[4];
+      const std::int64_t off = static_cast<std::int64_t>(dc_local_[dc_ref_]) + s.dc_delay_ns -
+                               static_cast<std::int64_t>(dc_local_[s.position]);
+      put_u64(o, static_cast<std::uint64_t>(off));
+      put_u32(dl, static_cast<std::uint32_t>(s.dc_delay_ns));
+      add(b, {SlotKind::dc, s.position, 0}, Cmd::fpwr, s.station, kRegDcOffset, 8, o);
+      add(b, {SlotKind::dc, s.position, 1}, Cmd::fpwr, s.station, kRegDcDelay, 4, dl);
       break;
+    }
     case 3: {
-      for (const auto& s : slaves_) {
-        if (!s.dc) continue;
-        std::uint8_t c[4], st[8], act[2];
-        const auto cycle = static_cast<std::uint64_t>(config_.cycle_ns);
-        put_u32(c, static_cast<std::uint32_t>(cycle));
-        // start 20 ms after the latest known system time, on a cycle boundary, plus the shift
-        std::uint64_t start = dc_ref_time_ + 20'000'000;
-        if (cycle) start = (start / cycle + 1) * cycle;
-        start = static_cast<std::uint64_t>(static_cast<std::int64_t>(start) + config_.sync0_shift_ns);
-        put_u64(st, start);
-        const std::uint16_t aa = s.esi && !s.esi->dc.empty() && s.esi->dc[0].assign_activate ? s.esi->dc[0].assign_activate : 0x0300;
-        put_u16(act, aa);
-        add(b, {SlotKind::dc, s.position, 0}, Cmd::fpwr, s.station, kRegDcCycle0, 4, c);
-        add(b, {SlotKind::dc, s.position, 1}, Cmd::fpwr, s.station, kRegDcStart, 8, st);
-        add(b, {SlotKind::dc, s.position, 2}, Cmd::fpwr, s.station, kRegDcAssign, 2, act);
-      }
+      std::uint8_t c[4], st[8], act[2];
+      put_u32(c, static_cast<std::uint32_t>(config_.cycle_ns));
+      put_u64(st, dc_start_);
+      const std::uint16_t aa = s.esi && !s.esi->dc.empty() && s.esi->dc[0].assign_activate ? s.esi->dc[0].assign_activate : 0x0300;
+      put_u16(act, aa);
+      add(b, {SlotKind::dc, s.position, 0}, Cmd::fpwr, s.station, kRegDcCycle0, 4, c);
+      add(b, {SlotKind::dc, s.position, 1}, Cmd::fpwr, s.station, kRegDcStart, 8, st);
+      add(b, {SlotKind::dc, s.position, 2}, Cmd::fpwr, s.station, kRegDcAssign, 2, act);
       break;
     }
     default:
@@ -1284,8 +1424,7 @@ void EcMaster::dc_fill(ec::PduBuilder& b) {
 
 void EcMaster::dc_reply(const ec::Datagram& d, int slave, int sub, SimTime t) {
   if (d.wkc() == 0) dc_ok_ = false;
-  const bool last = slave < 0 ||
-                    std::none_of(slaves_.begin() + slave + 1, slaves_.end(), [](const Slave& s) { return s.dc; });
+  const bool last = slave < 0 || slave == dc_last_;  // the frame's last slave of this step
   const int last_sub = dc_step_ == 1 || dc_step_ == 3 ? 2 : dc_step_ == 2 ? 1 : 0;
   if (dc_step_ == 1 && slave >= 0) {
     if (dc_ports_.size() != slaves_.size()) {
@@ -1301,10 +1440,16 @@ void EcMaster::dc_reply(const ec::Datagram& d, int slave, int sub, SimTime t) {
     if (dc_ref_ < 0 || slave < dc_ref_) dc_ref_ = slave;
   }
   if (!last || sub != last_sub) return;
-  if (!dc_ok_) {  // repeat this step
+  if (!dc_ok_) {  // repeat this frame's part of the step
     dc_ok_ = true;
     return;
   }
+  // More DC slaves behind this frame's: the step goes on with them in the next frame.
+  if (slave >= 0 && std::any_of(slaves_.begin() + slave + 1, slaves_.end(), [](const Slave& s) { return s.dc; })) {
+    dc_from_ = static_cast<std::size_t>(slave) + 1;
+    return;
+  }
+  dc_from_ = 0;
   if (dc_step_ == 1) {
     if (dc_ref_ < 0) {  // no DC slave
       dc_step_ = 4;

@@ -2,9 +2,10 @@
 // (facts/ethercat.md; DESIGN §4, §7).
 //
 // Shaped like controller/omni_master: no sockets, no clock, no globals. tick(t) is the cycle
-// timer: it hands out at most ONE EtherCAT PDU through the send callback; on_frame(pdu, t)
-// takes the PDU when it comes back. One exchange per tick. When the previous tick's PDU has
-// not come back by the next tick it is counted as lost and the tick builds its datagrams
+// timer: it hands out ONE EtherCAT PDU through the send callback (in OP, one more per further
+// frame of a cyclic image too large for one); on_frame(pdu, t) takes each PDU when it comes
+// back. One exchange per tick. When a PDU of the previous tick has not come back by the next
+// tick it is counted as lost and the tick builds its datagrams
 // again (configuration steps are simply repeated; the cyclic exchange just counts).
 //
 // Two levels of state machine, as open masters do it:
@@ -42,7 +43,12 @@
 // before the user's SDO queue. Cyclic process data: one LRW over the whole image (laid out
 // separate or overlapped, EcMasterConfig::image_layout) (+ FRMW
 // 0x0910 to the reference clock when DC is on), expected WKC = 2 × slaves with outputs +
-// slaves with inputs. After the first OP, every al_check_every_ns a BRD 0x0130 rides along:
+// slaves with inputs. An image larger than one frame is cut at slave boundaries into groups
+// of consecutive slaves, one LRW each: the first rides in the tick's frame with everything
+// else, each further group goes in a frame of its own sent right after it (as SOEM splits its
+// IOmap into several LRW frames). The cycle's WKC is the sum over its frames, judged once
+// every frame is back (or at the next tick, a missing frame counted lost and its part 0).
+// After the first OP, every al_check_every_ns a BRD 0x0130 rides along:
 // a slave that is not in OP (or shows the error bit) while the WKC is still right — e.g. one
 // that fell to SAFE-OP by its watchdog — is found by the same AL status reads.
 // Once supervising, a cyclic frame that does not come back by the next tick is a cycle with
@@ -133,8 +139,10 @@ struct EcMasterConfig {
   // slave's inputs (out + in bytes). overlapped: each slave's outputs and inputs share one
   // logical range of max(out, in) bytes — its ESC writes the outputs first and puts its inputs
   // in their place (facts/ethercat.md, LRW) — so twice the axes fit one frame. automatic:
-  // separate while that fits one frame, else overlapped.
+  // separate while that fits one frame, else overlapped. Either layout spreads over several
+  // frames when one does not hold it (each slave's data whole in one of them).
   ImageLayout image_layout = ImageLayout::automatic;
+  int max_cyclic_frames = 16;              // an image needing more frames than this is refused
 };
 
 // Where a PDO entry sits in the logical image.
@@ -206,7 +214,8 @@ class EcMaster {
   EcMaster(const EcMaster&) = delete;  // internal SDO callbacks refer to this object
   EcMaster& operator=(const EcMaster&) = delete;
 
-  // The cycle timer at t [ns]: notes a lost frame, runs timeouts, sends ≤ 1 PDU.
+  // The cycle timer at t [ns]: notes lost frames, runs timeouts, sends 1 PDU (+ the cyclic
+  // image's further frames in OP). Real-time safe once running (no allocation).
   void tick(SimTime t);
   // A PDU that came back at t [ns]. Unparsable or unexpected PDUs are counted, never thrown.
   void on_frame(std::span<std::uint8_t> pdu, SimTime t);
@@ -225,13 +234,16 @@ class EcMaster {
   std::uint32_t output_bytes() const { return out_total_; }
   // The layout the image took (separate until the layout is done) and the LRW's data length.
   bool image_overlapped() const { return overlapped_; }
-  std::uint32_t lrw_bytes() const { return static_cast<std::uint32_t>(overlapped_ ? wire_.size() : image_.size()); }
+  std::uint32_t lrw_bytes() const { return static_cast<std::uint32_t>(wire_.empty() ? image_.size() : wire_.size()); }
+  // Frames (one LRW each) the cyclic image takes per cycle: 1 until laid out.
+  int cyclic_frames() const { return groups_.empty() ? 1 : static_cast<int>(groups_.size()); }
   std::optional<EntryLocation> find_entry(int position, std::uint16_t index, std::uint8_t sub) const;
   std::int64_t read_entry(const EntryLocation& at, bool is_signed) const;
   void write_entry(const EntryLocation& at, std::int64_t value);
 
   MasterPhase phase() const { return phase_; }
-  bool awaiting_reply() const { return awaiting_; }  // the last PDU sent has not come back yet
+  // A PDU sent at the last tick (its frame or one of its further cyclic frames) is not back yet.
+  bool awaiting_reply() const { return awaiting_ || groups_out_ > 0; }
   bool operational() const;            // running and every slave in OP
   bool supervising() const { return operational_once_; }
   bool segment_lost() const { return segment_lost_; }  // left OP: the segment went silent
@@ -251,6 +263,12 @@ class EcMaster {
     SlotKind kind = SlotKind::count;
     int slave = -1;
     int sub = 0;
+  };
+  // The cyclic image's frames: group g is slaves [first, first + count) on the wire bytes
+  // [logical, logical + bytes) from logical_base.
+  struct CyclicGroup {
+    std::uint32_t logical = 0, bytes = 0;
+    int first = 0, count = 0;
   };
   struct MbxJob {
     std::uint64_t id = 0;
@@ -311,10 +329,16 @@ class EcMaster {
   bool mbx_ready(const Slave& s) const;
   void after_frame(SimTime t, bool from_frame);
   void cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t);
+  void copy_outputs(const CyclicGroup& g);
+  void take_group(const CyclicGroup& g, const omnitwin::ethercat::Datagram& d, SimTime t);
+  void send_groups();
+  bool on_group_frame(const omnitwin::ethercat::PduView& v, SimTime t);
+  void close_cycle(bool returned, SimTime t);
   void lose_segment(SimTime t);
   int segment_loss_threshold() const;
   void layout();
-  void dc_fill(omnitwin::ethercat::PduBuilder& b);
+  void dc_fill(omnitwin::ethercat::PduBuilder& b, SimTime t);
+  void dc_fill_slave(omnitwin::ethercat::PduBuilder& b, const Slave& s);
   void dc_reply(const omnitwin::ethercat::Datagram& d, int slave, int sub, SimTime t);
   bool add(omnitwin::ethercat::PduBuilder& b, Slot slot, omnitwin::ethercat::Cmd cmd, std::uint16_t adp,
            std::uint16_t ado, std::uint16_t len, const void* data = nullptr);
@@ -341,13 +365,20 @@ class EcMaster {
 
   std::vector<std::uint8_t> image_;   // outputs of every slave, then inputs (entry offsets)
   std::uint32_t out_total_ = 0, in_total_ = 0;
-  bool overlapped_ = false;           // the LRW carries wire_, not image_
-  std::vector<std::uint8_t> wire_;    // overlapped: the LRW's data, one range per slave
+  bool overlapped_ = false;           // each slave's outputs and inputs share one range
+  // Overlapped or in several frames: the LRWs' data (group after group); empty: image_ itself.
+  std::vector<std::uint8_t> wire_;
+  std::vector<CyclicGroup> groups_;      // empty until laid out; one group = one frame
+  std::vector<std::uint8_t> group_out_;  // group g ≥ 1: its frame is out, not back yet
+  int groups_out_ = 0;                   // how many of those
+  std::uint8_t index_stride_ = 1;        // datagram indices the last tick used (1 + further frames)
+  std::array<std::uint8_t, omnitwin::ethercat::kMaxPdu> group_tx_{};
+  int cycle_parts_ = 0, cycle_back_ = 0; // LRWs of the open cycle sent / come back (0 = none open)
+  std::uint32_t cycle_wkc_ = 0;          // their WKCs so far
   bool layout_done_ = false;
   bool operational_once_ = false;
   int wkc_bad_run_ = 0;
   int silent_run_ = 0;            // consecutive supervised cycles without any WKC
-  bool lrw_out_ = false;          // the outstanding frame carries the cyclic LRW
   bool segment_lost_ = false;
   std::string stop_reason_;
   SimTime next_al_check_ = 0;
@@ -363,6 +394,9 @@ class EcMaster {
   std::uint64_t dc_ref_time_ = 0;
   SimTime dc_read_t_ = 0;
   bool dc_ok_ = true;
+  std::size_t dc_from_ = 0;       // steps 1–3: the slave this frame's part of the step starts at
+  int dc_last_ = -1;              // … and the last slave it carries (-1: none)
+  std::uint64_t dc_start_ = 0;    // SYNC0 start time written to every slave [ns, system time]
 };
 
 }  // namespace omnitwin::controller::ethercat

@@ -1,7 +1,8 @@
 // Test support for the ecmaster tests (not a test file): our master core wired in-process to
 // A's EscChain of B's DriveSlaves built from models/ethercat/omnitwin_drive.xml, each axis on
-// C's AxisModel. One step() = drive/firmware cycle, one master tick, the frame through the
-// chain and back (unless dropped), the drive layer's update.
+// C's AxisModel. One step() = drive/firmware cycle, one master tick, its frames (one, or more
+// for an image larger than a frame) through the chain and back (unless dropped), the drive
+// layer's update.
 #pragma once
 
 #include <memory>
@@ -30,7 +31,9 @@ struct Bench {
   ec::EscChain chain;
   std::unique_ptr<me::EcMaster> master;
   std::unique_ptr<me::EcDrives> drives;
-  std::vector<std::uint8_t> frame;
+  std::vector<std::uint8_t> frame;               // the tick's first frame
+  std::vector<std::vector<std::uint8_t>> more;    // its further frames (a multi-frame image)
+  std::size_t n_more = 0;                         // how many of `more` this tick sent
   bool sent = false;
   int drop_next = 0;  // frames to lose
   int late_every = 0; // > 0: every n-th frame passes the slaves but comes back too late
@@ -50,8 +53,13 @@ struct Bench {
     cfg.devices = master_devices.empty() ? devices : master_devices;
     cycle = cfg.cycle_ns;
     master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
-      frame.assign(pdu.begin(), pdu.end());
-      sent = true;
+      if (sent) {
+        if (n_more == more.size()) more.emplace_back();
+        more[n_more++].assign(pdu.begin(), pdu.end());  // buffers kept from tick to tick
+      } else {
+        frame.assign(pdu.begin(), pdu.end());
+        sent = true;
+      }
       return true;
     });
     drives = std::make_unique<me::EcDrives>(*master);
@@ -67,23 +75,29 @@ struct Bench {
     }
     chain.advance(t);
     sent = false;
+    n_more = 0;
     if (paused > 0) {
       --paused;
     } else {
       master->tick(t);
     }
     if (sent) {
-      ++frames;
-      if (drop_next > 0) {
-        --drop_next;
-      } else if (late_every > 0 && frames % late_every == 0) {
-        chain.process(frame, t);  // the slaves act on it; the master never sees it in time
-      } else if (chain.process(frame, t)) {
-        master->on_frame(frame, t + 50'000);
-      }
+      pass(frame);
+      for (std::size_t i = 0; i < n_more; ++i) pass(more[i]);
     }
     drives->update();
     t += cycle;
+  }
+  // One frame through the chain and back to the master (or dropped, or too late).
+  void pass(std::vector<std::uint8_t>& f) {
+    ++frames;
+    if (drop_next > 0) {
+      --drop_next;
+    } else if (late_every > 0 && frames % late_every == 0) {
+      chain.process(f, t);  // the slaves act on it; the master never sees it in time
+    } else if (chain.process(f, t)) {
+      master->on_frame(f, t + 50'000);
+    }
   }
   // Steps until pred() or max steps; returns whether pred() held.
   template <class P>
@@ -111,8 +125,11 @@ struct MultiAxisSegment {
   std::vector<std::unique_ptr<ec::DriveSlave>> slaves;
   ec::EscChain chain;
   std::unique_ptr<me::EcMaster> master;
-  std::vector<std::uint8_t> frame;
+  std::vector<std::uint8_t> frame;               // the tick's first frame
+  std::vector<std::vector<std::uint8_t>> more;    // its further frames (a multi-frame image)
+  std::size_t n_more = 0;                         // how many of `more` this tick sent
   bool sent = false;
+  int drop_more = 0;  // further frames (not the tick's first) to lose
   me::SimTime t = 0;
   me::SimTime cycle = 100'000;
 
@@ -134,8 +151,13 @@ struct MultiAxisSegment {
     cfg.dc = true;
     cfg.expected_slaves = static_cast<int>(slaves.size());
     master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
-      frame.assign(pdu.begin(), pdu.end());
-      sent = true;
+      if (sent) {
+        if (n_more == more.size()) more.emplace_back();
+        more[n_more++].assign(pdu.begin(), pdu.end());  // buffers kept from tick to tick
+      } else {
+        frame.assign(pdu.begin(), pdu.end());
+        sent = true;
+      }
       return true;
     });
   }
@@ -144,8 +166,17 @@ struct MultiAxisSegment {
     for (auto& s : slaves) s->cycle(t);  // mailbox replies (process data runs on SYNC0 once DC is on)
     chain.advance(t);
     sent = false;
+    n_more = 0;
     master->tick(t);
-    if (sent && chain.process(frame, t)) master->on_frame(frame, t + cycle / 2);
+    if (!sent) return void(t += cycle);
+    if (chain.process(frame, t)) master->on_frame(frame, t + cycle / 2);
+    for (std::size_t i = 0; i < n_more; ++i) {
+      if (drop_more > 0) {
+        --drop_more;
+        continue;
+      }
+      if (chain.process(more[i], t)) master->on_frame(more[i], t + cycle / 2);
+    }
     t += cycle;
   }
   bool to_op(int max_steps) {

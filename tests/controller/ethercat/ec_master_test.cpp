@@ -385,6 +385,18 @@ TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   EXPECT_EQ(m.slave(0).esi->product_code, 0x00000801u);
 }
 
+// Every status module of a multi-axis segment sits at its own slave's place in the image: an
+// idle slot k reports card k + 1 (the slot driven by `commanded` reports card 3).
+void expect_modules_at_their_slaves(const EcMaster& m, int commanded = -1) {
+  for (int p = 0; p < m.slave_count(); ++p) {
+    const auto& s = m.slave(p);
+    for (std::uint32_t k = 0; k < s.in_bytes / 12; ++k) {
+      const std::uint8_t card = m.image()[s.in_offset + 12 * k];
+      EXPECT_EQ(card, p == commanded && k == 0 ? 3 : k + 1) << "slave " << p << " slot " << k;
+    }
+  }
+}
+
 // Issue 17, item 4: seed 001's 100 axes (12 slaves of 8 cards and one of 4, 12 bytes per card
 // each way) are 2,400 image bytes, more than a frame holds; laid out overlapped (each slave's
 // outputs and inputs on one logical range) they are 1,200 and cycle in one LRW at 100 µs. Every
@@ -407,24 +419,91 @@ TEST(EcMaster, AHundredAxesCycleInOneOverlappedLrwAndEachModuleLandsAtItsSlave) 
   EXPECT_EQ(seg.master->stats().last_wkc, 39);  // 3 per slave: outputs written, inputs read
   EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
   EXPECT_EQ(seg.master->stats().lost_frames, 0u);
-  for (int p = 0; p < 13; ++p) {
-    const auto& s = seg.master->slave(p);
-    for (std::uint32_t k = 0; k < s.in_bytes / 12; ++k) {
-      const std::uint8_t card = seg.master->image()[s.in_offset + 12 * k];
-      EXPECT_EQ(card, p == 12 && k == 0 ? 3 : k + 1) << "slave " << p << " slot " << k;
-    }
-  }
+  expect_modules_at_their_slaves(*seg.master, 12);
   EXPECT_EQ(seg.master->image()[last.in_offset + 1] & 0x7F, 2);  // card 3 runs velocity mode
 }
 
-// Forced to the separate layout, the same segment cannot start: the image does not fit.
-TEST(EcMaster, AHundredAxesLaidOutSeparatelyAreRefusedAsTooLargeForAFrame) {
+// Forced to the separate layout, the same segment's 2,400 bytes do not fit one frame: they
+// are cut at a slave boundary into two LRW frames per cycle (7 slaves of 192 bytes in the
+// first, 5 more and the 4-card slave in the second), and every module still lands at its slave.
+TEST(EcMaster, AHundredAxesLaidOutSeparatelyCycleInTwoFrames) {
   EcMasterConfig cfg;
   cfg.image_layout = ImageLayout::separate;
   ecbench::MultiAxisSegment seg(100, 100'000, cfg);
+  ASSERT_TRUE(seg.to_op(400000)) << seg.master->error() << "\n" << events(*seg.master);
+  EXPECT_FALSE(seg.master->image_overlapped());
+  EXPECT_EQ(seg.master->cyclic_frames(), 2);
+  EXPECT_EQ(seg.master->lrw_bytes(), 2400u);
+  EXPECT_EQ(seg.master->slave(7).out_logical, 1344u);  // the second frame starts with slave 7
+  EXPECT_EQ(seg.master->slave(7).in_logical, 1344u + 5 * 96 + 48);
+  const auto& last = seg.master->slave(12);
+  auto img = seg.master->image();
+  img[last.out_offset] = 3;
+  img[last.out_offset + 1] = 0x82;  // mode 2, handshake bit 15
+  for (int k = 0; k < 200; ++k) seg.step();
+  EXPECT_EQ(seg.n_more, 1u) << "one further frame per cycle";
+  EXPECT_EQ(seg.master->stats().last_wkc, 39);  // the sum over both frames
+  EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
+  EXPECT_EQ(seg.master->stats().lost_frames, 0u);
+  expect_modules_at_their_slaves(*seg.master, 12);
+  EXPECT_EQ(seg.master->image()[last.in_offset + 1] & 0x7F, 2);  // card 3 runs velocity mode
+}
+
+// 200 axes (25 slaves) do not fit one frame even overlapped (2,400 bytes): 14 slaves ride in
+// the tick's frame, 11 in a second one. The log says so. It also needs the DC set-up in
+// several frames: 3 datagrams per slave for 25 slaves are more than the 64 a frame chains, and
+// before, the last slaves' datagrams were cut off and the master waited in phase dc forever.
+// Every slave gets the same SYNC0 start time.
+TEST(EcMaster, TwoHundredAxesOverlappedTakeTwoFramesPerCycle) {
+  ecbench::MultiAxisSegment seg(200, 1'000'000);
+  ASSERT_TRUE(seg.to_op(40000)) << seg.master->error() << "\n" << events(*seg.master);
+  const std::uint64_t start = seg.slaves[0]->esc().read64(0x0990);
+  EXPECT_GT(start, 0u);
+  for (const auto& sl : seg.slaves) EXPECT_EQ(sl->esc().read64(0x0990), start);
+  EXPECT_TRUE(seg.master->image_overlapped());
+  EXPECT_EQ(seg.master->cyclic_frames(), 2);
+  EXPECT_EQ(seg.master->slave(14).out_logical, 14u * 96);
+  for (int k = 0; k < 50; ++k) seg.step();
+  EXPECT_EQ(seg.master->stats().last_wkc, 75);
+  EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
+  expect_modules_at_their_slaves(*seg.master);
+  EXPECT_NE(events(*seg.master).find("overlapped in 2400 bytes, 2 frames per cycle"), std::string::npos)
+      << events(*seg.master);
+}
+
+// A cap on the frames per cycle refuses an image that needs more, naming both numbers.
+TEST(EcMaster, AnImageNeedingMoreFramesThanAllowedIsRefused) {
+  EcMasterConfig cfg;
+  cfg.image_layout = ImageLayout::separate;
+  cfg.max_cyclic_frames = 1;
+  ecbench::MultiAxisSegment seg(100, 100'000, cfg);
   EXPECT_FALSE(seg.to_op(400000));
   EXPECT_EQ(seg.master->phase(), MasterPhase::failed);
-  EXPECT_NE(seg.master->error().find("2400 bytes does not fit one frame"), std::string::npos) << seg.master->error();
+  EXPECT_NE(seg.master->error().find("process image of 2400 bytes needs 2 frames, more than max_cyclic_frames 1"),
+            std::string::npos)
+      << seg.master->error();
+}
+
+// The second frame of a cycle lost three times: three lost frames and three WKC errors whose
+// WKC is the first frame's share; the segment is not silent (the first frame came back), the
+// AL status reads find every slave in OP, and the next complete cycles are clean again.
+TEST(EcMaster, ALostFurtherFrameCostsItsShareOfTheWkcNotTheSegment) {
+  ecbench::MultiAxisSegment seg(200, 1'000'000);
+  ASSERT_TRUE(seg.to_op(40000)) << seg.master->error();
+  for (int k = 0; k < 20; ++k) seg.step();
+  const auto before = seg.master->stats();
+  seg.drop_more = 3;
+  for (int k = 0; k < 4; ++k) seg.step();  // the fourth tick notices the third loss
+  EXPECT_EQ(seg.master->stats().lost_frames - before.lost_frames, 3u);
+  EXPECT_EQ(seg.master->stats().wkc_errors - before.wkc_errors, 3u);
+  EXPECT_FALSE(seg.master->segment_lost());
+  for (int k = 0; k < 300; ++k) seg.step();
+  EXPECT_EQ(seg.master->stats().wkc_errors - before.wkc_errors, 3u);
+  EXPECT_EQ(seg.master->stats().last_wkc, 75);
+  EXPECT_TRUE(seg.master->operational()) << events(*seg.master);
+  EXPECT_EQ(seg.master->stats().slaves_lost, 0u);
+  EXPECT_NE(events(*seg.master).find("WKC 42 instead of 75 for 3 cycles (frame lost)"), std::string::npos)
+      << events(*seg.master);
 }
 
 TEST(EcMaster, PoweredOffDcSlaveRejoinsDistributedClocks) {
