@@ -129,8 +129,11 @@ void EthercatNetwork::take_frame(const std::uint8_t* pdu, std::size_t size, SimT
     return;
   }
   Pending& p = pending_[(pending_head_ + pending_count_) % pending_.size()];
-  p.at = t + std::llround(spec_.t_pre_us * 1e3);
   p.size = static_cast<std::uint16_t>(std::min(size, p.pdu.size()));
+  // Frames share the line: one sent right behind another (a master's cyclic image in several
+  // frames) enters when the earlier one's last bit and the inter-frame gap have gone out.
+  p.at = std::max<SimTime>(t + std::llround(spec_.t_pre_us * 1e3), line_free_);
+  line_free_ = p.at + wire_ns(p.size);
   std::copy_n(pdu, p.size, p.pdu.begin());
   p.wire = transport_ && transport_->wire_header(p.hdr);
   ++pending_count_;

@@ -137,6 +137,7 @@ class EthercatNetwork final : public BusNetwork {
   std::array<std::uint8_t, 4> last_fsa_{};
   std::vector<Pending> pending_;           // ring of frames in flight towards the chain
   std::size_t pending_head_ = 0, pending_count_ = 0;
+  SimTime line_free_ = 0;  // when the master's last frame has left the line's entry [ns]
   std::vector<Reply> replies_;             // returned frames not yet handed to the transport
   std::size_t replies_count_ = 0;
   bool batch_ = false;                     // lockstep: replies wait for flush_transport()

@@ -208,18 +208,21 @@ void EcMaster::tick(SimTime t) {
       break;
     }
     case MasterPhase::address:
-      for (auto& s : slaves_) {
+      // As many APWRs as one frame chains (64), from addr_from_ on: a longer segment is
+      // addressed over several frames.
+      for (addr_next_ = addr_from_; addr_next_ < slaves_.size(); ++addr_next_) {
+        const Slave& s = slaves_[addr_next_];
         std::uint8_t a[2];
         put_u16(a, s.station);
-        add(b, {SlotKind::address, s.position}, Cmd::apwr, position_adp(s.position), kRegStation, 2, a);
+        if (!add(b, {SlotKind::address, s.position}, Cmd::apwr, position_adp(s.position), kRegStation, 2, a)) break;
       }
       break;
     case MasterPhase::dc:
       dc_fill(b, t);
       break;
     case MasterPhase::running: {
-      // The first group's LRW (the whole image when it fits one frame).
-      if (!groups_.empty() && groups_[0].bytes > 0) {
+      // The image's LRW, when it fits beside everything else (else it goes in frames of its own).
+      if (!lrw_own_frames_ && !groups_.empty() && groups_[0].bytes > 0) {
         const CyclicGroup& g = groups_[0];
         copy_outputs(g);
         const std::uint8_t* data = wire_.empty() ? image_.data() : wire_.data() + g.logical;
@@ -245,20 +248,20 @@ void EcMaster::tick(SimTime t) {
     case MasterPhase::failed:
       break;
   }
-  if (b.datagrams() == 0) return;
-  const std::size_t n = b.finish();
-  if (send_ && send_(std::span<const std::uint8_t>(tx_.data(), n))) {
-    ++stats_.frames_sent;
-    awaiting_ = true;
-  } else {
-    ++stats_.send_failures;
-    return;
+  bool sent = false;
+  if (b.datagrams() > 0) {
+    const std::size_t n = b.finish();
+    sent = send_ && send_(std::span<const std::uint8_t>(tx_.data(), n));
+    ++(sent ? stats_.frames_sent : stats_.send_failures);
+    awaiting_ = sent;
   }
-  if (!lrw_added) return;
-  cycle_parts_ = 1;
   cycle_back_ = 0;
   cycle_wkc_ = 0;
-  send_groups();
+  if (phase_ == MasterPhase::running && lrw_own_frames_) {
+    send_groups();
+  } else if (lrw_added && sent) {
+    cycle_parts_ = 1;
+  }
 }
 
 // Overlapped or in several frames: each slave's outputs of group g at its place in wire_ (for
@@ -271,13 +274,14 @@ void EcMaster::copy_outputs(const CyclicGroup& g) {
   }
 }
 
-// The further groups' frames, one LRW each, right behind the tick's frame (index_ + g).
+// The image in frames of its own, one LRW per group, right behind the tick's frame (datagram
+// index index_ + 1 + g).
 void EcMaster::send_groups() {
-  for (std::size_t g = 1; g < groups_.size(); ++g) {
+  for (std::size_t g = 0; g < groups_.size(); ++g) {
     const CyclicGroup& grp = groups_[g];
     copy_outputs(grp);
     ec::PduBuilder b(group_tx_);
-    const auto index = static_cast<std::uint8_t>(index_ + g);
+    const auto index = static_cast<std::uint8_t>(index_ + 1 + g);
     if (b.add_logical(Cmd::lrw, index, config_.logical_base + grp.logical, static_cast<std::uint16_t>(grp.bytes),
                       wire_.data() + grp.logical) < 0)
       continue;  // cannot happen: layout() sized every group to a frame
@@ -291,7 +295,7 @@ void EcMaster::send_groups() {
       ++stats_.send_failures;
     }
   }
-  index_stride_ = static_cast<std::uint8_t>(std::max<std::size_t>(1, groups_.size()));
+  index_stride_ = static_cast<std::uint8_t>(1 + groups_.size());
 }
 
 // One group's LRW came back: its slaves' inputs into the image, its WKC into the cycle's.
@@ -308,12 +312,12 @@ void EcMaster::take_group(const CyclicGroup& g, const ec::Datagram& d, SimTime t
   if (++cycle_back_ == cycle_parts_) close_cycle(true, t);
 }
 
-// A further group's frame (one LRW at index_ + g, g ≥ 1, still out)? Takes it and says so.
+// One of the image's own frames (one LRW at index_ + 1 + g, still out)? Takes it and says so.
 bool EcMaster::on_group_frame(const ec::PduView& v, SimTime t) {
   if (v.count != 1 || v.datagrams[0].cmd() != Cmd::lrw) return false;
   const ec::Datagram& d = v.datagrams[0];
-  const std::size_t g = static_cast<std::uint8_t>(d.index() - index_);
-  if (g == 0 || g >= groups_.size() || !group_out_[g] || d.length() != groups_[g].bytes) return false;
+  const std::size_t g = static_cast<std::uint8_t>(d.index() - index_ - 1);
+  if (g >= groups_.size() || !group_out_[g] || d.length() != groups_[g].bytes) return false;
   group_out_[g] = 0;
   --groups_out_;
   ++stats_.frames_received;
@@ -454,7 +458,9 @@ void EcMaster::after_frame(SimTime t, bool from_frame) {
       break;
     case MasterPhase::address:
       if (!from_frame) break;
-      if (reset_ok_) {
+      if (reset_ok_ && addr_next_ < slaves_.size()) {
+        addr_from_ = addr_next_;  // the next frame addresses the rest
+      } else if (reset_ok_) {
         phase_ = MasterPhase::sii;
         for (auto& s : slaves_) enter(s, SlaveStep::sii_cmd, t);
       }
@@ -587,21 +593,21 @@ void EcMaster::layout() {
   out_total_ = out;
   in_total_ = in;
   // Room a frame leaves for an LRW's data: the EtherCAT header, the datagram's header and WKC.
-  // The tick's own frame keeps 64 bytes more for what rides along (FRMW 0x0910, BRD 0x0130, a
-  // mailbox datagram).
-  const std::uint32_t room_further = ec::kMaxPdu - 2 - ec::kDatagramHeaderSize - ec::kWkcSize;
-  const std::uint32_t room_first = room_further - 64;
-  const auto room = [&](std::size_t group) { return group == 0 ? room_first : room_further; };
+  // In the tick's own frame 64 bytes more stay free for what rides along (FRMW 0x0910, BRD
+  // 0x0130, a mailbox datagram); an image that does not fit there goes in frames of its own,
+  // leaving the tick's frame to the slaves' configuration, mailbox and DC traffic.
+  const std::uint32_t room = ec::kMaxPdu - 2 - ec::kDatagramHeaderSize - ec::kWkcSize;
+  const std::uint32_t room_shared = room - 64;
   overlapped_ = config_.image_layout == ImageLayout::overlapped ||
-                (config_.image_layout == ImageLayout::automatic && out + in > room_first);
+                (config_.image_layout == ImageLayout::automatic && out + in > room_shared);
   // Consecutive slaves share a frame while their bytes fit it; a slave's data is never split.
   groups_.clear();
   std::uint32_t at = 0;
   for (std::size_t i = 0; i < slaves_.size(); ++i) {
     const Slave& s = slaves_[i];
     const std::uint32_t need = overlapped_ ? std::max(s.out_bytes, s.in_bytes) : s.out_bytes + s.in_bytes;
-    if (groups_.empty() || groups_.back().bytes + need > room(groups_.size() - 1)) {
-      if (need > room(groups_.size())) {
+    if (groups_.empty() || groups_.back().bytes + need > room) {
+      if (need > room) {
         fail(fmt::format("slave {}'s process data of {} bytes does not fit one frame", s.position, need));
         return;
       }
@@ -630,9 +636,10 @@ void EcMaster::layout() {
       in_at += overlapped_ ? 0 : s.in_bytes;
     }
   }
+  lrw_own_frames_ = groups_.size() > 1 || (groups_.size() == 1 && groups_[0].bytes > room_shared);
   group_out_.assign(groups_.size(), 0);
   groups_out_ = 0;
-  if (overlapped_ || groups_.size() > 1) {
+  if (overlapped_ || lrw_own_frames_) {
     wire_.assign(at, 0);
   } else {
     wire_.clear();
@@ -653,7 +660,7 @@ void EcMaster::layout() {
   }
   emit(fmt::format("process image: {} output bytes, {} input bytes{}{}, expected WKC {}", out, in,
                    overlapped_ ? fmt::format(", overlapped in {} bytes", at) : std::string(),
-                   groups_.size() > 1 ? fmt::format(", {} frames per cycle", groups_.size()) : std::string(), wkc));
+                   lrw_own_frames_ ? fmt::format(", in {} frames of its own", groups_.size()) : std::string(), wkc));
 }
 
 std::optional<EntryLocation> EcMaster::find_entry(int position, std::uint16_t index, std::uint8_t sub) const {

@@ -2,8 +2,8 @@
 // (facts/ethercat.md; DESIGN §4, §7).
 //
 // Shaped like controller/omni_master: no sockets, no clock, no globals. tick(t) is the cycle
-// timer: it hands out ONE EtherCAT PDU through the send callback (in OP, one more per further
-// frame of a cyclic image too large for one); on_frame(pdu, t) takes each PDU when it comes
+// timer: it hands out ONE EtherCAT PDU through the send callback (in OP, plus one per frame
+// of a cyclic image too large to ride in it); on_frame(pdu, t) takes each PDU when it comes
 // back. One exchange per tick. When a PDU of the previous tick has not come back by the next
 // tick it is counted as lost and the tick builds its datagrams
 // again (configuration steps are simply repeated; the cyclic exchange just counts).
@@ -43,11 +43,12 @@
 // before the user's SDO queue. Cyclic process data: one LRW over the whole image (laid out
 // separate or overlapped, EcMasterConfig::image_layout) (+ FRMW
 // 0x0910 to the reference clock when DC is on), expected WKC = 2 × slaves with outputs +
-// slaves with inputs. An image larger than one frame is cut at slave boundaries into groups
-// of consecutive slaves, one LRW each: the first rides in the tick's frame with everything
-// else, each further group goes in a frame of its own sent right after it (as SOEM splits its
-// IOmap into several LRW frames). The cycle's WKC is the sum over its frames, judged once
-// every frame is back (or at the next tick, a missing frame counted lost and its part 0).
+// slaves with inputs. An image too large to ride in the tick's frame beside the rest goes in
+// frames of its own sent right after it, cut at slave boundaries into groups of consecutive
+// slaves, one LRW frame each (as SOEM splits its IOmap into several LRW frames); the tick's
+// frame keeps the configuration, mailbox and DC traffic. The cycle's WKC is the sum over its
+// LRWs, judged once every frame is back (or at the next tick: a frame missing is lost, its
+// part 0).
 // After the first OP, every al_check_every_ns a BRD 0x0130 rides along:
 // a slave that is not in OP (or shows the error bit) while the WKC is still right — e.g. one
 // that fell to SAFE-OP by its watchdog — is found by the same AL status reads.
@@ -235,14 +236,16 @@ class EcMaster {
   // The layout the image took (separate until the layout is done) and the LRW's data length.
   bool image_overlapped() const { return overlapped_; }
   std::uint32_t lrw_bytes() const { return static_cast<std::uint32_t>(wire_.empty() ? image_.size() : wire_.size()); }
-  // Frames (one LRW each) the cyclic image takes per cycle: 1 until laid out.
+  // LRWs the cyclic image takes per cycle (1 until laid out), and whether they go in frames of
+  // their own (beside the tick's frame) rather than in the tick's frame.
   int cyclic_frames() const { return groups_.empty() ? 1 : static_cast<int>(groups_.size()); }
+  bool image_in_own_frames() const { return lrw_own_frames_; }
   std::optional<EntryLocation> find_entry(int position, std::uint16_t index, std::uint8_t sub) const;
   std::int64_t read_entry(const EntryLocation& at, bool is_signed) const;
   void write_entry(const EntryLocation& at, std::int64_t value);
 
   MasterPhase phase() const { return phase_; }
-  // A PDU sent at the last tick (its frame or one of its further cyclic frames) is not back yet.
+  // A PDU sent at the last tick (its frame or one of the image's own frames) is not back yet.
   bool awaiting_reply() const { return awaiting_ || groups_out_ > 0; }
   bool operational() const;            // running and every slave in OP
   bool supervising() const { return operational_once_; }
@@ -362,16 +365,18 @@ class EcMaster {
   bool awaiting_ = false;
   std::uint8_t index_ = 0;        // datagram index of the outstanding frame's first datagram
   bool reset_ok_ = false;
+  std::size_t addr_from_ = 0, addr_next_ = 0;  // address phase: this frame's first slave / the one after its last
 
   std::vector<std::uint8_t> image_;   // outputs of every slave, then inputs (entry offsets)
   std::uint32_t out_total_ = 0, in_total_ = 0;
   bool overlapped_ = false;           // each slave's outputs and inputs share one range
   // Overlapped or in several frames: the LRWs' data (group after group); empty: image_ itself.
   std::vector<std::uint8_t> wire_;
-  std::vector<CyclicGroup> groups_;      // empty until laid out; one group = one frame
-  std::vector<std::uint8_t> group_out_;  // group g ≥ 1: its frame is out, not back yet
+  std::vector<CyclicGroup> groups_;      // empty until laid out; one group = one LRW
+  bool lrw_own_frames_ = false;          // each group in a frame of its own (else: in the tick's)
+  std::vector<std::uint8_t> group_out_;  // own frames: group g's is out, not back yet
   int groups_out_ = 0;                   // how many of those
-  std::uint8_t index_stride_ = 1;        // datagram indices the last tick used (1 + further frames)
+  std::uint8_t index_stride_ = 1;        // datagram indices the last tick used (1 + own frames)
   std::array<std::uint8_t, omnitwin::ethercat::kMaxPdu> group_tx_{};
   int cycle_parts_ = 0, cycle_back_ = 0; // LRWs of the open cycle sent / come back (0 = none open)
   std::uint32_t cycle_wkc_ = 0;          // their WKCs so far

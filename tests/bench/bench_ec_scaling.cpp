@@ -12,8 +12,10 @@
 // a CLI figure: it is the bus model's share of a run (docs/benchmarks.md explains the split).
 // From 35 drives on the image no longer fits one LRW laid out separately; the master then
 // overlaps it (EcMasterConfig::image_layout), which holds up to 59 of these drives
-// (24 bytes each). This benchmark found that 22 or more did not even start (fixed:
-// EcMaster::fill_slaves). BM_Segment100Lockstep / BM_Segment100Realtime: seed 001's 100 axes.
+// (24 bytes each) per frame; beyond that it sends several LRW frames per cycle. This benchmark
+// found that 22 or more did not even start (fixed: EcMaster::fill_slaves).
+// BM_SegmentLockstep / BM_SegmentRealtime: seed 001's 100 axes at 100 µs, and segments of
+// 200 … 1,600 axes at 1 ms (several frames per cycle).
 // Run with `build/tests/bench/bench_ec_scaling` (scripts/bench does).
 #include <benchmark/benchmark.h>
 
@@ -76,31 +78,32 @@ void BM_EcDrivesOnly(benchmark::State& state) {
   counters(state, n);
 }
 
-BENCHMARK(BM_EcDrivesOnly)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48);
-BENCHMARK(BM_EcCycle)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48);
+BENCHMARK(BM_EcDrivesOnly)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48)->Arg(96)->Arg(192);
+BENCHMARK(BM_EcCycle)->Arg(1)->Arg(4)->Arg(8)->Arg(16)->Arg(32)->Arg(48)->Arg(96)->Arg(192);
 
-// ---- seed 001's 100 axes: 13 multi-axis slaves (12 × 8 cards + 4), one overlapped LRW ----
+// ---- segments of seed 001's multi-axis slaves (8 axis cards each, the rest on the last) ----
+// 100 axes: 13 slaves (12 × 8 + 4), one overlapped LRW of 1,200 bytes. From 119 axes on the
+// image takes more than one frame (EcMaster cuts it into several LRW frames per cycle).
 
-constexpr ecbench::me::SimTime k100us = 100'000;
-constexpr int kAxes = 100;
-
-std::unique_ptr<ecbench::MultiAxisSegment> segment100(benchmark::State& state, ecbench::me::SimTime cycle = k100us) {
-  auto seg = std::make_unique<ecbench::MultiAxisSegment>(kAxes, cycle);
+std::unique_ptr<ecbench::MultiAxisSegment> segment(benchmark::State& state, int axes, ecbench::me::SimTime cycle) {
+  auto seg = std::make_unique<ecbench::MultiAxisSegment>(axes, cycle);
   if (!seg->to_op(400000)) {
-    state.SkipWithError(("the 100-axis segment did not reach OP: " + seg->master->error()).c_str());
+    state.SkipWithError(("the segment did not reach OP: " + seg->master->error()).c_str());
     return nullptr;
   }
   return seg;
 }
 
-// Lockstep: 60 s of simulated time (600,000 cycles of 100 µs) in process — the master's tick,
-// the frame through 13 ESCs and back, 1,300 firmware cycles of 100 axes per 100 ms — timed;
-// beside it, in the same iteration, the baseline: the same 100 drives stepped 600,000 times with
-// no bus. rtf = 60 s / wall; bus_share = (segment − drives) / segment.
-void BM_Segment100Lockstep(benchmark::State& state) {
-  auto seg = segment100(state);
+// Lockstep, in process: state.range(1) cycles of state.range(2) µs of simulated time over a
+// segment of state.range(0) axes — the master's tick, its frames through the ESCs and back,
+// every card's firmware cycle on SYNC0 — timed; beside it, in the same iteration, the baseline:
+// the same drives stepped as often with no bus. rtf = simulated / wall; bus_share =
+// (segment − drives) / segment; us_per_cycle: what one cycle costs one core.
+void BM_SegmentLockstep(benchmark::State& state) {
+  const auto cycle = static_cast<ecbench::me::SimTime>(state.range(2)) * 1000;
+  auto seg = segment(state, static_cast<int>(state.range(0)), cycle);
   if (!seg) return;
-  const int cycles = static_cast<int>(state.range(0));
+  const auto cycles = static_cast<int>(state.range(1));
   double seg_s = 0, drives_s = 0;
   for (auto _ : state) {
     auto t0 = std::chrono::steady_clock::now();
@@ -109,35 +112,38 @@ void BM_Segment100Lockstep(benchmark::State& state) {
     t0 = std::chrono::steady_clock::now();
     for (int k = 0; k < cycles; ++k)
       for (auto& sl : seg->slaves)
-        for (int a = 0; a < sl->axes(); ++a) sl->axis(a).step(seg->t + k * k100us, omnitwin::drive::Feedback{});
+        for (int a = 0; a < sl->axes(); ++a) sl->axis(a).step(seg->t + k * cycle, omnitwin::drive::Feedback{});
     drives_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
-  const double sim_s = static_cast<double>(cycles) * 1e-4 * static_cast<double>(state.iterations());
+  const double sim_s = static_cast<double>(cycles) * static_cast<double>(cycle) * 1e-9 * static_cast<double>(state.iterations());
   state.counters["rtf"] = sim_s / seg_s;
   state.counters["rtf_drives_only"] = sim_s / drives_s;
-  state.counters["us_per_cycle"] = seg_s / (sim_s / 1e-4) * 1e6;
+  state.counters["us_per_cycle"] = seg_s / (sim_s / (static_cast<double>(cycle) * 1e-9)) * 1e6;
   state.counters["bus_share"] = (seg_s - drives_s) / seg_s;
   state.counters["wkc_errors"] = static_cast<double>(seg->master->stats().wkc_errors);
   state.counters["lost_frames"] = static_cast<double>(seg->master->stats().lost_frames);
   state.counters["last_wkc"] = seg->master->stats().last_wkc;
   state.counters["lrw_bytes"] = seg->master->lrw_bytes();
+  state.counters["frames_per_cycle"] = seg->master->cyclic_frames();
 }
 
-// Realtime: the same segment served on its own SCHED_FIFO thread on end b of a veth pair (what
-// the twin's segment does per frame), our master core on this thread (SCHED_FIFO) on end a,
-// paced by clock_nanosleep to absolute deadlines every state.range(1) µs (100: the seed's cycle;
-// 250, 500, 1000: what this machine holds) for state.range(0) seconds. Per cycle:
-// tick → send → wait for the answer until the next deadline → on_frame. Counters: frames sent,
-// lost (the master's own count: not back by the next tick), wkc_errors, turnaround p50/p99/max
-// (send → answer), late_starts (a cycle that began half a period or more after its deadline)
-// and the worst start lateness; fifo = 1 when both threads got SCHED_FIFO.
-void BM_Segment100Realtime(benchmark::State& state) {
+// Realtime: a segment of state.range(2) axes served on its own SCHED_FIFO thread on end b of a
+// veth pair (what the twin's segment does per frame), our master core on this thread
+// (SCHED_FIFO) on end a, paced by clock_nanosleep to absolute deadlines every state.range(1) µs
+// for state.range(0) seconds. Per cycle: tick → send its frames → wait until the cycle is
+// complete (every frame back) or the next deadline → on_frame. Counters: frames sent, lost
+// (the master's own count: not back by the next tick), wkc_errors, turnaround p50/p99/max
+// (first frame out → last frame back), late_starts (a cycle that began half a period or more
+// after its deadline) and the worst start lateness; fifo = 1 when both threads got SCHED_FIFO.
+// The chain thread answers each frame when it arrives: 100 Mbit/s wire time is not modelled
+// here (docs/benchmarks.md does that arithmetic).
+void BM_SegmentRealtime(benchmark::State& state) {
   if (const auto why = omnitwin::testing::VethPair::unavailable_reason()) {
     state.SkipWithError(why->c_str());
     return;
   }
   const ecbench::me::SimTime cycle = state.range(1) * 1000;
-  auto seg = segment100(state, cycle);
+  auto seg = segment(state, static_cast<int>(state.range(2)), cycle);
   if (!seg) return;
   sched_param sp{};
   sp.sched_priority = 40;
@@ -168,18 +174,20 @@ void BM_Segment100Realtime(benchmark::State& state) {
       late_starts += late_us * 1e3 >= static_cast<double>(cycle) / 2;
       const auto t = seg->t + std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
       seg->sent = false;
+      seg->n_more = 0;
       seg->master->tick(t);
       if (!seg->sent) continue;
       const auto t0 = std::chrono::steady_clock::now();
       master->send(seg->frame);
-      ++sent;
-      // Wait for the answer until the next deadline at most. An answer that came after its
-      // deadline is still queued: handed to the master (which counts it stray), and the wait
-      // goes on for this cycle's.
+      for (std::size_t i = 0; i < seg->n_more; ++i) master->send(seg->more[i]);
+      sent += 1 + seg->n_more;
+      // Wait for the cycle's frames until the next deadline at most. An answer that came after
+      // its deadline is still queued: handed to the master (which counts it stray), and the
+      // wait goes on for this cycle's.
       const auto deadline = std::chrono::steady_clock::now() + std::chrono::nanoseconds(cycle) -
                             std::chrono::nanoseconds(static_cast<std::int64_t>(late_us * 1e3));
-      const std::uint64_t before = seg->master->stats().frames_received;
-      while (seg->master->stats().frames_received == before) {
+      const std::uint64_t before = seg->master->stats().cycles;
+      while (seg->master->stats().cycles == before) {
         const auto left = deadline - std::chrono::steady_clock::now();
         if (left <= std::chrono::nanoseconds(0)) break;
         const int n = master->receive(buf, left);
@@ -187,7 +195,7 @@ void BM_Segment100Realtime(benchmark::State& state) {
         const auto t1 = std::chrono::steady_clock::now();
         seg->master->on_frame(std::span<std::uint8_t>(buf.data(), static_cast<std::size_t>(n)),
                               seg->t + std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - start).count());
-        if (seg->master->stats().frames_received != before)
+        if (seg->master->stats().cycles != before)
           turn_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
       }
     }
@@ -197,6 +205,7 @@ void BM_Segment100Realtime(benchmark::State& state) {
   const auto pct = [&](int p) { return turn_us.empty() ? -1.0 : turn_us[std::min(turn_us.size() - 1, turn_us.size() * p / 100)]; };
   const auto& st = seg->master->stats();
   state.counters["frames_sent"] = static_cast<double>(sent);
+  state.counters["frames_per_cycle"] = seg->master->cyclic_frames();
   state.counters["lost_frames"] = static_cast<double>(st.lost_frames);
   state.counters["stray_frames"] = static_cast<double>(st.stray_frames);
   state.counters["wkc_errors"] = static_cast<double>(st.wkc_errors);
@@ -209,8 +218,31 @@ void BM_Segment100Realtime(benchmark::State& state) {
   state.counters["fifo"] = fifo && chain_fifo;
 }
 
-BENCHMARK(BM_Segment100Lockstep)->Arg(600000)->Iterations(1)->Unit(benchmark::kSecond);
-BENCHMARK(BM_Segment100Realtime)->Args({60, 100})->Args({20, 250})->Args({20, 500})->Args({20, 1000})->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+// Seed 001's 100 axes at its 100 µs (60 s of simulated time), then segments beyond one frame
+// at 1 ms: what one core holds.
+BENCHMARK(BM_SegmentLockstep)
+    ->Args({100, 600000, 100})
+    ->Args({100, 20000, 1000})
+    ->Args({200, 20000, 1000})
+    ->Args({400, 20000, 1000})
+    ->Args({800, 10000, 1000})
+    ->Args({1600, 5000, 1000})
+    ->Iterations(1)
+    ->Unit(benchmark::kSecond);
+// Realtime: the seed's 100 axes at 100 µs for 60 s and at 250 µs … 1 ms for 20 s; then larger
+// segments at 1 ms for 20 s.
+BENCHMARK(BM_SegmentRealtime)
+    ->Args({60, 100, 100})
+    ->Args({20, 250, 100})
+    ->Args({20, 500, 100})
+    ->Args({20, 1000, 100})
+    ->Args({20, 1000, 200})
+    ->Args({20, 1000, 400})
+    ->Args({20, 1000, 800})
+    ->Args({20, 1000, 1600})
+    ->Iterations(1)
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime();
 
 }  // namespace
 

@@ -5,8 +5,10 @@
 // The wheels are a shaft per drive that follows the amplifier setpoint. Checked: the master
 // brings all four drives to OP with the expected WKC; frames in, out and lost are counted and
 // captured; a link break and a slave's power loss drop the WKC and are recovered; a stopped
-// master trips the process-data watchdogs; drift is set per slave.
+// master trips the process-data watchdogs; drift is set per slave; two frames sent in one
+// tick share the line, the second entering when the first has gone out at 100 Mbit/s.
 #include <gtest/gtest.h>
+#include <pcap/pcap.h>
 
 #include <array>
 #include <filesystem>
@@ -123,6 +125,43 @@ TEST_F(EthercatNetworkTest, MasterBringsTheFourDrivesToOpOverTheSegment) {
   // AL state changes were logged.
   EXPECT_NE(std::find_if(log_.begin(), log_.end(), [](const std::string& s) { return s.find("AL OP") != std::string::npos; }),
             log_.end());
+}
+
+// Two frames in one tick (as a master sends an image larger than a frame): the second enters
+// the line when the first's 1,000 bytes, Ethernet overhead and inter-frame gap have gone out,
+// (1000 + 38) × 80 ns = 83.04 µs later (the capture's timestamps), and both come back,
+// answered by all four slaves.
+TEST_F(EthercatNetworkTest, TwoFramesOfOneTickShareTheLineOneAfterTheOther) {
+  build("ecnet-serial");
+  sched_.add_periodic("burst", Phase::master, 200'000'000, 1'000'000'000, [this](SimTime t) {
+    for (int k = 0; k < 2; ++k) {
+      std::array<std::uint8_t, 1000> pdu{};
+      ethercat::PduBuilder b(pdu);
+      ASSERT_GE(b.add(ethercat::Cmd::brd, static_cast<std::uint8_t>(0xE0 + k), 0, 0x0000, 1000 - 14), 0);
+      ASSERT_EQ(b.finish(), 1000u);
+      ASSERT_TRUE(master_link_->send(pdu));
+      ++sent_;
+    }
+    ASSERT_TRUE(net_->drain_transport(sent_, t, std::chrono::milliseconds(1000)));
+  });
+  run_until(0.21);
+  net_.reset();  // closes the capture
+  char err[PCAP_ERRBUF_SIZE];
+  pcap_t* p = pcap_open_offline_with_tstamp_precision((dir_ / "bus-ethercat.pcap").c_str(), PCAP_TSTAMP_PRECISION_NANO, err);
+  ASSERT_NE(p, nullptr) << err;
+  std::vector<std::int64_t> at_ns;  // the burst's records in capture order: out, back, out, back
+  std::vector<int> wkc;              // … and the WKC each carries (the PDU's last two bytes)
+  pcap_pkthdr* h = nullptr;
+  const u_char* data = nullptr;
+  while (pcap_next_ex(p, &h, &data) == 1) {
+    if (h->caplen < 1000) continue;
+    at_ns.push_back(static_cast<std::int64_t>(h->ts.tv_sec) * 1'000'000'000 + h->ts.tv_usec);
+    wkc.push_back(data[h->caplen - 2] | data[h->caplen - 1] << 8);
+  }
+  pcap_close(p);
+  ASSERT_EQ(at_ns.size(), 4u);
+  EXPECT_EQ(at_ns[2] - at_ns[0], 83'040);
+  EXPECT_EQ(wkc, (std::vector<int>{0, 4, 0, 4}));  // out untouched, back read by all four slaves
 }
 
 TEST_F(EthercatNetworkTest, LinkBreakDropsTheWkcAndTheSlavesComeBack) {

@@ -129,7 +129,7 @@ struct MultiAxisSegment {
   std::vector<std::vector<std::uint8_t>> more;    // its further frames (a multi-frame image)
   std::size_t n_more = 0;                         // how many of `more` this tick sent
   bool sent = false;
-  int drop_more = 0;  // further frames (not the tick's first) to lose
+  int drop_last = 0;  // ticks whose last frame (of several) is lost
   me::SimTime t = 0;
   me::SimTime cycle = 100'000;
 
@@ -171,8 +171,8 @@ struct MultiAxisSegment {
     if (!sent) return void(t += cycle);
     if (chain.process(frame, t)) master->on_frame(frame, t + cycle / 2);
     for (std::size_t i = 0; i < n_more; ++i) {
-      if (drop_more > 0) {
-        --drop_more;
+      if (i + 1 == n_more && drop_last > 0) {
+        --drop_last;
         continue;
       }
       if (chain.process(more[i], t)) master->on_frame(more[i], t + cycle / 2);

@@ -357,6 +357,23 @@ TEST(EcMaster, ASegmentLargerThanOneFramesConfigurationReachesOp) {
   EXPECT_EQ(b.master->stats().wkc_errors, 0u);
 }
 
+// 70 drives: more station addresses than one frame chains APWRs (64), so the address phase
+// takes two frames. Before, the APWRs of slaves 64… were silently left out, the phase went on,
+// and slave 64 timed out reading its EEPROM at an address it never had. Their image (70 × 24
+// bytes overlapped) then takes two LRW frames per cycle, and every drive gets its WKC.
+TEST(EcMaster, SeventyDrivesAreAddressedOverTwoFramesAndCycleInTwo) {
+  Bench b(70);
+  ASSERT_TRUE(b.to_op(200000)) << b.master->error() << "\n" << events(*b.master);
+  for (int i = 0; i < 70; ++i) EXPECT_EQ(b.slaves[static_cast<std::size_t>(i)]->esc().station_address(), 0x1001 + i);
+  EXPECT_EQ(b.master->cyclic_frames(), 2);
+  EXPECT_TRUE(b.master->image_in_own_frames());
+  const auto sent = b.master->stats().frames_sent;
+  for (int k = 0; k < 20; ++k) b.step();
+  EXPECT_GE(b.master->stats().frames_sent - sent, 40u);  // the image's two frames every tick
+  EXPECT_EQ(b.master->stats().last_wkc, 210);
+  EXPECT_EQ(b.master->stats().wkc_errors, 0u);
+}
+
 TEST(EcMaster, MultiAxisSlaveOfSeed001ReachesOp) {
   const auto multi = omnitwin::ethercat::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
   ASSERT_FALSE(multi.empty());
@@ -424,8 +441,9 @@ TEST(EcMaster, AHundredAxesCycleInOneOverlappedLrwAndEachModuleLandsAtItsSlave) 
 }
 
 // Forced to the separate layout, the same segment's 2,400 bytes do not fit one frame: they
-// are cut at a slave boundary into two LRW frames per cycle (7 slaves of 192 bytes in the
-// first, 5 more and the 4-card slave in the second), and every module still lands at its slave.
+// are cut at a slave boundary into two LRW frames of their own per cycle (7 slaves of 192
+// bytes in the first, 5 more and the 4-card slave in the second) behind the tick's frame (DC's
+// FRMW), and every module still lands at its slave.
 TEST(EcMaster, AHundredAxesLaidOutSeparatelyCycleInTwoFrames) {
   EcMasterConfig cfg;
   cfg.image_layout = ImageLayout::separate;
@@ -441,7 +459,7 @@ TEST(EcMaster, AHundredAxesLaidOutSeparatelyCycleInTwoFrames) {
   img[last.out_offset] = 3;
   img[last.out_offset + 1] = 0x82;  // mode 2, handshake bit 15
   for (int k = 0; k < 200; ++k) seg.step();
-  EXPECT_EQ(seg.n_more, 1u) << "one further frame per cycle";
+  EXPECT_EQ(seg.n_more, 2u) << "the tick's frame, then the image's two";
   EXPECT_EQ(seg.master->stats().last_wkc, 39);  // the sum over both frames
   EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
   EXPECT_EQ(seg.master->stats().lost_frames, 0u);
@@ -449,8 +467,8 @@ TEST(EcMaster, AHundredAxesLaidOutSeparatelyCycleInTwoFrames) {
   EXPECT_EQ(seg.master->image()[last.in_offset + 1] & 0x7F, 2);  // card 3 runs velocity mode
 }
 
-// 200 axes (25 slaves) do not fit one frame even overlapped (2,400 bytes): 14 slaves ride in
-// the tick's frame, 11 in a second one. The log says so. It also needs the DC set-up in
+// 200 axes (25 slaves) do not fit one frame even overlapped (2,400 bytes): 15 slaves ride in
+// one frame, 10 in a second one. The log says so. It also needs the DC set-up in
 // several frames: 3 datagrams per slave for 25 slaves are more than the 64 a frame chains, and
 // before, the last slaves' datagrams were cut off and the master waited in phase dc forever.
 // Every slave gets the same SYNC0 start time.
@@ -462,12 +480,12 @@ TEST(EcMaster, TwoHundredAxesOverlappedTakeTwoFramesPerCycle) {
   for (const auto& sl : seg.slaves) EXPECT_EQ(sl->esc().read64(0x0990), start);
   EXPECT_TRUE(seg.master->image_overlapped());
   EXPECT_EQ(seg.master->cyclic_frames(), 2);
-  EXPECT_EQ(seg.master->slave(14).out_logical, 14u * 96);
+  EXPECT_EQ(seg.master->slave(15).out_logical, 15u * 96);
   for (int k = 0; k < 50; ++k) seg.step();
   EXPECT_EQ(seg.master->stats().last_wkc, 75);
   EXPECT_EQ(seg.master->stats().wkc_errors, 0u);
   expect_modules_at_their_slaves(*seg.master);
-  EXPECT_NE(events(*seg.master).find("overlapped in 2400 bytes, 2 frames per cycle"), std::string::npos)
+  EXPECT_NE(events(*seg.master).find("overlapped in 2400 bytes, in 2 frames of its own"), std::string::npos)
       << events(*seg.master);
 }
 
@@ -484,15 +502,15 @@ TEST(EcMaster, AnImageNeedingMoreFramesThanAllowedIsRefused) {
       << seg.master->error();
 }
 
-// The second frame of a cycle lost three times: three lost frames and three WKC errors whose
-// WKC is the first frame's share; the segment is not silent (the first frame came back), the
+// The image's second frame lost three times: three lost frames and three WKC errors whose
+// WKC is the first frame's share (15 slaves × 3); the segment is not silent (the first frame came back), the
 // AL status reads find every slave in OP, and the next complete cycles are clean again.
 TEST(EcMaster, ALostFurtherFrameCostsItsShareOfTheWkcNotTheSegment) {
   ecbench::MultiAxisSegment seg(200, 1'000'000);
   ASSERT_TRUE(seg.to_op(40000)) << seg.master->error();
   for (int k = 0; k < 20; ++k) seg.step();
   const auto before = seg.master->stats();
-  seg.drop_more = 3;
+  seg.drop_last = 3;
   for (int k = 0; k < 4; ++k) seg.step();  // the fourth tick notices the third loss
   EXPECT_EQ(seg.master->stats().lost_frames - before.lost_frames, 3u);
   EXPECT_EQ(seg.master->stats().wkc_errors - before.wkc_errors, 3u);
@@ -502,7 +520,7 @@ TEST(EcMaster, ALostFurtherFrameCostsItsShareOfTheWkcNotTheSegment) {
   EXPECT_EQ(seg.master->stats().last_wkc, 75);
   EXPECT_TRUE(seg.master->operational()) << events(*seg.master);
   EXPECT_EQ(seg.master->stats().slaves_lost, 0u);
-  EXPECT_NE(events(*seg.master).find("WKC 42 instead of 75 for 3 cycles (frame lost)"), std::string::npos)
+  EXPECT_NE(events(*seg.master).find("WKC 45 instead of 75 for 3 cycles (frame lost)"), std::string::npos)
       << events(*seg.master);
 }
 
