@@ -134,7 +134,8 @@ void BM_SegmentLockstep(benchmark::State& state) {
 // complete (every frame back) or the next deadline → on_frame. Counters: frames sent, lost
 // (the master's own count: not back by the next tick), wkc_errors, turnaround p50/p99/max
 // (first frame out → last frame back), late_starts (a cycle that began half a period or more
-// after its deadline) and the worst start lateness; fifo = 1 when both threads got SCHED_FIFO.
+// after its deadline), the worst start lateness and segment_losses (the master left OP on a
+// silent segment); fifo = 1 when both threads got SCHED_FIFO.
 // The chain thread answers each frame when it arrives: 100 Mbit/s wire time is not modelled
 // here (docs/benchmarks.md does that arithmetic).
 void BM_SegmentRealtime(benchmark::State& state) {
@@ -209,6 +210,7 @@ void BM_SegmentRealtime(benchmark::State& state) {
   state.counters["lost_frames"] = static_cast<double>(st.lost_frames);
   state.counters["stray_frames"] = static_cast<double>(st.stray_frames);
   state.counters["wkc_errors"] = static_cast<double>(st.wkc_errors);
+  state.counters["segment_losses"] = static_cast<double>(st.segment_losses);
   state.counters["turnaround_p50_us"] = pct(50);
   state.counters["turnaround_p99_us"] = pct(99);
   state.counters["turnaround_max_us"] = turn_us.empty() ? -1.0 : turn_us.back();
