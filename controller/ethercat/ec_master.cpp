@@ -143,10 +143,25 @@ void EcMaster::fill_slaves(ec::PduBuilder& b, SimTime t) {
   for (; filled < n; ++filled) {
     Slave& s = slaves_[(fill_from_ + filled) % n];
     if (!whole([&] { slave_fill(s, b, t); })) break;  // its step starts the next frame
-    // The mailbox may wait a frame (a cyclic image may leave no room for it): on its own.
-    if (mbx_ready(s) && !whole([&] { mbx_fill(s, b, t); })) s.mbx_read_sent = false;
+    // A transfer's mailbox datagram may wait a frame (a cyclic image may leave no room for
+    // it): on its own.
+    if (mbx_ready(s) && mbx_busy(s) && !whole([&] { mbx_fill(s, b, t); })) s.mbx_read_sent = false;
   }
-  fill_from_ = n == 0 ? 0 : (fill_from_ + filled) % n;
+  // Then the polls of idle mailboxes (an SM1 event: emergencies), in the room transfers left.
+  // A poll before a transfer took the room for good: the event bit the transfer's own reply
+  // keeps raising made every idle slave poll again each frame.
+  for (std::size_t k = 0; k < filled; ++k) {
+    Slave& s = slaves_[(fill_from_ + k) % n];
+    if (mbx_ready(s) && !mbx_busy(s) && !whole([&] { mbx_fill(s, b, t); })) s.mbx_read_sent = false;
+  }
+  // The next frame starts after the last slave served, or, when every slave was, one further
+  // on: no slave is always last in line for the room.
+  fill_from_ = n == 0 ? 0 : (fill_from_ + (filled == n ? 1 : filled)) % n;
+}
+
+// A mailbox transfer is under way or queued for the slave (not just a poll).
+bool EcMaster::mbx_busy(const Slave& s) const {
+  return s.job || !s.internal_jobs.empty() || (s.step == SlaveStep::op && !s.user_jobs.empty());
 }
 
 bool EcMaster::add(ec::PduBuilder& b, Slot slot, Cmd cmd, std::uint16_t adp, std::uint16_t ado, std::uint16_t len,

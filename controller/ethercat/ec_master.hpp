@@ -330,6 +330,7 @@ class EcMaster {
   void start_pdo_read(Slave& s);
   void finish_pdo_read(Slave& s);
   bool mbx_ready(const Slave& s) const;
+  bool mbx_busy(const Slave& s) const;
   void after_frame(SimTime t, bool from_frame);
   void cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t);
   void copy_outputs(const CyclicGroup& g);

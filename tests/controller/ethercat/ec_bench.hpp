@@ -130,6 +130,7 @@ struct MultiAxisSegment {
   std::size_t n_more = 0;                         // how many of `more` this tick sent
   bool sent = false;
   int drop_last = 0;  // ticks whose last frame (of several) is lost
+  int drop_all = 0;   // ticks whose frames are all lost (the segment gone)
   me::SimTime t = 0;
   me::SimTime cycle = 100'000;
 
@@ -169,6 +170,10 @@ struct MultiAxisSegment {
     n_more = 0;
     master->tick(t);
     if (!sent) return void(t += cycle);
+    if (drop_all > 0) {
+      --drop_all;
+      return void(t += cycle);
+    }
     if (chain.process(frame, t)) master->on_frame(frame, t + cycle / 2);
     for (std::size_t i = 0; i < n_more; ++i) {
       if (i + 1 == n_more && drop_last > 0) {
