@@ -33,6 +33,7 @@
 
 #include "bus_emulators/mem_pair_transport.hpp"  // FrameVerdict
 #include "bus_emulators/readable_waiter.hpp"
+#include "bus_emulators/sender_gate.hpp"
 #include "bus_emulators/transport_spec.hpp"
 
 namespace omnitwin::bus_emulators {
@@ -112,17 +113,8 @@ class UdpPairTransport final : public Traits::Base {
         case FrameVerdict::malformed: ++stats_.dropped_malformed; continue;
       }
       if (role_ == Role::slaves) {
-        if (!have_master_) {  // the first sender is the master
-          std::memcpy(&master_, &from, msg.msg_namelen);
-          master_len_ = msg.msg_namelen;
-          have_master_ = true;
-        } else if (msg.msg_namelen != master_len_ || std::memcmp(&master_, &from, master_len_) != 0) {
-          ++stats_.foreign_sender;
-          if (refuse_foreign_) {
-            ++stats_.refused_sender;
-            continue;
-          }
-        }
+        const std::span<const std::uint8_t> sender(reinterpret_cast<const std::uint8_t*>(&from), msg.msg_namelen);
+        if (!gate_.admit(sender, stats_.foreign_sender, stats_.refused_sender)) continue;
         remember_sender(from, msg.msg_namelen);
       }
       ++stats_.received;
@@ -145,7 +137,10 @@ class UdpPairTransport final : public Traits::Base {
   }
   Stats stats() const { return stats_; }
   std::uint16_t local_port() const { return local_port_; }  // the port this socket is bound to
-  void set_refuse_foreign_senders(bool refuse) override { refuse_foreign_ = refuse; }
+  // Not marked override, like every member here: each bus's interface declares a different
+  // set of them virtual (spec() and last_age_ns() only M-III's), so `override` cannot be
+  // written on all, and clang warns when only some carry it.
+  void set_refuse_foreign_senders(bool refuse) { gate_.set_refuse(refuse); }
 
  private:
   // Fills peer_ from spec_; returns the address family.
@@ -197,10 +192,7 @@ class UdpPairTransport final : public Traits::Base {
   sockaddr_storage peer_{};  // master: HOST:PORT; slaves: the last sender
   socklen_t peer_len_ = 0;
   bool have_peer_ = false;
-  sockaddr_storage master_{};  // slaves: the first sender
-  socklen_t master_len_ = 0;
-  bool have_master_ = false;
-  bool refuse_foreign_ = false;
+  SenderGate gate_;  // slaves: the first sender is the master
   std::uint16_t local_port_ = 0;
   Stats stats_;
   ReceiveStamp stamp_;

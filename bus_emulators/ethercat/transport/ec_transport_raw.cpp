@@ -125,16 +125,8 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     }
     if (role_ == Role::slaves) {
       // The first source MAC is the master's; another one is a foreign sender.
-      if (!have_master_) {
-        std::copy_n(rx_hdr_.begin() + 6, 6, master_mac_.begin());
-        have_master_ = true;
-      } else if (!std::equal(master_mac_.begin(), master_mac_.end(), rx_hdr_.begin() + 6)) {
-        ++stats_.foreign_sender;
-        if (refuse_foreign_) {
-          ++stats_.refused_sender;
-          continue;
-        }
-      }
+      if (!gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), stats_.foreign_sender, stats_.refused_sender))
+        continue;
       reply_hdr_ = rx_hdr_;
       reply_hdr_[6] |= 0x02;  // bit 1 of the first source-MAC byte: "passed a slave"
       have_peer_ = true;

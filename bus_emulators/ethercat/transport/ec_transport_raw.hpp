@@ -28,6 +28,7 @@
 
 #include "bus_emulators/ethercat/ec_frame.hpp"
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
+#include "bus_emulators/sender_gate.hpp"
 
 #include <array>
 #include <string>
@@ -50,7 +51,7 @@ class RawTransport final : public EcTransport {
   int fd() const override { return fd_; }
   std::string describe() const override;
   Stats stats() const override { return stats_; }
-  void set_refuse_foreign_senders(bool refuse) override { refuse_foreign_ = refuse; }
+  void set_refuse_foreign_senders(bool refuse) override { gate_.set_refuse(refuse); }
   bool wire_header(std::array<std::uint8_t, kEthHeaderSize>& out) const override {
     out = last_hdr_;
     return stats_.received > 0;
@@ -74,9 +75,7 @@ class RawTransport final : public EcTransport {
   std::array<std::uint8_t, kEthHeaderSize> tx_hdr_{};     // master: broadcast from mac_
   std::array<std::uint8_t, kEthHeaderSize> reply_hdr_{};  // slaves: the marked received header
   std::array<std::uint8_t, kEthHeaderSize> last_hdr_{};   // the header of the last PDU returned
-  Mac master_mac_{};                                       // slaves: the first sender's source MAC
-  bool have_master_ = false;
-  bool refuse_foreign_ = false;
+  bus_emulators::SenderGate gate_;                         // slaves: the first source MAC is the master's
   std::array<std::uint8_t, kEthHeaderSize> rx_hdr_{};     // scratch for receive()
   Stats stats_;
 };

@@ -113,22 +113,6 @@ std::uint64_t* RawTransport::drop_reason(unsigned pkttype, std::size_t n, std::s
   return nullptr;
 }
 
-// Slaves: true when the frame in rx_hdr_ is a foreign sender's and refused (counted either
-// way); the first source MAC seen is taken as the master's.
-bool RawTransport::foreign_sender() {
-  const auto src = rx_hdr_.begin() + 6;
-  if (!have_master_) {
-    std::copy_n(src, 6, master_mac_.begin());
-    have_master_ = true;
-    return false;
-  }
-  if (std::equal(master_mac_.begin(), master_mac_.end(), src)) return false;
-  ++stats_.foreign_sender;
-  if (!refuse_foreign_) return false;
-  ++stats_.refused_sender;
-  return true;
-}
-
 int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) {
   detail::ReadableWaiter waiter(timeout);
   // Bounded, so that a flood of frames we drop cannot hold the caller; fd stays readable then.
@@ -152,7 +136,10 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
       ++*counter;
       continue;
     }
-    if (role_ == Role::slaves && foreign_sender()) continue;
+    // Slaves: the first source MAC is the master's; another one is a foreign sender.
+    if (role_ == Role::slaves &&
+        !gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), stats_.foreign_sender, stats_.refused_sender))
+      continue;
     ++stats_.received;
     last_age_ns_ = detail::ReceiveStamp::age_ns(msg);
     return static_cast<int>(size);

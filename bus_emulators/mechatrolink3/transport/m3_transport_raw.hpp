@@ -30,6 +30,7 @@
 #pragma once
 
 #include "bus_emulators/mechatrolink3/transport/m3_transport.hpp"
+#include "bus_emulators/sender_gate.hpp"
 
 #include <array>
 #include <string>
@@ -51,7 +52,7 @@ class RawTransport final : public M3Transport {
   ~RawTransport() override;
 
   bool send(std::span<const std::uint8_t> frame) override;
-  void set_refuse_foreign_senders(bool refuse) override { refuse_foreign_ = refuse; }
+  void set_refuse_foreign_senders(bool refuse) override { gate_.set_refuse(refuse); }
   int receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds timeout) override;
   int fd() const override { return fd_; }
   std::string spec() const override { return "raw:" + ifname_; }
@@ -67,7 +68,6 @@ class RawTransport final : public M3Transport {
  private:
   void set_options(const RawOptions& options);  // best effort: ignore outgoing, bypass, promisc
   void attach_filter();                        // the kernel filter (best effort)
-  bool foreign_sender();                       // see receive()
   // Why the frame just received into rx_hdr_ and buf is dropped (its stats field), or null.
   // `pkttype` is the sockaddr_ll's, n the Ethernet frame's real length; ok: size is the frame's.
   std::uint64_t* drop_reason(unsigned pkttype, std::size_t n, std::span<const std::uint8_t> buf, std::size_t& size);
@@ -83,9 +83,7 @@ class RawTransport final : public M3Transport {
   std::array<std::uint8_t, kEthHeaderSize> tx_hdr_{};  // scratch for send()
   std::array<std::uint8_t, kEthHeaderSize> rx_hdr_{};  // scratch for receive()
   // Slaves: the first source MAC received is the master's; frames from another are foreign.
-  std::array<std::uint8_t, 6> master_mac_{};
-  bool have_master_ = false;
-  bool refuse_foreign_ = false;
+  bus_emulators::SenderGate gate_;  // slaves: the first source MAC is the master's
   Stats stats_;
   detail::ReceiveStamp stamp_;
   std::int64_t last_age_ns_ = -1;
