@@ -53,6 +53,12 @@ std::string ethercat_esi_path(const EthercatSpec& e) {
   return std::string(OMNITWIN_SOURCE_DIR) + "/models/ethercat/omnitwin_drive.xml";
 }
 
+std::string ethercat_multiaxis_esi_path() {
+  return std::string(OMNITWIN_SOURCE_DIR) + "/models/ethercat/omnitwin_multiaxis.xml";
+}
+
+int ethercat_extra_slaves(const EthercatSpec& e) { return (e.extra_axes + 7) / 8; }
+
 EthercatNetwork::EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
     : s_(s), spec_(s.bus.ethercat), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.ethercat.seed) {
   const std::vector<ethercat::DeviceDescription> devices = ethercat::load_esi(ethercat_esi_path(spec_));
@@ -85,7 +91,36 @@ EthercatNetwork::EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hook
     timers_[k] = sched_.add_periodic(fmt::format("ecat-slave{}", i + 1), Phase::device, period / (i + 2), period,
                                      [this, i](SimTime t) { on_drive_timer(i, t); }, timer_drift(drift_[k]));
   }
+  add_extra_slaves(period);
   open_transport(s);
+}
+
+// Seed 001's multi-axis slaves behind the four wheel drives (bus.ethercat.extra_axes): 8 axis
+// cards each, the rest on the last, every card held at rest and stepped by its slave's
+// firmware cycle (on the SYNC0 pulses once DC runs). One timer cycles them all (mailbox
+// replies, and the process data without DC).
+void EthercatNetwork::add_extra_slaves(SimTime period) {
+  if (spec_.extra_axes <= 0) return;
+  const std::vector<ethercat::DeviceDescription> multi = ethercat::load_esi(ethercat_multiaxis_esi_path());
+  if (multi.empty()) throw std::runtime_error(fmt::format("{}: no Device in the file", ethercat_multiaxis_esi_path()));
+  multi_device_ = multi.front();
+  for (int left = spec_.extra_axes, i = 0; left > 0; left -= 8, ++i) {
+    ethercat::DriveSlaveConfig c;
+    c.axes = std::min(left, 8);
+    c.serial = static_cast<std::uint32_t>(101 + i);
+    c.esc.power_on_time_ns = 1'000'000'000LL * (5 + i);
+    c.drive.period_s = spec_.drive_period;
+    extra_.push_back(std::make_unique<ethercat::DriveSlave>(multi_device_, c));
+    ethercat::DriveSlave* sl = extra_.back().get();
+    sl->set_cycle_hook([sl](SimTime at) {
+      for (int a = 0; a < sl->axes(); ++a) sl->axis(a).step(at, drive::Feedback{});
+    });
+    chain_.add(&sl->esc());
+  }
+  sched_.add_periodic("ecat-extra-slaves", Phase::device, period / 7, period, [this](SimTime t) {
+    advance(t);
+    for (auto& e : extra_) e->cycle(t);
+  });
 }
 
 EthercatNetwork::~EthercatNetwork() = default;

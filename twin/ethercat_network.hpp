@@ -49,6 +49,10 @@ namespace omnitwin::twin {
 
 // The ESI file a scenario's ethercat bus uses (its `esi`, else the shipped drive).
 std::string ethercat_esi_path(const EthercatSpec& e);
+// The ESI file of seed 001's multi-axis slave (bus.ethercat.extra_axes).
+std::string ethercat_multiaxis_esi_path();
+// How many multi-axis slaves `extra_axes` axis cards take (8 per slave, the rest on the last).
+int ethercat_extra_slaves(const EthercatSpec& e);
 
 class EthercatNetwork final : public BusNetwork {
  public:
@@ -118,6 +122,7 @@ class EthercatNetwork final : public BusNetwork {
   void watch_states(SimTime t);
   bool lose_frame();
   std::uint64_t malformed() const;
+  void add_extra_slaves(SimTime period);
 
   const Scenario& s_;
   const EthercatSpec& spec_;
@@ -125,6 +130,8 @@ class EthercatNetwork final : public BusNetwork {
   Hooks hooks_;
   ethercat::DeviceDescription device_;
   std::array<std::unique_ptr<ethercat::DriveSlave>, 4> slaves_;
+  ethercat::DeviceDescription multi_device_;                   // seed 001's multi-axis slave
+  std::vector<std::unique_ptr<ethercat::DriveSlave>> extra_;   // bus.ethercat.extra_axes, behind the wheels
   ethercat::EscChain chain_;
   std::shared_ptr<ethercat::VethPair> veth_;
   std::unique_ptr<ethercat::EcTransport> transport_;

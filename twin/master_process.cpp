@@ -191,13 +191,23 @@ std::string ethercat_master_config_yaml(const Scenario& s, const std::string& pl
   const EthercatSpec& e = s.bus.ethercat;
   const bool csv = e.mode == "csv";
   std::string out = fmt::format("# omni-master --bus ethercat configuration written by omnitwin for scenario {}\n", s.name);
-  out += fmt::format("esi: {}\n", ethercat_esi_path(e));
+  const int extra = ethercat_extra_slaves(e);
+  if (extra == 0) {
+    out += fmt::format("esi: {}\n", ethercat_esi_path(e));
+  } else {  // the wheels' drives, then seed 001's multi-axis slaves behind them
+    out += fmt::format("esi:\n  - {}\n  - {}\n", ethercat_esi_path(e), ethercat_multiaxis_esi_path());
+  }
   out += fmt::format("cycle: {}\n", s.controller.period);
   out += fmt::format("dc: {}\n", e.dc ? "true" : "false");
-  out += "expected_slaves: 4\n";
-  // Every drive in the wheels' cyclic mode (0x6060 modes of operation: 9 CSV, 8 CSP).
+  out += fmt::format("expected_slaves: {}\n", 4 + extra);
+  // Every wheel drive in the wheels' cyclic mode (0x6060 modes of operation: 9 CSV, 8 CSP).
   out += "startup:\n";
-  out += fmt::format("  - slave: all\n    index: 0x6060\n    sub: 0\n    size: 1\n    value: {}\n", csv ? 9 : 8);
+  if (extra == 0) {
+    out += fmt::format("  - slave: all\n    index: 0x6060\n    sub: 0\n    size: 1\n    value: {}\n", csv ? 9 : 8);
+  } else {  // not the multi-axis slaves: their cards have modes of their own
+    for (int i = 1; i <= 4; ++i)
+      out += fmt::format("  - slave: {}\n    index: 0x6060\n    sub: 0\n    size: 1\n    value: {}\n", i, csv ? 9 : 8);
+  }
   out += "wheels:\n";
   for (int i = 1; i <= 4; ++i) out += fmt::format("  - slave: {}\n    channel: 1\n", i);
   out += fmt::format("wheel_mode: {}\n", e.mode);

@@ -439,6 +439,7 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
     e.esi = resolved.string();
   }
   if (f["mode"].exists()) e.mode = f["mode"].choice({"csv", "csp"});
+  read_integer(f, "extra_axes", e.extra_axes, Bounds::closed(0, 1600));
   read_number(f, "drive_period", e.drive_period, Bounds::closed(50e-6, 0.01));
   read_integer(f, "counts_per_rev", e.counts_per_rev, Bounds::closed(4, 1 << 24));
   read_bool(f, "dc", e.dc);
@@ -580,8 +581,8 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     read_tml(f, bus.tml);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
-    f.allow_keys({"type", "transport", "master_iface", "esi", "mode", "drive_period", "counts_per_rev", "dc", "drift", "t_pre_us",
-                  "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
+    f.allow_keys({"type", "transport", "master_iface", "esi", "extra_axes", "mode", "drive_period", "counts_per_rev", "dc", "drift",
+                  "t_pre_us", "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_ethercat(f, bus.ethercat, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::m3) {

@@ -116,6 +116,10 @@ struct EthercatSpec {
   std::string transport = "auto";
   std::string master_iface;                 // raw: the master's interface (the peer of IFACE)
   std::string esi;                          // device description; "" = models/ethercat/omnitwin_drive.xml
+  // Axis cards of seed 001's multi-axis slaves (models/ethercat/omnitwin_multiaxis.xml, 8 per
+  // slave, the rest on the last) behind the four wheel drives, each at rest on SYNC0: the
+  // seeds' network sizes as a run (issue 17, item 4). 0 = the four drives alone.
+  int extra_axes = 0;
   std::string mode = "csv";                 // csv | csp: how the master commands the wheels
   double drive_period = 0.001;              // the drives' own update period [s]
   int counts_per_rev = 131072;              // the drives' motor encoder (17 bit) [counts/rev]

@@ -106,6 +106,29 @@ TEST_F(CliEthercat, LockstepOverUdp) {
   EXPECT_EQ(m.at("bus").at("dropouts"), 0);
 }
 
+// Seed 001's 100 axes as a run (bus.ethercat.extra_axes): 13 multi-axis slaves behind the
+// four wheel drives, brought to OP by omni-master beside them (17 slaves, expected WKC 12 +
+// 39 = 51, the image overlapped in one frame), every cycle with its WKC, and the platform still
+// follows its path.
+TEST_F(CliEthercat, AHundredAxesOfSeed001RunBehindTheWheels) {
+  const fs::path out = dir_ / "extra";
+  const Finished f = run({"run", test_scenario("ethercat_short.yaml"), "--out", out.string(), "--no-progress", "--set",
+                          "bus.extra_axes=100", "--set", "bus.startup=3.5"});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const nlohmann::json m = metrics(out);
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_EQ(ms.at("state"), "finished");
+  EXPECT_EQ(ms.at("slaves"), 17);
+  EXPECT_EQ(ms.at("expected_wkc"), 51);
+  EXPECT_EQ(ms.at("last_wkc"), 51);
+  EXPECT_EQ(ms.at("wkc_errors"), 0);
+  EXPECT_EQ(m.at("bus").at("dropouts"), 0);
+  EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
+  const std::string log = read_bytes(out / "master.log");
+  EXPECT_NE(log.find("process image: 1272 output bytes, 1296 input bytes, overlapped in 1296 bytes"), std::string::npos)
+      << log;
+}
+
 // SIGINT half-way through a long EtherCAT run: both processes end, exit 3, and the records
 // stay whole — the capture decodes in tshark with no malformed frame and holds what the
 // segment saw up to the stop.

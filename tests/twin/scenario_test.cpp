@@ -10,6 +10,7 @@
 
 #include "tests/support/mujoco_fixture.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "twin/ethercat_network.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
@@ -504,6 +505,18 @@ TEST(ScenarioEthercat, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.ethercat.transport, "auto");
   EXPECT_EQ(by_name.bus.ethercat.mode, "csv");
   EXPECT_TRUE(by_name.bus.ethercat.dc);
+  EXPECT_EQ(by_name.bus.ethercat.extra_axes, 0);
+}
+
+// bus.extra_axes: seed 001's axis cards behind the wheels, 0 … 1600; 8 per slave.
+TEST(ScenarioEthercat, ExtraAxesAreReadWithinTheirBounds) {
+  const std::string m = scenario("minimal.yaml");
+  const Scenario s = load_scenario(m, {{"bus", "ethercat"}, {"bus.extra_axes", "100"}});
+  EXPECT_EQ(s.bus.ethercat.extra_axes, 100);
+  EXPECT_EQ(ethercat_extra_slaves(s.bus.ethercat), 13);
+  EXPECT_EQ(load_error(m, {{"bus", "ethercat"}, {"bus.extra_axes", "1601"}}).key(), "bus.extra_axes");
+  EXPECT_EQ(load_error(m, {{"bus", "ethercat"}, {"bus.extra_axes", "-1"}}).key(), "bus.extra_axes");
+  EXPECT_EQ(load_error(m, {{"bus", "can"}, {"bus.extra_axes", "8"}}).key(), "bus.extra_axes");
 }
 
 TEST(ScenarioErrors, EthercatSettingsAndFaultsOfTheOtherBus) {
