@@ -20,6 +20,10 @@ class DdsRunObserver : public RunObserver {
   void on_end(const nlohmann::json&) override { pub_.finish(); }
 
   DdsPublisher::Stats stats() const { return pub_.stats(); }
+  // See DdsPublisher::wait_for_readers.
+  int wait_for_readers(int readers, double timeout_s, const std::atomic<bool>* stop = nullptr) const {
+    return pub_.wait_for_readers(readers, timeout_s, stop);
+  }
 
  private:
   DdsPublisher pub_;

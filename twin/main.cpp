@@ -348,6 +348,21 @@ int cmd_run(const RunArgs& a) {
       std::cerr << "omnitwin: --web-wait needs --web [ADDR:]PORT\n";
       return 2;
     }
+    // outputs.dds.wait_for_readers: a reader in another process (omnitwin echo, a recorder) is
+    // discovered before the first state goes out, as --web-wait waits for a page.
+    if (dds && s.outputs.dds.wait_for_readers > 0) {
+      const int want = s.outputs.dds.wait_for_readers;
+      std::cerr << fmt::format("  DDS: waiting up to {:g} s for {} reader(s) of the state topic\n", s.outputs.dds.wait_s, want)
+                << std::flush;
+      const int got = dds->wait_for_readers(want, s.outputs.dds.wait_s, &g_interrupt);
+      if (g_interrupt.load()) {
+        std::cerr << "omnitwin: interrupted while waiting for DDS readers; nothing was run\n";
+        return 3;
+      }
+      if (got < want)
+        std::cerr << fmt::format("  DDS: {} of {} reader(s) matched within {:g} s; the run starts anyway\n", got, want,
+                                 s.outputs.dds.wait_s);
+    }
     ObserverFan observers;
     observers.add(dds.get());
     observers.add(web_observer.get());

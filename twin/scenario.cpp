@@ -818,12 +818,14 @@ DdsSpec read_dds(const YamlField& f, double control_period) {
     d.enabled = f.boolean();
     return d;
   }
-  f.allow_keys({"enabled", "domain", "interface", "config", "rate_hz"});
+  f.allow_keys({"enabled", "domain", "interface", "config", "rate_hz", "wait_for_readers", "wait_s"});
   read_bool(f, "enabled", d.enabled);
   read_integer(f, "domain", d.domain, Bounds::closed(0, 232));
   if (f["interface"].exists()) d.interface = f["interface"].string();
   if (f["config"].exists()) d.config_file = f["config"].string();
   read_number(f, "rate_hz", d.rate_hz, Bounds::positive());
+  read_integer(f, "wait_for_readers", d.wait_for_readers, Bounds::closed(0, 1000));
+  read_number(f, "wait_s", d.wait_s, Bounds::closed(0, 3600));
   if (d.rate_hz > 1.0 / control_period + 1e-9)
     f["rate_hz"].fail(fmt::format("at most the control rate ({:g} Hz)", 1.0 / control_period));
   return d;

@@ -601,6 +601,13 @@ TEST(ScenarioOutputs, EveryKeyIsReadAndDefaultsHold) {
   EXPECT_EQ(d.outputs.video.width, 640);
   EXPECT_TRUE(d.outputs.report);
   EXPECT_FALSE(d.outputs.dds.enabled);
+  EXPECT_EQ(d.outputs.dds.wait_for_readers, 0);
+  EXPECT_DOUBLE_EQ(d.outputs.dds.wait_s, 10.0);
+  const Scenario w = load_scenario(scenario("minimal.yaml"), {{"outputs.dds", "{wait_for_readers: 2, wait_s: 3}"}});
+  EXPECT_EQ(w.outputs.dds.wait_for_readers, 2);
+  EXPECT_DOUBLE_EQ(w.outputs.dds.wait_s, 3.0);
+  EXPECT_EQ(load_error(scenario("minimal.yaml"), {{"outputs.dds", "{wait_for_readers: -1}"}}).key(),
+            "outputs.dds.wait_for_readers");
 }
 
 TEST(ScenarioErrors, OutputsOddWidthAndTooFastDds) {

@@ -2,8 +2,10 @@
 // (see dds_publisher.hpp).
 #include "twin/dds/dds_publisher.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <sstream>
+#include <thread>
 
 #include "twin/dds/dds_messages.hpp"
 
@@ -67,6 +69,17 @@ DdsPublisher::DdsPublisher(const DdsSettings& settings)
 }
 
 DdsPublisher::~DdsPublisher() { finish(); }
+
+int DdsPublisher::wait_for_readers(int readers, double timeout_s, const std::atomic<bool>* stop) const {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  for (;;) {
+    dds_publication_matched_status_t st{};
+    if (dds_get_publication_matched_status(writers_->state, &st) < 0) return 0;
+    const int matched = static_cast<int>(st.current_count);
+    if (matched >= readers || (stop && stop->load()) || std::chrono::steady_clock::now() >= give_up) return matched;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+}
 
 void DdsPublisher::start(const RunInfo& info) {
   if (started_ || finished_) return;

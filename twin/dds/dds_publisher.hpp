@@ -44,6 +44,10 @@ class DdsPublisher {
   DdsPublisher(const DdsPublisher&) = delete;
   DdsPublisher& operator=(const DdsPublisher&) = delete;
 
+  // Waits until at least `readers` readers match the state topic, or `timeout_s` seconds of
+  // wall time have passed, or *stop becomes nonzero; returns how many matched. Polls every
+  // 10 ms. Not real-time safe: call before the run.
+  int wait_for_readers(int readers, double timeout_s, const std::atomic<bool>* stop = nullptr) const;
   // Queues the run's start event (text from `info`) and starts the publishing thread. Once.
   void start(const RunInfo& info);
   // Real-time safe: never blocks, never allocates; at most one futex wake-up. Decimates by

@@ -15,6 +15,12 @@ struct DdsSettings {
   double rate_hz = 100;       // state topics [Hz] (> 0), decimated by simulated time
   std::size_t queue_capacity = 256;  // state samples the ring holds between the two threads
   double finish_timeout_s = 1.0;     // finish(): longest wait for run events to be acknowledged [s]
+  // Before the run starts: wait until this many readers match the state topic (0 = do not
+  // wait), at most wait_s of wall time. A lockstep run publishes its first states within
+  // milliseconds, before a reader in another process is discovered; best-effort state
+  // samples sent before then are not delivered to it.
+  int wait_for_readers = 0;
+  double wait_s = 10.0;
 };
 
 }  // namespace omnitwin::twin
