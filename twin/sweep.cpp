@@ -270,7 +270,8 @@ SweepSpec load_sweep_tree(const std::string& path) {
   s.name = root["name"].IsDefined() ? root["name"].as<std::string>() : fs::path(path).stem().string();
   if (!root["scenario"].IsDefined()) bad(s, root, "scenario", "a sweep needs the scenario it varies");
   s.scenario = (fs::path(path).parent_path() / root["scenario"].as<std::string>()).lexically_normal().string();
-  if (!fs::is_regular_file(s.scenario)) bad(s, root["scenario"], "scenario", "no such file: " + s.scenario);
+  std::error_code ec;  // a name the file system refuses is no file either, not an exception
+  if (!fs::is_regular_file(s.scenario, ec)) bad(s, root["scenario"], "scenario", "no such file: " + s.scenario);
   if (!root["grid"].IsDefined() && !root["random"].IsDefined()) bad(s, root, "grid", "a sweep needs grid or random");
   const auto grid = grid_points(s, root["grid"]);
   const auto draws = random_points(s, root["random"]);

@@ -293,6 +293,29 @@ TEST(ScenarioErrors, AControlCharacterFromTheFileStaysOutOfTheOneLineMessage) {
   EXPECT_NE(m.find("\\x01"), std::string::npos) << m;
 }
 
+TEST(ScenarioErrors, AFileNameTheFileSystemRefusesIsAKeyErrorNotACrash) {
+  // Found by fuzz/scenario_fuzz (campaign of 2026-11-26 22:56): a path component over NAME_MAX
+  // made std::filesystem throw "File name too long", which no reader caught; `omnitwin run`
+  // ended with exit 3 instead of naming the key. Every file a scenario names, and the scenario
+  // file itself, now reads as "cannot open".
+  omnitwin::testing::TempDir dir("omnitwin-scenario");
+  const std::string too_long(300, 'x');
+  const std::string path = (dir.path() / "long.yaml").string();
+  {
+    std::ofstream f(path);
+    f << "platform:\n  params: ../" << too_long << "/omni4.yaml\nbus: direct\n";
+  }
+  const auto e = load_error(path);
+  EXPECT_EQ(e.key(), "platform.params");
+  EXPECT_NE(std::string(e.what()).find("cannot open parameter file"), std::string::npos) << e.what();
+  for (const Override& o : std::vector<Override>{{"platform.mjcf", too_long + "/m.xml"},
+                                                 {"bus", "{type: ethercat, esi: " + too_long + "/e.xml}"}}) {
+    const auto k = load_error(scenario("minimal.yaml"), {o});
+    EXPECT_FALSE(k.key().empty()) << o.key;
+  }
+  EXPECT_EQ(load_error((dir.path() / too_long).string()).key(), "");  // the scenario file itself
+}
+
 TEST(ScenarioErrors, ARunLongerThanElevenDaysIsATypoNotASoak) {
   // Found by the scenario mutants: settle 1e308 loaded and would have run until killed.
   for (const Override& o : std::vector<Override>{{"settle", "1e308"},
