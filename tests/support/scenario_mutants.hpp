@@ -27,7 +27,8 @@ namespace omnitwin::testing {
 
 struct ScenarioMutant {
   std::string name;  // source file stem, kind and index: what a failure message shows
-  std::string kind;  // truncate, wrong_type, delete_line, duplicate_line, unknown_key, tab, open_flow, garbage, empty, stray_comma
+  std::string kind;  // truncate, wrong_type, delete_line, duplicate_line, unknown_key, tab, open_flow, garbage, empty,
+                     // stray_comma, long_file_name
   std::string text;  // the file's bytes
 };
 
@@ -121,6 +122,10 @@ inline std::vector<ScenarioMutant> scenario_mutants(std::size_t count, std::uint
   // A stray ',' at the top: yaml-cpp 0.7's LoadAll never returned on these (fuzz/scenario_fuzz).
   out.push_back({"stray_comma", "stray_comma", ","});
   out.push_back({"stray_comma_first", "stray_comma", ",\n" + texts[0]});
+  // A file name the file system refuses (a component over NAME_MAX): std::filesystem threw
+  // and the run ended with exit 3 (fuzz/scenario_fuzz, 2026-11-26).
+  out.push_back({"long_file_name", "long_file_name",
+                 "platform:\n  params: " + std::string(300, 'x') + "/omni4.yaml\nbus: direct\n"});
   while (out.size() < count) {
     const std::size_t fi = pick(files.size());
     const std::string& text = texts[fi];
