@@ -174,8 +174,7 @@ void BM_SegmentRealtime(benchmark::State& state) {
       worst_late_us = std::max(worst_late_us, late_us);
       late_starts += late_us * 1e3 >= static_cast<double>(cycle) / 2;
       const auto t = seg->t + std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count();
-      seg->sent = false;
-      seg->n_more = 0;
+      seg->new_tick();
       seg->master->tick(t);
       if (!seg->sent) continue;
       const auto t0 = std::chrono::steady_clock::now();

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "bus_emulators/drive/axis_model.hpp"
@@ -24,17 +25,36 @@ inline std::vector<ec::DeviceDescription> drive_esi() {
   return ec::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_drive.xml");
 }
 
-struct Bench {
+// What the master's send callback handed out during one tick: its first frame, then any
+// further ones (an image in frames of its own), their buffers kept from tick to tick.
+struct TickFrames {
+  std::vector<std::uint8_t> frame;               // the tick's first frame
+  std::vector<std::vector<std::uint8_t>> more;    // its further frames
+  std::size_t n_more = 0;                         // how many of `more` this tick sent
+  bool sent = false;                              // the tick sent anything
+
+  void new_tick() {
+    sent = false;
+    n_more = 0;
+  }
+  void catch_frame(std::span<const std::uint8_t> pdu) {
+    if (!sent) {
+      frame.assign(pdu.begin(), pdu.end());
+      sent = true;
+      return;
+    }
+    if (n_more == more.size()) more.emplace_back();
+    more[n_more++].assign(pdu.begin(), pdu.end());
+  }
+};
+
+struct Bench : TickFrames {
   std::vector<ec::DeviceDescription> devices = drive_esi();
   std::vector<std::unique_ptr<ec::DriveSlave>> slaves;
   std::vector<omnitwin::drive::AxisModel> models;
   ec::EscChain chain;
   std::unique_ptr<me::EcMaster> master;
   std::unique_ptr<me::EcDrives> drives;
-  std::vector<std::uint8_t> frame;               // the tick's first frame
-  std::vector<std::vector<std::uint8_t>> more;    // its further frames (a multi-frame image)
-  std::size_t n_more = 0;                         // how many of `more` this tick sent
-  bool sent = false;
   int drop_next = 0;  // frames to lose
   int late_every = 0; // > 0: every n-th frame passes the slaves but comes back too late
   int paused = 0;     // > 0: the master is not ticked for that many steps (a stalled master)
@@ -53,13 +73,7 @@ struct Bench {
     cfg.devices = master_devices.empty() ? devices : master_devices;
     cycle = cfg.cycle_ns;
     master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
-      if (sent) {
-        if (n_more == more.size()) more.emplace_back();
-        more[n_more++].assign(pdu.begin(), pdu.end());  // buffers kept from tick to tick
-      } else {
-        frame.assign(pdu.begin(), pdu.end());
-        sent = true;
-      }
+      catch_frame(pdu);
       return true;
     });
     drives = std::make_unique<me::EcDrives>(*master);
@@ -74,8 +88,7 @@ struct Bench {
       slaves[i]->cycle(t);
     }
     chain.advance(t);
-    sent = false;
-    n_more = 0;
+    new_tick();
     if (paused > 0) {
       --paused;
     } else {
@@ -119,16 +132,12 @@ struct Bench {
 // core in-process at `cycle` with distributed clocks, each card's drive stepped at rest by its
 // slave's firmware cycle (SYNC0). One step() = the line to t (SYNC0 pulses), one master tick,
 // the frame through the chain and back. The 100-axis segment of issue 17, item 4.
-struct MultiAxisSegment {
+struct MultiAxisSegment : TickFrames {
   std::vector<ec::DeviceDescription> devices =
       ec::load_esi(OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_multiaxis.xml");
   std::vector<std::unique_ptr<ec::DriveSlave>> slaves;
   ec::EscChain chain;
   std::unique_ptr<me::EcMaster> master;
-  std::vector<std::uint8_t> frame;               // the tick's first frame
-  std::vector<std::vector<std::uint8_t>> more;    // its further frames (a multi-frame image)
-  std::size_t n_more = 0;                         // how many of `more` this tick sent
-  bool sent = false;
   int drop_last = 0;  // ticks whose last frame (of several) is lost
   int drop_all = 0;   // ticks whose frames are all lost (the segment gone)
   me::SimTime t = 0;
@@ -152,13 +161,7 @@ struct MultiAxisSegment {
     cfg.dc = true;
     cfg.expected_slaves = static_cast<int>(slaves.size());
     master = std::make_unique<me::EcMaster>(std::move(cfg), [this](std::span<const std::uint8_t> pdu) {
-      if (sent) {
-        if (n_more == more.size()) more.emplace_back();
-        more[n_more++].assign(pdu.begin(), pdu.end());  // buffers kept from tick to tick
-      } else {
-        frame.assign(pdu.begin(), pdu.end());
-        sent = true;
-      }
+      catch_frame(pdu);
       return true;
     });
   }
@@ -166,8 +169,7 @@ struct MultiAxisSegment {
   void step() {
     for (auto& s : slaves) s->cycle(t);  // mailbox replies (process data runs on SYNC0 once DC is on)
     chain.advance(t);
-    sent = false;
-    n_more = 0;
+    new_tick();
     master->tick(t);
     if (!sent) return void(t += cycle);
     if (drop_all > 0) {
