@@ -57,7 +57,12 @@ std::string ethercat_multiaxis_esi_path() {
   return std::string(OMNITWIN_SOURCE_DIR) + "/models/ethercat/omnitwin_multiaxis.xml";
 }
 
-int ethercat_extra_slaves(const EthercatSpec& e) { return (e.extra_axes + 7) / 8; }
+// Axis cards per seed 001 multi-axis slave (the ESI's 8 module slots); the last one takes the rest.
+constexpr int kCardsPerMultiAxisSlave = 8;
+
+int ethercat_extra_slaves(const EthercatSpec& e) {
+  return (e.extra_axes + kCardsPerMultiAxisSlave - 1) / kCardsPerMultiAxisSlave;
+}
 
 EthercatNetwork::EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
     : s_(s), spec_(s.bus.ethercat), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.ethercat.seed) {
@@ -104,9 +109,9 @@ void EthercatNetwork::add_extra_slaves(SimTime period) {
   const std::vector<ethercat::DeviceDescription> multi = ethercat::load_esi(ethercat_multiaxis_esi_path());
   if (multi.empty()) throw std::runtime_error(fmt::format("{}: no Device in the file", ethercat_multiaxis_esi_path()));
   multi_device_ = multi.front();
-  for (int left = spec_.extra_axes, i = 0; left > 0; left -= 8, ++i) {
+  for (int left = spec_.extra_axes, i = 0; left > 0; left -= kCardsPerMultiAxisSlave, ++i) {
     ethercat::DriveSlaveConfig c;
-    c.axes = std::min(left, 8);
+    c.axes = std::min(left, kCardsPerMultiAxisSlave);
     c.serial = static_cast<std::uint32_t>(101 + i);
     c.esc.power_on_time_ns = 1'000'000'000LL * (5 + i);
     c.drive.period_s = spec_.drive_period;
