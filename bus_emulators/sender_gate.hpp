@@ -1,6 +1,6 @@
 // bus_emulators — the slaves' side of a transport deciding who the master is (issue 16, item 7):
 // the first sender a slaves-role transport hears is taken as the master; a frame from any other
-// sender is counted, and refused when the scenario asks (bus.refuse_foreign_senders).
+// sender is counted, and refused when the scenario asks (bus.refuse_foreign).
 //
 // One gate for every transport that has senders to tell apart: a source MAC on raw Ethernet
 // (EtherCAT, M-III), a socket address on UDP (EtherCAT, M-III). The address is compared as
