@@ -18,8 +18,10 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
     "iae_x_cm",       "iae_y_cm",       "iae_contour_cm",      "std_x_cm",
     "std_y_cm",       "std_contour_cm", "final_error_cm",      "max_error_cm",
     "iae_phi_deg",    "std_phi_deg",    "final_phi_error_deg", "max_phi_error_deg"};
-// The true pose at the end (platform only): "the platform reached a pose".
-constexpr std::array<std::string_view, 3> kFinalPose = {"final_x_m", "final_y_m", "final_phi_deg"};
+// The true pose at the end (platform only): "the platform reached a pose"; and when the plan
+// reached the path's end (−1: the run ended first), without which final_error_cm is only the
+// error against a plan still on its way.
+constexpr std::array<std::string_view, 4> kFinalPose = {"final_x_m", "final_y_m", "final_phi_deg", "path_done_s"};
 // What the drives did (DriveHistory): how a master commissioning them is judged.
 constexpr std::array<std::string_view, 4> kDriveMetrics = {"all_running_at_s", "stopped_at_s", "faults",
                                                            "running_at_end"};

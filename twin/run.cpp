@@ -168,6 +168,7 @@ class PlatformRun {
   void master_lost(SimTime t, std::string why, bool always_fail = false);
   std::vector<std::string> expected_records() const;
   controller::Pose2 bus_reference(SimTime t) const;
+  SimTime plan_origin() const;  // when the plan's path time was 0 (−1: not started)
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
   // the first reason and stop the scheduler. Real-time safe on the success path.
   template <class Writer>
@@ -210,6 +211,7 @@ class PlatformRun {
   PoseErrorStats truth_stats_, odom_stats_;
   DriveHistory drive_history_;
   std::array<double, 3> final_pose_{};  // x, y [m], phi [rad] at the last control sample
+  SimTime path_done_ns_ = -1;           // when the plan reached the path's end (−1: not in this run)
   std::array<VelocityErrorStats, 4> axis_stats_;
   std::vector<double> row_;
 
@@ -504,10 +506,16 @@ void PlatformRun::on_physics_bus(SimTime t) {
   net_->observe_wheels();
 }
 
+// Path time 0 of the plan: bus direct's loop starts at 0; a lockstep master reports its own;
+// otherwise the path starts when the master's start-all completed.
+SimTime PlatformRun::plan_origin() const {
+  if (!on_bus()) return 0;
+  return clock_server_ ? report_.path_origin_ns : net_->master_start_ns();
+}
+
 // The plan at t: the master's own (lockstep), else the path from when its start-all completed.
 controller::Pose2 PlatformRun::bus_reference(SimTime t) const {
-  SimTime origin = report_.path_origin_ns;
-  if (!clock_server_) origin = net_->master_start_ns();
+  const SimTime origin = plan_origin();
   if (origin < 0) return path_.start_pose();
   return path_.sample(std::max(0.0, ns_to_seconds(t - origin))).pose;
 }
@@ -583,6 +591,12 @@ void PlatformRun::on_record(SimTime t) {
                                static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
                                sim_.wheel_torque(i)});
     }
+  }
+  // The plan's end, once a control sample reaches it: final_error_cm means "at the goal" only
+  // when this is set (a master that started late leaves the run mid-path).
+  const SimTime origin = plan_origin();
+  if (path_done_ns_ < 0 && origin >= 0 && t - origin >= seconds_to_ns(path_.duration())) {
+    path_done_ns_ = origin + seconds_to_ns(path_.duration());
   }
   note(csv_->row(row_), *csv_);
   record_bus_and_state(t);
@@ -747,6 +761,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   m["platform"]["final_x_m"] = final_pose_[0];
   m["platform"]["final_y_m"] = final_pose_[1];
   m["platform"]["final_phi_deg"] = final_pose_[2] * 180.0 / std::numbers::pi;
+  m["platform"]["path_done_s"] = path_done_ns_ < 0 ? -1.0 : ns_to_seconds(path_done_ns_);
   m["drives"] = drive_history_.to_json();
   m["platform_odometry"] = odom_stats_.to_json();
   m["axes"] = nlohmann::json::array();

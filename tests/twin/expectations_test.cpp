@@ -34,7 +34,9 @@ TEST(KnownMetrics, AcceptsTheDocumentedPaths) {
                         "bus.dropout_rate", "bus.errors", "realtime.overruns", "realtime.jitter_p99_us",
                         // issue 18 (what the master did) and issue 20 (emergencies)
                         "platform.final_x_m", "platform.final_phi_deg", "drives.all_running_at_s",
-                        "drives.stopped_at_s", "drives.faults", "drives.running_at_end", "master.emergencies"}) {
+                        "drives.stopped_at_s", "drives.faults", "drives.running_at_end", "master.emergencies",
+                        // whether the plan reached the path's end within the run
+                        "platform.path_done_s"}) {
     EXPECT_TRUE(is_known_metric(m)) << m;
   }
 }
@@ -44,7 +46,7 @@ TEST(KnownMetrics, RejectsEverythingElse) {
                         "axes.x.iae_velocity_pulse", "axes.-1.iae_velocity_pulse", "axes.0",
                         "axes.00x.iae_velocity_pulse", "bus.frames_tx.more", "realtime.jitter",
                         "scenario", "expectations.passed", "platform..iae_x_cm",
-                        "platform_odometry.final_x_m", "drives.faultz", "drives"}) {
+                        "platform_odometry.final_x_m", "platform_odometry.path_done_s", "drives.faultz", "drives"}) {
     EXPECT_FALSE(is_known_metric(m)) << m;
   }
 }

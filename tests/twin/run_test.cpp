@@ -151,6 +151,7 @@ TEST_F(RunThesisLine, EndsWithin5mmOfGoal) {
   EXPECT_EQ(m["physics"]["model"], "rollers");
   EXPECT_EQ(m["physics"]["warnings"], 0);
   EXPECT_LT(m["platform"]["final_error_cm"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(m["platform"]["path_done_s"].get<double>(), 20.0);  // bus direct: path time = run time
   // The last true pose, from the record itself.
   const Csv csv = read_csv(t / "trajectory.csv");
   ASSERT_EQ(csv.rows.size(), samples(22.0, 0.010));
@@ -369,6 +370,23 @@ TEST_F(RunShort, ImpossibleExpectationFailsTheRun) {
   EXPECT_NE(failure.find("max 0.0001"), std::string::npos) << failure;
   // The records are complete all the same.
   EXPECT_EQ(read_csv(dir_ / "out/trajectory.csv").rows.size(), samples(3.5, 0.010));
+}
+
+// A run that ends before its path does (0.5 m in 3 s, cut at 2 s) is not "at the goal", though
+// its error against the plan at the last sample is small: path_done_s is −1 and an expectation
+// on it fails the run, while the final error alone would have passed.
+TEST_F(RunShort, ARunThatEndsMidPathFailsThePathDoneExpectation) {
+  const RunResult r = run_into(test_scenario("run_short_line.yaml"), dir_ / "cut",
+                               {{"duration", "2.0"}, {"expect.platform.path_done_s.min", "0"}});
+  EXPECT_EQ(r.exit_code, 1);
+  const nlohmann::json& p = r.metrics.at("platform");
+  EXPECT_DOUBLE_EQ(p.at("path_done_s").get<double>(), -1.0);
+  EXPECT_LT(p.at("final_error_cm").get<double>(), 5.0);  // the scenario's own bound still holds
+  const nlohmann::json& failures = r.metrics.at("expectations").at("failures");
+  ASSERT_EQ(failures.size(), 1u) << failures.dump();
+  EXPECT_NE(failures[0].get<std::string>().find("platform.path_done_s"), std::string::npos) << failures.dump();
+  // Uncut, the plan ends at 3 s and the same expectation holds.
+  EXPECT_DOUBLE_EQ(short_line().result.metrics.at("platform").at("path_done_s").get<double>(), 3.0);
 }
 
 // A wheel_slip fault on wheel 2 (friction ×0.05 from 1 s to 2 s) changes the physics:
