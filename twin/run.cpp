@@ -660,6 +660,26 @@ bool PlatformRun::log_event(SimTime t, std::string_view kind, std::string_view t
   return ok;
 }
 
+// The drive chain's parameters as loaded: what platform.xml does not hold (driver, DA, encoder,
+// the slave's velocity loop) and the master's platform loop, so a run's record says which
+// gains, dead band and arithmetic it ran with. The velocity loop is the thesis slave's (bus
+// direct and can); the other buses' drives have their own (docs/run-directory.md).
+nlohmann::json drive_chain_json(const physics::PlatformParams& p) {
+  const physics::DriverParams& d = p.driver;
+  const physics::VelocityLoopParams& v = p.velocity_loop;
+  return {{"driver", {{"zero_volts", d.zero_volts}, {"gain_rad_s_per_v", d.gain}, {"dead_band_v", d.dead_band},
+                      {"gain_error", d.gain_error}}},
+          {"dac", {{"bits", p.dac.bits}, {"vref_v", p.dac.vref}}},
+          {"encoder", {{"lines", p.encoder.lines}, {"counts_per_rev", p.counts_per_rev()}}},
+          {"velocity_loop", {{"period_s", v.period}, {"kp", v.kp}, {"ki", v.ki}, {"kff", v.kff},
+                             {"arithmetic", v.arithmetic == physics::LoopArithmetic::int16 ? "int16" : "real"}}}};
+}
+
+nlohmann::json controller_json(const ControllerSpec& c) {
+  return {{"period_s", c.period}, {"kp", c.kp}, {"ki", c.ki}, {"feedforward", c.feedforward},
+          {"max_speed_m_s", c.max_speed}, {"max_yaw_rate_rad_s", c.max_yaw_rate}};
+}
+
 void PlatformRun::write_run_description() const {
   const fs::path dir(o_.out_dir);
   const std::string mjcf = s_.platform.sim.mjcf.empty() ? physics::platform_mjcf(s_.platform) : [this] {
@@ -683,6 +703,8 @@ void PlatformRun::write_run_description() const {
                             {"model_variant", model_name(s_.platform)}, {"control_period_s", s_.controller.period},
                             {"physics_timestep_s", s_.platform.sim.timestep}, {"duration_s", s_.duration},
                             {"start_pose", {s_.path.x0, s_.path.y0, s_.path.phi0_deg * kDeg}},
+                            {"overrides", s_.overrides}, {"controller", controller_json(s_.controller)},
+                            {"drive_chain", drive_chain_json(s_.platform)},
                             {"faults", faults}, {"expectations", expect}};
   write_json_atomic((dir / "run.json").string(), j);
 }

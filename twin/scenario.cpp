@@ -945,7 +945,9 @@ Scenario load_scenario(const std::string& path, const std::vector<Override>& ove
     overridden.push_back(apply_override(root, o));
   }
   const YamlDoc doc(path, overridden);
-  return read_scenario(YamlField::root(doc, root), path);
+  Scenario s = read_scenario(YamlField::root(doc, root), path);
+  for (const auto& o : overrides) s.overrides.push_back(o.key + "=" + o.value);
+  return s;
 }
 
 const char* to_string(BusKind b) {

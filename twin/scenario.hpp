@@ -320,6 +320,7 @@ struct Scenario {
   std::vector<Expectation> expectations;
   OutputsSpec outputs;
   MasterSpec master;
+  std::vector<std::string> overrides;  // "key=value" applied over the file, in order (run.json)
   // Lockstep with a master we did not write: it lives on the virtual clock.
   bool virtual_time_master() const { return !master.command.empty() && clock == ClockMode::lockstep; }
 };

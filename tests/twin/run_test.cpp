@@ -310,6 +310,18 @@ TEST_F(RunRecords, RunJsonAndPlatformXmlDescribeTheRun) {
   EXPECT_EQ(j["expectations"][0]["metric"], "platform.final_error_cm");
   EXPECT_DOUBLE_EQ(j["expectations"][0]["max"].get<double>(), 5.0);
   EXPECT_TRUE(j["expectations"][0]["min"].is_null());
+  // What platform.xml does not hold: the drive chain's firmware and driver, the master's loop.
+  EXPECT_TRUE(j["overrides"].empty());
+  const nlohmann::json& dc = j["drive_chain"];
+  EXPECT_DOUBLE_EQ(dc["velocity_loop"]["kp"].get<double>(), 20.0);
+  EXPECT_DOUBLE_EQ(dc["velocity_loop"]["period_s"].get<double>(), 0.010);
+  EXPECT_EQ(dc["velocity_loop"]["arithmetic"], "real");
+  EXPECT_DOUBLE_EQ(dc["driver"]["dead_band_v"].get<double>(), 0.0);
+  EXPECT_EQ(dc["driver"]["gain_error"].size(), 4u);
+  EXPECT_EQ(dc["dac"]["bits"], 12);
+  EXPECT_EQ(dc["encoder"]["counts_per_rev"], 2000);
+  EXPECT_DOUBLE_EQ(j["controller"]["kp"][1].get<double>(), 6.0);
+  EXPECT_EQ(j["controller"]["feedforward"], false);
   char err[300] = "";
   mjModel* m = mj_loadXML((short_line() / "platform.xml").c_str(), nullptr, err, sizeof err);
   ASSERT_NE(m, nullptr) << err;
@@ -387,6 +399,20 @@ TEST_F(RunShort, ARunThatEndsMidPathFailsThePathDoneExpectation) {
   EXPECT_NE(failures[0].get<std::string>().find("platform.path_done_s"), std::string::npos) << failures.dump();
   // Uncut, the plan ends at 3 s and the same expectation holds.
   EXPECT_DOUBLE_EQ(short_line().result.metrics.at("platform").at("path_done_s").get<double>(), 3.0);
+}
+
+// run.json records the --set overrides in order and the firmware values they set, so a run
+// made with other gains or another arithmetic can be told apart and repeated from its record.
+TEST_F(RunShort, RunJsonRecordsTheOverridesAndTheFirmwareTheyChanged) {
+  run_into(test_scenario("run_short_line.yaml"), dir_ / "fw",
+           {{"platform.driver.dead_band", "0.1"}, {"platform.velocity_loop.arithmetic", "int16"},
+            {"controller.kp", "[3, 6, 6]"}});
+  const nlohmann::json j = read_json(dir_ / "fw/run.json");
+  EXPECT_EQ(j["overrides"], nlohmann::json({"platform.driver.dead_band=0.1", "platform.velocity_loop.arithmetic=int16",
+                                            "controller.kp=[3, 6, 6]"}));
+  EXPECT_DOUBLE_EQ(j["drive_chain"]["driver"]["dead_band_v"].get<double>(), 0.1);
+  EXPECT_EQ(j["drive_chain"]["velocity_loop"]["arithmetic"], "int16");
+  EXPECT_DOUBLE_EQ(j["controller"]["kp"][0].get<double>(), 3.0);
 }
 
 // A wheel_slip fault on wheel 2 (friction ×0.05 from 1 s to 2 s) changes the physics:
