@@ -53,8 +53,22 @@ void round_trip(const Config& c, Parse parse, Dump dump) {
   if (once != twice) std::abort();
 }
 
+// A bus program's reader: its section, then the platform section it names, as the program
+// loads them; `use` exercises what the program does next with the configuration.
+template <class Parse, class Use>
+void program(Parse parse, Use use) {
+  try {
+    const auto c = parse();
+    platform(c.platform_file, c.platform_yaml);
+    use(c);
+  } catch (const controller::config::ConfigFileError&) {
+  }
+}
+
 void run(std::uint8_t which, std::string_view yaml) {
-  using controller::config::ConfigFileError;
+  namespace co = controller::canopen;
+  namespace ec = controller::ethercat;
+  namespace tml = controller::tml;
   switch (which % 5) {
     case 0:
       try {
@@ -65,36 +79,17 @@ void run(std::uint8_t which, std::string_view yaml) {
       }
       break;
     case 1:
-      try {
-        const auto c = controller::canopen::parse_co_config(yaml, kFile, kBase);
-        platform(c.platform_file, c.platform_yaml);
-        (void)controller::canopen::dump_co_config(c);
-      } catch (const ConfigFileError&) {
-      }
+      program([&] { return co::parse_co_config(yaml, kFile, kBase); }, [](const auto& c) { (void)co::dump_co_config(c); });
       break;
     case 2:
-      try {
-        const auto c = controller::ethercat::parse_ec_config(yaml, kFile, kBase);
-        platform(c.platform_file, c.platform_yaml);
-      } catch (const ConfigFileError&) {
-      }
+      program([&] { return ec::parse_ec_config(yaml, kFile, kBase); }, [](const auto&) {});
       break;
     case 3:
-      try {
-        const auto c = m3::parse_m3_config(yaml, kFile, kBase);
-        platform(c.platform_file, c.platform_yaml);
-        (void)m3::dump_m3_config(c);
-        (void)m3::station_addresses(c);
-      } catch (const ConfigFileError&) {
-      }
+      program([&] { return m3::parse_m3_config(yaml, kFile, kBase); },
+              [](const auto& c) { (void)m3::dump_m3_config(c), (void)m3::station_addresses(c); });
       break;
     case 4:
-      try {
-        const auto c = controller::tml::parse_tml_config(yaml, kFile, kBase);
-        platform(c.platform_file, c.platform_yaml);
-        (void)controller::tml::dump_tml_config(c);
-      } catch (const ConfigFileError&) {
-      }
+      program([&] { return tml::parse_tml_config(yaml, kFile, kBase); }, [](const auto& c) { (void)tml::dump_tml_config(c); });
       break;
   }
 }
