@@ -1,5 +1,5 @@
 // Tests twin/experiment_thesis_calibrate (and the rig it shares with thesis-platform,
-// twin/experiment_thesis): a quick calibration starts from the project's defaults, writes a
+// twin/experiment_thesis): a quick calibration starts from its documented start, writes a
 // scenario that loads and holds exactly the best evaluation's values, a trace with one row per
 // evaluation and a report naming method, bounds and result; the committed fitted scenario
 // loads, lies inside the bounds and says what it was fitted to.
@@ -36,29 +36,35 @@ std::vector<std::vector<std::string>> csv_rows(const fs::path& p) {
 // The fitted values of a scenario in the trace's order.
 std::vector<double> fitted_values(const Scenario& s) {
   return {s.controller.kp[0],          s.controller.ki[0],          s.platform.velocity_loop.kp,
-          s.platform.velocity_loop.ki, s.platform.driver.dead_band, s.platform.motor.friction_torque};
+          s.platform.velocity_loop.ki, s.platform.driver.dead_band, s.platform.motor.friction_torque,
+          s.platform.motor.backlash,   s.platform.driver.gain_error[1]};
 }
 
 TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAndMethod) {
   omnitwin::testing::TempDir dir("omnitwin-cal");
   ExperimentOptions o{dir.path().string(), true};
-  o.budget = 8;
+  o.budget = 10;
   ASSERT_EQ(run_experiment("thesis-calibrate", o), kExperimentOk);
-  // The trace: one row per evaluation, the first at the project's defaults.
+  // The trace: one row per evaluation, the first at the start.
   const auto rows = csv_rows(dir.path() / "thesis_calibrate.csv");
-  ASSERT_EQ(rows.size(), 9u);
-  ASSERT_EQ(rows[0][8], "objective");
+  ASSERT_EQ(rows.size(), 11u);
+  ASSERT_EQ(rows[0][9], "objective");
   const Scenario defaults = load_scenario(thesis::plain_scenario());
-  const std::vector<double> start = fitted_values(defaults);
+  const std::vector<double> start{1.518, 0.02875, 20, 0.2, 0.1233, 0.5984, 0.02561, 0.3};
   for (std::size_t k = 0; k < start.size(); ++k) EXPECT_DOUBLE_EQ(std::stod(rows[1][k + 1]), start[k]) << k;
   // The written scenario holds the best row's values exactly.
   const auto best = std::min_element(rows.begin() + 1, rows.end(),
-                                     [](const auto& a, const auto& b) { return std::stod(a[8]) < std::stod(b[8]); });
+                                     [](const auto& a, const auto& b) { return std::stod(a[9]) < std::stod(b[9]); });
   const Scenario fitted = load_scenario((dir.path() / "thesis_line_fitted.yaml").string());
   const std::vector<double> v = fitted_values(fitted);
   for (std::size_t k = 0; k < v.size(); ++k) EXPECT_DOUBLE_EQ(v[k], std::stod((*best)[k + 1])) << k;
   EXPECT_EQ(fitted.controller.kp[0], fitted.controller.kp[1]);    // x and y share their gains
   EXPECT_EQ(fitted.controller.kp[2], defaults.controller.kp[2]);  // the heading loop is not fitted
+  // The gain mismatch is the diagonal pairs': wheels 1 and 3 one way, 2 and 4 the other.
+  const auto& g = fitted.platform.driver.gain_error;
+  EXPECT_EQ(g[0], -g[1]);
+  EXPECT_EQ(g[2], g[0]);
+  EXPECT_EQ(g[3], g[1]);
   // It is still the thesis line.
   ASSERT_EQ(fitted.path.segments.size(), 1u);
   EXPECT_EQ(fitted.path.segments[0].dx, 2.0);
@@ -66,7 +72,8 @@ TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAnd
   // The report names the method, the objective and every free parameter.
   const std::string md = omnitwin::testing::read_bytes(dir.path() / "thesis_calibrate.md");
   for (const char* word : {"Nelder–Mead", "ln(ours / thesis)", "controller.kp", "platform.velocity_loop.ki",
-                           "platform.driver.dead_band", "platform.motor.friction_torque", "platform.motor.backlash", "QUICK"})
+                           "platform.driver.dead_band", "platform.motor.friction_torque", "platform.motor.backlash",
+                           "platform.driver.gain_error", "QUICK"})
     EXPECT_NE(md.find(word), std::string::npos) << word;
 }
 
@@ -75,7 +82,7 @@ TEST(ThesisCalibrate, TheCommittedFitLoadsInsideItsBoundsAndSaysWhatItWasFittedT
   EXPECT_EQ(thesis::default_scenario(), thesis::fitted_scenario());
   const Scenario s = load_scenario(thesis::fitted_scenario());
   const std::vector<double> v = fitted_values(s);
-  const std::vector<std::pair<double, double>> bounds{{0.5, 8}, {0, 8}, {5, 150}, {0, 40}, {0, 0.3}, {0, 1.5}, {0, 0.05}};
+  const std::vector<std::pair<double, double>> bounds{{0.5, 8}, {0, 8}, {5, 150}, {0, 40}, {0, 0.3}, {0, 1.5}, {0, 0.05}, {0, 0.4}};
   for (std::size_t k = 0; k < v.size(); ++k) {
     EXPECT_GE(v[k], bounds[k].first) << k;
     EXPECT_LE(v[k], bounds[k].second) << k;
