@@ -136,6 +136,10 @@ void read_platform(const std::string& file, const Val& v, const std::string& bas
 }
 
 std::string read_file(const std::string& path) {
+  // An ifstream opens a directory and then reads nothing, which would pass for an empty file.
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw ConfigFileError(fmt::format("{}: a directory, not a configuration file", path));
   std::ifstream in(path);
   if (!in) throw ConfigFileError(fmt::format("{}: cannot read the file", path));
   std::stringstream ss;

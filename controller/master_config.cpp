@@ -361,6 +361,9 @@ MasterConfig parse_master_config(std::string_view yaml, const std::string& file)
 }
 
 MasterConfig load_master_config(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw MasterConfigError(path, 0, "", "a directory, not a configuration file");
   if (!std::filesystem::is_regular_file(path)) throw MasterConfigError(path, 0, "", "cannot open configuration file");
   std::string text;
   try {

@@ -64,6 +64,8 @@ TEST(ConfigReader, PlatformIsABlockMappingOrAFile) {
   EXPECT_TRUE(file.empty());
   EXPECT_EQ(resolve("/cfg", "/abs/p.yaml"), "/abs/p.yaml");
   EXPECT_EQ(error_of([] { read_file("/nonexistent/omnitwin.yaml"); }), "/nonexistent/omnitwin.yaml: cannot read the file");
+  // A directory is named as one, not read as an empty configuration.
+  EXPECT_EQ(error_of([] { read_file("/tmp"); }), "/tmp: a directory, not a configuration file");
 }
 
 }  // namespace

@@ -186,6 +186,12 @@ TEST(MasterConfig, FileLevelErrors) {
     EXPECT_EQ(std::string(e.what()), missing + ": cannot open configuration file");
     EXPECT_EQ(e.line(), 0);
   }
+  try {
+    load_master_config(dir.path().string());
+    FAIL() << "no error";
+  } catch (const MasterConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), dir.path().string() + ": a directory, not a configuration file");
+  }
   const std::string broken = write_file(dir, "broken.yaml", "path:\n  segments: [\n");
   try {
     load_master_config(broken);
