@@ -260,7 +260,7 @@ std::string prediction_section(const std::vector<Result>& rs, const std::vector<
   out << fmt::format("\n- Held-out configurations with X, Y, contour and axis IAE all within 2× of the thesis's: **{} of "
                      "{}** (the acceptance asks for 6 of 7); leaving Y out: {} of {}.\n",
                      held_ok, held, held_ok3, held)
-      << fmt::format("- Read it with the spread: over these rows our contour IAE spans a factor {:.2f} (largest / "
+      << fmt::format("- Read it with the spread: over the eight rows our contour IAE spans a factor {:.2f} (largest / "
                      "smallest), the thesis's {:.2f}. Within 2× says the twin holds the thesis's level; what differs "
                      "between the configurations is in the sync rows below.\n",
                      held ? ours_hi / ours_lo : 0.0, held ? theirs_hi / theirs_lo : 0.0)
@@ -383,9 +383,10 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
              "- **X and contour IAE (fast: X {}, contour {}; slow: contour {}; the thesis: contour {} above "
              "125 kbit/s).** Our odometric X error is the following lag of the master's position loop without "
              "feed-forward (the thesis's structure, fig. 4-13) on the 20 s trapezoid, σ {:.2f} cm, with the "
-             "scenario's gains kp {:g}/s, ki {:g}/s². A P-dominant loop's lag is the planned speed over its gain whatever "
-             "the drives do, and the odometry is summed from every feedback frame, so lost or late commands hardly "
-             "change it: the drift of 0.362 % costs one command in 276. The thesis's X "
+             "scenario's gains kp {:g}/s, ki {:g}/s²: it grows with the planned speed, and where ki is not negligible "
+             "the integral carries it past zero before the path ends (thesis_platform_time.png). Its size is set by "
+             "the gains whatever the drives do, and the odometry is summed from every feedback frame, so lost or late "
+             "commands hardly change it: the drift of 0.362 % costs one command in 276. The thesis's X "
              "fell by 25 … 39 % with sync, so its lag depended on the bus in a way this model does not have (a "
              "master that integrates only the latest feedback per tick, losing what a dropout overwrites, would "
              "be one; the thesis does not describe its odometry).\n",
