@@ -6,8 +6,8 @@
 // program loads it (load_platform_section).
 //
 // The contract omni-master relies on: a reader throws only its documented error (the programs
-// catch exactly that and exit 2 with its one line); anything else escaping is a finding, since
-// nothing above main() catches it. A configuration that parsed must also print
+// catch exactly that and exit 2 with its one line); anything else escaping is a finding: main()
+// would end it as an internal error (exit 3) instead. A configuration that parsed must also print
 // (--print-config) and read back to the same print where a printer exists.
 // Abort on any mismatch. Platform files are not opened: the fuzzer could name /dev/zero.
 //
