@@ -209,7 +209,8 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
              "- **Y is weighed** since the diagonal pairs' gain mismatch is a free parameter (over this search's {} "
              "evaluations our odometric Y IAE ranged over {:.0f} … {:.0f} cm; the thesis: 1308 … 2673 cm). Without "
              "it the master's Y loop held the unloaded platform on its line whatever the drives did: a velocity PI "
-             "with a real integral (the old fit's 17.3) erases a driver's gain error, and an earlier search with Y weighed but no mismatch "
+             "with a real integral (the old fit's 17.3) erases a driver's gain error, and an earlier search with Y "
+             "weighed but no mismatch "
              "gave up a factor 4 on X for a factor 2 on Y. A mismatch shows in Y only where the velocity loop "
              "leaves a speed-proportional tracking error, so it and the velocity PI's integral are fitted "
              "together.\n",
