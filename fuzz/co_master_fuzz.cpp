@@ -1,7 +1,8 @@
 // libFuzzer target for controller/canopen/co_master: our CANopen master, the one CANopen
 // program that reads frames from devices we did not write, while it resets, configures (SDO),
 // starts and runs four emulated CiA 402 drives (bus_emulators/canopen/co_drive, built from the
-// shipped EDS) on the simulated CAN wire (can_bus), as tests/controller/canopen's network does.
+// shipped EDS) on the simulated CAN wire (can_bus): the tests' network
+// (tests/controller/canopen/co_network.hpp).
 //
 // The drives answer properly, so the master reaches every phase; the input adds what a faulty
 // or hostile bus would: records of 12 bytes [ms][op][id lo][id hi][dlc][rtr|node][6 data]…
@@ -25,83 +26,20 @@
 #include <string>
 #include <vector>
 
-#include "bus_emulators/can/can_bus.hpp"
-#include "bus_emulators/canopen/co_drive.hpp"
-#include "bus_emulators/canopen/co_eds.hpp"
-#include "controller/canopen/co_master.hpp"
+#include "tests/controller/canopen/co_network.hpp"
 
 namespace co = omnitwin::canopen;
 namespace can = omnitwin::can;
 using omnitwin::controller::canopen::CoMaster;
-using omnitwin::controller::canopen::CoProgramConfig;
 using omnitwin::controller::canopen::to_string;
 
 namespace {
 
-constexpr co::SimTime kMs = 1'000'000;
+using omnitwin::controller::canopen::testing::Network;
 
-const co::EdsDevice& shipped_eds() {
-  static const co::EdsDevice eds = co::load_eds(std::string(OMNITWIN_SOURCE_DIR) + "/models/canopen/omnitwin_drive.eds");
-  return eds;
-}
-
-// A frame the master sends must be one a CAN controller could put on the wire.
+// A frame the master sends must be one a CAN controller could put on the wire; the tests'
+// network hands the master's frames to the wire, so the check wraps its send callback.
 bool valid(const can::Frame& f) { return f.valid() && !f.extended; }
-
-// The master (bus node 0) and four drives (nodes 1..4) on one 1 Mbit/s wire.
-struct Network {
-  can::CanBus bus{can::BusConfig{.bit_rate_bps = 1'000'000, .queue_capacity = 64, .max_nodes = 5}};
-  std::unique_ptr<CoMaster> master;
-  std::vector<std::unique_ptr<co::DriveNode>> drives;
-  bool powered[4] = {true, true, true, true};
-  co::SimTime now = 0;
-
-  Network() {
-    for (int i = 0; i < 5; ++i) bus.attach();
-    CoProgramConfig cfg;
-    cfg.eds = shipped_eds().source;
-    cfg.wheel_counts_per_rev = 10000;
-    master = std::make_unique<CoMaster>(cfg, shipped_eds(), [this](const can::Frame& f, co::SimTime t) {
-      if (!valid(f)) std::abort();
-      return bus.submit(0, f, t) == can::SubmitStatus::queued;
-    });
-    for (int i = 0; i < 4; ++i) {
-      omnitwin::drive::DriveConfig dc;
-      dc.counts_per_rev = 10000;
-      drives.push_back(std::make_unique<co::DriveNode>(shipped_eds(), static_cast<std::uint8_t>(i + 1), dc,
-                                                       [this, i](const can::Frame& f, co::SimTime t) {
-                                                         return bus.submit(i + 1, f, t) == can::SubmitStatus::queued;
-                                                       }));
-    }
-    bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) {
-      if (r == 0) master->on_frame(f, t.end_ns);
-      else drives[static_cast<std::size_t>(r - 1)]->on_frame(f, t.end_ns);
-    });
-    for (auto& d : drives) d->power_on(0);
-  }
-  // `ms` SYNC periods: the master's tick on each ms, the drives' steps half-way.
-  void run(int ms) {
-    for (int k = 0; k < ms; ++k) {
-      bus.advance(now);
-      master->on_tick(now);
-      bus.advance(now + kMs / 2);
-      for (std::size_t i = 0; i < 4; ++i)
-        if (powered[i]) drives[i]->step(now + kMs / 2, omnitwin::drive::Feedback{});
-      now += kMs;
-    }
-  }
-  void power(int i, bool on) {
-    if (powered[i] == on) return;
-    powered[i] = on;
-    if (on) {
-      bus.reattach(i + 1, now);
-      drives[static_cast<std::size_t>(i)]->power_on(now);
-    } else {
-      bus.detach(i + 1, now);
-      drives[static_cast<std::size_t>(i)]->power_off();
-    }
-  }
-};
 
 // The frame a record describes (op 0..4).
 can::Frame frame_of(const std::uint8_t* r) {
@@ -120,6 +58,9 @@ can::Frame frame_of(const std::uint8_t* r) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   Network net;
+  net.on_master_send = [](const can::Frame& f) {
+    if (!valid(f)) std::abort();
+  };
   std::uint8_t r[12];
   for (std::size_t at = 0; at < size; at += sizeof r) {
     std::memset(r, 0, sizeof r);
@@ -127,8 +68,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     net.run(r[0] % 32);
     const std::uint8_t op = r[1] % 16;
     if (op <= 4) net.master->on_frame(frame_of(r), net.now);
-    else if (op == 5) net.power(r[5] % 4, false);
-    else if (op == 6) net.power(r[5] % 4, true);
+    else if (op == 5 || op == 6) {
+      const int i = r[5] % 4;
+      if (net.powered[static_cast<std::size_t>(i)] != (op == 6)) net.power(i, op == 6);
+    }
     else if (op == 7) net.master->finish(net.now);
     if (std::string(to_string(net.master->phase())) == "?") std::abort();
   }
