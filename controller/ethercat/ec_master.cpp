@@ -1295,8 +1295,10 @@ void EcMaster::start_pdo_read(Slave& s) {
         return;
       }
       s.assign[assign].assign(r.data[0], 0);
-      for (std::uint8_t i = 1; i <= r.data[0]; ++i) {
-        queue_internal(s, SdoRequest{true, assign, i, {}}, [this, &s, assign, i](const SdoResult& r2) {
+      // An int index: a count of 255 must end the loop (an 8-bit index would wrap and queue forever).
+      for (int i = 1; i <= r.data[0]; ++i) {
+        const auto sub = static_cast<std::uint8_t>(i);
+        queue_internal(s, SdoRequest{true, assign, sub, {}}, [this, &s, assign, i](const SdoResult& r2) {
           if (r2.status != SdoStatus::done || r2.data.size() < 2) {
             s.pdo_from_coe = false;
             return;
@@ -1309,8 +1311,8 @@ void EcMaster::start_pdo_read(Slave& s) {
               return;
             }
             s.mapping[pdo].assign(r3.data[0], 0);
-            for (std::uint8_t k = 1; k <= r3.data[0]; ++k) {
-              queue_internal(s, SdoRequest{true, pdo, k, {}}, [&s, pdo, k](const SdoResult& r4) {
+            for (int k = 1; k <= r3.data[0]; ++k) {
+              queue_internal(s, SdoRequest{true, pdo, static_cast<std::uint8_t>(k), {}}, [&s, pdo, k](const SdoResult& r4) {
                 if (r4.status != SdoStatus::done || r4.data.size() < 4) {
                   s.pdo_from_coe = false;
                   return;

@@ -260,8 +260,8 @@ SdoAbort DriveSlave::check_mapping(const OdObject& o, std::uint8_t sub, std::spa
     const std::uint8_t n = data[0];
     if (n > o.max_subindex()) return SdoAbort::value_range;
     std::uint32_t bits = 0;
-    for (std::uint8_t s = 1; s <= n; ++s) {
-      const OdEntry* e = o.entry(s);
+    for (int s = 1; s <= n; ++s) {  // int: n = 255 must end the loop
+      const OdEntry* e = o.entry(static_cast<std::uint8_t>(s));
       if (!e) return SdoAbort::value_range;
       bits += static_cast<std::uint32_t>(e->as_int() & 0xFF);
     }

@@ -5,6 +5,7 @@
 // layer's update.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <span>
 #include <vector>
@@ -58,6 +59,8 @@ struct Bench : TickFrames {
   int drop_next = 0;  // frames to lose
   int late_every = 0; // > 0: every n-th frame passes the slaves but comes back too late
   int paused = 0;     // > 0: the master is not ticked for that many steps (a stalled master)
+  // Called on every frame that comes back to the master, before on_frame(): a wire that changes it.
+  std::function<void(std::vector<std::uint8_t>&)> tamper;
   std::uint64_t frames = 0;
   me::SimTime t = 0;
   me::SimTime cycle = 1'000'000;
@@ -109,6 +112,7 @@ struct Bench : TickFrames {
     } else if (late_every > 0 && frames % late_every == 0) {
       chain.process(f, t);  // the slaves act on it; the master never sees it in time
     } else if (chain.process(f, t)) {
+      if (tamper) tamper(f);
       master->on_frame(f, t + 50'000);
     }
   }

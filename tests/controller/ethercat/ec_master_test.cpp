@@ -89,6 +89,29 @@ TEST(EcMaster, PdoMappingReadOverCoeMatchesTheEsi) {
   }
 }
 
+// A reply saying that 255 PDOs are assigned to SM2 (a corrupted or hostile slave): the master
+// reads the entries, falls back to the SII's PDOs when they abort, and reaches OP. An 8-bit
+// loop index used to wrap at 255 and queue reads until memory ran out (fuzz/ec_master_fuzz).
+TEST(EcMaster, AnAssignmentCountOf255EndsAndTheSlaveStillReachesOp) {
+  Bench b(1);
+  int patched = 0;
+  b.tamper = [&](std::vector<std::uint8_t>& f) {
+    // The expedited upload response of 0x1C12:00 (command 0x4F, index, subindex, one byte).
+    const std::uint8_t head[] = {0x4F, 0x12, 0x1C, 0x00};
+    auto at = std::search(f.begin(), f.end(), std::begin(head), std::end(head));
+    if (at == f.end() || at + 4 == f.end()) return;
+    *(at + 4) = 0xFF;
+    ++patched;
+  };
+  ASSERT_TRUE(b.to_op(20000)) << b.master->error() << "\n" << events(*b.master);
+  EXPECT_EQ(patched, 1);
+  const SlaveStatus& s = b.master->slave(0);
+  EXPECT_FALSE(s.pdo_from_coe);
+  EXPECT_GE(b.master->stats().sdo_failed, 1u);
+  EXPECT_EQ(s.out_bytes, b.slaves[0]->output_bytes());
+  EXPECT_EQ(s.in_bytes, b.slaves[0]->input_bytes());
+}
+
 TEST(EcMaster, AllReachOpAndEveryCycleHasTheExpectedWkc) {
   Bench b;
   ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
