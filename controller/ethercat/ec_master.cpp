@@ -696,7 +696,8 @@ std::optional<EntryLocation> EcMaster::find_entry(int position, std::uint16_t in
 
 std::int64_t EcMaster::read_entry(const EntryLocation& at, bool is_signed) const {
   std::uint64_t v = 0;
-  for (unsigned i = 0; i < at.bits; ++i) {
+  const unsigned n = std::min<unsigned>(at.bits, 64);  // a shift by 64 or more is undefined
+  for (unsigned i = 0; i < n; ++i) {
     const std::uint32_t bit = at.bit_offset + i;
     if (bit / 8 >= image_.size()) break;
     if (image_[bit / 8] & (1u << (bit % 8))) v |= 1ULL << i;
@@ -711,7 +712,7 @@ void EcMaster::write_entry(const EntryLocation& at, std::int64_t value) {
     const std::uint32_t bit = at.bit_offset + i;
     if (bit / 8 >= image_.size()) break;
     const auto mask = static_cast<std::uint8_t>(1u << (bit % 8));
-    if ((v >> i) & 1) image_[bit / 8] |= mask;
+    if (i < 64 && (v >> i) & 1) image_[bit / 8] |= mask;  // zeros above bit 63
     else image_[bit / 8] &= static_cast<std::uint8_t>(~mask);
   }
 }

@@ -112,6 +112,23 @@ TEST(EcMaster, AnAssignmentCountOf255EndsAndTheSlaveStillReachesOp) {
   EXPECT_EQ(s.in_bytes, b.slaves[0]->input_bytes());
 }
 
+// A mapping may say an entry is up to 255 bits wide (a corrupted reply did, in
+// fuzz/ec_master_fuzz): reading and writing it as an integer touch its low 64 bits only. Shifts
+// by 64 or more used to be undefined; on x86 they wrapped and copied bit 0 into bit 64.
+TEST(EcMaster, AnEntryWiderThan64BitsIsReadAndWrittenInItsLow64Bits) {
+  Bench b(1);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  ASSERT_GE(b.master->lrw_bytes(), 10u);
+  const EntryLocation wide{0, 80, true};
+  b.master->write_entry(EntryLocation{64, 16, true}, 0x5A5A);
+  b.master->write_entry(wide, 1);
+  EXPECT_EQ(b.master->read_entry(EntryLocation{64, 16, true}, false), 0);  // zeros above bit 63
+  EXPECT_EQ(b.master->read_entry(wide, false), 1);
+  b.master->write_entry(EntryLocation{64, 1, true}, 1);
+  EXPECT_EQ(b.master->read_entry(wide, false), 1);  // bit 64 is not folded into bit 0
+  EXPECT_EQ(b.master->read_entry(EntryLocation{0, 64, true}, true), 1);
+}
+
 TEST(EcMaster, AllReachOpAndEveryCycleHasTheExpectedWkc) {
   Bench b;
   ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
