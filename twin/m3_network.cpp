@@ -367,6 +367,7 @@ nlohmann::json M3Network::slave_metrics() const {
                    {"missed_commands", st.missed_commands},
                    {"wdt_errors", st.wdt_errors},
                    {"phase_errors", st.phase_errors},
+                   {"length_errors", st.length_errors},
                    {"comm_alarms", st.comm_alarms},
                    {"repeated", st.repeated}});
   }

@@ -145,6 +145,14 @@ CmdAlarm SlaveLink::run_link_command(Command c, std::span<const std::uint8_t> cm
       return CmdAlarm::normal;
     default: break;
   }
+  // The profile reads its fields at fixed offsets: a command of another length than the
+  // connection's (before CONNECT: one the profile does not take) is not executed.
+  const bool length_ok = s_.phase == Phase::p1 ? profile_.accepts_length(cmd.size()) || cmd.size() == kMaxData
+                                               : cmd.size() == s_.conn.data_bytes;
+  if (!length_ok) {
+    ++s_.stats.length_errors;
+    return CmdAlarm::invalid_data;
+  }
   return profile_.execute(c, cmd, rsp, t);
 }
 

@@ -84,6 +84,8 @@ struct LinkConfig {
 struct LinkStats {
   std::uint64_t commands = 0, responses = 0, fcs_errors = 0, bad_frames = 0, not_for_me = 0;
   std::uint64_t missed_commands = 0, missed_syncs = 0, wdt_errors = 0, phase_errors = 0, unsupported = 0;
+  // Profile commands not executed because their length is not the connection's (CMD_ALM 9h).
+  std::uint64_t length_errors = 0;
   std::uint64_t comm_alarms = 0;  // COMM_ALM alarms (8h-Ch) raised
   std::uint64_t repeated = 0;     // retries of the last command answered from its stored response
 };

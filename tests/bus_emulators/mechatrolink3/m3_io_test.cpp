@@ -71,6 +71,25 @@ TEST_F(M3Io, DataExchangeWritesOutputsAndAnswersInputs) {
   EXPECT_EQ(io.writes(), 2u);
 }
 
+// The profile reads its fields at fixed offsets, so a command shorter (or longer) than the
+// connection's length is refused, not executed: an 8-byte ID_RD after a 16-byte CONNECT read
+// bytes 12-14 past the frame (ASan, found in review).
+TEST_F(M3Io, ACommandOfAnotherLengthThanTheConnectionsIsRefusedNotRun) {
+  link.power_on(0);
+  ASSERT_EQ(connect(16), CmdAlarm::normal);
+  std::vector<std::uint8_t> shorter(8, 0);
+  const FrameView v = exchange(0x03, shorter);
+  EXPECT_EQ(v.data.size(), 8u);
+  EXPECT_EQ(unpack_stat(get_u16(v.data, 2)).cmd_alm, CmdAlarm::invalid_data);
+  std::vector<std::uint8_t> longer(32, 0);
+  longer[4] = 0x81;
+  EXPECT_EQ(unpack_stat(get_u16(exchange(kDataRwa, longer).data, 2)).cmd_alm, CmdAlarm::invalid_data);
+  EXPECT_EQ(io.writes(), 0u);
+  EXPECT_EQ(link.stats().length_errors, 2u);
+  std::vector<std::uint8_t> right(16, 0);
+  EXPECT_EQ(unpack_stat(get_u16(exchange(kDataRwa, right).data, 2)).cmd_alm, CmdAlarm::normal);
+}
+
 TEST_F(M3Io, IdReadAndAServoCommand) {
   link.power_on(0);
   ASSERT_EQ(connect(32), CmdAlarm::normal);
