@@ -170,6 +170,8 @@ bool EcMaster::add(ec::PduBuilder& b, Slot slot, Cmd cmd, std::uint16_t adp, std
     add_failed_ = true;
     return false;
   }
+  slot.cmd = cmd;
+  slot.length = len;
   slots_[slot_count_++] = slot;
   return true;
 }
@@ -243,7 +245,7 @@ void EcMaster::tick(SimTime t) {
         const std::uint8_t* data = wire_.empty() ? image_.data() : wire_.data() + g.logical;
         const auto len = static_cast<std::uint16_t>(g.bytes);
         if (b.add_logical(Cmd::lrw, index_, config_.logical_base + g.logical, len, data) >= 0) {
-          slots_[slot_count_++] = {SlotKind::lrw};
+          slots_[slot_count_++] = Slot{SlotKind::lrw, -1, 0, Cmd::lrw, len};
           lrw_added = true;
         }
       }
@@ -359,6 +361,14 @@ void EcMaster::close_cycle(bool returned, SimTime t) {
 // ---------------------------------------------------------------------------------------
 // on_frame
 
+// Every datagram came back with the command and data length it went out with: the handlers
+// read each reply at the offsets and sizes they asked for.
+bool EcMaster::matches_slots(const ec::PduView& v) const {
+  for (std::size_t i = 0; i < v.count; ++i)
+    if (v.datagrams[i].cmd() != slots_[i].cmd || v.datagrams[i].length() != slots_[i].length) return false;
+  return true;
+}
+
 void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
   ec::PduView v;
   if (ec::parse_pdu(pdu, v) != ec::PduError::ok) {
@@ -366,7 +376,7 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
     return;
   }
   if (groups_out_ > 0 && on_group_frame(v, t)) return;
-  if (!awaiting_ || v.count != slot_count_ || v.datagrams[0].index() != index_) {
+  if (!awaiting_ || v.count != slot_count_ || v.datagrams[0].index() != index_ || !matches_slots(v)) {
     ++stats_.stray_frames;
     return;
   }

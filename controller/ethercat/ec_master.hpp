@@ -269,6 +269,8 @@ class EcMaster {
     SlotKind kind = SlotKind::count;
     int slave = -1;
     int sub = 0;
+    omnitwin::ethercat::Cmd cmd = omnitwin::ethercat::Cmd::nop;  // as sent: a reply must come back with the same command
+    std::uint16_t length = 0;    // and the same data length, or it is not this frame's
   };
   // The cyclic image's frames: group g is slaves [first, first + count) on the wire bytes
   // [logical, logical + bytes) from logical_base.
@@ -340,6 +342,7 @@ class EcMaster {
   void take_group(const CyclicGroup& g, const omnitwin::ethercat::Datagram& d, SimTime t);
   void send_groups();
   bool on_group_frame(const omnitwin::ethercat::PduView& v, SimTime t);
+  bool matches_slots(const omnitwin::ethercat::PduView& v) const;
   void close_cycle(bool returned, SimTime t);
   void lose_segment(SimTime t);
   int segment_loss_threshold() const;

@@ -129,6 +129,51 @@ TEST(EcMaster, AnEntryWiderThan64BitsIsReadAndWrittenInItsLow64Bits) {
   EXPECT_EQ(b.master->read_entry(EntryLocation{0, 64, true}, true), 1);
 }
 
+// The tick's frame as it came back with every LRW cut to no data, its lengths and header
+// consistent (a slave or a wire that shortens a datagram); false when it held no LRW.
+bool cut_lrw(std::vector<std::uint8_t>& f) {
+  omnitwin::ethercat::PduView v;
+  if (omnitwin::ethercat::parse_pdu(f, v) != omnitwin::ethercat::PduError::ok) return false;
+  std::vector<std::uint8_t> out(f.size());
+  omnitwin::ethercat::PduBuilder pb(out);
+  bool cut = false;
+  for (std::size_t i = 0; i < v.count; ++i) {
+    const auto& d = v.datagrams[i];
+    const bool lrw = d.cmd() == omnitwin::ethercat::Cmd::lrw;
+    cut = cut || lrw;
+    pb.add(d.cmd(), d.index(), d.adp(), d.ado(), lrw ? 0 : d.length(), d.data());
+  }
+  out.resize(pb.finish());
+  omnitwin::ethercat::PduView w;
+  if (omnitwin::ethercat::parse_pdu(out, w) != omnitwin::ethercat::PduError::ok) return false;
+  for (std::size_t i = 0; i < v.count; ++i) {
+    w.datagrams[i].set_wkc(v.datagrams[i].wkc());
+    w.datagrams[i].set_irq(v.datagrams[i].irq());
+  }
+  f = out;
+  return cut;
+}
+
+// A reply whose datagram lost its data (length 0, the frame otherwise well formed) is not this
+// frame's answer: the master used to copy the image's inputs from past its end (ASan, found in
+// review). It is counted as a stray frame and the cycle as not returned.
+TEST(EcMaster, AReplyWhoseDatagramCameBackShorterIsNotTaken) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  ASSERT_FALSE(b.master->image_in_own_frames());
+  const auto stray = b.master->stats().stray_frames;
+  const auto cycles = b.master->stats().cycles;
+  int cut = 0;
+  b.tamper = [&](std::vector<std::uint8_t>& f) { cut += cut_lrw(f) ? 1 : 0; };
+  for (int i = 0; i < 5; ++i) b.step();
+  EXPECT_EQ(cut, 5);
+  EXPECT_EQ(b.master->stats().stray_frames, stray + 5);
+  EXPECT_EQ(b.master->stats().cycles, cycles);
+  b.tamper = nullptr;
+  for (int i = 0; i < 5; ++i) b.step();
+  EXPECT_EQ(b.master->stats().cycles, cycles + 5);
+}
+
 TEST(EcMaster, AllReachOpAndEveryCycleHasTheExpectedWkc) {
   Bench b;
   ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
