@@ -242,6 +242,9 @@ SdoTransfer::ReplyOutcome SdoTransfer::on_reply(std::span<const std::uint8_t> mb
   if (req_.upload) {
     if (scs != 0) return ReplyOutcome::ignored;
     if (toggle != toggle_) { abort_local(static_cast<std::uint32_t>(SdoAbort::toggle)); return ReplyOutcome::finished; }
+    // A segment is at least the CoE header and 8 SDO bytes; the 7 data bytes of a short one
+    // are inside them (a shorter reply would hand out bytes from past the mailbox's length).
+    if (len < kCoeSdoSize) { abort_local(static_cast<std::uint32_t>(SdoAbort::type_mismatch)); return ReplyOutcome::finished; }
     std::size_t n = len - 3;
     if (n <= 7) n = 7 - ((cmd >> 1) & 0x07);
     n = std::min<std::size_t>(n, total_ - data_.size());

@@ -132,6 +132,20 @@ TEST(EcSdo, SegmentedUploadToggleErrorAborts) {
   EXPECT_EQ(x.abort_code(), 0x05030000u);
 }
 
+// A segment reply shorter than the CoE header and 8 SDO bytes cannot hold the 7 bytes its
+// command says: aborted (length does not match), not read from past the mailbox's length.
+TEST(EcSdo, SegmentedUploadWithATooShortSegmentAborts) {
+  SdoTransfer x;
+  x.begin(SdoRequest{true, 0x1008, 0, {}}, 32);
+  request(x, 32, 1);
+  x.on_reply(reply(3, {0x41, 0x08, 0x10, 0x00, 20, 0, 0, 0}));
+  request(x, 32, 2);
+  EXPECT_EQ(x.on_reply(reply(3, {0x00})), SdoTransfer::ReplyOutcome::finished);
+  EXPECT_EQ(x.status(), SdoStatus::aborted);
+  EXPECT_EQ(x.abort_code(), 0x06070010u);
+  EXPECT_TRUE(x.data().empty());
+}
+
 TEST(EcSdo, SegmentedDownload) {
   Bytes data(40);
   for (std::size_t i = 0; i < data.size(); ++i) data[i] = static_cast<std::uint8_t>(i);
