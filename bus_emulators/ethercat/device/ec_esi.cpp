@@ -257,6 +257,9 @@ EsiObject parse_object(const Ctx& c, const pugi::xml_node& o, const TypeMap& typ
       const std::string base = sub_dt->second.node.child("BaseType").text().as_string();
       const std::uint16_t bits = type_bits(types, base);
       if (bits == 0) c.fail(sub_dt->second.node, fmt::format("unknown BaseType '{}'", base));
+      // Each element is a subindex (1..255): a larger array cannot be an object's entries.
+      if (lbound < 0 || elements < 0 || lbound + elements > 256)
+        c.fail(ai, fmt::format("ArrayInfo LBound {} and Elements {} do not fit subindices 0..255", lbound, elements));
       for (std::int64_t k = 0; k < elements; ++k) {
         EsiObjectEntry e;
         e.subindex = static_cast<std::uint8_t>(lbound + k);

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+#include <sstream>
 #include <string>
 
 namespace omnitwin::ethercat {
@@ -162,6 +164,33 @@ TEST(EcEsi, ArraysRestrictionsAndDecimalIds) {
   ASSERT_NE(secret, nullptr);
   EXPECT_EQ(secret->entries[0].access,
             od_access::read_preop | od_access::read_safeop | od_access::write_all | od_access::txpdo);
+}
+
+// An array's elements become subindices: LBound + Elements past 256 is an error naming the
+// line, not 5,000,000 entries (3.5 s, 1.6 GB) or wrapped, duplicate subindices (found in review).
+TEST(EcEsi, AnArrayLargerThanTheSubindicesIsRefused) {
+  std::ifstream in(data("small_io.xml"));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string good = ss.str();
+  for (const std::string& bad : {std::string("<LBound>1</LBound><Elements>5000000</Elements>"),
+                                 std::string("<LBound>1</LBound><Elements>300</Elements>"),
+                                 std::string("<LBound>-1</LBound><Elements>2</Elements>")}) {
+    std::string text = good;
+    const std::string was = "<LBound>1</LBound><Elements>2</Elements>";
+    const auto at = text.find(was);
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, was.size(), bad);
+    try {
+      parse_esi(text, "big.xml");
+      FAIL() << bad;
+    } catch (const EsiError& e) {
+      EXPECT_NE(std::string(e.what()).find("big.xml:28: ArrayInfo LBound"), std::string::npos) << e.what();
+    }
+  }
+  std::string edge = good;
+  edge.replace(edge.find("<Elements>2</Elements>"), 22, "<Elements>255</Elements>");
+  EXPECT_NO_THROW(parse_esi(edge, "edge.xml"));
 }
 
 TEST(EcEsi, MissingFile) {
