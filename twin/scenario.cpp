@@ -230,8 +230,10 @@ void read_geometry(const YamlField& s, physics::GeometryParams& g, ParamTrace& t
 void read_rollers(const YamlField& s, physics::RollerParams& r, ParamTrace& t) {
   s.allow_keys({"rows", "per_row", "row_offset", "row_phase_deg", "wheel_phase_deg", "radius",
                 "coverage_deg", "mass", "damping", "friction_torque"});
-  read_integer(s, "rows", r.rows, Bounds::at_least(1));
-  read_integer(s, "per_row", r.per_row, Bounds::at_least(1));
+  // Each roller is a body of the model, 4 × rows × per_row of them: real omniwheels have 1-3
+  // rows of 5-16; the caps keep a typo from building millions of bodies (and rows × per_row an int).
+  read_integer(s, "rows", r.rows, Bounds::closed(1, 8));
+  read_integer(s, "per_row", r.per_row, Bounds::closed(1, 64));
   read_number(s, "row_offset", r.row_offset, Bounds::non_negative());
   read_number(s, "row_phase_deg", r.row_phase_deg);
   read_number(s, "wheel_phase_deg", r.wheel_phase_deg);

@@ -277,6 +277,19 @@ TEST(ScenarioErrors, DriverGainErrorsNeedFourValuesWithinHalf) {
   EXPECT_NE(std::string(big.what()).find("gain_error"), std::string::npos) << big.what();
 }
 
+TEST(ScenarioErrors, RollerCountsAreBounded) {
+  // Every roller is a body of the model: 100,000 × 100,000 used to reach the MJCF builder (and
+  // overflow rows × per_row as an int; found in review). At most 8 rows of 64.
+  for (const auto& [key, value] : std::vector<std::pair<std::string, std::string>>{
+           {"platform.rollers.rows", "100000"}, {"platform.rollers.per_row", "100000"},
+           {"platform.rollers.rows", "9"}, {"platform.rollers.per_row", "65"}}) {
+    const auto e = load_error(scenario("minimal.yaml"), {{key, value}});
+    EXPECT_NE(std::string(e.what()).find(key.substr(key.rfind('.') + 1)), std::string::npos) << e.what();
+  }
+  const Scenario s = load_scenario(scenario("minimal.yaml"), {{"platform.rollers.rows", "8"}, {"platform.rollers.per_row", "64"}});
+  EXPECT_EQ(s.platform.rollers.rows * s.platform.rollers.per_row, 512);
+}
+
 TEST(ScenarioErrors, AControlCharacterFromTheFileStaysOutOfTheOneLineMessage) {
   // Found by the scenario mutants: yaml-cpp quotes the character it choked on, and a newline
   // there split the CLI's one-line error in two (binary garbage). Control characters are
