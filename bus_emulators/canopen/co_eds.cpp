@@ -16,6 +16,7 @@
 #include <map>
 #include <sstream>
 #include <string_view>
+#include <unordered_map>
 #include <utility>
 
 namespace omnitwin::canopen {
@@ -166,6 +167,7 @@ struct IniSection {
   std::string name;  // as written
   int line = 0;
   std::vector<IniKey> keys;
+  std::unordered_map<std::string, std::size_t> by_name;  // lower-case key → its place in keys
 };
 
 // Context of one parse: the name used in messages.
@@ -189,9 +191,9 @@ void add_key(const Ctx& c, std::vector<IniSection>& out, std::string_view t, int
   if (eq == std::string_view::npos) c.fail(line, s.name, "", fmt::format("'{}' is not key=value", t));
   IniKey k{std::string(trim(t.substr(0, eq))), std::string(trim(t.substr(eq + 1))), line};
   if (k.name.empty()) c.fail(line, s.name, "", fmt::format("'{}' has no key before '='", t));
-  const std::string lk = lower(k.name);
-  for (const auto& other : s.keys)
-    if (lower(other.name) == lk) c.fail(line, s.name, k.name, fmt::format("given twice (first at line {})", other.line));
+  // A hash of the lower-case names: a section of N keys costs N lookups, not N² comparisons.
+  if (auto [it, fresh] = s.by_name.emplace(lower(k.name), s.keys.size()); !fresh)
+    c.fail(line, s.name, k.name, fmt::format("given twice (first at line {})", s.keys[it->second].line));
   s.keys.push_back(std::move(k));
 }
 
@@ -228,10 +230,8 @@ struct Sec {
   const IniSection& s;
 
   const IniKey* get(std::string_view key) const {
-    const std::string lk = lower(key);
-    for (const auto& k : s.keys)
-      if (lower(k.name) == lk) return &k;
-    return nullptr;
+    const auto it = s.by_name.find(lower(key));
+    return it == s.by_name.end() ? nullptr : &s.keys[it->second];
   }
   const IniKey& need(std::string_view key) const {
     if (const IniKey* k = get(key)) return *k;
