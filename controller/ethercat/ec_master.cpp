@@ -19,6 +19,9 @@ using ec::put_u64;
 
 namespace {
 constexpr std::uint16_t kStationBase = 0x1001;
+// Slaves one master addresses: the configured addresses 0x1001 + k stay below 0xF000, and a
+// count beyond this is a corrupted WKC, not a segment (SOEM's default limit is 200).
+constexpr int kMaxSlaves = 4096;
 constexpr std::uint16_t kRegStation = 0x0010, kRegAlControl = 0x0120, kRegAlStatus = 0x0130,
                         kRegEeprom = 0x0500, kRegFmmu = 0x0600, kRegSm = 0x0800, kRegDcRecv = 0x0900,
                         kRegDcSysTime = 0x0910, kRegDcRecvLocal = 0x0918, kRegDcOffset = 0x0920,
@@ -393,6 +396,10 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
         if (n == 0) break;
         if (config_.expected_slaves > 0 && n != config_.expected_slaves) {
           fail(fmt::format("found {} slaves, the configuration expects {}", n, config_.expected_slaves));
+          return;
+        }
+        if (n > kMaxSlaves) {
+          fail(fmt::format("the broadcast read counted {} slaves, more than the {} this master addresses", n, kMaxSlaves));
           return;
         }
         slaves_.clear();

@@ -174,6 +174,23 @@ TEST(EcMaster, AReplyWhoseDatagramCameBackShorterIsNotTaken) {
   EXPECT_EQ(b.master->stats().cycles, cycles + 5);
 }
 
+// The slave count is the WKC of one broadcast read: a corrupted 0xFFFF used to become 65535
+// slaves (133 MB, station addresses wrapping past 0xFFFF, then a misleading SII timeout; found in
+// review). Beyond 4096 the master stops and says why.
+TEST(EcMaster, ACountBeyondWhatTheMasterAddressesStopsIt) {
+  Bench b(2);
+  b.tamper = [](std::vector<std::uint8_t>& f) {
+    omnitwin::ethercat::PduView v;
+    if (omnitwin::ethercat::parse_pdu(f, v) != omnitwin::ethercat::PduError::ok) return;
+    for (std::size_t i = 0; i < v.count; ++i)
+      if (v.datagrams[i].cmd() == omnitwin::ethercat::Cmd::brd) v.datagrams[i].set_wkc(0xFFFF);
+  };
+  b.step();
+  EXPECT_EQ(b.master->phase(), MasterPhase::failed);
+  EXPECT_NE(b.master->error().find("counted 65535 slaves, more than the 4096"), std::string::npos) << b.master->error();
+  EXPECT_EQ(b.master->slave_count(), 0);
+}
+
 TEST(EcMaster, AllReachOpAndEveryCycleHasTheExpectedWkc) {
   Bench b;
   ASSERT_TRUE(b.to_op()) << b.master->error() << "\n" << events(*b.master);
