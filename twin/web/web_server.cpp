@@ -16,10 +16,6 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-// A live run keeps at most this much SSE text for pages that open late; the oldest sample
-// batches go first (about 1.5 kB per sample: hours of a run at 20 samples per second).
-constexpr std::size_t kHistoryCapBytes = 256u << 20;
-
 // The page and its libraries; a missing library means `npm ci` did not run.
 void check_assets(const std::string& dir) {
   for (const char* f : {"index.html", "view.js", "node_modules/three/build/three.module.js",
@@ -148,13 +144,13 @@ void WebServer::add_routes() {
 // comment line so that a vanished page is noticed). False once the stream is complete.
 bool WebServer::stream_chunk(std::uint64_t& cursor, std::string& out) {
   std::unique_lock<std::mutex> lk(mu_);
-  const auto end = [this] { return base_ + history_.size(); };
-  if (cursor >= end() && !closed_ && !stopping_)
-    changed_.wait_for(lk, std::chrono::seconds(1), [&] { return cursor < end() || closed_ || stopping_; });
+  if (cursor >= total_ && !closed_ && !stopping_)
+    changed_.wait_for(lk, std::chrono::seconds(1), [&] { return cursor < total_ || closed_ || stopping_; });
+  if (cursor == 0 && total_ > 0) out += first_, cursor = 1;
   if (cursor < base_) cursor = base_;  // dropped over the cap while this page was away
-  for (; cursor < end() && out.size() < (1u << 20); ++cursor) out += history_[cursor - base_];
+  for (; cursor < total_ && out.size() < (1u << 20); ++cursor) out += history_[cursor - base_];
   if (out.empty() && !closed_ && !stopping_) out = ": idle\n\n";
-  return !(stopping_ || (closed_ && cursor >= end()));
+  return !(stopping_ || (closed_ && cursor >= total_));
 }
 
 void WebServer::set_info(json info) {
@@ -168,12 +164,17 @@ void WebServer::publish(const std::string& event, const json& data) {
     std::lock_guard<std::mutex> lk(mu_);
     ++stats_.messages;
     stats_.bytes += msg.size();
-    history_bytes_ += msg.size();
-    history_.push_back(std::move(msg));
-    // Over the cap: drop the oldest, but keep the first message (the run's info).
-    while (history_bytes_ > kHistoryCapBytes && history_.size() > 2) {
-      history_bytes_ -= history_[1].size();
-      history_.erase(history_.begin() + 1);
+    if (total_++ == 0) {
+      first_ = std::move(msg);  // the run's info: every page gets it
+    } else {
+      history_bytes_ += msg.size();
+      history_.push_back(std::move(msg));
+    }
+    // Over the cap: drop the oldest (not the newest, which open pages may still need).
+    while (history_bytes_ > settings_.history_cap_bytes && history_.size() > 1) {
+      history_bytes_ -= history_.front().size();
+      history_.pop_front();
+      ++base_;
       ++stats_.history_dropped;
     }
   }

@@ -13,6 +13,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -31,6 +32,10 @@ struct WebSettings {
   std::string host = "127.0.0.1";  // loopback unless the user names another address
   int port = 0;                    // 0: the system picks a free port (printed in url())
   std::string assets_dir;          // media/web: index.html, view.js, node_modules/
+  // The live history a page opened late gets [bytes of SSE text]: over it the oldest messages
+  // but the first (the run's info) are dropped, and such a page starts after the gap. 256 MiB
+  // is hours of a run at 20 samples per second (about 1.5 kB per sample).
+  std::size_t history_cap_bytes = 256u << 20;
 };
 
 // "[ADDR:]PORT" (e.g. "8080", "0.0.0.0:8080", "127.0.0.1:0"), with the assets directory filled
@@ -92,9 +97,12 @@ class WebServer {
   nlohmann::json info_ = nlohmann::json::object();
   std::string scene_;                // serialized once
   std::string recorded_;             // /api/run, serialized once
-  std::vector<std::string> history_;  // SSE messages; history_[0] is message number base_
-  std::uint64_t base_ = 0;
-  std::size_t history_bytes_ = 0;
+  // Messages are numbered from 0 in publishing order; a stream's cursor is such a number.
+  std::string first_;                 // message 0 (the run's info), never dropped
+  std::deque<std::string> history_;   // messages base_ … total_ - 1
+  std::uint64_t base_ = 1;
+  std::uint64_t total_ = 0;           // messages published
+  std::size_t history_bytes_ = 0;     // in history_
   bool closed_ = false;
   bool stopping_ = false;
   int open_streams_ = 0;

@@ -141,6 +141,39 @@ TEST(WebServer, StreamsHistoryThenLiveThenEndsAndALatePageGetsItAll) {
   EXPECT_EQ(w.stats().messages, 4u);
 }
 
+// Over the history cap the oldest messages but the first go, and an open page still gets
+// every new one: the history used to drop by erasing its second element without moving its
+// numbering, so once full the stream's end stopped moving and open pages froze (found in
+// review). A page opened late gets the info, the newest messages and the end.
+TEST(WebServer, OverTheHistoryCapOpenPagesKeepStreamingAndALatePageGetsTheNewest) {
+  omnitwin::testing::TempDir dir("webserver");
+  write_assets(dir.path());
+  WebSettings settings = loopback_settings(dir.path());
+  settings.history_cap_bytes = 400;  // a few messages
+  WebServer w(settings, json::object());
+  w.start();
+  w.publish("info", {{"mode", "live"}});
+  std::atomic<bool> stop{false};
+  auto early = std::async(std::launch::async, [&] { return read_stream(port_of(w)); });
+  ASSERT_TRUE(w.wait_for_client(&stop));
+  for (int k = 0; k < 60; ++k) {
+    w.publish("samples", json::array({{{"k", k}}}));
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  w.publish("end", {{"passed", true}});
+  w.close_streams();
+  const std::string got = early.get();
+  EXPECT_NE(got.find("data: [{\"k\":59}]"), std::string::npos) << got;
+  EXPECT_NE(got.find("event: end"), std::string::npos) << got;
+  const std::string late = read_stream(port_of(w));
+  EXPECT_EQ(late.find("event: info"), 0u) << late;
+  EXPECT_EQ(late.find("data: [{\"k\":0}]"), std::string::npos) << late;
+  EXPECT_NE(late.find("data: [{\"k\":59}]"), std::string::npos) << late;
+  EXPECT_NE(late.find("event: end"), std::string::npos) << late;
+  EXPECT_GT(w.stats().history_dropped, 40u);
+  w.wait_streams_drained(2.0);
+}
+
 TEST(WebServer, WaitForAPageEndsOnInterrupt) {
   omnitwin::testing::TempDir dir("webserver");
   write_assets(dir.path());
