@@ -53,6 +53,9 @@ void only_keys(const SweepSpec& s, const YAML::Node& map, const std::vector<std:
   }
 }
 
+// The most points a sweep may have (grid × draws).
+constexpr std::size_t kMaxPoints = 100000;
+
 // The grid's points: the cartesian product, the last key varying fastest.
 std::vector<Point> grid_points(SweepSpec& s, const YAML::Node& grid) {
   std::vector<Point> pts{Point{}};
@@ -62,6 +65,10 @@ std::vector<Point> grid_points(SweepSpec& s, const YAML::Node& grid) {
     const std::string key = kv.first.as<std::string>();
     if (!kv.second.IsSequence() || kv.second.size() == 0) bad(s, kv.second, "grid." + key, "expected a non-empty list");
     s.params.push_back(key);
+    // Checked before the product is built: ten keys of 100 values would be 1e20 points.
+    if (pts.size() * kv.second.size() > kMaxPoints)
+      bad(s, kv.second, "grid." + key,
+          fmt::format("the grid has {} × {} points here: more than {}", pts.size(), kv.second.size(), kMaxPoints));
     std::vector<Point> next;
     for (const Point& p : pts)
       for (const auto& v : kv.second) {
@@ -275,13 +282,14 @@ SweepSpec load_sweep_tree(const std::string& path) {
   if (!root["grid"].IsDefined() && !root["random"].IsDefined()) bad(s, root, "grid", "a sweep needs grid or random");
   const auto grid = grid_points(s, root["grid"]);
   const auto draws = random_points(s, root["random"]);
+  if (grid.size() * draws.size() > kMaxPoints)
+    bad(s, root, "grid", fmt::format("{} grid points × {} draws: more than {} points", grid.size(), draws.size(), kMaxPoints));
   for (const Point& g : grid)
     for (const Point& r : draws) {
       Point p = g;
       p.insert(p.end(), r.begin(), r.end());
       s.points.push_back(std::move(p));
     }
-  if (s.points.size() > 100000) bad(s, root, "grid", fmt::format("{} points: more than 100000", s.points.size()));
   read_metrics_and_plot(s, root);
   // The first point must load: unknown keys and bad values show now, not in every run.
   std::vector<Override> first;

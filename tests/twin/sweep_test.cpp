@@ -78,6 +78,9 @@ TEST_F(Sweep, BadSpecsNameTheirLineAndKey) {
       {"scenario: line.yaml\nrandom: {draws: 0, params: {settle: {min: 0, max: 1}}}\nmetrics: [x]\n", "random.draws"},
       {"scenario: line.yaml\nrandom: {draws: 2, params: {settle: {min: 2, max: 1}}}\nmetrics: [x]\n", "random.params.settle"},
       {"scenario: line.yaml\ngrid: {no_such_key: [1]}\nmetrics: [x]\n", "no_such_key"},
+      // A grid past 100000 points is refused at the key that passes it, before it is built.
+      {"scenario: line.yaml\ngrid: {a: [0,1,2,3,4,5,6,7,8,9], b: [0,1,2,3,4,5,6,7,8,9], c: [0,1,2,3,4,5,6,7,8,9], "
+       "d: [0,1,2,3,4,5,6,7,8,9], e: [0,1,2,3,4,5,6,7,8,9], f: [0,1]}\nmetrics: [x]\n", "grid.f"},
   };
   for (const Bad& b : bad) {
     SCOPED_TRACE(b.body);
