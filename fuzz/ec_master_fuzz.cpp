@@ -41,7 +41,11 @@ void cycle(ecbench::Bench& b, Change change) {
   auto pass = [&](std::vector<std::uint8_t>& f) {
     std::vector<std::uint8_t> back = f;
     if (!b.chain.process(back, b.t)) return;
-    if (change(back)) b.master->on_frame(back, b.t + 50'000);
+    if (!change(back)) return;
+    // A copy of exactly its size: a frame cut short keeps its capacity, and ASan sees a read
+    // past its end only past the capacity (libstdc++'s vectors are not annotated).
+    std::vector<std::uint8_t> exact(back.begin(), back.end());
+    b.master->on_frame(exact, b.t + 50'000);
   };
   if (b.sent) {
     pass(b.frame);
