@@ -74,7 +74,14 @@ WebServer::WebServer(const WebSettings& settings, json scene)
 }
 
 void WebServer::start() {
-  if (!listener_.joinable()) listener_ = std::thread([this] { http_->listen_after_bind(); });
+  if (listener_.joinable()) return;
+  listener_ = std::thread([this] {
+    http_->listen_after_bind();
+    listener_done_ = true;
+  });
+  // httplib's stop() does nothing until the listener runs, and a listener that starts after it
+  // never ends: a Ctrl-C right after start() hung the destructor's join. So wait for it here.
+  while (!http_->is_running() && !listener_done_) std::this_thread::sleep_for(std::chrono::milliseconds(1));
 }
 
 WebServer::~WebServer() {

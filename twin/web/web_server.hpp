@@ -90,6 +90,7 @@ class WebServer {
   WebSettings settings_;
   std::unique_ptr<httplib::Server> http_;
   std::thread listener_;
+  std::atomic<bool> listener_done_{false};  // listen_after_bind() returned
   int port_ = 0;
 
   mutable std::mutex mu_;
