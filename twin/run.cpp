@@ -432,6 +432,9 @@ void PlatformRun::on_master_bus(SimTime t) {
                                       ? clock_server_->grant(g, d, timeout, &PlatformRun::answer_sent, this)
                                       : clock_server_->grant(g, d, timeout);
   if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
+    // A Ctrl-C at a terminal reaches the master too (one process group): its end is then the
+    // interruption's, and the run ends as interrupted, not with a lost master.
+    if (o_.interrupt && o_.interrupt->load()) return;
     // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
     // but always the run's end: in lockstep nothing else answers the ticks.
     return master_lost(
@@ -459,7 +462,10 @@ simclock::Horizon PlatformRun::answer_sent(void* self, const simclock::Sent& sen
 // its first frame it has handshake_timeout to start. Real-time safe but for waitpid().
 void PlatformRun::supervise_master(SimTime t) {
   if (!master_ || master_lost_ns_ >= 0) return;
-  if (!master_->running()) return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
+  if (!master_->running()) {
+    if (o_.interrupt && o_.interrupt->load()) return;  // the same Ctrl-C ended it (see on_master_bus())
+    return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
+  }
   const std::uint64_t rx = net_->frames_from_transport();
   if (rx != heard_frames_) {
     heard_frames_ = rx;

@@ -56,9 +56,11 @@ class Child {
  public:
   Child(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& io)
       : Child(omnitwin_binary(), args, cwd, io, "") {}
-  // Any program; `tag` keeps its captured output apart from another child's.
+  // Any program; `tag` keeps its captured output apart from another child's. `own_group`: the
+  // child leads a process group of its own, as a shell's foreground job does, so that
+  // signal_group() reaches it and everything it started, as a Ctrl-C at a terminal does.
   Child(const std::string& program, const std::vector<std::string>& args, const fs::path& cwd, const fs::path& io,
-        const std::string& tag)
+        const std::string& tag, bool own_group = false)
       : out_(io / (tag + "stdout")), err_(io / (tag + "stderr")) {
     std::vector<std::string> argv_s{program};
     argv_s.insert(argv_s.end(), args.begin(), args.end());
@@ -82,7 +84,9 @@ class Child {
     sigaddset(&defaults, SIGTERM);
     posix_spawnattr_setsigmask(&at, &none);
     posix_spawnattr_setsigdefault(&at, &defaults);
-    posix_spawnattr_setflags(&at, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+    posix_spawnattr_setpgroup(&at, 0);
+    posix_spawnattr_setflags(&at, static_cast<short>(POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF |
+                                                     (own_group ? POSIX_SPAWN_SETPGROUP : 0)));
     const int rc = posix_spawn(&pid_, argv[0], &fa, &at, argv.data(), environ);
     posix_spawn_file_actions_destroy(&fa);
     posix_spawnattr_destroy(&at);
@@ -99,6 +103,11 @@ class Child {
   bool running() { return pid_ > 0 && !reap(WNOHANG); }
   void signal(int sig) const {
     if (pid_ > 0) ::kill(pid_, sig);
+  }
+  pid_t pid() const { return pid_; }
+  // The whole process group (a child started with own_group).
+  void signal_group(int sig) const {
+    if (pid_ > 0) ::kill(-pid_, sig);
   }
 
   // Waits up to `limit` for the exit. Returns the exit code, 128 + N if killed by signal

@@ -25,6 +25,7 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <cctype>
 #include <fstream>
 #include <sstream>
 #include <set>
@@ -385,6 +386,25 @@ TEST_F(CliCheck, BadShardsAndMergesAreBadUsage) {
 // ---------------------------------------------------------------------------------------
 // Interrupts: SIGINT and SIGTERM half-way leave closed, complete records
 
+// The pid of the process named `comm` in process group `pgid` (from /proc), or -1.
+int process_in_group(int pgid, const std::string& comm) {
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string name = e.path().filename().string();
+    if (name.empty() || !std::isdigit(static_cast<unsigned char>(name[0]))) continue;
+    std::ifstream f(e.path() / "stat");
+    std::string stat;
+    std::getline(f, stat);
+    const auto open = stat.find('('), close = stat.rfind(')');
+    if (open == std::string::npos || close == std::string::npos) continue;
+    std::istringstream rest(stat.substr(close + 2));
+    std::string state;
+    int ppid = 0, pgrp = 0;
+    rest >> state >> ppid >> pgrp;
+    if (pgrp == pgid && stat.substr(open + 1, close - open - 1) == comm) return std::stoi(name);
+  }
+  return -1;
+}
+
 class CliInterrupt : public CliTest {
  protected:
   void expect_clean_stop(int sig);
@@ -449,6 +469,32 @@ TEST_F(CliInterrupt, SigintClosesCompleteRecords) { expect_clean_stop(SIGINT); }
 
 // SIGTERM half-way through a run (see expect_clean_stop).
 TEST_F(CliInterrupt, SigtermClosesCompleteRecords) { expect_clean_stop(SIGTERM); }
+
+// A Ctrl-C at a terminal goes to the whole foreground process group: the twin and the master it
+// started. The master's end is then the interruption's: the run ends interrupted, without the
+// "master lost" error its end used to add (found in review: a lockstep run's metrics.json said
+// both).
+TEST_F(CliInterrupt, ACtrlCToALockstepRunsProcessGroupIsAnInterruptNotALostMaster) {
+  const fs::path out = dir_ / "out";
+  Child c(omnitwin_binary(), {"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--out", out.string(), "--no-progress"},
+          work(), io(), "", true);
+  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, c)) << c.err();
+  // The race made certain: the master held (SIGSTOP) so that the twin waits inside a tick's
+  // handshake when the Ctrl-C comes, then let go to take its SIGINT and end without answering.
+  const int master = process_in_group(c.pid(), "omni-master");
+  ASSERT_GT(master, 0);
+  ::kill(master, SIGSTOP);
+  std::this_thread::sleep_for(300ms);
+  c.signal_group(SIGINT);
+  std::this_thread::sleep_for(100ms);
+  ::kill(master, SIGCONT);
+  EXPECT_EQ(c.wait(20s), 3) << c.out() << c.err();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("interrupted"), true);
+  EXPECT_FALSE(contains(m.dump(), "master lost")) << m.dump(2);
+  EXPECT_FALSE(contains(read_bytes(out / "events.log"), "lost:")) << read_bytes(out / "events.log");
+  EXPECT_FALSE(contains(c.err(), "master lost")) << c.err();
+}
 
 // ---------------------------------------------------------------------------------------
 // model
