@@ -412,19 +412,24 @@ int run_ethercat_program(const ProgramOptions& o) {
   }
   const std::int64_t period_ns = mc.cycle_ns;
   Runner runner(std::move(mc), ec, std::move(platform), *tr);
+  // SIGINT and SIGTERM are blocked (and read from this descriptor) before the shell's reader
+  // thread exists: a thread inherits the mask, and one that did not block them took the signal
+  // with its default action, killing the program without its end line or statistics.
+  const int sigfd = open_signal_fd();
   Botnana bn;
-  LineQueue lines;
+  // Shared with the detached reader thread, which may outlive this function.
+  const auto lines = std::make_shared<LineQueue>();
   if (o.shell || !o.script.empty()) {
     bn.interp = std::make_unique<botnana::Interpreter>(runner.drives(), [](std::string_view s) { std::cout << s << std::flush; });
     bn.interp->set_cycle_period_ns(period_ns);
     bn.script = std::move(script);
     bn.script_mode = !o.shell;
-    bn.lines = &lines;
+    bn.lines = lines.get();
   }
   if (o.shell) {
-    for (const auto& line : bn.script) lines.push(line);  // --script with shell: evaluated first
+    for (const auto& line : bn.script) lines->push(line);  // --script with shell: evaluated first
     bn.script.clear();
-    std::thread([&lines] {
+    std::thread([lines] {
       using_history();
       for (;;) {
         char* raw = ::readline("botnana> ");
@@ -432,12 +437,11 @@ int run_ethercat_program(const ProgramOptions& o) {
         std::string line(raw);
         std::free(raw);
         if (!line.empty()) add_history(line.c_str());
-        lines.push(std::move(line));
+        lines->push(std::move(line));
       }
-      lines.eof = true;
+      lines->eof = true;
     }).detach();
   }
-  const int sigfd = open_signal_fd();
   spdlog::info("EtherCAT master on {} (clock {}, cycle {} µs)", tr->describe(), o.clock, period_ns / 1000);
   int code = kExitOk;
   try {

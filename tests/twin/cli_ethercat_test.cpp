@@ -97,6 +97,24 @@ TEST_F(CliEthercat, LockstepOverVethIsByteIdenticalAndDecodes) {
 }
 
 // EtherCAT over UDP on loopback (what a run uses without root) drives the same run.
+// `omni-master shell` ends on SIGINT as the other programs do, with its end line and exit 0
+// (no slaves answer here: it is the signal that matters). Its reader thread used to be started
+// before SIGINT and SIGTERM were blocked, took the signal with the default action and killed the
+// program without an end line (found in review). stdin is a pipe kept open, as a terminal is.
+TEST_F(CliEthercat, TheShellEndsOnSigintWithItsEndLine) {
+  const std::string cmd = "exec " + binary_path("controller/omni-master") + " shell --iface udp:127.0.0.1:47719 --config " +
+                          source_path("tests/data/ethercat/drives_only.yaml") + " 0< <(sleep 8)";
+  Child shell("/bin/bash", {"-c", cmd}, work(), io(), "shell-");
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!contains(shell.err(), "EtherCAT master on") && shell.running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(contains(shell.err(), "EtherCAT master on")) << shell.err();
+  std::this_thread::sleep_for(300ms);
+  shell.signal(SIGINT);
+  EXPECT_EQ(shell.wait(10s), 0) << shell.err();
+  EXPECT_TRUE(contains(shell.err(), "end: state")) << shell.err();
+}
+
 TEST_F(CliEthercat, LockstepOverUdp) {
   const fs::path out = dir_ / "udp";
   const Finished f = run_short(out, "udp:127.0.0.1:47611");
