@@ -5,11 +5,13 @@
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/signalfd.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <cstring>
 
@@ -26,6 +28,17 @@ int open_signal_fd() {
   sigaddset(&set, SIGTERM);
   ::sigprocmask(SIG_BLOCK, &set, nullptr);
   return ::signalfd(-1, &set, SFD_CLOEXEC | SFD_NONBLOCK);
+}
+
+bool watch_parent() {
+  const char* v = std::getenv("OMNITWIN_TWIN_PID");
+  if (!v || !*v) return true;
+  char* end = nullptr;
+  const long twin = std::strtol(v, &end, 10);
+  if (*end != '\0' || twin <= 1) return true;
+  if (::getppid() != static_cast<pid_t>(twin)) return ::kill(static_cast<pid_t>(twin), 0) == 0 || errno == EPERM;
+  ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+  return ::getppid() == static_cast<pid_t>(twin);  // it may have ended just before the prctl
 }
 
 bool signalled(int sigfd) {

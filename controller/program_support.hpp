@@ -20,6 +20,13 @@ int open_signal_fd();
 // True (and the signal consumed) if SIGINT/SIGTERM is pending on the signalfd. Real-time safe.
 bool signalled(int sigfd);
 
+// A master the twin started (its environment holds OMNITWIN_TWIN_PID, the twin's pid) asks the
+// kernel for a SIGTERM when the twin ends (PR_SET_PDEATHSIG), so that a twin killed outright
+// does not leave a realtime master running on: it ends as on a Ctrl-C, drives stopped. Where a
+// program stands between them (a shell of --master-cmd) nothing is asked. False when the twin
+// is already gone (the caller then exits). Without the variable: true, nothing done. Set-up only.
+bool watch_parent();
+
 // CLOCK_MONOTONIC and CLOCK_REALTIME [ns]; ns → timespec. Real-time safe.
 std::int64_t monotonic_ns();
 std::int64_t realtime_ns();

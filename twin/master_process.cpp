@@ -47,6 +47,9 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
     if (!replaced) env_s.emplace_back(v);
   }
   env_s.insert(env_s.end(), env.begin(), env.end());
+  // Who started it: our masters end when this process does (OMNITWIN_TWIN_PID, see
+  // controller/program_support's watch_parent); other programs ignore the name.
+  env_s.push_back(fmt::format("OMNITWIN_TWIN_PID={}", ::getpid()));
   std::vector<char*> envp;
   for (std::string& e : env_s) envp.push_back(e.data());
   envp.push_back(nullptr);

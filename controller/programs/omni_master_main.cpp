@@ -438,6 +438,10 @@ int main(int argc, char** argv) {
     spdlog::error("{}", p);
     return kExitUsage;
   }
+  if (!controller::watch_parent()) {
+    spdlog::error("the twin that started this master (OMNITWIN_TWIN_PID) is gone");
+    return kExitRuntime;
+  }
   // Nothing a user can give is meant to throw past the programs' own error handling (the
   // master_config fuzzer holds them to it); if something does, say what and exit as a runtime
   // failure instead of aborting with a core dump the twin can only call "killed by signal 6".

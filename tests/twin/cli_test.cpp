@@ -470,6 +470,35 @@ TEST_F(CliInterrupt, SigintClosesCompleteRecords) { expect_clean_stop(SIGINT); }
 // SIGTERM half-way through a run (see expect_clean_stop).
 TEST_F(CliInterrupt, SigtermClosesCompleteRecords) { expect_clean_stop(SIGTERM); }
 
+// A twin killed outright (SIGKILL: no chance to stop its master) does not leave a realtime
+// master running on: the master it started asked for a SIGTERM at its parent's death and ends
+// as on a Ctrl-C. It used to run on (33 s and more, memory locked; found in review).
+TEST_F(CliInterrupt, ARealtimeMasterEndsWhenItsTwinIsKilled) {
+  const fs::path out = dir_ / "out";
+  Child c(omnitwin_binary(), {"run", test_scenario("can_realtime_short.yaml"), "--out", out.string(), "--no-progress"},
+          work(), io(), "", true);
+  int master = -1, cli = -1;
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while ((master < 0 || cli < 0) && c.running() && std::chrono::steady_clock::now() < deadline) {
+    master = process_in_group(c.pid(), "omni-master");
+    cli = process_in_group(c.pid(), "omnitwin-cli");
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_GT(master, 0);
+  ASSERT_GT(cli, 0);
+  std::this_thread::sleep_for(500ms);  // running on the wall clock
+  ::kill(cli, SIGKILL);
+  const auto gone = std::chrono::steady_clock::now() + 5s;
+  while (::kill(master, 0) == 0 && std::chrono::steady_clock::now() < gone) std::this_thread::sleep_for(20ms);
+  const bool ended = ::kill(master, 0) != 0;
+  if (!ended) ::kill(master, SIGKILL);
+  EXPECT_TRUE(ended) << "the master outlived its twin by 5 s";
+  c.wait(10s);
+  // Its log stays under the name the killed twin could not rename: the master's own end is in it.
+  const std::string log = read_bytes(out / ".master.log.part");
+  EXPECT_TRUE(contains(log, "end:")) << log;
+}
+
 // A Ctrl-C at a terminal goes to the whole foreground process group: the twin and the master it
 // started. The master's end is then the interruption's: the run ends interrupted, without the
 // "master lost" error its end used to add (found in review: a lockstep run's metrics.json said
