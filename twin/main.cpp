@@ -554,7 +554,7 @@ int main(int argc, char** argv) {
   check->add_option("--out", co.out_root, "root of the run directories")->capture_default_str();
   check->add_flag("--video", co.video, "render every run's video.mp4 (off by default)");
   check->add_flag("--no-report", check_no_report, "no report.html per run and no index.html");
-  check->add_option("-j,--jobs", co.jobs, "run N scenarios at once (lockstep runs are isolated; default: the cores)")
+  check->add_option("-j,--jobs", co.jobs, "run N scenarios at once (lockstep runs are isolated, realtime ones go one at a time; default: the cores)")
       ->check(CLI::Range(1, 64));
   std::string check_shard;
   bool check_merge = false;
@@ -576,7 +576,7 @@ int main(int argc, char** argv) {
   CLI::App* sweep = app.add_subcommand("sweep", "run a scenario over a parameter grid or random draws; one table and plot");
   sweep->add_option("spec", sweep_spec, "the sweep file (docs/scenarios.md, \"Sweeps\")")->required();
   sweep->add_option("--out", so.out, "output folder (default out/sweep/<name>)");
-  sweep->add_option("-j,--jobs", so.jobs, "points at once (default: the cores)")->check(CLI::Range(1, 64));
+  sweep->add_option("-j,--jobs", so.jobs, "points at once (realtime points go one at a time; default: the cores)")->check(CLI::Range(1, 64));
   sweep->add_flag("--slurm", so.slurm, "run the points as a Slurm job array (sbatch --wait), then collect");
   sweep->add_option("--point", so.point, "run only point K (what each Slurm task runs)")->check(CLI::Range(1, 100000));
 

@@ -154,7 +154,8 @@ std::string csv_quoted(const std::string& v) {
 fs::path point_dir(const fs::path& out, int k) { return out / "points" / fmt::format("{:04d}", k); }
 
 // Runs point k (1-based) into its directory and writes point.json; returns its exit code.
-int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt) {
+// `realtime`: held for the run when the point runs on the wall clock (see run_local).
+int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt, std::mutex& realtime) {
   const Point& p = s.points[static_cast<std::size_t>(k - 1)];
   nlohmann::json pj = {{"point", k}, {"params", nlohmann::json::object()}};
   for (const auto& [key, v] : p) pj["params"][key] = v;
@@ -163,6 +164,8 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
     std::vector<Override> o;
     for (const auto& [key, v] : p) o.push_back({key, v});
     const Scenario sc = load_scenario(s.scenario, o);
+    std::unique_lock<std::mutex> wall;
+    if (sc.clock == ClockMode::realtime) wall = std::unique_lock<std::mutex>(realtime);
     RunOptions ro;
     ro.out_dir = point_dir(out, k).string();
     ro.interrupt = interrupt;
@@ -187,9 +190,12 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
 void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
   const std::size_t n = s.points.size();
   std::mutex print;
+  // Lockstep points are isolated on buses of their own; realtime points use the scenario's bus
+  // and the wall clock, so two at once would hear each other's frames: one at a time.
+  std::mutex realtime;
   run_jobs(n, jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
     const int k = static_cast<int>(i) + 1;
-    const int code = run_point(s, k, out, opt.interrupt);
+    const int code = run_point(s, k, out, opt.interrupt, realtime);
     const std::lock_guard lock(print);
     std::cout << fmt::format("point {}/{}: exit {}\n", k, n, code) << std::flush;
   });
@@ -333,7 +339,8 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
       std::cerr << fmt::format("omnitwin sweep: --point {}: the sweep has {} points\n", opt.point, s.points.size());
       return 2;
     }
-    return run_point(s, opt.point, out, opt.interrupt);
+    std::mutex alone;
+    return run_point(s, opt.point, out, opt.interrupt, alone);
   }
   std::cout << fmt::format("sweep {}: {} points of {} ({})\n", s.name, s.points.size(), s.scenario,
                            opt.slurm ? "Slurm job array" : "local");

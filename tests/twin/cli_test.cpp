@@ -269,6 +269,24 @@ TEST_F(CliCheck, OnePassedOneFailed) {
   EXPECT_TRUE(contains(read_bytes(dir_ / "runs/index.html"), "1 passed, 1 failed"));
 }
 
+// Two realtime scenarios on one bus under -j 2 run one after the other (lockstep runs are
+// isolated, realtime ones use their scenario's bus): at once each master heard the other's
+// frames and NMT stop, and both missed the goal (found in review).
+TEST_F(CliCheck, RealtimeScenariosRunOneAtATimeWhateverTheJobs) {
+  const fs::path scenarios = dir_ / "rt";
+  fs::create_directories(scenarios);
+  for (const std::string name : {"rt_a", "rt_b"}) {
+    std::ofstream(scenarios / (name + ".yaml"))
+        << "name: " << name << "\nplatform:\n  params: " << source_path("models/platform/omni4.yaml")
+        << "\nbus: {type: can, transport: \"udp:239.74.163.2:47303\"}\nclock: realtime\n"
+        << "path:\n  segments:\n    - line: {dx: 0.3, dy: 0.0, duration: 4}\nsettle: 1.0\n"
+        << "outputs: {video: false, report: false}\nexpect:\n  platform.final_error_cm: {max: 2.0}\n";
+  }
+  const Finished f = run({"check", scenarios.string(), "-j", "2", "--no-report", "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "2 passed, 0 failed")) << f.out;
+}
+
 // A directory holding a bad scenario: check exits 2 and the bad file is an <error> case
 // (errors="1") naming its line and key, while the good one still runs and passes.
 TEST_F(CliCheck, BadScenarioIsAnError) {
