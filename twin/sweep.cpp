@@ -15,6 +15,8 @@
 #include <mutex>
 #include <random>
 #include <thread>
+#include <chrono>
+#include <csignal>
 
 #include "media/run_report.hpp"
 #include "twin/expectations.hpp"
@@ -201,15 +203,25 @@ void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt)
   });
 }
 
-int spawn_wait(const std::vector<std::string>& argv) {
+// Runs argv and waits for it; a Ctrl-C or SIGTERM to us (*interrupt) is passed on as SIGTERM
+// (sbatch --wait then cancels its job array) and waited for. Its exit code, -1 if it cannot start.
+int spawn_wait(const std::vector<std::string>& argv, const std::atomic<bool>* interrupt) {
   std::vector<char*> a;
   for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
   a.push_back(nullptr);
   pid_t pid = 0;
   if (::posix_spawnp(&pid, a[0], nullptr, nullptr, a.data(), environ) != 0) return -1;
   int st = 0;
-  while (::waitpid(pid, &st, 0) < 0) {
-    if (errno != EINTR) return -1;
+  bool passed_on = false;
+  for (;;) {
+    const pid_t r = ::waitpid(pid, &st, WNOHANG);
+    if (r == pid) break;
+    if (r < 0 && errno != EINTR) return -1;
+    if (interrupt && interrupt->load() && !passed_on) {
+      ::kill(pid, SIGTERM);
+      passed_on = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
 }
@@ -231,7 +243,7 @@ std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOption
     if (!f) return "cannot write " + script.string();
   }
   std::cout << "submitting " << script.string() << " (" << s.points.size() << " array tasks) and waiting\n" << std::flush;
-  const int rc = spawn_wait({opt.sbatch, "--wait", script.string()});
+  const int rc = spawn_wait({opt.sbatch, "--wait", script.string()}, opt.interrupt);
   if (rc < 0) return "cannot start '" + opt.sbatch + "' (is Slurm installed? scripts/slurm-local)";
   if (rc != 0) std::cout << fmt::format("sbatch --wait ended with {} (some tasks failed); collecting what they wrote\n", rc);
   return "";

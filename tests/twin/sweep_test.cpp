@@ -9,7 +9,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cstdlib>
 #include <fstream>
+#include <thread>
 
 #include "tests/twin/cli_support.hpp"
 #include "twin/scenario.hpp"
@@ -134,6 +136,28 @@ TEST_F(Sweep, RealtimePointsRunOneAtATimeWhateverTheJobs) {
     EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 2.0) << "point " << k;
     EXPECT_EQ(m.at("bus").at("frames_rx").get<double>() > 0, true);
   }
+}
+
+// SIGTERM to `sweep --slurm` while `sbatch --wait` waits: passed on to sbatch (which cancels its
+// array), and the sweep ends at once with exit 3. It used to wait for every task (found in
+// review). A stand-in sbatch on PATH that only waits, and says when it is told to stop.
+TEST_F(Sweep, SigtermDuringSlurmPassesOnToSbatchAndEnds) {
+  const fs::path bin = dir_ / "bin";
+  fs::create_directories(bin);
+  {
+    std::ofstream f(bin / "sbatch");
+    f << "#!/bin/sh\nsleep 60 &\ntrap 'kill $!; echo cancelled > " << (dir_ / "sbatch-term").string()
+      << "; exit 143' TERM\nwait $!\n";
+  }
+  fs::permissions(bin / "sbatch", fs::perms::owner_all);
+  ::setenv("PATH", (bin.string() + ":" + std::getenv("PATH")).c_str(), 1);
+  const fs::path out = dir_ / "slurm";
+  Child c({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--slurm", "--out", out.string()}, work(), io());
+  ASSERT_TRUE(c.wait_for_output("submitting")) << c.out() << c.err();
+  std::this_thread::sleep_for(300ms);
+  c.signal(SIGTERM);
+  EXPECT_EQ(c.wait(10s), 3) << c.out() << c.err();
+  EXPECT_TRUE(fs::exists(dir_ / "sbatch-term")) << "sbatch was not told to stop";
 }
 
 TEST_F(Sweep, PointRunsOnlyThatPoint) {
