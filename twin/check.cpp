@@ -138,7 +138,8 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
   }
   c.time_s = (monotonic_ns() - t0) * 1e-9;
   entry = index_entry(file, run_dir, c, metrics);
-  entry["run_dir_rel"] = run_dir.empty() ? "" : fs::relative(run_dir, opt.out_root).generic_string();
+  std::error_code ec;  // the non-throwing form: this runs on a -j worker, outside the try above
+  entry["run_dir_rel"] = run_dir.empty() ? "" : fs::relative(run_dir, opt.out_root, ec).generic_string();
   return c;
 }
 

@@ -184,7 +184,9 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
   pj["exit_code"] = code;
   std::error_code ec;
   fs::create_directories(point_dir(out, k), ec);
-  std::ofstream(point_dir(out, k) / "point.json") << pj.dump(1) << "\n";
+  // Replacing bytes that are not UTF-8 (an error text may quote them): dump() would throw on a
+  // -j worker, outside any try.
+  std::ofstream(point_dir(out, k) / "point.json") << pj.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   return code;
 }
 
