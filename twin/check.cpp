@@ -77,7 +77,7 @@ nlohmann::json index_entry(const std::string& file, const std::string& run_dir, 
 // What the scenarios of one `check` share; guarded by `mutex` when they run in parallel.
 struct CheckShared {
   std::mutex mutex;
-  std::mutex realtime;  // held by a realtime run for its whole length (see check_one)
+  std::mutex realtime;  // RunOptions::realtime_turn of every run
   std::map<std::string, std::string> used;  // scenario name -> its file (one run directory each)
   bool bad_input = false;
 };
@@ -101,15 +101,11 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
       if (const auto it = shared.used.find(s.name); it != shared.used.end() && it->second != file)
         throw ScenarioError(file, 0, "name", fmt::format("'{}' is already the name of {}", s.name, it->second));
     }
-    // Lockstep runs are isolated on buses of their own; realtime runs use the scenario's bus and
-    // the wall clock, so two at once would hear each other's frames: one at a time.
-    std::unique_lock<std::mutex> wall;
-    if (s.clock == ClockMode::realtime) wall = std::unique_lock<std::mutex>(shared.realtime);
     RunOptions o;
     o.out_dir = (fs::path(out_root) / s.name).string();
     o.interrupt = opt.interrupt;
+    o.realtime_turn = &shared.realtime;  // realtime runs one at a time (RunOptions)
     const RunResult r = run_scenario(s, o);
-    if (wall.owns_lock()) wall.unlock();
     run_dir = r.out_dir;
     metrics = r.metrics;
     OutputPlan plan;

@@ -179,6 +179,8 @@ class PlatformRun {
   }
   nlohmann::json metrics_json(double wall_s, bool interrupted) const;
   RunResult finish(double wall_s, const RealtimePacer* realtime);
+  // SIGINT/SIGTERM has asked the run to end. Real-time safe.
+  bool signalled() const { return o_.interrupt && o_.interrupt->load(); }
 
   const Scenario& s_;
   const RunOptions& o_;
@@ -434,7 +436,7 @@ void PlatformRun::on_master_bus(SimTime t) {
   if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
     // A Ctrl-C at a terminal reaches the master too (one process group): its end is then the
     // interruption's, and the run ends as interrupted, not with a lost master.
-    if (o_.interrupt && o_.interrupt->load()) return;
+    if (signalled()) return;
     // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
     // but always the run's end: in lockstep nothing else answers the ticks.
     return master_lost(
@@ -463,7 +465,7 @@ simclock::Horizon PlatformRun::answer_sent(void* self, const simclock::Sent& sen
 void PlatformRun::supervise_master(SimTime t) {
   if (!master_ || master_lost_ns_ >= 0) return;
   if (!master_->running()) {
-    if (o_.interrupt && o_.interrupt->load()) return;  // the same Ctrl-C ended it (see on_master_bus())
+    if (signalled()) return;  // the same Ctrl-C ended it (see on_master_bus())
     return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
   }
   const std::uint64_t rx = net_->frames_from_transport();
@@ -853,7 +855,7 @@ RunResult PlatformRun::execute() {
   // Events up to and including the final control sample at `duration`. Anything thrown
   // from inside a step ends the run like a record failure: records closed, metrics written.
   try {
-    sched_.run_until(end_ + 1, *pacer_, [this] { return o_.interrupt && o_.interrupt->load(); });
+    sched_.run_until(end_ + 1, *pacer_, [this] { return signalled(); });
   } catch (const std::exception& e) {
     if (error_.empty()) error_ = e.what();
   }
@@ -866,8 +868,8 @@ RunResult PlatformRun::execute() {
 
 RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   // A twin that runs until stopped ends by the signal: that is its normal end.
-  const bool signalled = o_.interrupt && o_.interrupt->load();
-  const bool interrupted = signalled && !o_.until_stopped;
+  const bool was_signalled = signalled();
+  const bool interrupted = was_signalled && !o_.until_stopped;
   RunResult r;
   r.out_dir = o_.out_dir;
   r.interrupted = interrupted;
@@ -892,7 +894,7 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
                                       r.metrics["bus"].value("transport", std::string("its transport")),
                                       ns_to_seconds(sched_.now())));
   }
-  if (o_.external_master) r.metrics["stopped_by"] = signalled ? "signal" : "duration";
+  if (o_.external_master) r.metrics["stopped_by"] = was_signalled ? "signal" : "duration";
   if (sim_.warning_count() > 0) {
     ex.passed = false;
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));
@@ -1013,6 +1015,9 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
   if (options.external_master && (bus == BusKind::direct || scenario.clock != ClockMode::realtime))
     throw RunSetupError(
         "the twin alone needs bus: can or ethercat and clock: realtime (an external master keeps its own time)");
+  // Decided here, after a static master may have moved the run onto the wall clock.
+  std::unique_lock<std::mutex> turn;
+  if (options.realtime_turn && scenario.clock == ClockMode::realtime) turn = std::unique_lock<std::mutex>(*options.realtime_turn);
   if (bus != BusKind::direct) {
     try {
       run->build_network();

@@ -16,6 +16,7 @@
 
 #include <atomic>
 #include <functional>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -80,6 +81,10 @@ struct RunOptions {
   // should use, e.g. the master's end of a veth pair made for the run). May be empty.
   std::function<void(const std::string& master_iface)> on_bus_ready;
   RunObserver* observer = nullptr;            // live state and events (may be null)
+  // For commands that run many scenarios at once (check -j, sweep -j): lockstep runs are
+  // isolated on buses of their own, but a realtime run uses its scenario's bus and the wall
+  // clock, so it holds this lock from its network's start to its end (null: run alone).
+  std::mutex* realtime_turn = nullptr;
 };
 
 struct RunResult {

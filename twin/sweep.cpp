@@ -9,14 +9,14 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <mutex>
 #include <random>
 #include <thread>
-#include <chrono>
-#include <csignal>
 
 #include "media/run_report.hpp"
 #include "twin/expectations.hpp"
@@ -156,7 +156,7 @@ std::string csv_quoted(const std::string& v) {
 fs::path point_dir(const fs::path& out, int k) { return out / "points" / fmt::format("{:04d}", k); }
 
 // Runs point k (1-based) into its directory and writes point.json; returns its exit code.
-// `realtime`: held for the run when the point runs on the wall clock (see run_local).
+// `realtime`: RunOptions::realtime_turn (realtime points go one at a time).
 int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt, std::mutex& realtime) {
   const Point& p = s.points[static_cast<std::size_t>(k - 1)];
   nlohmann::json pj = {{"point", k}, {"params", nlohmann::json::object()}};
@@ -166,11 +166,10 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
     std::vector<Override> o;
     for (const auto& [key, v] : p) o.push_back({key, v});
     const Scenario sc = load_scenario(s.scenario, o);
-    std::unique_lock<std::mutex> wall;
-    if (sc.clock == ClockMode::realtime) wall = std::unique_lock<std::mutex>(realtime);
     RunOptions ro;
     ro.out_dir = point_dir(out, k).string();
     ro.interrupt = interrupt;
+    ro.realtime_turn = &realtime;
     const RunResult r = run_scenario(sc, ro);
     code = r.interrupted ? 3 : r.exit_code;
     pj["passed"] = r.passed;
@@ -194,9 +193,7 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
 void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
   const std::size_t n = s.points.size();
   std::mutex print;
-  // Lockstep points are isolated on buses of their own; realtime points use the scenario's bus
-  // and the wall clock, so two at once would hear each other's frames: one at a time.
-  std::mutex realtime;
+  std::mutex realtime;  // RunOptions::realtime_turn: realtime points one at a time
   run_jobs(n, jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
     const int k = static_cast<int>(i) + 1;
     const int code = run_point(s, k, out, opt.interrupt, realtime);
