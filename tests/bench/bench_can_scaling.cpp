@@ -27,6 +27,7 @@
 #include "bus_emulators/can/can_bus.hpp"
 #include "bus_emulators/canopen/co_drive.hpp"
 #include "bus_emulators/canopen/co_eds.hpp"
+#include "tests/bus_emulators/canopen/co_drive_on_bus.hpp"
 
 namespace {
 
@@ -37,10 +38,6 @@ using co::SimTime;
 constexpr SimTime kMs = 1'000'000;
 constexpr std::int64_t kBitRate = 1'000'000;
 
-const co::EdsDevice& shipped_eds() {
-  static const co::EdsDevice eds = co::load_eds(std::string(OMNITWIN_SOURCE_DIR) + "/models/canopen/omnitwin_drive.eds");
-  return eds;
-}
 
 can::Frame frame(std::uint32_t id, std::initializer_list<std::uint8_t> data) {
   can::Frame f;
@@ -79,14 +76,7 @@ struct Segment {
   Segment(int n, SimTime cycle_ns)
       : bus(can::BusConfig{.bit_rate_bps = kBitRate, .queue_capacity = 256, .max_nodes = n + 1}), cycle(cycle_ns) {
     for (int i = 0; i <= n; ++i) bus.attach();
-    for (int i = 0; i < n; ++i) {
-      drive::DriveConfig dc;
-      dc.counts_per_rev = 10000;
-      drives.push_back(std::make_unique<co::DriveNode>(shipped_eds(), static_cast<std::uint8_t>(i + 1), dc,
-                                                       [this, i](const can::Frame& f, SimTime t) {
-                                                         return bus.submit(i + 1, f, t) == can::SubmitStatus::queued;
-                                                       }));
-    }
+    for (int i = 0; i < n; ++i) drives.push_back(co::testing::drive_on_bus(bus, i + 1));
     bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) {
       if (r == 0) {
         if ((f.id & 0x780) == 0x180) ++tpdos;

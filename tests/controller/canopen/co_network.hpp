@@ -12,6 +12,7 @@
 #include "bus_emulators/can/can_bus.hpp"
 #include "bus_emulators/canopen/co_drive.hpp"
 #include "bus_emulators/canopen/co_eds.hpp"
+#include "tests/bus_emulators/canopen/co_drive_on_bus.hpp"
 #include "controller/canopen/co_master.hpp"
 
 namespace omnitwin::controller::canopen::testing {
@@ -19,10 +20,7 @@ namespace omnitwin::controller::canopen::testing {
 namespace co = omnitwin::canopen;
 inline constexpr SimTime kMs = 1'000'000;
 
-inline const co::EdsDevice& shipped_eds() {
-  static const co::EdsDevice eds = co::load_eds(std::string(OMNITWIN_SOURCE_DIR) + "/models/canopen/omnitwin_drive.eds");
-  return eds;
-}
+using co::testing::shipped_eds;
 
 // The master (bus node 0) and four drives (bus nodes 1..4, node IDs 1..4) on one wire.
 struct Network {
@@ -44,14 +42,7 @@ struct Network {
       return bus.submit(0, f, t) == can::SubmitStatus::queued;
     });
     master->set_event_callback([this](SimTime, const std::string& s, bool) { events.push_back(s); });
-    for (int i = 0; i < 4; ++i) {
-      drive::DriveConfig dc;
-      dc.counts_per_rev = 10000;
-      drives.push_back(std::make_unique<co::DriveNode>(shipped_eds(), static_cast<std::uint8_t>(i + 1), dc,
-                                                       [this, i](const can::Frame& f, SimTime t) {
-                                                         return bus.submit(i + 1, f, t) == can::SubmitStatus::queued;
-                                                       }));
-    }
+    for (int i = 0; i < 4; ++i) drives.push_back(co::testing::drive_on_bus(bus, i + 1));
     bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& t) {
       if (r == 0) master->on_frame(f, t.end_ns);
       else drives[static_cast<std::size_t>(r - 1)]->on_frame(f, t.end_ns);

@@ -30,6 +30,14 @@ Bytes reply(std::uint8_t service, Bytes sdo, std::uint8_t counter = 1) {
   m.resize(128, 0);
   return m;
 }
+// An upload of 0x1008 whose initiate reply announced 20 bytes in segments, the first segment
+// request sent (toggle 0).
+void begin_segments_of_20(SdoTransfer& x) {
+  x.begin(SdoRequest{true, 0x1008, 0, {}}, 32);
+  request(x, 32, 1);
+  x.on_reply(reply(3, {0x41, 0x08, 0x10, 0x00, 20, 0, 0, 0}));
+  request(x, 32, 2);
+}
 }  // namespace
 
 TEST(EcSdo, UploadRequestGoldenBytes) {
@@ -123,10 +131,7 @@ TEST(EcSdo, SegmentedUpload) {
 
 TEST(EcSdo, SegmentedUploadToggleErrorAborts) {
   SdoTransfer x;
-  x.begin(SdoRequest{true, 0x1008, 0, {}}, 32);
-  request(x, 32, 1);
-  x.on_reply(reply(3, {0x41, 0x08, 0x10, 0x00, 20, 0, 0, 0}));
-  request(x, 32, 2);
+  begin_segments_of_20(x);
   EXPECT_EQ(x.on_reply(reply(3, {0x10, 'a', 'b', 'c', 'd', 'e', 'f', 'g'})), SdoTransfer::ReplyOutcome::finished);
   EXPECT_EQ(x.status(), SdoStatus::aborted);
   EXPECT_EQ(x.abort_code(), 0x05030000u);
@@ -136,10 +141,7 @@ TEST(EcSdo, SegmentedUploadToggleErrorAborts) {
 // command says: aborted (length does not match), not read from past the mailbox's length.
 TEST(EcSdo, SegmentedUploadWithATooShortSegmentAborts) {
   SdoTransfer x;
-  x.begin(SdoRequest{true, 0x1008, 0, {}}, 32);
-  request(x, 32, 1);
-  x.on_reply(reply(3, {0x41, 0x08, 0x10, 0x00, 20, 0, 0, 0}));
-  request(x, 32, 2);
+  begin_segments_of_20(x);
   EXPECT_EQ(x.on_reply(reply(3, {0x00})), SdoTransfer::ReplyOutcome::finished);
   EXPECT_EQ(x.status(), SdoStatus::aborted);
   EXPECT_EQ(x.abort_code(), 0x06070010u);
