@@ -493,7 +493,11 @@ TEST_F(CliInterrupt, SigtermClosesCompleteRecords) { expect_clean_stop(SIGTERM);
 // as on a Ctrl-C. It used to run on (33 s and more, memory locked; found in review).
 TEST_F(CliInterrupt, ARealtimeMasterEndsWhenItsTwinIsKilled) {
   const fs::path out = dir_ / "out";
-  Child c(omnitwin_binary(), {"run", test_scenario("can_realtime_short.yaml"), "--out", out.string(), "--no-progress"},
+  // A multicast port of its own: the sweep test runs can_realtime_short.yaml on 47301 and may
+  // run at the same time under ctest -j.
+  Child c(omnitwin_binary(),
+          {"run", test_scenario("can_realtime_short.yaml"), "--set", "bus.transport=udp:239.74.163.2:47307", "--out",
+           out.string(), "--no-progress"},
           work(), io(), "", true);
   int master = -1, cli = -1;
   const auto deadline = std::chrono::steady_clock::now() + 20s;
