@@ -28,6 +28,17 @@ namespace {
 
 bool interrupted(const CheckOptions& opt) { return opt.interrupt != nullptr && opt.interrupt->load(); }
 
+// The prefix of a case's first failure when the run itself failed (exit 3 of `omnitwin run`),
+// as opposed to a scenario that could not be loaded (exit 2).
+const std::string kRunFailed = "run failed: ";
+const std::string kIncompleteMerge = "incomplete merge: ";  // check --merge without all its shards
+bool runtime_failure(const JunitCase& c) {
+  return c.error && !c.failures.empty() &&
+         (c.failures.front().starts_with(kRunFailed) || c.failures.front().starts_with(kIncompleteMerge));
+}
+// A case's exit code as `omnitwin run` gives it: 0 passed, 1 failed, 2 bad input, 3 runtime.
+int case_exit_code(const JunitCase& c) { return c.passed ? 0 : (runtime_failure(c) ? 3 : (c.error ? 2 : 1)); }
+
 int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
                  const CheckOptions& opt);
 
@@ -68,7 +79,7 @@ nlohmann::json index_entry(const std::string& file, const std::string& run_dir, 
     if (metrics.contains(k)) m[k] = metrics[k];
   return {{"scenario", c.name},       {"file", file},
           {"run_dir", run_dir},      {"passed", c.passed},
-          {"exit_code", c.passed ? 0 : (c.error ? 2 : 1)},
+          {"exit_code", case_exit_code(c)},
           {"failures", c.failures},  {"metrics", m},
           {"time_s", c.time_s},      {"error", c.error},
           {"classname", c.classname}};
@@ -113,8 +124,18 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
     plan.video_spec = s.outputs.video;
     plan.report = opt.report && s.outputs.report;
     const OutputsResult out = make_run_outputs(r.out_dir, plan, opt.interrupt);
-    for (const std::string& e : out.errors) c.failures.push_back(e);
-    c.passed = r.passed && !r.interrupted;
+    // What `omnitwin run` ends with exit 3 for (a record, the video or the report not written
+    // whole) is a runtime failure here too, whatever the bounds said: an <error>, not a pass.
+    std::vector<std::string> broken;
+    if (!r.interrupted) {
+      if (!r.error.empty()) broken.push_back(r.error);
+      for (const std::string& f : r.missing_records) broken.push_back(f + " was not written");
+      for (const std::string& f : r.partial_records) broken.push_back(f + " is incomplete");
+      broken.insert(broken.end(), out.errors.begin(), out.errors.end());
+    }
+    for (const std::string& b : broken) c.failures.push_back(kRunFailed + b);
+    c.error = !broken.empty();
+    c.passed = r.passed && !r.interrupted && !c.error;
     for (const auto& f : r.metrics["expectations"]["failures"]) c.failures.push_back(f.get<std::string>());
     if (r.interrupted) c.failures.push_back("interrupted");
     c.system_out = r.metrics.dump(2);
@@ -126,9 +147,9 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
     c.failures.push_back(file + ": " + e.what());
   } catch (const std::exception& e) {
     c.error = true;
-    c.failures.push_back(std::string("run failed: ") + e.what());
+    c.failures.push_back(kRunFailed + e.what());
   }
-  if (c.error && !c.failures.empty() && !c.failures.front().starts_with("run failed: ")) {
+  if (c.error && !runtime_failure(c)) {
     const std::lock_guard lock(shared.mutex);
     shared.bad_input = true;
   }
@@ -176,22 +197,57 @@ std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const C
 }
 
 
+// What one shard's check.json says about itself.
+struct ShardInfo {
+  int k = 1, n = 1;            // "K/N" ("" = a check of every file: 1/1)
+  std::size_t files_total = 0; // the scenario files over all shards
+  std::size_t results = 0;     // the results it holds
+};
+
 // One shard's check.json, its run directories made relative to here; "" or why not.
-std::string read_shard(const std::string& dir, nlohmann::json& results) {
+std::string read_shard(const std::string& dir, nlohmann::json& results, ShardInfo& info) {
   const fs::path file = fs::path(dir) / "check.json";
   std::ifstream f(file, std::ios::binary);
   if (!f) return file.string() + ": no check.json (is it the --out of an `omnitwin check`?)";
   try {
     const nlohmann::json j = nlohmann::json::parse(f);
+    const std::string shard = j.value("shard", "");
+    if (!shard.empty() && !parse_shard(shard, info.k, info.n)) return file.string() + ": bad shard '" + shard + "'";
+    info.files_total = j.at("files_total").get<std::size_t>();
     for (nlohmann::json e : j.at("results")) {
       const std::string rel = e.value("run_dir_rel", "");
       e["run_dir"] = rel.empty() ? "" : (fs::path(dir) / rel).lexically_normal().string();
       results.push_back(std::move(e));
+      ++info.results;
     }
   } catch (const std::exception& e) {
     return file.string() + ": " + e.what();
   }
   return "";
+}
+
+// Why the shards do not add up to one whole check (a shard missing, one of another split or
+// suite, one cut short), one line each; empty when they do.
+std::vector<std::string> incomplete_shards(const std::vector<ShardInfo>& shards) {
+  std::vector<std::string> why;
+  const ShardInfo& first = shards.front();
+  std::set<int> seen;
+  for (const ShardInfo& s : shards) {
+    if (s.n != first.n || s.files_total != first.files_total) {
+      why.push_back(fmt::format("shard {}/{} of {} files does not belong with shard {}/{} of {} files", s.k, s.n,
+                                s.files_total, first.k, first.n, first.files_total));
+      continue;
+    }
+    seen.insert(s.k);
+    // Shard K of N holds the files i with i mod N = K - 1 (shard_of()).
+    const std::size_t n = static_cast<std::size_t>(s.n), k0 = static_cast<std::size_t>(s.k - 1);
+    const std::size_t expected = s.files_total > k0 ? (s.files_total - k0 + n - 1) / n : 0;
+    if (s.results != expected)
+      why.push_back(fmt::format("shard {}/{} holds {} of its {} results (cut short?)", s.k, s.n, s.results, expected));
+  }
+  for (int k = 1; k <= first.n; ++k)
+    if (!seen.contains(k)) why.push_back(fmt::format("shard {}/{} is missing", k, first.n));
+  return why;
 }
 
 JunitCase case_of(const nlohmann::json& e) {
@@ -281,8 +337,9 @@ int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& op
     return 2;
   }
   nlohmann::json index = nlohmann::json::array();
+  std::vector<ShardInfo> shards;
   for (const std::string& d : dirs) {
-    if (const std::string e = read_shard(d, index); !e.empty()) {
+    if (const std::string e = read_shard(d, index, shards.emplace_back()); !e.empty()) {
       std::cerr << "omnitwin check --merge: " << e << "\n";
       return 2;
     }
@@ -298,7 +355,21 @@ int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& op
       return 2;
     }
     cases.push_back(case_of(e));
-    bad_input = bad_input || cases.back().error;
+    bad_input = bad_input || (cases.back().error && !runtime_failure(cases.back()));
+  }
+  // A merge that lacks a shard, or holds one cut short, is not the suite's verdict: it ends as
+  // a runtime failure, with a case that says what is missing.
+  if (const std::vector<std::string> why = incomplete_shards(shards); !why.empty()) {
+    JunitCase c;
+    c.name = "merge";
+    c.classname = "omnitwin.check";
+    c.error = true;
+    for (const std::string& w : why) {
+      c.failures.push_back(kIncompleteMerge + w);
+      std::cerr << "omnitwin check --merge: " << w << "\n";
+    }
+    index.push_back(index_entry("", "", c, nlohmann::json::object()));
+    cases.push_back(std::move(c));
   }
   std::cout << fmt::format("merged {} results from {} shard folders\n", cases.size(), dirs.size());
   if (const std::string e = write_check_json(opt.out_root, "", cases.size(), index); !e.empty()) {
@@ -335,6 +406,8 @@ int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& inde
   }
   if (bad_input) return 2;
   if (interrupted(opt)) return 3;
+  // A run that could not leave its records (or its video or report) is a runtime failure.
+  if (std::any_of(cases.begin(), cases.end(), runtime_failure)) return 3;
   return failed ? 1 : 0;
 }
 

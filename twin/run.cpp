@@ -926,6 +926,12 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
     if (std::string why = net_->close_pcap(); !why.empty() && error_.empty()) error_ = why;
   }
   if (!error_.empty()) r.metrics["error"] = error_;
+  // A record that failed while it was closed leaves the run without its evidence: whatever
+  // the bounds said, it is not a pass.
+  if (!error_.empty() && ex.passed) {
+    ex.passed = false;
+    ex.failures.push_back("records not written whole: " + error_);
+  }
   if (interrupted) r.metrics["interrupted_phase"] = "run";
   r.metrics["expectations"] = ex.to_json();
   r.passed = ex.passed;
@@ -939,8 +945,10 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   const RecordInventory inv = take_inventory(o_.out_dir, expected_records());
   r.missing_records = inv.missing;
   r.partial_records = inv.partial;
+  const bool records_whole = r.error.empty() && r.missing_records.empty() && r.partial_records.empty();
+  if (!records_whole) r.passed = false;  // e.g. metrics.json itself could not be written
   if (o_.observer) o_.observer->on_end(r.metrics);
-  r.exit_code = cut_short || !r.error.empty() ? 3 : (r.passed ? 0 : 1);
+  r.exit_code = cut_short || !records_whole ? 3 : (r.passed ? 0 : 1);
   return r;
 }
 

@@ -89,7 +89,7 @@ struct RunOptions {
 
 struct RunResult {
   int exit_code = 0;          // DESIGN §9: 0 ok, 1 expectations failed, 3 runtime failure
-  bool passed = false;        // expectations held
+  bool passed = false;        // expectations held and every record was written whole
   bool interrupted = false;
   std::string error;          // why the run ended early (a record write failed…); "" if not
   std::vector<std::string> missing_records;  // records absent at the end (names in the run dir)

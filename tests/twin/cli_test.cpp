@@ -382,6 +382,38 @@ TEST_F(CliCheck, ShardsRunEveryScenarioOnceAndMergeJoinsThem) {
   }
 }
 
+// A merge that lacks a shard, or holds a shard cut short, is not the suite's verdict: exit 3
+// and an <error> case "merge" naming what is missing (found in review: a lone shard 1/2 of
+// two scenarios merged as "1 passed, 0 failed", exit 0).
+TEST_F(CliCheck, AMergeOfAnIncompleteSetOfShardsIsARuntimeError) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml", "run_wheel_slip.yaml"});
+  for (const char* k : {"1", "2"}) {
+    const Finished f = run({"check", scenarios.string(), "--shard", std::string(k) + "/2", "--no-report", "--out",
+                            (dir_ / (std::string("s") + k)).string()});
+    ASSERT_EQ(f.code, 0) << f.out << f.err;
+  }
+  const fs::path junit = dir_ / "m.xml";
+  Finished m = run({"check", "--merge", (dir_ / "s1").string(), "--junit", junit.string(), "--out",
+                    (dir_ / "m1").string()});
+  EXPECT_EQ(m.code, 3) << m.out << m.err;
+  EXPECT_TRUE(contains(m.err, "shard 2/2 is missing")) << m.err;
+  EXPECT_TRUE(contains(read_bytes(junit), "<testcase name=\"merge\"")) << read_bytes(junit);
+  EXPECT_TRUE(contains(read_bytes(junit), "errors=\"1\"")) << read_bytes(junit);
+  // Both shards: a whole suite, green.
+  m = run({"check", "--merge", (dir_ / "s1").string(), (dir_ / "s2").string(), "--out", (dir_ / "m0").string(),
+           "--no-report"});
+  EXPECT_EQ(m.code, 0) << m.out << m.err;
+  EXPECT_EQ(lines_of(m.out).back(), "2 passed, 0 failed") << m.out;
+  // Both shards, one of them cut short (its result removed as an interrupted shard leaves it).
+  nlohmann::json j = nlohmann::json::parse(read_bytes(dir_ / "s2/check.json"));
+  j["results"] = nlohmann::json::array();
+  std::ofstream(dir_ / "s2/check.json", std::ios::trunc) << j.dump();
+  m = run({"check", "--merge", (dir_ / "s1").string(), (dir_ / "s2").string(), "--out", (dir_ / "m2").string(),
+           "--no-report"});
+  EXPECT_EQ(m.code, 3) << m.out << m.err;
+  EXPECT_TRUE(contains(m.err, "shard 2/2 holds 0 of its 1 results")) << m.err;
+}
+
 // Bad shard arguments and bad merges are usage errors naming what is wrong.
 TEST_F(CliCheck, BadShardsAndMergesAreBadUsage) {
   const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});

@@ -286,6 +286,51 @@ TEST_F(CliTrust, FullDiskDuringTheReportGivesExit3AndNoReport) {
   EXPECT_TRUE(contains(f.err, "report")) << f.err;
 }
 
+// `check` judges a run that could not write its records as `run` does: a runtime failure
+// (exit 3, an <error> in JUnit, exit_code 3 in check.json), not a plain FAIL (exit 1). The run
+// directory is a link to a full disk; check's own files live elsewhere (found in review:
+// check said FAIL and exit 1 here, and PASS with exit 0 when only metrics.json failed).
+TEST_F(CliTrust, CheckOfARunWhoseRecordsMeetAFullDiskIsARuntimeError) {
+  SmallTmpfs disk("64k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  fs::create_directories(dir_ / "runs");
+  fs::create_directory_symlink(disk / "", dir_ / "runs/run_short_line");
+  const fs::path junit = dir_ / "report.xml";
+  const Finished f = run({"check", scenarios.string(), "--no-report", "--junit", junit.string(), "--out",
+                          (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "ERROR run_short_line")) << f.out;
+  EXPECT_TRUE(contains(f.out, "run failed: ")) << f.out;
+  EXPECT_TRUE(contains(read_bytes(junit), "failures=\"0\" errors=\"1\"")) << read_bytes(junit);
+  const nlohmann::json j = nlohmann::json::parse(read_bytes(dir_ / "runs/check.json"));
+  ASSERT_EQ(j.at("results").size(), 1u);
+  EXPECT_EQ(j["results"][0].at("exit_code"), 3);
+  EXPECT_EQ(j["results"][0].at("passed"), false);
+}
+
+// A run whose bounds hold but whose report cannot be written is not a pass either: `run` ends
+// with exit 3 for it, and so does `check` (found in review: "PASS" and exit 0).
+TEST_F(CliTrust, CheckOfARunWhoseReportCannotBeWrittenIsARuntimeError) {
+  SmallTmpfs disk("300k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  const fs::path file = scenarios / "run_short_line.yaml";
+  std::string text = read_bytes(file);
+  const std::string off = "outputs: {video: false, report: false}";
+  ASSERT_NE(text.find(off), std::string::npos) << text;
+  text.replace(text.find(off), off.size(), "outputs: {video: false, report: true}");
+  std::ofstream(file, std::ios::trunc) << text;
+  fs::create_directories(dir_ / "runs");
+  fs::create_directory_symlink(disk / "", dir_ / "runs/run_short_line");
+  const Finished f = run({"check", scenarios.string(), "--out", (dir_ / "runs").string()});
+  ASSERT_TRUE(fs::exists(disk / "metrics.json")) << "the records should fit in 300k: " << f.out << f.err;
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "ERROR run_short_line")) << f.out;
+  EXPECT_TRUE(contains(f.out, "report")) << f.out;
+  EXPECT_EQ(omnitwin::testing::lines_of(f.out).back(), "0 passed, 1 failed") << f.out;
+}
+
 // A re-run into a used directory replaces the earlier run whole: nothing of it survives.
 TEST_F(CliTrust, ARerunClearsTheEarlierRunsRecords) {
   const fs::path out = dir_ / "again";
