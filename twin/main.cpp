@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
@@ -180,9 +181,13 @@ void print_summary(const RunResult& r) {
                            m.value("sim_time_s", 0.0), m.value("wall_time_s", 0.0),
                            m.value("real_time_factor", 0.0));
   const auto& p = m["platform"];
+  // A figure without samples is null in metrics.json: printed as nan.
+  const auto figure = [&p](const char* k) {
+    return p.contains(k) && p[k].is_number() ? p[k].get<double>() : std::nan("");
+  };
   std::cout << fmt::format("  final error {:.3f} cm, max error {:.3f} cm, IAE contour {:.1f} cm, sigma contour {:.3f} cm\n",
-                           p.value("final_error_cm", 0.0), p.value("max_error_cm", 0.0),
-                           p.value("iae_contour_cm", 0.0), p.value("std_contour_cm", 0.0));
+                           figure("final_error_cm"), figure("max_error_cm"), figure("iae_contour_cm"),
+                           figure("std_contour_cm"));
   if (m.contains("realtime")) {
     const auto& rt = m["realtime"];
     std::cout << fmt::format("  realtime ({}): {} ticks, {} overruns, jitter mean {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",

@@ -15,6 +15,18 @@ constexpr double kDeg = 180.0 / std::numbers::pi;  // rad -> deg
 // σ of eq. 4-15 from Σe² over n samples (0 with no samples).
 double rms(double sum_sq, std::size_t n) { return n == 0 ? 0.0 : std::sqrt(sum_sq / n); }
 
+// The larger of a and b, NaN once either is: a worst case that skipped a NaN sample would
+// pass a bound no sample was checked against (std::max drops a NaN second argument).
+double max_keeping_nan(double a, double b) { return std::isnan(a) || std::isnan(b) ? std::nan("") : std::max(a, b); }
+
+// The figures of an accumulator that got no sample: each null, and "samples": 0.
+nlohmann::json without_samples(std::initializer_list<const char*> keys) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const char* k : keys) j[k] = nullptr;
+  j["samples"] = 0;
+  return j;
+}
+
 }  // namespace
 
 void PoseErrorStats::add(double ex_m, double ey_m, double ephi_rad) {
@@ -31,12 +43,17 @@ void PoseErrorStats::add(double ex_m, double ey_m, double ephi_rad) {
   // Last and worst samples.
   final_c_ = ec;
   final_phi_ = std::abs(ephi_rad);
-  max_c_ = std::max(max_c_, ec);
-  max_phi_ = std::max(max_phi_, final_phi_);
+  max_c_ = max_keeping_nan(max_c_, ec);
+  max_phi_ = max_keeping_nan(max_phi_, final_phi_);
   ++n_;
 }
 
 nlohmann::json PoseErrorStats::to_json() const {
+  // No sample, no figure: null, so that a bound on it fails as "not a number" instead of
+  // passing on a 0 nothing was measured for (e.g. odometry outside lockstep).
+  if (n_ == 0) return without_samples({"iae_x_cm", "iae_y_cm", "iae_contour_cm", "std_x_cm", "std_y_cm",
+                                       "std_contour_cm", "final_error_cm", "max_error_cm", "iae_phi_deg",
+                                       "std_phi_deg", "final_phi_error_deg", "max_phi_error_deg"});
   return nlohmann::json{
       {"iae_x_cm", abs_x_ * kCm},
       {"iae_y_cm", abs_y_ * kCm},
@@ -61,6 +78,7 @@ void VelocityErrorStats::add(double err_pulses) {
 }
 
 nlohmann::json VelocityErrorStats::to_json() const {
+  if (n_ == 0) return without_samples({"iae_velocity_pulse", "std_velocity_pulse"});
   return nlohmann::json{
       {"iae_velocity_pulse", abs_},
       {"std_velocity_pulse", rms(sq_, n_)},

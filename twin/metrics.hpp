@@ -26,7 +26,8 @@ class PoseErrorStats {
 
   // iae_x_cm, iae_y_cm, iae_contour_cm, std_x_cm, std_y_cm, std_contour_cm, final_error_cm,
   // max_error_cm, iae_phi_deg, std_phi_deg, final_phi_error_deg, max_phi_error_deg, samples.
-  // The contour error is sqrt(ex² + ey²); all zero with no samples. Not real-time safe.
+  // The contour error is sqrt(ex² + ey²); every figure null with no samples, and the max
+  // figures NaN once a sample was. Not real-time safe.
   nlohmann::json to_json() const;
 
  private:
@@ -44,7 +45,7 @@ class VelocityErrorStats {
 
   std::size_t samples() const { return n_; }
 
-  // iae_velocity_pulse, std_velocity_pulse, samples. Not real-time safe.
+  // iae_velocity_pulse, std_velocity_pulse (null with no samples), samples. Not real-time safe.
   nlohmann::json to_json() const;
 
  private:

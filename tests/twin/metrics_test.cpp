@@ -1,11 +1,12 @@
 // Tests the thesis's tracking indices (twin/metrics.cpp): IAE = Σ|e| (seed 002 eq. 4-14)
 // and σ = sqrt(Σe²/N) (eq. 4-15) over samples, in cm/deg/pulses, against numbers worked
-// out by hand, including the contour error, final/max values and the empty case.
+// out by hand, including the contour error, final/max values, NaN samples and the empty case.
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <numbers>
 
+#include "twin/expectations.hpp"
 #include "twin/metrics.hpp"
 
 namespace omnitwin::twin {
@@ -38,11 +39,38 @@ TEST(PoseErrorStats, TwoSamplesByHand) {
   EXPECT_NEAR(j["max_phi_error_deg"].get<double>(), 0.02 * kDegPerRad, kTol);
 }
 
-TEST(PoseErrorStats, EmptyIsAllZero) {
+// No sample, no figure: every figure null (was 0, which passed any max bound on odometry
+// a realtime run never sampled; found in review), and a bound on one fails.
+TEST(PoseErrorStats, EmptyIsNullAndFailsItsBounds) {
   const auto j = PoseErrorStats{}.to_json();
   EXPECT_EQ(j["samples"], 0);
   EXPECT_EQ(j.size(), 13u);
-  for (const auto& [key, value] : j.items()) EXPECT_EQ(value.get<double>(), 0.0) << key;
+  for (const auto& [key, value] : j.items()) {
+    if (key != "samples") {
+      EXPECT_TRUE(value.is_null()) << key;
+    }
+  }
+  const nlohmann::json metrics = {{"platform_odometry", j}};
+  const ExpectationResult r = evaluate_expectations({Expectation{.metric = "platform_odometry.max_error_cm", .min = {}, .max = 1e-4}}, metrics);
+  EXPECT_FALSE(r.passed);
+  ASSERT_EQ(r.failures.size(), 1u);
+  EXPECT_EQ(r.failures[0], "platform_odometry.max_error_cm: not a number (null)");
+}
+
+// A NaN error (a master's odometry can report one) makes the worst case NaN for good: the
+// max figures skipped NaN samples and passed their bounds (found in review).
+TEST(PoseErrorStats, ANanSampleMakesTheMaxFiguresNan) {
+  PoseErrorStats s;
+  s.add(0.01, 0, 0);
+  s.add(std::nan(""), 0, std::nan(""));
+  s.add(0.02, 0, 0.01);
+  const auto j = s.to_json();
+  EXPECT_TRUE(std::isnan(j["max_error_cm"].get<double>()));
+  EXPECT_TRUE(std::isnan(j["max_phi_error_deg"].get<double>()));
+  EXPECT_NEAR(j["final_error_cm"].get<double>(), 2.0, kTol);
+  const ExpectationResult r = evaluate_expectations({Expectation{.metric = "platform.max_error_cm", .min = {}, .max = 10.0}},
+                                                    nlohmann::json{{"platform", j}});
+  EXPECT_FALSE(r.passed);
 }
 
 TEST(PoseErrorStats, IaeGrowsWithSampleCountNotTime) {
@@ -66,10 +94,10 @@ TEST(VelocityErrorStats, ThreeSamplesByHand) {
   EXPECT_NEAR(j["std_velocity_pulse"].get<double>(), std::sqrt(25.0 / 3.0), kTol);
 }
 
-TEST(VelocityErrorStats, EmptyIsZero) {
+TEST(VelocityErrorStats, EmptyIsNull) {
   const auto j = VelocityErrorStats{}.to_json();
-  EXPECT_EQ(j["iae_velocity_pulse"], 0.0);
-  EXPECT_EQ(j["std_velocity_pulse"], 0.0);
+  EXPECT_TRUE(j["iae_velocity_pulse"].is_null());
+  EXPECT_TRUE(j["std_velocity_pulse"].is_null());
   EXPECT_EQ(j["samples"], 0);
 }
 
