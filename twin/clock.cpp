@@ -8,6 +8,7 @@
 #include <sched.h>
 #include <sys/mman.h>
 
+#include <cmath>
 #include <cerrno>
 #include <cstring>
 
@@ -55,7 +56,10 @@ double LatenessHistogram::mean_us() const {
 
 double LatenessHistogram::quantile_us(double q) const {
   if (count_ == 0) return 0.0;
-  const auto rank = std::min<std::uint64_t>(count_ - 1, static_cast<std::uint64_t>(std::clamp(q, 0.0, 1.0) * count_));
+  // Nearest rank: the smallest sample with at least q·n samples at or below it (0-based
+  // ceil(q·n) − 1), so p99 of 100 samples is the 99th, not the largest.
+  const double at = std::ceil(std::clamp(q, 0.0, 1.0) * static_cast<double>(count_));
+  const auto rank = std::min<std::uint64_t>(count_ - 1, at < 1.0 ? 0 : static_cast<std::uint64_t>(at) - 1);
   std::uint64_t seen = 0;
   for (std::size_t i = 0; i < kBins; ++i) {
     seen += bins_[i];

@@ -60,7 +60,7 @@ class LatenessHistogram {
   std::uint64_t count() const { return count_; }
   double mean_us() const;
   double max_us() const { return static_cast<double>(max_ns_) * 1e-3; }
-  // The q-quantile [µs] (q in [0, 1]): the sample of rank floor(q·n) in ascending order.
+  // The q-quantile [µs] (q in [0, 1]) by nearest rank: the ceil(q·n)-th smallest sample.
   double quantile_us(double q) const;
 
   static constexpr std::size_t kExactUs = 2048;  // 1 µs bins below this

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <algorithm>
 #include <random>
 #include <thread>
@@ -121,7 +122,9 @@ TEST(Clock, LatenessQuantilesAreWithinOneBinOfTheExactOnes) {
   ns.push_back(0);
   std::sort(ns.begin(), ns.end());
   for (double q : {0.0, 0.5, 0.9, 0.99, 0.999, 1.0}) {
-    const std::size_t rank = std::min(ns.size() - 1, static_cast<std::size_t>(q * ns.size()));
+    // Nearest rank: the ceil(q·n)-th smallest (1-based).
+    const auto at = static_cast<std::size_t>(std::ceil(q * static_cast<double>(ns.size())));
+    const std::size_t rank = std::min(ns.size() - 1, at == 0 ? 0 : at - 1);
     const double exact = ns[rank] * 1e-3;
     const double got = h.quantile_us(q);
     EXPECT_GE(got, exact) << q;
@@ -136,6 +139,20 @@ TEST(Clock, LatenessQuantilesAreWithinOneBinOfTheExactOnes) {
   h.clear();
   EXPECT_EQ(h.count(), 0u);
   EXPECT_EQ(h.quantile_us(0.99), 0.0);
+}
+
+// p99 of 100 samples is the 99th, not the largest: the rank was one too high, so every
+// realtime.csv window of 100 ticks had late_p99_us = late_max_us (found in review).
+TEST(Clock, TheP99OfAHundredSamplesIsTheNinetyNinthNotTheMaximum) {
+  LatenessHistogram h;
+  for (int i = 1; i <= 100; ++i) h.add(i * 5'000);  // 5, 10, … 500 µs, in 1 µs bins
+  EXPECT_LT(h.quantile_us(0.99), h.max_us());
+  EXPECT_GE(h.quantile_us(0.99), 495.0);
+  EXPECT_LE(h.quantile_us(0.99), 496.0);
+  EXPECT_GE(h.quantile_us(0.5), 250.0);
+  EXPECT_LE(h.quantile_us(0.5), 251.0);
+  EXPECT_EQ(h.quantile_us(1.0), 500.0);
+  EXPECT_LE(h.quantile_us(0.0), 6.0);
 }
 
 // Each window of sim time reaches the sink once a tick falls beyond it; flush hands over the
