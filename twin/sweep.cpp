@@ -9,6 +9,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cmath>
 #include <chrono>
 #include <csignal>
 #include <filesystem>
@@ -22,6 +24,7 @@
 #include "twin/expectations.hpp"
 #include "twin/job_pool.hpp"
 #include "twin/run.hpp"
+#include "twin/run_directory.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
 
@@ -83,6 +86,26 @@ std::vector<Point> grid_points(SweepSpec& s, const YAML::Node& grid) {
   return pts;
 }
 
+// True when a YAML scalar is written as a whole number (no point, no exponent).
+bool integer_scalar(const YAML::Node& n) {
+  const std::string& t = n.Scalar();
+  return !t.empty() && t.find_first_not_of("+-0123456789") == std::string::npos;
+}
+
+// One draw from {min, max} as the text a --set takes: a whole number when both bounds are
+// written as whole numbers (a bit rate, a count), else the double's shortest exact text, so
+// the value run is the value drawn and never falls outside [min, max].
+std::string draw_in_range(const SweepSpec& s, const YAML::Node& d, const std::string& where, std::mt19937_64& rng) {
+  if (integer_scalar(d["min"]) && integer_scalar(d["max"])) {
+    const auto lo = d["min"].as<long long>(), hi = d["max"].as<long long>();
+    if (lo > hi) bad(s, d, where, "min must not exceed max");
+    return std::to_string(std::uniform_int_distribution<long long>(lo, hi)(rng));
+  }
+  const double lo = d["min"].as<double>(), hi = d["max"].as<double>();
+  if (!(lo <= hi) || !std::isfinite(lo) || !std::isfinite(hi)) bad(s, d, where, "min must not exceed max");
+  return fmt::format("{}", std::clamp(std::uniform_real_distribution<double>(lo, hi)(rng), lo, hi));
+}
+
 // `draws` seeded draws of the random parameters (none: one empty draw).
 std::vector<Point> random_points(SweepSpec& s, const YAML::Node& r) {
   if (!r.IsDefined()) return {Point{}};
@@ -109,9 +132,7 @@ std::vector<Point> random_points(SweepSpec& s, const YAML::Node& r) {
         p.emplace_back(key, as_set_value(d["values"][pick(rng)]));
       } else {
         if (!d["min"].IsDefined() || !d["max"].IsDefined()) bad(s, d, where, "expected {min, max} or {values: [...]}");
-        const double lo = d["min"].as<double>(), hi = d["max"].as<double>();
-        if (!(lo <= hi)) bad(s, d, where, "min must not exceed max");
-        p.emplace_back(key, fmt::format("{:.6g}", std::uniform_real_distribution<double>(lo, hi)(rng)));
+        p.emplace_back(key, draw_in_range(s, d, where, rng));
       }
     }
   }
@@ -147,6 +168,13 @@ std::string metric_text(const nlohmann::json& m, const std::string& path) {
 }
 
 // A CSV field in double quotes, inner quotes doubled (RFC 4180).
+std::string csv_quoted(const std::string& v);
+
+// A CSV field, quoted only when it must be (a comma, a quote or a line break in it).
+std::string csv_field(const std::string& v) {
+  return v.find_first_of(",\"\r\n") == std::string::npos ? v : csv_quoted(v);
+}
+
 std::string csv_quoted(const std::string& v) {
   std::string q = "\"";
   for (const char c : v) q += c == '"' ? std::string("\"\"") : std::string(1, c);
@@ -225,27 +253,67 @@ int spawn_wait(const std::vector<std::string>& argv, const std::atomic<bool>* in
   return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
 }
 
+// `text` as one word of a POSIX shell: in single quotes, each ' written as '\''.
+std::string sh_quoted(const std::string& text) {
+  std::string q = "'";
+  for (const char c : text) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// A Slurm job name from the sweep's name: only [A-Za-z0-9_.-], the rest as '_'.
+std::string slurm_job_name(const std::string& name) {
+  std::string n = "omnitwin-sweep-";
+  for (const char c : name) n += std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.' || c == '-' ? c : '_';
+  return n;
+}
+
 // sweep.sbatch (a job array, one task per point) submitted with `sbatch --wait`; "" or why not.
 std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
   std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  // The tasks run the `omnitwin` launcher beside us (it holds signals until the handlers are
+  // in place), or this program itself where there is none.
+  fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (const fs::path launcher = self.parent_path() / "omnitwin"; ::access(launcher.c_str(), X_OK) == 0) self = launcher;
   const fs::path script = out / "sweep.sbatch";
   {
+    // Paths go in single quotes with their own quotes escaped; the job name keeps only
+    // [A-Za-z0-9_.-], and the log path goes on sbatch's command line, never into a #SBATCH
+    // line that a space, quote or line break in it would break (found in review).
     std::ofstream f(script);
     f << "#!/bin/sh\n"
-      << "#SBATCH --job-name=omnitwin-sweep-" << s.name << "\n"
+      << "#SBATCH --job-name=" << slurm_job_name(s.name) << "\n"
       << "#SBATCH --array=1-" << s.points.size() << "\n"
       << "#SBATCH --cpus-per-task=1\n"
-      << "#SBATCH --output=" << (out / "slurm-%A_%a.out").string() << "\n"
-      << "exec '" << self.string() << "' sweep '" << fs::absolute(s.file).string() << "' --point \"$SLURM_ARRAY_TASK_ID\" --out '"
-      << out.string() << "'\n";
+      << "exec " << sh_quoted(self.string()) << " sweep " << sh_quoted(fs::absolute(s.file).string())
+      << " --point \"$SLURM_ARRAY_TASK_ID\" --out " << sh_quoted(out.string()) << "\n";
     if (!f) return "cannot write " + script.string();
   }
+  if (s.points.size() > 1000)
+    std::cout << fmt::format("note: {} array tasks; Slurm's default MaxArraySize (1001) allows 1000\n", s.points.size());
   std::cout << "submitting " << script.string() << " (" << s.points.size() << " array tasks) and waiting\n" << std::flush;
-  const int rc = spawn_wait({opt.sbatch, "--wait", script.string()}, opt.interrupt);
+  const int rc = spawn_wait({opt.sbatch, "--wait", "--output=" + (out / "slurm-%A_%a.out").string(), script.string()},
+                            opt.interrupt);
   if (rc < 0) return "cannot start '" + opt.sbatch + "' (is Slurm installed? scripts/slurm-local)";
   if (rc != 0) std::cout << fmt::format("sbatch --wait ended with {} (some tasks failed); collecting what they wrote\n", rc);
   return "";
+}
+
+// Removes what an earlier sweep into the same folder left under points/ (each point folder
+// that holds a point.json or a run), so that no point of this sweep can be read with an
+// earlier sweep's result: a point that fails to load starts no run that would clear it, and
+// a Slurm task that never ran writes nothing. "" or why not.
+std::string clear_points(const fs::path& out) {
+  std::error_code ec;
+  const fs::path points = out / "points";
+  if (!fs::is_directory(points, ec)) return "";
+  for (const auto& e : fs::directory_iterator(points, ec)) {
+    const fs::path d = e.path();
+    if (!e.is_directory(ec) || d.filename().string().find_first_not_of("0123456789") != std::string::npos) continue;
+    if (!fs::exists(d / "point.json", ec) && !fs::exists(d / kRunMarker, ec) && !fs::exists(d / "run.json", ec)) continue;
+    fs::remove_all(d, ec);
+    if (ec) return "cannot clear " + d.string() + " (an earlier sweep's point): " + ec.message();
+  }
+  return ec ? "cannot read " + points.string() + ": " + ec.message() : "";
 }
 
 // sweep.csv over every point's point.json and metrics.json; returns how many points lack a
@@ -253,8 +321,8 @@ std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOption
 int write_table(const SweepSpec& s, const fs::path& out) {
   std::ofstream f(out / "sweep.csv");
   f << "point";
-  for (const auto& p : s.params) f << "," << p;
-  for (const auto& m : s.metrics) f << "," << m;
+  for (const auto& p : s.params) f << "," << csv_field(p);
+  for (const auto& m : s.metrics) f << "," << csv_field(m);
   f << ",passed,exit_code\n";
   int bad_points = 0;
   for (std::size_t k = 1; k <= s.points.size(); ++k) {
@@ -265,16 +333,17 @@ int write_table(const SweepSpec& s, const fs::path& out) {
     } catch (const std::exception&) {
       pj = {{"exit_code", 3}, {"passed", false}};  // no result: the task never ran
     }
+    const int code = pj.value("exit_code", 3);
+    // Metrics only of a point that ran (clear_points() removed what an earlier sweep left).
     try {
-      mj = nlohmann::json::parse(std::ifstream(d / "metrics.json"));
+      mj = code <= 1 ? nlohmann::json::parse(std::ifstream(d / "metrics.json")) : nlohmann::json::object();
     } catch (const std::exception&) {
       mj = nlohmann::json::object();
     }
-    const int code = pj.value("exit_code", 3);
     if (code >= 2) ++bad_points;
     f << k;
     for (const auto& [key, v] : s.points[k - 1]) f << "," << csv_quoted(v);
-    for (const auto& m : s.metrics) f << "," << metric_text(mj, m);
+    for (const auto& m : s.metrics) f << "," << csv_field(metric_text(mj, m));
     f << "," << (pj.value("passed", false) ? "true" : "false") << "," << code << "\n";
   }
   return bad_points;
@@ -355,6 +424,10 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   }
   std::cout << fmt::format("sweep {}: {} points of {} ({})\n", s.name, s.points.size(), s.scenario,
                            opt.slurm ? "Slurm job array" : "local");
+  if (const std::string e = clear_points(out); !e.empty()) {
+    std::cerr << "omnitwin sweep: " << e << "\n";
+    return 2;
+  }
   if (opt.slurm) {
     if (const std::string e = run_slurm(s, out, opt); !e.empty()) {
       std::cerr << "omnitwin sweep: " << e << "\n";

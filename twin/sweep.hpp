@@ -22,8 +22,11 @@
 // the other parameters, failed expectations marked). Locally the points run -j at a time;
 // --slurm writes sweep.sbatch (a job array, one task per point, each `omnitwin sweep SPEC
 // --point K`), submits it with `sbatch --wait`, then collects what the tasks wrote.
-// Exit: 0 every point ran (its expectations are data, not a verdict); 2 a bad spec or a bad
-// point's scenario; 3 a point failed to run or left no result, or an interruption.
+// Before the points run, what an earlier sweep left under points/ is removed, so the table
+// holds this sweep's results only.
+// Exit: 0 every point ran (its expectations are data, not a verdict); 2 a bad spec (its
+// first point must load); 3 a later point did not load, failed to run or left no result, or
+// an interruption.
 // Not real-time code.
 #pragma once
 

@@ -11,6 +11,7 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <set>
 #include <thread>
 
 #include "tests/twin/cli_support.hpp"
@@ -158,6 +159,89 @@ TEST_F(Sweep, SigtermDuringSlurmPassesOnToSbatchAndEnds) {
   c.signal(SIGTERM);
   EXPECT_EQ(c.wait(10s), 3) << c.out() << c.err();
   EXPECT_TRUE(fs::exists(dir_ / "sbatch-term")) << "sbatch was not told to stop";
+}
+
+// A random real keeps every digit it was drawn with and stays in [min, max]; whole-number
+// bounds draw whole numbers. The draws were printed with 6 digits: two of three equal and
+// one below min in this range (found in review).
+TEST_F(Sweep, RandomDrawsKeepTheirDigitsAndTheirRange) {
+  const std::string body = "scenario: line.yaml\ngrid: {bus: [can]}\n"
+                           "random:\n  draws: 20\n  seed: 3\n  params:\n"
+                           "    platform.motor.friction_torque: {min: 0.1000001, max: 0.1000009}\n"
+                           "    bus.bit_rate: {min: 125000, max: 1000000}\n"
+                           "metrics: [platform.final_error_cm]\n";
+  const SweepSpec a = load_sweep(write_spec(dir_ / "a", "r.yaml", body).string());
+  ASSERT_EQ(a.points.size(), 20u);
+  std::set<std::string> seen;
+  for (const auto& p : a.points) {
+    ASSERT_EQ(p.size(), 3u);
+    const double v = std::stod(p[1].second);
+    EXPECT_GE(v, 0.1000001) << p[1].second;
+    EXPECT_LE(v, 0.1000009) << p[1].second;
+    seen.insert(p[1].second);
+    EXPECT_EQ(p[2].second.find_first_not_of("0123456789"), std::string::npos) << p[2].second;
+    const long rate = std::stol(p[2].second);
+    EXPECT_GE(rate, 125000);
+    EXPECT_LE(rate, 1000000);
+  }
+  EXPECT_EQ(seen.size(), 20u) << "draws collapsed onto each other";
+}
+
+// A second sweep into the same folder never reports the first one's results: point 2 does
+// not load this time, and its row read the earlier run's metrics (found in review). A string
+// metric holding a comma (the scenario's path here) is quoted in the table.
+TEST_F(Sweep, AnEarlierSweepsResultsAreNotReadAsThisOnesAndStringsAreQuoted) {
+  const fs::path spec_dir = dir_ / "d,1";
+  const auto spec = [&](const std::string& second) {
+    return write_spec(spec_dir, "s.yaml",
+                      "name: s\nscenario: line.yaml\ngrid: {controller.period: [0.005, " + second +
+                          "]}\nmetrics: [platform.final_error_cm, scenario_file]\n");
+  };
+  const fs::path out = dir_ / "out";
+  const Finished first = run({"sweep", spec("0.010").string(), "--out", out.string()});
+  ASSERT_EQ(first.code, 0) << first.out << first.err;
+  const Finished second = run({"sweep", spec("\"bogus\"").string(), "--out", out.string()});
+  EXPECT_EQ(second.code, 3) << second.out << second.err;
+  EXPECT_TRUE(contains(second.out, "2 points, 1 ran, 1 failed to run")) << second.out;
+  const auto rows = lines_of(read_bytes(out / "sweep.csv"));
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_TRUE(rows[2].starts_with("2,\"bogus\",,,false,2")) << rows[2];
+  EXPECT_FALSE(fs::exists(out / "points/0002/metrics.json")) << "the earlier sweep's point 2 is still there";
+  // Every row has the header's number of fields for a CSV reader.
+  const std::string parse = "python3 -c \"import csv, sys; r = list(csv.reader(open(sys.argv[1]))); "
+                            "sys.exit(0 if all(len(x) == len(r[0]) for x in r) else 1)\" '" +
+                            (out / "sweep.csv").string() + "'";
+  EXPECT_EQ(std::system(parse.c_str()), 0) << read_bytes(out / "sweep.csv");
+}
+
+// The Slurm script takes the sweep's name, the spec's folder and --out as data, whatever they
+// hold: a name with a line break and a command, a folder and an output path with a quote and
+// a space. The name's command ran when the script did, and the quoted paths broke the exec
+// line (found in review). A stand-in sbatch runs the script as task 1.
+TEST_F(Sweep, TheSlurmScriptQuotesWhatItIsGiven) {
+  const fs::path bin = dir_ / "bin";
+  fs::create_directories(bin);
+  {
+    std::ofstream f(bin / "sbatch");
+    f << "#!/bin/sh\nfor a; do last=$a; done\nprintf '%s\\n' \"$@\" > '" << (dir_ / "args").string()
+      << "'\nSLURM_ARRAY_TASK_ID=1 sh \"$last\"\n";
+  }
+  fs::permissions(bin / "sbatch", fs::perms::owner_all);
+  ::setenv("PATH", (bin.string() + ":" + std::getenv("PATH")).c_str(), 1);
+  const fs::path pwned = dir_ / "PWNED";
+  const fs::path spec = write_spec(dir_ / "q'd ir", "s.yaml",
+                                   "name: \"x\\ntouch " + pwned.string() + "\"\nscenario: line.yaml\n"
+                                   "grid: {controller.period: [0.005, 0.010]}\nmetrics: [platform.final_error_cm]\n");
+  const fs::path out = dir_ / "out q'B";
+  const Finished f = run({"sweep", spec.string(), "--slurm", "--out", out.string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;  // point 2 never ran: the stand-in ran task 1 only
+  EXPECT_FALSE(fs::exists(pwned)) << read_bytes(out / "sweep.sbatch");
+  const nlohmann::json pj = nlohmann::json::parse(read_bytes(out / "points/0001/point.json"));
+  EXPECT_EQ(pj.at("exit_code"), 0);
+  EXPECT_TRUE(contains(read_bytes(out / "sweep.sbatch"), "#SBATCH --job-name=omnitwin-sweep-x_touch_"))
+      << read_bytes(out / "sweep.sbatch");
+  EXPECT_TRUE(contains(read_bytes(dir_ / "args"), "--output=" + (out / "slurm-%A_%a.out").string()))
+      << read_bytes(dir_ / "args");
 }
 
 TEST_F(Sweep, PointRunsOnlyThatPoint) {
