@@ -357,7 +357,7 @@ int cmd_run(const RunArgs& a) {
     // discovered before the first state goes out, as --web-wait waits for a page.
     if (dds && s.outputs.dds.wait_for_readers > 0) {
       const int want = s.outputs.dds.wait_for_readers;
-      std::cerr << fmt::format("  DDS: waiting up to {:g} s for {} reader(s) of the state topic\n", s.outputs.dds.wait_s, want)
+      std::cerr << fmt::format("  DDS: waiting up to {:g} s for {} reader(s) of a state topic\n", s.outputs.dds.wait_s, want)
                 << std::flush;
       const int got = dds->wait_for_readers(want, s.outputs.dds.wait_s, &g_interrupt);
       if (g_interrupt.load()) {
@@ -611,8 +611,11 @@ int main(int argc, char** argv) {
   echo->add_option("--domain", eo.domain, "DDS domain (default $OMNITWIN_DDS_DOMAIN, else 0)")->check(CLI::Range(0, 232));
   echo->add_option("--interface", eo.interface, "network interface, e.g. lo (default $OMNITWIN_DDS_INTERFACE)");
   echo->add_option("--config", eo.config_file, "a Cyclone DDS XML configuration file");
-  echo->add_option("--count", eo.count, "exit after N samples (0: never)");
-  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)");
+  // A negative count wrapped to 2^64 - 1 and a negative timeout meant "never" (found in review).
+  const CLI::Validator not_negative(
+      [](std::string& v) { return v.starts_with('-') ? std::string("must not be negative") : std::string(); }, "");
+  echo->add_option("--count", eo.count, "exit after N samples (0: never)")->check(not_negative);
+  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)")->check(not_negative);
   echo->add_flag("--json", eo.json, "JSON lines instead of text");
 
   std::string exp_name, exp_out, exp_model;

@@ -115,10 +115,20 @@ TEST_F(CliOutputs, EchoInAnotherProcessReceivesTheRunsStates) {
   }
   EXPECT_GE(states, 345u) << "of 351 published";
   EXPECT_EQ(first_t, 0.0) << "the run waited for the echo's reader";
-  EXPECT_TRUE(contains(f.err, "DDS: waiting up to 10 s for 1 reader(s) of the state topic")) << f.err;
+  EXPECT_TRUE(contains(f.err, "DDS: waiting up to 10 s for 1 reader(s) of a state topic")) << f.err;
   ASSERT_FALSE(events.empty());
   EXPECT_EQ(events.front(), "start");
   EXPECT_EQ(events.back(), "end");
+}
+
+// A negative --count wrapped to 2^64 - 1 and a negative --timeout meant "never" (found in
+// review): both are bad usage now.
+TEST_F(CliOutputs, EchoRefusesANegativeCountOrTimeout) {
+  for (const char* opt : {"--count", "--timeout"}) {
+    const Finished f = run({"echo", opt, "-1"});
+    EXPECT_EQ(f.code, 2) << opt << ": " << f.err;
+    EXPECT_TRUE(contains(f.err, std::string(opt) + ": must not be negative")) << f.err;
+  }
 }
 
 // A DDS interface that does not exist is bad input: exit 2, one line naming outputs.dds,

@@ -87,6 +87,19 @@ TEST(DdsEcho, PrintsRunEventsAsJsonLinesAndStopsAtCount) {
   EXPECT_EQ(lines[1]["t_ns"], 1'500'000'000);
 }
 
+// A text that is not UTF-8 (a run directory's name can be any bytes) is printed with the
+// bad bytes replaced: the JSON form threw and ended the echo with exit 3 (found in review).
+TEST(DdsEcho, JsonOfATextThatIsNotUtf8IsPrintedNotThrown) {
+  DdsPublisher pub(publisher_settings());
+  pub.start(run_info("echo-bytes"));
+  pub.event(RunEvent{1'000'000, RunEventKind::info, "twin", "run_dir=/tmp/caf\xe9"});
+  EchoThread echo(echo_options("events", 2, 5.0));
+  ASSERT_EQ(echo.result.get(), kEchoOk);
+  const std::vector<json> lines = echo.json_lines();
+  ASSERT_EQ(lines.size(), 2u);
+  EXPECT_EQ(lines[1]["text"], "run_dir=/tmp/caf\xef\xbf\xbd");  // U+FFFD
+}
+
 TEST(DdsEcho, PlatformStateJsonCarriesTheExactValues) {
   DdsPublisher pub(publisher_settings());
   pub.start(run_info("echo-state"));

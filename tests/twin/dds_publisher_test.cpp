@@ -25,6 +25,8 @@ using ddstest::make_sample;
 using ddstest::test_domain;
 using ddstest::TestReader;
 
+namespace fs = std::filesystem;
+
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 DdsSettings loopback_settings(int domain, double rate_hz = 1000) {
@@ -261,6 +263,75 @@ TEST(DdsPublisher, LateReaderGetsTheRunEventsThenTheEnd) {
     EXPECT_EQ(m.kind, static_cast<std::uint8_t>(RunEventKind::end));
   });
   EXPECT_EQ(ends, 1);
+}
+
+// The source timestamps of what `reader` holds, in the order taken, with each sample's text
+// from `name` (the event's kind, or "" for a state).
+template <class T>
+std::vector<std::pair<dds_time_t, std::string>> stamps(dds_entity_t reader, std::string (*name)(const T&)) {
+  std::vector<std::pair<dds_time_t, std::string>> out;
+  ddstest::wait_until([&] {
+    void* samples[64] = {nullptr};
+    dds_sample_info_t infos[64];
+    const dds_return_t n = dds_take(reader, samples, infos, 64, 64);
+    for (dds_return_t i = 0; i < n; ++i)
+      if (infos[i].valid_data) out.emplace_back(infos[i].source_timestamp, name(*static_cast<const T*>(samples[i])));
+    if (n > 0) dds_return_loan(reader, samples, n);
+    return false;
+  }, 0.5);
+  return out;
+}
+
+// Events go out after every sample offered before them, so a reader gets the run's end after
+// its last state: the publishing thread sent all queued events before the states still in the
+// ring, and the end came 20–100 states early (found in review). Samples offered before start()
+// wait in the ring; the event queued after them must follow them on the wire (the writers'
+// source timestamps), the start event precede them.
+TEST(DdsPublisher, EventsGoOutAfterTheSamplesOfferedBeforeThem) {
+  const int domain = test_domain(3);
+  DdsPublisher pub(loopback_settings(domain));
+  TestReader states(domain, "state"), events(domain, "events");
+  ASSERT_TRUE(states.wait_matched());
+  ASSERT_TRUE(events.wait_matched());
+  for (std::uint64_t i = 0; i < 50; ++i) ASSERT_TRUE(pub.offer(make_sample(i)));
+  pub.event(RunEvent{49'000'000, RunEventKind::info, "master", "after 50 states"});
+  pub.start(run_info("order"));
+  pub.finish();
+  const auto st = stamps<omnitwin_msg_dds__PlatformState_>(
+      states.get(), +[](const omnitwin_msg_dds__PlatformState_&) { return std::string(); });
+  const auto ev = stamps<omnitwin_msg_dds__RunEvent_>(
+      events.get(), +[](const omnitwin_msg_dds__RunEvent_& m) { return std::string(m.kind_name); });
+  ASSERT_EQ(st.size(), 50u);
+  ASSERT_EQ(ev.size(), 3u);
+  EXPECT_EQ(ev[0].second, "start");
+  EXPECT_EQ(ev[1].second, "info");
+  EXPECT_EQ(ev[2].second, "end");
+  EXPECT_LE(ev[0].first, st.front().first) << "the start event precedes the first state";
+  EXPECT_GE(ev[1].first, st.back().first) << "an event went out before states offered before it";
+  EXPECT_GE(ev[2].first, st.back().first);
+}
+
+// outputs.dds.wait_for_readers counts readers of any state topic: a ROS 2 node reads rt/clock,
+// not our platform_state, and only that one counted (found in review).
+TEST(DdsPublisher, AReaderOfTheClockAloneCountsForWaitForReaders) {
+  const int domain = test_domain(4);
+  DdsPublisher pub(loopback_settings(domain));
+  EXPECT_EQ(pub.wait_for_readers(1, 0.0), 0);
+  TestReader clock(domain, "clock");
+  EXPECT_EQ(pub.wait_for_readers(1, 5.0), 1);
+}
+
+// A configuration file whose path holds a comma: Cyclone splits its configuration string at
+// commas, so the path was cut there and the file not found (found in review).
+TEST(DdsPublisher, AConfigFileWhosePathHoldsACommaIsRead) {
+  omnitwin::testing::TempDir dir("omnitwin-dds");
+  fs::create_directories(dir / "com,ma");
+  fs::copy_file(ddstest::loopback_config(), dir / "com,ma/loopback.xml");
+  DdsSettings s = loopback_settings(test_domain(5));
+  s.interface.clear();
+  s.config_file = (dir / "com,ma/loopback.xml").string();
+  DdsPublisher pub(s);
+  EXPECT_EQ(pub.endpoint().config_file, s.config_file);
 }
 
 TEST(DdsPublisher, AnEndEventGivenByTheRunIsNotRepeated) {

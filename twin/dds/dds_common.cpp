@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "omnitwin_msgs.h"
 
@@ -102,6 +103,15 @@ ResolvedEndpoint resolve_endpoint(const DdsEndpoint& ep) {
   if (!ep.config_file.empty()) {
     r.config_file = resolve_config_file(ep.config_file);
     r.config = "file://" + r.config_file;
+    // Cyclone reads its configuration string as a comma-separated list, so a path with a
+    // comma would be cut there (found in review): such a file goes in as its XML text.
+    if (r.config_file.find(',') != std::string::npos) {
+      std::ifstream f(r.config_file, std::ios::binary);
+      std::ostringstream text;
+      text << f.rdbuf();
+      if (!f) throw DdsError("DDS configuration file " + r.config_file + ": cannot read it");
+      r.config = text.str();
+    }
     return r;
   }
   r.interface = ep.interface.empty() ? env_or_empty("OMNITWIN_DDS_INTERFACE") : ep.interface;

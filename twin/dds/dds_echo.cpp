@@ -216,7 +216,9 @@ std::uint64_t Subscription::take_and_print(std::size_t reader, std::uint64_t lim
   for (dds_return_t i = 0; i < n && (!limit || printed < limit); ++i) {
     if (!infos[i].valid_data) continue;
     const Json j = formatters_[reader](samples[i]);
-    out << (json ? j.dump() : text_line(j)) << '\n';
+    // Bytes that are not UTF-8 (a run directory's name may hold them) are replaced: dump()
+    // threw on them and ended the echo with exit 3 (found in review).
+    out << (json ? j.dump(-1, ' ', false, Json::error_handler_t::replace) : text_line(j)) << '\n';
     out.flush();
     ++printed;
   }

@@ -18,7 +18,8 @@ struct EchoOptions {
   std::string interface;      // "": $OMNITWIN_DDS_INTERFACE, else Cyclone's default
   std::string config_file;    // a Cyclone DDS XML file; overrides interface
   // "all" (or "") for every topic, or one: a short name (state, odom, joint_states, cmd_vel,
-  // drives, bus, events), a full topic name (rt/omnitwin/odom) or its last part (platform_state).
+  // drives, bus, events, clock), a full topic name (rt/omnitwin/odom) or its last part
+  // (platform_state).
   std::string topic = "all";
   std::uint64_t count = 0;    // exit after this many samples (all topics together); 0 = no limit
   double timeout_s = 0;       // > 0: give up after this long without a sample [s]; 0 = wait forever

@@ -2,8 +2,10 @@
 // (see dds_publisher.hpp).
 #include "twin/dds/dds_publisher.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -73,9 +75,14 @@ DdsPublisher::~DdsPublisher() { finish(); }
 int DdsPublisher::wait_for_readers(int readers, double timeout_s, const std::atomic<bool>* stop) const {
   const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   for (;;) {
-    dds_publication_matched_status_t st{};
-    if (dds_get_publication_matched_status(writers_->state, &st) < 0) return 0;
-    const int matched = static_cast<int>(st.current_count);
+    // A reader of any state topic counts: a ROS 2 node reads rt/clock or odom, not our own
+    // platform_state type (only that one counted; found in review). The most on any topic.
+    int matched = 0;
+    for (const dds_entity_t w : {writers_->state, writers_->odom, writers_->joints, writers_->cmd_vel,
+                                 writers_->drives, writers_->bus, writers_->clock}) {
+      dds_publication_matched_status_t st{};
+      if (dds_get_publication_matched_status(w, &st) == 0) matched = std::max(matched, static_cast<int>(st.current_count));
+    }
     if (matched >= readers || (stop && stop->load()) || std::chrono::steady_clock::now() >= give_up) return matched;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -84,7 +91,11 @@ int DdsPublisher::wait_for_readers(int readers, double timeout_s, const std::ato
 void DdsPublisher::start(const RunInfo& info) {
   if (started_ || finished_) return;
   info_ = info;
-  event(RunEvent{0, RunEventKind::start, "twin", start_text(info)});
+  {
+    // The start event goes out first, before any sample or event queued before start().
+    std::lock_guard lock(events_mutex_);
+    events_.emplace_front(RunEvent{0, RunEventKind::start, "twin", start_text(info)}, 0);
+  }
   started_ = true;
   thread_ = std::thread([this] { run_thread(); });
 }
@@ -100,14 +111,17 @@ bool DdsPublisher::offer(const StateSample& s) {
     dropped_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
+  pushed_.fetch_add(1, std::memory_order_release);
   wake();
   return true;
 }
 
-void DdsPublisher::event(const RunEvent& e) {
+void DdsPublisher::event(const RunEvent& e) { queue_event(e, pushed_.load(std::memory_order_acquire)); }
+
+void DdsPublisher::queue_event(const RunEvent& e, std::uint64_t after) {
   {
     std::lock_guard lock(events_mutex_);
-    events_.push_back(e);
+    events_.emplace_back(e, after);
   }
   wake();
 }
@@ -131,49 +145,62 @@ DdsPublisher::Stats DdsPublisher::stats() const {
                published_.load(r), events_n_.load(r), write_errors_.load(r)};
 }
 
-// The publishing thread: events first (the start event precedes the first sample), then the
-// samples, sleeping on wake_ when there is nothing to do.
+// The publishing thread: samples and events in the order they were offered, sleeping on
+// wake_ when there is nothing to do.
 void DdsPublisher::run_thread() {
   for (;;) {
     const std::uint32_t seen = wake_.load(std::memory_order_acquire);
     const bool stopping = stopping_.load(std::memory_order_acquire);
-    const bool worked = publish_events() | publish_samples();  // both: no short-circuit
+    const bool worked = publish_in_order();
     if (stopping && !worked) break;
     if (!worked) wake_.wait(seen, std::memory_order_acquire);
   }
   publish_end_and_flush();
 }
 
-bool DdsPublisher::publish_events() {
-  std::deque<RunEvent> batch;
-  {
-    std::lock_guard lock(events_mutex_);
-    batch.swap(events_);
+// Publishes what is queued: the next event as soon as every sample pushed before it is out,
+// samples otherwise. An event used to go out before the samples still in the ring, so the run's
+// `end` reached readers before its last states (found in review). True if anything went out.
+bool DdsPublisher::publish_in_order() {
+  bool any = false;
+  for (;;) {
+    std::optional<std::pair<RunEvent, std::uint64_t>> next;
+    {
+      std::lock_guard lock(events_mutex_);
+      if (!events_.empty()) next = events_.front();
+    }
+    if (next && popped_ >= next->second) {
+      publish_event(next->first);
+      std::lock_guard lock(events_mutex_);
+      events_.pop_front();
+    } else if (!publish_sample()) {
+      return any;
+    }
+    any = true;
   }
-  for (const RunEvent& e : batch) {
-    const omnitwin_msg_dds__RunEvent_ m = ddsmsg::to_message(e, info_.scenario);
-    if (dds_write(writers_->events, &m) < 0) write_errors_.fetch_add(1, std::memory_order_relaxed);
-    else events_n_.fetch_add(1, std::memory_order_relaxed);
-    end_seen_ = end_seen_ || e.kind == RunEventKind::end;
-  }
-  return !batch.empty();
 }
 
-bool DdsPublisher::publish_samples() {
+void DdsPublisher::publish_event(const RunEvent& e) {
+  const omnitwin_msg_dds__RunEvent_ m = ddsmsg::to_message(e, info_.scenario);
+  if (dds_write(writers_->events, &m) < 0) write_errors_.fetch_add(1, std::memory_order_relaxed);
+  else events_n_.fetch_add(1, std::memory_order_relaxed);
+  end_seen_ = end_seen_ || e.kind == RunEventKind::end;
+}
+
+// One sample from the ring on every state topic; false when the ring is empty.
+bool DdsPublisher::publish_sample() {
   Writers& w = *writers_;
   StateSample s;
-  bool any = false;
-  while (ring_.pop(s)) {
-    any = true;
-    w.scratch.fill(s, info_.bus);
-    int failed = (dds_write(w.state, &w.scratch.state) < 0) + (dds_write(w.odom, &w.scratch.odom) < 0) +
-                 (dds_write(w.joints, &w.scratch.joints) < 0) + (dds_write(w.drives, &w.scratch.drives) < 0) +
-                 (dds_write(w.bus, &w.scratch.bus) < 0) + (dds_write(w.clock, &w.scratch.clock) < 0);
-    if (w.scratch.has_cmd_vel) failed += dds_write(w.cmd_vel, &w.scratch.cmd_vel) < 0;
-    published_.fetch_add(1, std::memory_order_relaxed);
-    if (failed) write_errors_.fetch_add(static_cast<std::uint64_t>(failed), std::memory_order_relaxed);
-  }
-  return any;
+  if (!ring_.pop(s)) return false;
+  ++popped_;
+  w.scratch.fill(s, info_.bus);
+  int failed = (dds_write(w.state, &w.scratch.state) < 0) + (dds_write(w.odom, &w.scratch.odom) < 0) +
+               (dds_write(w.joints, &w.scratch.joints) < 0) + (dds_write(w.drives, &w.scratch.drives) < 0) +
+               (dds_write(w.bus, &w.scratch.bus) < 0) + (dds_write(w.clock, &w.scratch.clock) < 0);
+  if (w.scratch.has_cmd_vel) failed += dds_write(w.cmd_vel, &w.scratch.cmd_vel) < 0;
+  published_.fetch_add(1, std::memory_order_relaxed);
+  if (failed) write_errors_.fetch_add(static_cast<std::uint64_t>(failed), std::memory_order_relaxed);
+  return true;
 }
 
 void DdsPublisher::publish_end_and_flush() {
@@ -182,7 +209,7 @@ void DdsPublisher::publish_end_and_flush() {
     const std::string text = "published=" + std::to_string(st.published) + " dropped=" +
                              std::to_string(st.dropped) + " skipped=" + std::to_string(st.skipped);
     event(RunEvent{last_t_ns_.load(std::memory_order_relaxed), RunEventKind::end, "twin", text});
-    publish_events();
+    publish_in_order();
   }
   const auto timeout = static_cast<dds_duration_t>(settings_.finish_timeout_s * 1e9);
   dds_wait_for_acks(writers_->events, timeout);  // a timeout only means a reader was slow

@@ -44,7 +44,8 @@ class DdsPublisher {
   DdsPublisher(const DdsPublisher&) = delete;
   DdsPublisher& operator=(const DdsPublisher&) = delete;
 
-  // Waits until at least `readers` readers match the state topic, or `timeout_s` seconds of
+  // Waits until at least `readers` readers match one of the state topics (platform_state,
+  // odom, joint_states, cmd_vel, drives, bus or clock), or `timeout_s` seconds of
   // wall time have passed, or *stop becomes nonzero; returns how many matched. Polls every
   // 10 ms. Not real-time safe: call before the run.
   int wait_for_readers(int readers, double timeout_s, const std::atomic<bool>* stop = nullptr) const;
@@ -55,7 +56,8 @@ class DdsPublisher {
   // sample was due but the ring was full (counted in Stats::dropped); true otherwise. Samples
   // offered before start() wait in the ring. Call from one thread only.
   bool offer(const StateSample& s);
-  // Queues a run event (non-blocking; allocates). Events reach the wire in order.
+  // Queues a run event (non-blocking; allocates). Events reach the wire in order, and each
+  // after every sample offered before it (so `end` is the last thing a reader gets).
   void event(const RunEvent& e);
   // Drains the ring and the events, publishes the end event (unless one was given to
   // event()), waits up to finish_timeout_s for readers to acknowledge the events, and joins
@@ -67,8 +69,10 @@ class DdsPublisher {
  private:
   struct Writers;
   void run_thread();
-  bool publish_events();
-  bool publish_samples();
+  void queue_event(const RunEvent& e, std::uint64_t after);
+  bool publish_in_order();
+  void publish_event(const RunEvent& e);
+  bool publish_sample();
   void publish_end_and_flush();
   void wake();
 
@@ -78,7 +82,11 @@ class DdsPublisher {
   RateDecimator decimator_;            // producer only
   SpscRing<StateSample> ring_;
   std::mutex events_mutex_;
-  std::deque<RunEvent> events_;        // guarded by events_mutex_
+  // Each event with the number of samples pushed before it: it goes out once that many were
+  // published. Guarded by events_mutex_.
+  std::deque<std::pair<RunEvent, std::uint64_t>> events_;
+  std::atomic<std::uint64_t> pushed_{0};  // samples in the ring so far (producer)
+  std::uint64_t popped_ = 0;              // samples taken from the ring (consumer)
   RunInfo info_;                       // written by start() before the thread starts
   std::atomic<std::int64_t> last_t_ns_{0};  // the last offered sample's time [ns]
   bool end_seen_ = false;              // consumer: an end event went out
