@@ -177,7 +177,7 @@ std::string write_summary(const fs::path& file, const nlohmann::json& summary) {
 
 }  // namespace
 
-ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools) {
+ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video) {
   const auto t0 = Clock::now();
   ReportResult r;
   try {
@@ -185,7 +185,9 @@ ReportResult write_run_report(const std::string& run_dir, const ReportTools& too
     if (!fs::is_directory(run_dir, ec)) {
       r.error = "run directory '" + run_dir + "' does not exist";
     } else {
-      run_script(tools, "run_report.py", {run_dir}, r);
+      std::vector<std::string> args{run_dir};
+      if (!video.empty()) args.insert(args.end(), {"--video", video});
+      run_script(tools, "run_report.py", args, r);
       if (r.ok) r.path = (fs::path(run_dir) / "report.html").string();
     }
   } catch (const std::exception& e) {

@@ -39,7 +39,9 @@ struct ReportResult {
 // when run_dir is missing or is not a run directory, or the tools cannot run.
 // Takes about a second for a run of a few thousand samples. Not real-time safe: spawns a
 // process, blocks until it ends (or tools.timeout_s passes), allocates. Thread-safe.
-ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools);
+// `video`: the run's video when it is not RUN_DIR/video.mp4 (run --video FILE, render --out
+// FILE); the report embeds and links it by a path relative to the run directory.
+ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video = "");
 
 // Writes out_html, the index page over the scenarios `omnitwin check` ran. `summary` is
 // {"title": str, "results": [{"scenario", "file", "run_dir", "exit_code", "passed",

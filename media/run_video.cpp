@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -266,12 +267,17 @@ GlBackend backend_of(const VideoOptions& o) {
 // frame only, so once set (and however often set again) finalising is never cut short.
 VideoResult render_frames(Recording& rec, SceneRenderer& renderer, VideoEncoder& encoder, const VideoOptions& o,
                           const std::atomic<bool>* stop) {
-  const int total = static_cast<int>(std::floor(rec.end_time() * o.fps + 1e-6)) + 1;
+  // Frames at k/fps, and the run's last instant as the last frame where T·fps is not whole:
+  // the video ended up to a frame short of the final state (found in review).
+  const double end = rec.end_time();
+  const int steps = static_cast<int>(std::floor(end * o.fps + 1e-6));
+  const bool end_frame = steps / o.fps < end - 1e-9;
+  const int total = steps + 1 + (end_frame ? 1 : 0);
   VideoResult res{encoder.path()};
   for (int k = 0; k < total; ++k) {
     res.stopped_early = stop && stop->load();
     if (res.stopped_early) break;
-    encoder.add_frame(renderer.render(rec.at(k / o.fps)).data());
+    encoder.add_frame(renderer.render(rec.at(k <= steps ? k / o.fps : end)).data());
     if (o.progress) o.progress(k + 1, total);
   }
   if (res.stopped_early && encoder.frames() == 0) {
@@ -301,11 +307,24 @@ VideoResult render_or_throw(const std::string& run_dir, const std::string& out_f
 
 }  // namespace
 
+std::string video_file_problem(const std::string& out_file) {
+  std::error_code ec;
+  if (!fs::exists(out_file, ec)) return "";
+  if (!fs::is_regular_file(out_file, ec)) return out_file + " exists and is not a regular file";
+  // An ISO base-media file (MP4) has a box type at bytes 4…7 ("ftyp" first for ours).
+  char head[8] = {};
+  std::ifstream f(out_file, std::ios::binary);
+  f.read(head, sizeof head);
+  if (f.gcount() == sizeof head && std::memcmp(head + 4, "ftyp", 4) == 0) return "";
+  return out_file + " exists and is not an MP4 video: not replacing it (give another file)";
+}
+
 VideoResult render_run(const std::string& run_dir, const std::string& out_file, const VideoOptions& o,
                        const std::atomic<bool>* stop) {
   validate(o);
   const GlBackend backend = backend_of(o);
   const auto start = std::chrono::steady_clock::now();
+  if (const std::string why = video_file_problem(out_file); !why.empty()) throw std::invalid_argument(why);
   // An older video must not pass for this run's, whatever fails below.
   std::error_code ec;
   const bool removed_old = !fs::is_directory(out_file, ec) && fs::remove(out_file, ec);

@@ -8,8 +8,8 @@
 //
 // Timing: frame k shows the state at sim time t = k / fps, interpolated linearly between
 // the two control samples around it (clamped to the first/last sample); frames run from
-// t = 0 to the last sample, so a run of T seconds gives floor(T * fps) + 1 frames and the
-// final state is the last frame. The chassis height and tilt come from the model's qpos0.
+// t = 0 to the last sample, so a run of T seconds gives floor(T * fps) + 1 frames, and one
+// more showing the state at T when T * fps is not whole: the final state is the last frame. The chassis height and tilt come from the model's qpos0.
 #pragma once
 
 #include <atomic>
@@ -43,6 +43,11 @@ struct VideoResult {
   double render_s = 0;       // wall time spent [s]
 };
 
+// "" when out_file may be written, else why not: it exists and is not an MP4 (a run's record,
+// any other file: a typo in --out would have deleted it; found in review) or not a regular
+// file. Not real-time safe.
+std::string video_file_problem(const std::string& out_file);
+
 // Renders the recorded run in run_dir into out_file (its directory must exist), written as
 // DIR/.NAME.part and renamed to out_file only once the MP4 is complete (VideoEncoder), so
 // out_file is whole or absent, never cut. An older out_file is removed first: it never
@@ -51,7 +56,10 @@ struct VideoResult {
 // stop requests cannot cut it) and the result says stopped_early. Throws
 // std::runtime_error with a message naming the file (missing or malformed run files, unknown
 // camera, unwritable output, disk full; "; the older FILE was removed" when one was), after
-// which nothing is under out_file; std::invalid_argument for bad options (nothing removed).
+// which nothing is under out_file; std::invalid_argument for bad options or an out_file that
+// video_file_problem() refuses (nothing removed). The frames are at k/fps and, when the
+// run's length T is not a whole number of frames, one more at T: the final state is the
+// last frame.
 // Not real-time safe: allocates, renders in software, writes files. Uses an off-screen GL
 // context current on the calling thread for the duration of the call.
 VideoResult render_run(const std::string& run_dir, const std::string& out_file,

@@ -204,6 +204,29 @@ void SceneRenderer::set_reference_path(std::span<const PathPoint> path) {
   std::vector<PathPoint> kept;
   for (size_t i : simplify_path(path, kPathTolerance)) kept.push_back(path[i]);
   reference_ = thin_path(kept, kMaxPathPoints);
+  frame_overview(path);
+}
+
+// The inset shows the whole planned path from the model's "overview" direction: the model's
+// fixed camera looks at the origin from 2.6 m and lost the platform beyond about 1.4 m, so
+// on the 2 m thesis line the inset ended on an empty floor (found in review). A free camera
+// at the fixed one's azimuth and elevation, aimed at the middle of the path, far enough back
+// for its larger side (45° field of view) and never nearer than the fixed camera.
+void SceneRenderer::frame_overview(std::span<const PathPoint> path) {
+  if (path.empty()) return;
+  double x0 = path[0].x, x1 = x0, y0 = path[0].y, y1 = y0;
+  for (const PathPoint& p : path) x0 = std::min(x0, p.x), x1 = std::max(x1, p.x), y0 = std::min(y0, p.y), y1 = std::max(y1, p.y);
+  const mjModel* m = model_.get();
+  const mjtNum* pos = m->cam_pos + 3 * inset_cam_.fixedcamid;  // the fixed camera looks at the origin
+  const double horizontal = std::hypot(pos[0], pos[1]), reach = std::hypot(horizontal, pos[2]);
+  const double span = std::max(x1 - x0, y1 - y0) + 0.8;  // the platform's size either side
+  inset_cam_.type = mjCAMERA_FREE;
+  inset_cam_.lookat[0] = 0.5 * (x0 + x1);
+  inset_cam_.lookat[1] = 0.5 * (y0 + y1);
+  inset_cam_.lookat[2] = 0;
+  inset_cam_.azimuth = std::atan2(-pos[1], -pos[0]) * 180.0 / std::numbers::pi;
+  inset_cam_.elevation = -std::atan2(pos[2], horizontal) * 180.0 / std::numbers::pi;
+  inset_cam_.distance = std::max(reach, 1.3 * span);
 }
 
 // Pose and wheel angles into qpos (height and tilt from qpos0), then kinematics only.

@@ -8,7 +8,9 @@
 // mj_camlight), so rendering cannot disturb, or be disturbed by, the dynamics.
 //
 // Frame layout: the chosen camera (default "track", which follows the chassis) fills the
-// frame; the fixed "overview" camera is an inset in the top-right corner, 1/3 of the width;
+// frame; an overview is an inset in the top-right corner, 1/3 of the width (the model's
+// "overview" camera until a reference path is set, then a camera from the same direction
+// that frames the whole path);
 // the reference path (blue) and the driven trace (orange) are capsules appended to the
 // scene after mjv_updateScene, slightly above the floor, after simplification (each geom is
 // costly in software); text at top left (mjr_overlay). Shadows and multisampling are off by
@@ -73,7 +75,8 @@ class SceneRenderer {
   SceneRenderer(const SceneRenderer&) = delete;
   SceneRenderer& operator=(const SceneRenderer&) = delete;
 
-  // The reference path drawn in every following frame, simplified by simplify_path.
+  // The reference path drawn in every following frame, simplified by simplify_path; the
+  // overview inset is framed on it.
   void set_reference_path(std::span<const PathPoint> path);
 
   // Draws one frame (the trace capped at kMaxPathPoints by thin_path) and returns its pixels: width*height*3 bytes, RGB24, rows top to bottom.
@@ -100,6 +103,7 @@ class SceneRenderer {
   void adapt_visual_settings();
   void make_gl_objects();
   void set_state(const FrameState& s);
+  void frame_overview(std::span<const PathPoint> path);
   void draw_view(const mjrRect& rect, mjvCamera& camera, std::span<const PathPoint> trace);
   void draw_overlay(const mjrRect& rect, const FrameState& s);
   void read_frame();

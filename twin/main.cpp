@@ -16,12 +16,14 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <mutex>
 #include <optional>
 #include <thread>
 
+#include "media/run_video.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "twin/check.hpp"
 #include "twin/clock.hpp"
@@ -118,7 +120,9 @@ OutputPlan output_plan(const RunArgs& a, const Scenario& s) {
 }
 
 // Renders and reports after the run; prints where they are. Returns false if one failed.
-bool make_outputs(const std::string& run_dir, const OutputPlan& plan) {
+// `before_report` (may be empty) runs between the video and the report.
+bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<void()> before_report = {}) {
+  plan.before_report = std::move(before_report);
   if (!plan.video && !plan.report) return true;
   if (plan.video)
     std::cout << "  rendering the video (Ctrl-C stops it and keeps the frames so far)...\n" << std::flush;
@@ -273,6 +277,10 @@ std::unique_ptr<WebServer> start_web_view(const RunArgs& a, const Scenario& s, c
 
 int cmd_run(const RunArgs& a) {
   try {
+    if (const std::string why = media::video_file_problem(a.video_file); !a.video_file.empty() && !why.empty()) {
+      std::cerr << "omnitwin: --video: " << why << "\n";
+      return 2;
+    }
     Scenario s = load_scenario(a.scenario, collect_overrides(a));
     if (a.loopback) confine_to_loopback(s);
     RunOptions o;
@@ -392,7 +400,11 @@ int cmd_run(const RunArgs& a) {
       std::cout << fmt::format("  DDS: {} states published, {} dropped, {} events\n", st.published, st.dropped,
                                st.events);
     }
-    const bool outputs_ok = make_outputs(r.out_dir, output_plan(a, s));
+    // A signal while the video renders must reach metrics.json before the report reads it:
+    // the report called an interrupted run PASSED (found in review).
+    const bool outputs_ok = make_outputs(r.out_dir, output_plan(a, s), [&] {
+      if (!r.interrupted && g_signals.load() > signals_in_run) mark_interrupted_after_run(r.out_dir);
+    });
     // A signal after the run loop's end (closing the records, video, report) is an
     // interruption too: say so in metrics.json and end with exit 3, as for one during the run.
     if (!r.interrupted && g_signals.load() > signals_in_run) {
@@ -443,12 +455,25 @@ int cmd_render(const std::string& run_dir, const std::string& out, const VideoSp
     std::cerr << "omnitwin render: " << run_dir << " is not a run directory (no trajectory.csv)\n";
     return 2;
   }
+  const std::string file = out.empty() ? (fs::path(run_dir) / "video.mp4").string() : out;
+  if (const std::string why = media::video_file_problem(file); !why.empty()) {
+    std::cerr << "omnitwin render: " << why << "\n";
+    return 2;
+  }
   OutputPlan plan;
   plan.video = true;
   plan.video_file = out;
   plan.video_spec = v;
   plan.report = report;
-  return make_outputs(run_dir, plan) ? 0 : 3;
+  const int signals_before = g_signals.load();
+  const bool ok = make_outputs(run_dir, plan);
+  // Ctrl-C or SIGTERM stops the rendering with a playable but shorter video: exit 3, as the
+  // README says for a signal in any phase (it was 0; found in review).
+  if (g_signals.load() > signals_before) {
+    std::cout << "  INTERRUPTED: the video holds the frames rendered so far\n";
+    return 3;
+  }
+  return ok ? 0 : 3;
 }
 
 int cmd_echo(const EchoOptions& o) {

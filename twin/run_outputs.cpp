@@ -38,7 +38,10 @@ void render_video(const std::string& run_dir, const OutputPlan& plan, const std:
 }
 
 void write_report(const std::string& run_dir, OutputsResult& r) {
-  const media::ReportResult rep = media::write_run_report(run_dir, report_tools());
+  // A video made elsewhere (--video FILE) is the run's video too: the report embeds it.
+  std::error_code ec;
+  const bool elsewhere = !r.video.empty() && !fs::equivalent(r.video, fs::path(run_dir) / "video.mp4", ec);
+  const media::ReportResult rep = media::write_run_report(run_dir, report_tools(), elsewhere ? r.video : "");
   if (rep.ok) {
     r.report = rep.path;
     r.report_wall_s = rep.seconds;
@@ -55,6 +58,7 @@ OutputsResult make_run_outputs(const std::string& run_dir, const OutputPlan& pla
   OutputsResult r;
   // The video first: the report links it when it exists.
   if (plan.video) render_video(run_dir, plan, stop, r);
+  if (plan.report && plan.before_report) plan.before_report();
   if (plan.report) write_report(run_dir, r);
   return r;
 }

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,7 @@ struct OutputPlan {
   std::string video_file;  // "" = RUN_DIR/video.mp4
   VideoSpec video_spec;
   bool report = false;
+  std::function<void()> before_report;  // may be empty: runs after the video, before the report
 };
 
 struct OutputsResult {

@@ -469,7 +469,9 @@ def fault_spans(run, t_end):
         if start is None:
             continue
         dur = number(f.get("duration_s")) or 0.0
-        spans.append((start, start + dur if dur > 0 else t_end))
+        end = min(start + dur, t_end) if dur > 0 else t_end
+        if start < t_end:  # one that begins after the run's end never happened
+            spans.append((start, end))
     return spans
 
 
@@ -637,11 +639,14 @@ def plot_bus(bus, plots_dir, spans):
 
 
 def run_end(run, traj, bus):
-    """The last sim time of the run [s]: its last sample or its planned duration."""
-    t = traj.get("t") or bus.get("t") or []
+    """The last sim time the run recorded [s]; its planned duration when it recorded nothing.
+    An interrupted run ends at its last sample: its plots must not run on to the planned
+    end, nor shade faults that never began (found in review)."""
+    t = [v for v in (traj.get("t") or bus.get("t") or []) if math.isfinite(v)]
+    if t:
+        return max(t)
     planned = run.get("duration_s") if isinstance(run, dict) else None
-    planned = planned if isinstance(planned, (int, float)) else 0.0
-    return max([v for v in t if math.isfinite(v)] + [float(planned)])
+    return float(planned) if isinstance(planned, (int, float)) else 0.0
 
 
 def make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind):
@@ -691,11 +696,21 @@ def plots_section(made, notes, title="Plots"):
     return "".join(parts)
 
 
-def video_section(run_dir):
+def video_link(run_dir, video):
+    """The run's video as a link relative to the report: `video` (run --video FILE, render
+    --out FILE) or RUN_DIR/video.mp4; None when there is none."""
+    path = video if video else os.path.join(run_dir, "video.mp4")
+    if not os.path.isfile(path):
+        return None
+    return os.path.relpath(os.path.abspath(path), os.path.abspath(run_dir))
+
+
+def video_section(run_dir, video=None):
     """The run's video right under the verdict, or nothing when it was not rendered."""
-    if not os.path.isfile(os.path.join(run_dir, "video.mp4")):
+    link = video_link(run_dir, video)
+    if link is None:
         return ""
-    return '<video controls preload="metadata" src="video.mp4"></video>'
+    return f'<video controls preload="metadata" src="{href(link)}"></video>'
 
 
 def collapsible(html_text, open_=False):
@@ -732,11 +747,11 @@ def expected_files(bus_kind):
     return names
 
 
-def files_section(run_dir, bus_kind):
+def files_section(run_dir, bus_kind, video=None):
     """Video (embedded when present) and links to the run's files that exist."""
     parts = ["<h2>Files</h2>"]
     pcaps = sorted(n for n in os.listdir(run_dir) if re.fullmatch(r"bus-[^/]+\.pcap", n))
-    entries = [("video.mp4", "H.264 video of the run")]
+    entries = [(video_link(run_dir, video) or "video.mp4", "H.264 video of the run")]
     entries += [(p, "bus capture (Wireshark, tshark)") for p in pcaps]
     entries += list(LINKED_FILES)
     items = []
@@ -747,7 +762,7 @@ def files_section(run_dir, bus_kind):
             items.append(f'<li><a href="{href(name)}">{esc(name)}</a> ({esc(size)}): {esc(what)}</li>')
     parts.append(f"<ul>{''.join(items)}</ul>")
     missing = [n for n in expected_files(bus_kind) if not os.path.isfile(os.path.join(run_dir, n))]
-    if not os.path.isfile(os.path.join(run_dir, "video.mp4")):
+    if video_link(run_dir, video) is None:
         missing.append("video.mp4 (not rendered: --no-video, or `omnitwin render` not run yet)")
     if missing:
         parts.append('<p class="note">Absent: ' + esc(", ".join(missing)) + ".</p>")
@@ -781,8 +796,9 @@ def data_notes(traj_problem, traj_rows, bus_problem, run_problem):
     return notes
 
 
-def build_report(run_dir):
-    """Reads the run directory, draws the plots and writes report.html; returns its path."""
+def build_report(run_dir, video=None):
+    """Reads the run directory, draws the plots and writes report.html; returns its path.
+    `video`: the run's video when it is not RUN_DIR/video.mp4."""
     run, run_problem = load_json(os.path.join(run_dir, "run.json"))
     run = run if isinstance(run, dict) else None
     metrics, metrics_problem = load_json(os.path.join(run_dir, "metrics.json"))
@@ -799,13 +815,13 @@ def build_report(run_dir):
     # expectations; the detailed tables below, folded.
     body = [header_section(run_dir, run, metrics, metrics_problem),
             "".join(f'<p class="note">{esc(n)}</p>' for n in notes),
-            video_section(run_dir),
+            video_section(run_dir, video),
             plots_section(made[:HEADLINE_PLOTS], [], "At a glance"),
             expectations_section(run, metrics),
             collapsible(metrics_section(metrics)),
             collapsible(plots_section(made[HEADLINE_PLOTS:], plot_notes, "More plots"), open_=True),
             collapsible(events_section(events, events_problem)),
-            collapsible(files_section(run_dir, bus_kind), open_=True)]
+            collapsible(files_section(run_dir, bus_kind, video), open_=True)]
     page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>omnitwin run: {esc(title)}</title><style>{CSS}</style></head>\n<body>\n"
             + "\n".join(body) + "\n</body></html>\n")
@@ -821,16 +837,19 @@ def usage_error(message):
 
 
 def main(argv):
-    """Entry point: run_report.py RUN_DIR."""
-    if len(argv) != 2:
-        usage_error("usage: run_report.py RUN_DIR")
+    """Entry point: run_report.py RUN_DIR [--video FILE]."""
+    video = None
+    if len(argv) == 4 and argv[2] == "--video":
+        video = argv[3]
+    elif len(argv) != 2:
+        usage_error("usage: run_report.py RUN_DIR [--video FILE]")
     run_dir = argv[1]
     if not os.path.isdir(run_dir):
         usage_error(f"'{run_dir}' is not a directory")
     if not any(os.path.isfile(os.path.join(run_dir, n)) for n in RUN_FILES):
         usage_error(f"'{run_dir}' is not a run directory (none of {', '.join(RUN_FILES)})")
     try:
-        out = build_report(run_dir)
+        out = build_report(run_dir, video)
     except OSError as e:
         sys.stderr.write(f"run_report.py: cannot write the report in '{run_dir}': {e}\n")
         sys.exit(3)

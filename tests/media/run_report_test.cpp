@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <algorithm>
@@ -208,6 +209,32 @@ TEST(RunReport, LinksOnlyFilesThatExist) {
   EXPECT_LT(expect, metrics);
   EXPECT_LT(metrics, events);
   EXPECT_EQ(with_video.find("<script"), std::string::npos);
+}
+
+// A video written elsewhere (run --video FILE, render --out FILE) is the run's video: the
+// report said "Absent: video.mp4" and embedded nothing (found in review).
+TEST(RunReport, AVideoWrittenElsewhereIsEmbeddedByItsRelativePath) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  write_file(tmp / "the run.mp4", "not really a video");
+  const ReportResult r = write_run_report(run.string(), tools(), (tmp / "the run.mp4").string());
+  ASSERT_TRUE(r.ok) << r.error;
+  const std::string page = read_bytes(run / "report.html");
+  EXPECT_NE(page.find(R"(<video controls preload="metadata" src="../the%20run.mp4">)"), std::string::npos) << page;
+  EXPECT_EQ(page.find("video.mp4 (not rendered"), std::string::npos);
+}
+
+// An interrupted run's plots end at its last sample: a fault planned after it is not shaded,
+// and one that began before it ends there. The time axis ran on to the planned duration and
+// shaded faults that never happened (found in review).
+TEST(RunReport, FaultSpansEndAtTheLastRecordedSample) {
+  const std::string check =
+      tools().python + " -c \"import sys; sys.path.insert(0, '" + tools().scripts_dir + "'); import run_report as r; "
+      "run = {'duration_s': 3.5, 'faults': [{'at_s': 0.5, 'duration_s': 0.2}, {'at_s': 1.0}, {'at_s': 2.5}]}; "
+      "end = r.run_end(run, {'t': [0.0, 0.7, 1.42]}, {}); "
+      "spans = r.fault_spans(run, end); "
+      "sys.exit(0 if end == 1.42 and spans == [(0.5, 0.7), (1.0, 1.42)] else print(end, spans) or 1)\"";
+  EXPECT_EQ(std::system(check.c_str()), 0);
 }
 
 TEST(RunReport, SameInputSameOutput) {

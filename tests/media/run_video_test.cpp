@@ -267,12 +267,36 @@ TEST_F(RunVideo, MalformedTrajectoryIsAnErrorWithFileAndLine) {
 }
 
 TEST_F(RunVideo, AFailedRenderRemovesAnOlderVideoAndSaysSo) {
-  std::ofstream(out()) << "the video of an earlier run";
+  std::ofstream(out(), std::ios::binary) << std::string("\0\0\0\x18" "ftypisom", 12) << "an earlier run's video";
   fs::remove(dir_ / "trajectory.csv");
   const std::string msg = error_of(run_dir(), out(), small());
   EXPECT_NE(msg.find("trajectory.csv"), std::string::npos) << msg;
   EXPECT_NE(msg.find("the older " + out() + " was removed"), std::string::npos) << msg;
   EXPECT_FALSE(fs::exists(out()));
+}
+
+// An output file that exists and is not an MP4 is refused, not deleted: `render --out` naming
+// a record of the run removed it (found in review).
+TEST_F(RunVideo, AnOutputThatIsNotAVideoIsRefusedAndKept) {
+  const fs::path target = dir_ / "trajectory.csv";
+  const std::string before = omnitwin::testing::read_bytes(target);
+  try {
+    render_run(run_dir(), target.string(), small());
+    ADD_FAILURE() << "no error for an output that is a record of the run";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("is not an MP4 video"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(omnitwin::testing::read_bytes(target), before);
+  EXPECT_EQ(video_file_problem((dir_ / "absent.mp4").string()), "");
+}
+
+// The last frame is the run's last instant, also when its length is not a whole number of
+// frames: at 1 fps a 3.5 s run ended on the state at 3 s (found in review).
+TEST_F(RunVideo, TheLastFrameIsTheRunsLastInstant) {
+  VideoOptions o = small();
+  o.fps = 0.75;
+  const VideoResult v = render_run(run_dir(), out(), o);
+  EXPECT_EQ(v.frames, 3);  // t = 0 and 1.33 s, then the run's end at 2 s
 }
 
 // A 12 KiB tmpfs holds the run's MP4 header and a few frames, not 21.

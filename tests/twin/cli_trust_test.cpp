@@ -179,6 +179,51 @@ TEST_F(CliTrust, TwoSigintsWhileRenderingStillLeaveAPlayableVideo) {
   expect_video_interrupt(io(), out, c, true);
 }
 
+// A signal while the video renders reaches the report as well: it said PASSED from the
+// metrics.json written before the signal (found in review).
+TEST_F(CliTrust, SigintWhileRenderingMakesAReportThatSaysInterrupted) {
+  const fs::path out = dir_ / "vidrep";
+  Child c({"run", test_scenario("run_long_line.yaml"), "--set", "duration=40", "--set", "outputs.video=true",
+           "--set", "outputs.report=true", "--no-progress", "--out", out.string()},
+          work(), io());
+  expect_video_interrupt(io(), out, c, false);
+  const std::string report = read_bytes(out / "report.html");
+  EXPECT_TRUE(contains(report, "banner warn\">INTERRUPTED")) << report.substr(0, 2000);
+  EXPECT_FALSE(contains(report, "banner pass")) << report.substr(0, 2000);
+}
+
+// `render` stopped by a signal ends with exit 3 (it was 0): the video holds only the frames
+// rendered so far (found in review).
+TEST_F(CliTrust, SigintDuringRenderGivesExit3) {
+  const fs::path run_out = dir_ / "torender";
+  ASSERT_EQ(run({"run", test_scenario("run_long_line.yaml"), "--set", "duration=40", "--no-video", "--no-report",
+                 "--no-progress", "--out", run_out.string()})
+                .code,
+            0);
+  Child c({"render", run_out.string(), "--out", (dir_ / "r.mp4").string()}, work(), io());
+  ASSERT_TRUE(wait_for_text(io() / "stdout", "rendering the video", c)) << c.out() << c.err();
+  std::this_thread::sleep_for(1500ms);
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
+  EXPECT_TRUE(video_decodes(dir_ / "r.mp4"));
+}
+
+// `render --out` naming a record of the run (or any file that is not a video) is bad usage,
+// and the file stays: it was deleted before the render failed (found in review).
+TEST_F(CliTrust, RenderOntoARecordIsRefusedAndTheRecordKept) {
+  const fs::path run_out = dir_ / "keep";
+  ASSERT_EQ(run({"run", test_scenario("run_short_line.yaml"), "--no-progress", "--out", run_out.string()}).code, 0);
+  const std::string before = read_bytes(run_out / "trajectory.csv");
+  const Finished f = run({"render", run_out.string(), "--out", (run_out / "trajectory.csv").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "is not an MP4 video")) << f.err;
+  EXPECT_EQ(read_bytes(run_out / "trajectory.csv"), before);
+  const Finished g = run({"run", test_scenario("run_short_line.yaml"), "--no-progress", "--out",
+                          (dir_ / "other").string(), "--video", (run_out / "metrics.json").string()});
+  EXPECT_EQ(g.code, 2) << g.out << g.err;
+  EXPECT_TRUE(fs::exists(run_out / "metrics.json"));
+}
+
 // SIGINT once the run has ended and the report is being made: exit 3, interrupted, and the
 // report either whole or absent (never half-written under its name).
 TEST_F(CliTrust, SigintWhileReportingGivesExit3) {
