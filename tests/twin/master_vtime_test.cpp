@@ -6,12 +6,16 @@
 //    families, every receive with SO_RCVTIMEO and MSG_DONTWAIT, relative, periodic and absolute
 //    timerfds, timed and clock waits on condition variables), the busy-poll rule on receives
 //    and on clock reads alone, two threads, and a fork (refused);
+//  - regressions found in review, one probe mode each (thread ids reused, wake-ups by the
+//    process itself, signal handlers, overflowing timeouts, timerfd flags, MSG_WAITALL, …);
 //  - the command line: omni-master --clock wall under the library through `omnitwin run
 //    --master-cmd` reruns byte for byte and moves the platform as its --clock sim run does; the
 //    same on bus can; the bad masters (exits early, crashes, never waits, ignores SIGTERM,
 //    static, forks) each give exit 3, a message that says what happened, and records.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+
+#include <poll.h>
 
 #include <map>
 #include <sstream>
@@ -139,6 +143,27 @@ std::map<std::string, long long> probe_values(const std::string& text, std::vect
 class VtimeProbe : public ::testing::Test {
  protected:
   std::string probe() const { return OMNITWIN_BINARY_DIR "/tests/vt_probe"; }
+
+  // The probe in `mode` against a scripted twin, to its end: its values, its output, how the
+  // channel ended and the exit code (-1: still running after 5 s, then stopped).
+  struct Run {
+    std::map<std::string, long long> v;
+    std::string text;
+    VtimeServer::Status status = VtimeServer::Status::ok;
+    int exit = -1;
+  };
+  Run run_mode(const std::string& mode) {
+    ScriptedTwin twin;
+    const std::string log = (dir_.path() / (mode + ".log")).string();
+    MasterProcess p(probe(), {mode}, log, twin.server.environment(find_vtime_library(), "udp:127.0.0.1:9"));
+    Run r;
+    if (twin.server.accept(std::chrono::seconds(10), 0) == VtimeServer::Status::ok) r.status = twin.serve();
+    if (p.wait(std::chrono::seconds(5))) r.exit = p.exit_code();
+    r.text = read_bytes(log);
+    r.v = probe_values(r.text);
+    return r;
+  }
+
   TempDir dir_{"omnitwin-vtime"};
 };
 
@@ -274,6 +299,26 @@ TEST_F(VtimeProbe, AForkedChildIsRefusedAndEnds) {
   EXPECT_NE(twin.server.other_pid(), p.pid());
   p.stop(std::chrono::milliseconds(500));
   EXPECT_TRUE(contains(read_bytes(log), "the twin refused process")) << read_bytes(log);
+}
+
+// ---- regressions: each found in review, each failed on the library before its fix ----------
+
+// glibc reuses the id of a thread that was joined: a join on the new thread must wait for it,
+// not take the old one's end for its own (it blocked in the kernel and held time still).
+TEST_F(VtimeProbe, JoinWaitsForANewThreadThatReusesAnEndedThreadsId) {
+  const Run r = run_mode("join-reuse");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_GE(r.v.at("join_reused"), 1) << "glibc did not reuse an id: the test proves nothing\n" << r.text;
+  std::istringstream in(r.text);
+  std::string name;
+  long long value = 0;
+  int joins = 0;
+  while (in >> name >> value)
+    if (name == "join_took") {
+      EXPECT_EQ(value, 1'000'000) << r.text;
+      ++joins;
+    }
+  EXPECT_EQ(joins, 4) << r.text;
 }
 
 // ---- the command line -----------------------------------------------------------------------

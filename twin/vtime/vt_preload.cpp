@@ -141,6 +141,7 @@ struct Timer {  // a timerfd, simulated: an eventfd the leader writes expiration
 
 struct Exited {
   pthread_t id;
+  std::uint64_t serial;  // g.exits when it ended: tells a reused id's old entry from the new one's
   Exited* next;
 };
 
@@ -161,7 +162,8 @@ struct State {
   bool leading = false;
   std::uint64_t generation = 0;
   Waiter* waiters = nullptr;
-  Exited* exited = nullptr;
+  Exited* exited = nullptr;      // ended threads not yet joined
+  std::uint64_t exits = 0;      // threads ended so far
   Timer timers[kMaxFd];
   int timers_end = 0;           // 1 + the highest descriptor that was a timerfd: the loops' bound
   bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
@@ -1048,12 +1050,27 @@ void thread_ends() {
   auto* e = static_cast<Exited*>(malloc(sizeof(Exited)));
   if (e) {
     e->id = pthread_self();
+    e->serial = ++g.exits;
     e->next = g.exited;
     g.exited = e;
   }
   for (Waiter* w = g.waiters; w; w = w->next)
     if (w->joining && !w->satisfied && pthread_equal(w->join, pthread_self())) satisfy(w);
   cv_broadcast(&g.cv);  // a leader may be due now that one runner fewer is left
+}
+
+// Forgets ended threads with id `t` (lock held); only those that ended by `serial` when given:
+// glibc reuses a joined or detached thread's id for a new thread.
+void forget_exited(pthread_t t, std::uint64_t serial = UINT64_MAX) {
+  for (Exited** p = &g.exited; *p;) {
+    Exited* e = *p;
+    if (pthread_equal(e->id, t) && e->serial <= serial) {
+      *p = e->next;
+      free(e);
+    } else {
+      p = &e->next;
+    }
+  }
 }
 
 void* trampoline(void* p) {
@@ -1073,15 +1090,19 @@ int pthread_create(pthread_t* t, const pthread_attr_t* a, void* (*fn)(void*), vo
   auto* s = static_cast<Start*>(malloc(sizeof(Start)));
   if (!s) return EAGAIN;
   *s = Start{fn, arg};
+  std::uint64_t before;
   {
     Lock l;
     ++g.running;  // counted before it starts: time cannot move past its first instant
+    before = g.exits;
   }
   const int r = real_pthread_create(t, a, trampoline, s);
+  Lock l;
   if (r != 0) {
     free(s);
-    Lock l;
     --g.running;
+  } else {
+    forget_exited(*t, before);  // an earlier thread's end under the same id (the new one may have ended already)
   }
   return r;
 }
@@ -1106,7 +1127,12 @@ int pthread_join(pthread_t t, void** ret) {
       wait_virtual(w);
     }
   }
-  return real_pthread_join(t, ret);
+  const int r = real_pthread_join(t, ret);
+  if (r == 0 && g.active) {
+    Lock l;
+    forget_exited(t);
+  }
+  return r;
 }
 
 // Condition variables: a wait on the simulated clock, ended by a signal or broadcast of the same

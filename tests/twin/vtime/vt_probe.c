@@ -1,10 +1,13 @@
 /* A probe for the virtual-time library (tests/twin/master_vtime_test.cpp): plain C and libc, as
  * a master we did not write is. Each mode makes the intercepted calls and prints what they
  * returned ("NAME VALUE" lines, times in ns on the monotonic clock) so the test can compare them
- * with what the kernel would give on the simulated clock; the other modes are the bad masters
- * (exits early, crashes, never waits, ignores SIGTERM, forks). Built dynamic and static. */
+ * with what the kernel would give on the simulated clock; the regression modes each repeat a
+ * defect found in review; the other modes are the bad masters (exits early, crashes, never
+ * waits, ignores SIGTERM, forks). Built dynamic and static. */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
 #include <poll.h>
 #include <pthread.h>
 #include <signal.h>
@@ -13,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/ioctl.h>
 #include <sys/select.h>
 #include <sys/socket.h>
 #include <sys/time.h>
@@ -225,9 +230,39 @@ static int calls(void) {
   return 0;
 }
 
+/* ---- the regression modes (one per defect found in review; "NAME VALUE" lines, times as
+ * differences in ns) ---- */
+static long long t0;
+static long long since(void) { return mono() - t0; }
+
+static void* sleep_1ms(void* arg) {
+  (void)arg;
+  usleep(1000);
+  return NULL;
+}
+
+/* pthread_join after glibc reused an ended (joined) thread's id */
+static int join_reuse(void) {
+  pthread_t prev = 0;
+  int reused = 0;
+  for (int i = 0; i < 4; ++i) {
+    pthread_t t;
+    pthread_create(&t, NULL, sleep_1ms, NULL);
+    if (i > 0 && pthread_equal(t, prev)) ++reused;
+    prev = t;
+    t0 = mono();
+    pthread_join(t, NULL);
+    out("join_took", since());
+  }
+  out("join_reused", reused);
+  return 0;
+}
+
+
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
   if (!strcmp(mode, "calls")) return calls();
+  if (!strcmp(mode, "join-reuse")) return join_reuse();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
