@@ -321,6 +321,40 @@ TEST_F(VtimeProbe, JoinWaitsForANewThreadThatReusesAnEndedThreadsId) {
   EXPECT_EQ(joins, 4) << r.text;
 }
 
+// A pipe or eventfd written by one thread wakes the thread that polls it at once, not when the
+// writer's next sleep (200 ms) has passed.
+TEST_F(VtimeProbe, AWriteByAnotherThreadWakesItsWaiterWithoutTimeMoving) {
+  const Run r = run_mode("self-wake");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  std::istringstream in(r.text);
+  std::string name;
+  long long value = 0;
+  std::vector<long long> rc, after;
+  while (in >> name >> value) {
+    if (name == "wake_rc") rc.push_back(value);
+    if (name == "wake_after") after.push_back(value);
+  }
+  EXPECT_EQ(rc, (std::vector<long long>{1, 1})) << r.text;        // the pipe, the eventfd
+  EXPECT_EQ(after, (std::vector<long long>{1'000'000, 1'000'000})) << r.text;
+}
+
+// Reruns of it stay identical wait for wait (the library checks its own descriptors before it
+// asks the twin to move time).
+TEST_F(VtimeProbe, SelfWakesRerunIdenticallyWaitForWait) {
+  std::vector<std::vector<vt::Record>> runs;
+  for (int i = 0; i < 2; ++i) {
+    ScriptedTwin twin;
+    MasterProcess p(probe(), {"self-wake"}, (dir_.path() / "w.log").string(),
+                    twin.server.environment(find_vtime_library(), "udp:127.0.0.1:9"));
+    ASSERT_EQ(twin.server.accept(std::chrono::seconds(10), 0), VtimeServer::Status::ok);
+    twin.serve();
+    p.wait(std::chrono::seconds(5));
+    runs.push_back(twin.waits);
+  }
+  ASSERT_EQ(runs[0].size(), runs[1].size());
+  for (std::size_t i = 0; i < runs[0].size(); ++i) EXPECT_EQ(vt::encode(runs[0][i]), vt::encode(runs[1][i])) << i;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

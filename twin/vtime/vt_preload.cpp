@@ -5,7 +5,8 @@
 //    timespec_get) answer simulated time: monotonic = 1000 s + t, realtime = EPOCH + t.
 //  - Every wait (sleeps, poll/select/epoll, blocking receives, timerfds, condition variables,
 //    pthread_join) becomes a wait on the twin. Simulated time moves only when every thread of
-//    the process waits: then the last thread to wait (the leader) sends Wait{earliest deadline,
+//    the process waits: then the last thread to wait (the leader) ends the waits whose
+//    descriptors the process itself made ready, or if there are none sends Wait{earliest deadline,
 //    wake on a frame?, bus frames sent} and the twin runs to the earlier of that deadline and
 //    the next frame reaching the master's socket, and answers Wake{now}. The leader then wakes
 //    every waiter whose deadline passed, whose descriptors became ready, or that was signalled.
@@ -340,6 +341,19 @@ void satisfy(Waiter* w) {
 // The leader's turn (lock held, every thread waiting): one Wait/Wake with the twin, then the
 // waiters it ends. Returns false when the twin is gone (time then runs on the wall clock).
 bool lead() {
+  // First what the process did itself: a descriptor another thread wrote before it waited (a
+  // pipe, an eventfd, a loopback socket) ends its waiter now, with no round trip and no time.
+  bool woke = false;
+  for (Waiter* w = g.waiters; w; w = w->next)
+    if (!w->satisfied && w->nfds > 0 && fds_ready(*w, 0)) {
+      satisfy(w);
+      woke = true;
+    }
+  if (woke) {
+    ++g.generation;
+    cv_broadcast(&g.cv);
+    return true;
+  }
   ns_t deadline = earliest_timer();
   bool frame = false;
   for (Waiter* w = g.waiters; w; w = w->next) {

@@ -258,11 +258,43 @@ static int join_reuse(void) {
   return 0;
 }
 
+/* a thread's own write wakes another thread's wait at once, not at the next deadline */
+static int wake_fd;
+static void* wait_on_fd(void* arg) {
+  (void)arg;
+  struct pollfd p = {wake_fd, POLLIN, 0};
+  const int r = poll(&p, 1, 1000);
+  out("wake_rc", r);
+  out("wake_after", since());
+  return NULL;
+}
+static void wake_by(int rfd, int wfd, const void* what, size_t len) {
+  wake_fd = rfd;
+  t0 = mono();
+  pthread_t t;
+  pthread_create(&t, NULL, wait_on_fd, NULL);
+  usleep(1000); /* the waiter blocks */
+  ssize_t w = write(wfd, what, len);
+  (void)w;
+  usleep(200000);
+  pthread_join(t, NULL);
+}
+static int self_wake(void) {
+  int pfd[2];
+  if (pipe(pfd) != 0) return 1;
+  wake_by(pfd[0], pfd[1], "x", 1);
+  int efd = eventfd(0, 0);
+  uint64_t one = 1;
+  wake_by(efd, efd, &one, sizeof one);
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
   if (!strcmp(mode, "calls")) return calls();
   if (!strcmp(mode, "join-reuse")) return join_reuse();
+  if (!strcmp(mode, "self-wake")) return self_wake();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
