@@ -172,23 +172,39 @@ struct State {
 };
 constinit State g;  // constant-initialised: ready before any constructor runs
 constinit thread_local int t_spin = 0;
-// Set while this thread leads (talks to the twin): a signal handler that reads the clock or
-// waits then gets the kernel's answer instead of re-entering the library's own wait.
-constinit thread_local bool t_inside = false;
+// Non-zero while this thread takes, holds or waits under g.mu (leading included): a signal
+// handler that runs meanwhile must not take the (non-recursive) lock. Its clock reads answer
+// without it and its waits go to the kernel.
+constinit thread_local int t_held = 0;
 
+void mu_lock() {
+  ++t_held;  // before the lock: a signal while it is taken sees it too
+  pthread_mutex_lock(&g.mu);
+}
+void mu_unlock() {
+  pthread_mutex_unlock(&g.mu);
+  --t_held;
+}
 struct Lock {
-  Lock() { pthread_mutex_lock(&g.mu); }
-  ~Lock() { pthread_mutex_unlock(&g.mu); }
+  Lock() { mu_lock(); }
+  ~Lock() { mu_unlock(); }
 };
 
-bool on() { return g.active && !g.ended && !t_inside; }
+bool on() { return g.active && !g.ended && t_held == 0; }
 // Clock reads stay on the simulated clock's time line after the end too (continued on the wall).
-bool clocked() { return g.active && !t_inside; }
+bool clocked() { return g.active; }
 
-// Simulated now on the monotonic base (or the wall clock's continuation after the end).
+// Simulated now on the monotonic base (or the wall clock's continuation after the end); lock
+// held, or inside it on this thread (a signal handler: g.now is read atomically).
 ns_t now_locked() {
   if (g.ended) return g.end_now + (wall_ns() - g.end_wall);
-  return g.now;
+  return __atomic_load_n(&g.now, __ATOMIC_RELAXED);
+}
+// The same from anywhere: takes the lock unless this thread is already inside it.
+ns_t now_any() {
+  if (t_held > 0) return now_locked();
+  Lock l;
+  return now_locked();
 }
 
 // ---- the channel ----------------------------------------------------------------------------
@@ -368,11 +384,9 @@ bool lead() {
   r.frames = g.sent;
   r.wake_on_frame = frame ? 1 : 0;
   g.leading = true;
-  pthread_mutex_unlock(&g.mu);
+  pthread_mutex_unlock(&g.mu);  // t_held stays set: a signal handler meanwhile stays out of the library
   vt::Record a;
-  t_inside = true;
   const bool ok = send_record(r) && recv_record(a);
-  t_inside = false;
   pthread_mutex_lock(&g.mu);
   g.leading = false;
   if (!ok || a.type == vt::Type::end || a.type != vt::Type::wake || a.seq != r.seq) {
@@ -381,7 +395,7 @@ bool lead() {
     return false;
   }
   const bool new_frames = a.frames != g.delivered;
-  g.now = a.now;
+  __atomic_store_n(&g.now, a.now, __ATOMIC_RELAXED);
   g.delivered = a.frames;
   fire_timers();
   for (Waiter* w = g.waiters; w; w = w->next) {
@@ -477,10 +491,7 @@ bool is_real(clockid_t c) {
   return c == CLOCK_REALTIME || c == CLOCK_REALTIME_COARSE || c == CLOCK_TAI || c == CLOCK_REALTIME_ALARM;
 }
 ns_t base_of(clockid_t c) { return is_mono(c) ? kMonoBase : g.epoch + (c == CLOCK_TAI ? 37 * kNs : 0); }
-ns_t clock_now(clockid_t c) {
-  Lock l;
-  return base_of(c) + now_locked();
-}
+ns_t clock_now(clockid_t c) { return base_of(c) + now_any(); }
 
 // Socket bookkeeping: a datagram to the bus counts as a frame the twin must receive.
 bool is_socket(int fd, int* family = nullptr, int* type = nullptr) {
@@ -635,11 +646,7 @@ int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) 
   if (!on()) {
     if (g.ended && (flags & TIMER_ABSTIME) && (is_mono(c) || is_real(c))) {
       // A deadline on the simulated clock, continued on the wall clock.
-      ns_t left;
-      {
-        Lock l;
-        left = ts_ns(*req) - base_of(c) - now_locked();
-      }
+      const ns_t left = ts_ns(*req) - base_of(c) - now_any();
       if (left <= 0) return 0;
       const timespec rel = ns_ts(left);
       return real_clock_nanosleep(CLOCK_MONOTONIC, 0, &rel, rem);
@@ -1042,8 +1049,12 @@ int timerfd_gettime(int fd, itimerspec* cur) {
 int close(int fd) {
   REAL(close);
   if (fd >= 0 && fd < kMaxFd && g.active) {
-    Lock l;
-    g.timers[fd].used = false;
+    if (t_held > 0) {  // a signal handler inside the library's lock
+      g.timers[fd].used = false;
+    } else {
+      Lock l;
+      g.timers[fd].used = false;
+    }
   }
   return real_close(fd);
 }
@@ -1142,7 +1153,7 @@ int pthread_join(pthread_t t, void** ret) {
     }
   }
   const int r = real_pthread_join(t, ret);
-  if (r == 0 && g.active) {
+  if (r == 0 && g.active && t_held == 0) {
     Lock l;
     forget_exited(t);
   }
@@ -1158,18 +1169,18 @@ int cond_wait_virtual(pthread_cond_t* c, pthread_mutex_t* m, ns_t deadline) {
   Waiter w;
   w.cond = c;
   w.deadline = deadline;
-  pthread_mutex_lock(&g.mu);  // registered before the user's mutex is released: no lost signal
+  mu_lock();  // registered before the user's mutex is released: no lost signal
   pthread_mutex_unlock(m);
   wait_virtual(w);
   const bool timed_out = w.timed_out;
-  pthread_mutex_unlock(&g.mu);
+  mu_unlock();
   pthread_mutex_lock(m);
   return timed_out ? ETIMEDOUT : 0;
 }
 
 int cond_wake(pthread_cond_t* c, bool all) {
   bool found = false;
-  if (g.active && !g.ended) {
+  if (on()) {
     Lock l;
     for (Waiter* w = g.waiters; w; w = w->next) {
       if (w->cond != c || w->satisfied) continue;
@@ -1203,11 +1214,7 @@ int pthread_cond_timedwait(pthread_cond_t* c, pthread_mutex_t* m, const timespec
   const ns_t deadline = mono ? v - kMonoBase : v - g.epoch;
   if (on()) return cond_wait_virtual(c, m, deadline);
   // After the end: the same instant on the real clock.
-  ns_t left;
-  {
-    Lock l;
-    left = deadline - now_locked();
-  }
+  const ns_t left = deadline - now_any();
   timespec real_now;
   syscall(SYS_clock_gettime, mono ? CLOCK_MONOTONIC : CLOCK_REALTIME, &real_now);
   const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));
@@ -1220,11 +1227,7 @@ int pthread_cond_clockwait(pthread_cond_t* c, pthread_mutex_t* m, clockid_t clk,
   if (abs->tv_nsec < 0 || abs->tv_nsec >= kNs) return EINVAL;
   const ns_t deadline = ts_ns(*abs) - base_of(clk);
   if (on()) return cond_wait_virtual(c, m, deadline);
-  ns_t left;
-  {
-    Lock l;
-    left = deadline - now_locked();
-  }
+  const ns_t left = deadline - now_any();
   timespec real_now;
   syscall(SYS_clock_gettime, clk, &real_now);
   const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));

@@ -289,12 +289,38 @@ static int self_wake(void) {
   return 0;
 }
 
+/* a wall-clock SIGALRM whose handler reads the clock (async-signal-safe) while the loop's own
+ * clock reads hold the library's lock */
+static volatile long alarm_runs, alarm_off_clock;
+static void on_alarm(int sig) {
+  (void)sig;
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  if (t.tv_sec < 1000 || t.tv_sec >= 1100) ++alarm_off_clock; /* not the simulated clock */
+  ++alarm_runs;
+}
+static int signal_clock(void) {
+  signal(SIGALRM, on_alarm);
+  struct itimerval it = {{0, 20}, {0, 20}};
+  setitimer(ITIMER_REAL, &it, NULL);
+  for (long i = 0; i < 5000000 && alarm_runs < 5000; ++i) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+  }
+  struct itimerval off = {{0, 0}, {0, 0}};
+  setitimer(ITIMER_REAL, &off, NULL);
+  out("alarm_runs", alarm_runs);
+  out("alarm_off_clock", alarm_off_clock);
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
   if (!strcmp(mode, "calls")) return calls();
   if (!strcmp(mode, "join-reuse")) return join_reuse();
   if (!strcmp(mode, "self-wake")) return self_wake();
+  if (!strcmp(mode, "signal-clock")) return signal_clock();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
