@@ -366,6 +366,16 @@ TEST_F(VtimeProbe, ASignalHandlerThatReadsTheClockDoesNotDeadlock) {
   EXPECT_EQ(r.v.at("alarm_off_clock"), 0);
 }
 
+// TFD_TIMER_ABSTIME on a CLOCK_REALTIME timerfd: the instant is on the realtime clock.
+TEST_F(VtimeProbe, AnAbsoluteRealtimeTimerfdFiresAtItsInstant) {
+  const Run r = run_mode("timerfd-realtime");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("rt_settime_rc"), 0);
+  EXPECT_EQ(r.v.at("rt_left"), 2'000'000) << r.text;
+  EXPECT_EQ(r.v.at("rt_poll_rc"), 1) << r.text;
+  EXPECT_EQ(r.v.at("rt_after"), 2'000'000) << r.text;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -138,6 +138,7 @@ struct Timer {  // a timerfd, simulated: an eventfd the leader writes expiration
   ns_t expiry = vt::kNever;  // simulated time [ns]
   ns_t interval = 0;
   bool nonblock = false;     // the program asked for TFD_NONBLOCK (the eventfd always is)
+  clockid_t clock = CLOCK_MONOTONIC;  // TFD_TIMER_ABSTIME instants are on this clock
 };
 
 struct Exited {
@@ -990,7 +991,7 @@ int timerfd_create(int clockid, int flags) {
     return -1;
   }
   Lock l;
-  g.timers[fd] = Timer{true, vt::kNever, 0, (flags & TFD_NONBLOCK) != 0};
+  g.timers[fd] = Timer{true, vt::kNever, 0, (flags & TFD_NONBLOCK) != 0, clockid};
   if (fd >= g.timers_end) g.timers_end = fd + 1;
   return fd;
 }
@@ -1026,7 +1027,7 @@ int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
   if (v == 0)
     t.expiry = vt::kNever;
   else
-    t.expiry = (flags & TFD_TIMER_ABSTIME) ? v - kMonoBase : add_sat(g.now, v);
+    t.expiry = (flags & TFD_TIMER_ABSTIME) ? v - base_of(t.clock) : add_sat(g.now, v);
   if (t.expiry != vt::kNever && t.expiry <= g.now) fire_timers();
   return 0;
 }

@@ -314,6 +314,24 @@ static int signal_clock(void) {
   return 0;
 }
 
+/* an absolute timerfd on CLOCK_REALTIME, 2 ms ahead */
+static int timerfd_realtime(void) {
+  int tf = timerfd_create(CLOCK_REALTIME, 0);
+  struct timespec now;
+  clock_gettime(CLOCK_REALTIME, &now);
+  long long at = (long long)now.tv_sec * 1000000000LL + now.tv_nsec + 2000000;
+  struct itimerspec its = {{0, 0}, {at / 1000000000LL, at % 1000000000LL}};
+  out("rt_settime_rc", timerfd_settime(tf, TFD_TIMER_ABSTIME, &its, NULL));
+  struct itimerspec cur;
+  timerfd_gettime(tf, &cur);
+  out("rt_left", (long long)cur.it_value.tv_sec * 1000000000LL + cur.it_value.tv_nsec);
+  t0 = mono();
+  struct pollfd p = {tf, POLLIN, 0};
+  out("rt_poll_rc", poll(&p, 1, 50));
+  out("rt_after", since());
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -321,6 +339,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "join-reuse")) return join_reuse();
   if (!strcmp(mode, "self-wake")) return self_wake();
   if (!strcmp(mode, "signal-clock")) return signal_clock();
+  if (!strcmp(mode, "timerfd-realtime")) return timerfd_realtime();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
