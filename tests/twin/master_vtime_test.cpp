@@ -376,6 +376,19 @@ TEST_F(VtimeProbe, AnAbsoluteRealtimeTimerfdFiresAtItsInstant) {
   EXPECT_EQ(r.v.at("rt_after"), 2'000'000) << r.text;
 }
 
+// A timeout that ends at the instant a descriptor becomes ready reports the descriptor.
+TEST_F(VtimeProbe, ReadinessAtTheTimeoutsInstantIsReportedAsReady) {
+  const Run r = run_mode("tie");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("tie_poll_rc"), 1) << r.text;
+  EXPECT_EQ(r.v.at("tie_poll_revents"), POLLIN);
+  EXPECT_EQ(r.v.at("tie_poll_at"), 2'000'000);
+  EXPECT_EQ(r.v.at("tie_select_rc"), 1) << r.text;
+  EXPECT_EQ(r.v.at("tie_select_set"), 1);
+  EXPECT_EQ(r.v.at("tie_epoll_rc"), 1) << r.text;
+  EXPECT_EQ(r.v.at("tie_epoll_at"), 6'000'000);
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

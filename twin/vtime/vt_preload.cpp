@@ -586,8 +586,14 @@ ssize_t receive(int fd, int flags, Attempt attempt) {
   for (;;) {
     pollfd p{fd, POLLIN, 0};
     if (!wait_fds(&p, 1, deadline)) {
-      Lock l;
-      if (g.ended) return attempt(flags);  // the run is over: the kernel decides
+      bool ended;
+      {
+        Lock l;
+        ended = g.ended;
+      }
+      if (ended) return attempt(flags);  // the run is over: the kernel decides
+      const ssize_t last = attempt(flags | MSG_DONTWAIT);  // data there at the timeout's instant
+      if (last >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) return last;
       errno = EAGAIN;  // SO_RCVTIMEO passed
       return -1;
     }
@@ -721,12 +727,9 @@ int poll(pollfd* fds, nfds_t n, int timeout_ms) {
     deadline = deadline_after(timeout_ms < 0 ? -1 : static_cast<ns_t>(timeout_ms) * 1'000'000);
   }
   for (;;) {
-    if (!wait_fds(fds, n, deadline)) {
-      Lock l;
-      if (g.ended) return real_poll(fds, n, 0);
-      for (nfds_t i = 0; i < n; ++i) fds[i].revents = 0;
-      return 0;
-    }
+    // The timeout (or the run's end): the kernel's answer now, so that a descriptor ready at
+    // the timeout's instant is reported, not lost.
+    if (!wait_fds(fds, n, deadline)) return real_poll(fds, n, 0);
     const int again = real_poll(fds, n, 0);
     if (again != 0) return again;
   }
@@ -755,12 +758,7 @@ int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
     deadline = deadline_after(tmo ? ts_ns(*tmo) : -1);
   }
   for (;;) {
-    if (!wait_fds(fds, n, deadline)) {
-      Lock l;
-      if (g.ended) return real_ppoll(fds, n, &zero, mask);
-      for (nfds_t i = 0; i < n; ++i) fds[i].revents = 0;
-      return 0;
-    }
+    if (!wait_fds(fds, n, deadline)) return real_ppoll(fds, n, &zero, mask);  // as in poll
     const int again = real_ppoll(fds, n, &zero, mask);
     if (again != 0) return again;
   }
@@ -805,15 +803,9 @@ int select_common(int nfds, fd_set* r, fd_set* w, fd_set* e, ns_t rel, const sig
   }
   for (;;) {
     if (!wait_fds(fds, n, deadline)) {
-      {
-        Lock l;
-        if (g.ended) return attempt();
-      }
-      if (r) FD_ZERO(r);
-      if (w) FD_ZERO(w);
-      if (e) FD_ZERO(e);
-      if (tv_out) *tv_out = timeval{0, 0};
-      return 0;
+      const int last = attempt();  // as in poll: ready at the timeout's instant counts
+      if (last == 0 && tv_out) *tv_out = timeval{0, 0};
+      return last;
     }
     const int again = attempt();
     if (again != 0) return again;
@@ -863,11 +855,7 @@ int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms, const sigset
   }
   pollfd p{epfd, POLLIN, 0};  // an epoll descriptor is readable while an event is ready
   for (;;) {
-    if (!wait_fds(&p, 1, deadline)) {
-      Lock l;
-      if (g.ended) return real_epoll_pwait(epfd, ev, max, 0, mask);
-      return 0;
-    }
+    if (!wait_fds(&p, 1, deadline)) return real_epoll_pwait(epfd, ev, max, 0, mask);  // as in poll
     const int again = real_epoll_pwait(epfd, ev, max, 0, mask);
     if (again != 0) return again;
   }

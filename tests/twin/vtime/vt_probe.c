@@ -332,6 +332,33 @@ static int timerfd_realtime(void) {
   return 0;
 }
 
+/* a 2 ms timeout that ends as a 2 ms periodic timerfd expires: ready, not a timeout */
+static int tie(void) {
+  int tf = timerfd_create(CLOCK_MONOTONIC, 0);
+  struct itimerspec its = {{0, 2000000}, {0, 2000000}};
+  timerfd_settime(tf, 0, &its, NULL);
+  t0 = mono();
+  uint64_t n;
+  struct pollfd p = {tf, POLLIN, 0};
+  out("tie_poll_rc", poll(&p, 1, 2));
+  out("tie_poll_revents", p.revents);
+  out("tie_poll_at", since());
+  if (read(tf, &n, sizeof n) != 8) return 1;
+  fd_set r;
+  FD_ZERO(&r);
+  FD_SET(tf, &r);
+  struct timeval tv = {0, 2000};
+  out("tie_select_rc", select(tf + 1, &r, NULL, NULL, &tv));
+  out("tie_select_set", FD_ISSET(tf, &r) ? 1 : 0);
+  if (read(tf, &n, sizeof n) != 8) return 1;
+  int ep = epoll_create1(0);
+  struct epoll_event ev = {EPOLLIN, {.fd = tf}};
+  epoll_ctl(ep, EPOLL_CTL_ADD, tf, &ev);
+  out("tie_epoll_rc", epoll_wait(ep, &ev, 1, 2));
+  out("tie_epoll_at", since());
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -340,6 +367,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "self-wake")) return self_wake();
   if (!strcmp(mode, "signal-clock")) return signal_clock();
   if (!strcmp(mode, "timerfd-realtime")) return timerfd_realtime();
+  if (!strcmp(mode, "tie")) return tie();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
