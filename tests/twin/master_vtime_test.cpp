@@ -389,6 +389,18 @@ TEST_F(VtimeProbe, ReadinessAtTheTimeoutsInstantIsReportedAsReady) {
   EXPECT_EQ(r.v.at("tie_epoll_at"), 6'000'000);
 }
 
+// usleep(0), nanosleep({0, 0}) and an absolute sleep in the past return at once and count as
+// calls that found nothing (the busy-poll rule): a thread yielding with them lets time move.
+TEST_F(VtimeProbe, ZeroAndPastSleepsCountTowardTheBusyPollRule) {
+  const Run r = run_mode("yield-zero");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  for (const std::string k : {"usleep0", "nanosleep0", "past_abs"}) {
+    EXPECT_EQ(r.v.at(k + "_flag"), 1) << k << "\n" << r.text;
+    EXPECT_GE(r.v.at(k + "_at"), 1'000'000) << k;
+    EXPECT_LE(r.v.at(k + "_at"), 1'001'000) << k;  // at most one quantum after the flag
+  }
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

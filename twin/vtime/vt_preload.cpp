@@ -11,9 +11,10 @@
 //    the next frame reaching the master's socket, and answers Wake{now}. The leader then wakes
 //    every waiter whose deadline passed, whose descriptors became ready, or that was signalled.
 //  - Busy polling: a thread that makes kSpinLimit calls in a row that neither wait nor find
-//    anything (clock reads, empty non-blocking receives, zero-timeout polls) waits one quantum
-//    (1 µs) of simulated time, woken early by a frame. So a spinning master advances, and
-//    deterministically: the count of its own calls decides, never the wall clock.
+//    anything (clock reads, empty non-blocking receives, zero-timeout polls, sleeps already
+//    over) waits one quantum (1 µs) of simulated time, woken early by a frame. So a spinning
+//    master advances, and deterministically: the count of its own calls decides, never the
+//    wall clock.
 //  - Every wait on the twin has a wall-clock watchdog (OMNITWIN_VTIME_WATCHDOG, default 60 s).
 //  - After the twin's End (or if the twin disappears) time continues on the wall clock from
 //    where it stopped and every call goes to the kernel.
@@ -476,11 +477,17 @@ bool wait_fds(pollfd* fds, nfds_t n, ns_t deadline) {
 }
 
 void sleep_until(ns_t deadline) {
-  Lock l;
-  if (deadline <= g.now) return;
-  Waiter w;
-  w.deadline = deadline;
-  wait_virtual(w);
+  bool over;
+  {
+    Lock l;
+    over = deadline <= g.now;
+    if (!over) {
+      Waiter w;
+      w.deadline = deadline;
+      wait_virtual(w);
+    }
+  }
+  if (over) spun();  // already over (usleep(0) as a yield): a call that found nothing
 }
 
 // ---- clocks -------------------------------------------------------------------------------

@@ -359,6 +359,39 @@ static int tie(void) {
   return 0;
 }
 
+/* a thread that yields with zero or past sleeps until another one sets a flag 1 ms later */
+static volatile int flag;
+static void* set_flag(void* arg) {
+  (void)arg;
+  usleep(1000);
+  flag = 1;
+  return NULL;
+}
+static int yield_zero(void) {
+  const char* names[] = {"usleep0", "nanosleep0", "past_abs"};
+  for (int k = 0; k < 3; ++k) {
+    flag = 0;
+    t0 = mono();
+    pthread_t t;
+    pthread_create(&t, NULL, set_flag, NULL);
+    long calls = 0;
+    while (!flag && calls < 300000) {
+      struct timespec zero = {0, 0}, past = {1, 0};
+      if (k == 0) usleep(0);
+      if (k == 1) nanosleep(&zero, NULL);
+      if (k == 2) clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &past, NULL);
+      ++calls;
+    }
+    char name[32];
+    snprintf(name, sizeof name, "%s_flag", names[k]);
+    out(name, flag);
+    snprintf(name, sizeof name, "%s_at", names[k]);
+    out(name, since());
+    pthread_join(t, NULL);
+  }
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -368,6 +401,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "signal-clock")) return signal_clock();
   if (!strcmp(mode, "timerfd-realtime")) return timerfd_realtime();
   if (!strcmp(mode, "tie")) return tie();
+  if (!strcmp(mode, "yield-zero")) return yield_zero();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
