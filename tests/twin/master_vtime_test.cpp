@@ -401,6 +401,14 @@ TEST_F(VtimeProbe, ZeroAndPastSleepsCountTowardTheBusyPollRule) {
   }
 }
 
+// select leaves the time not slept in its timeval, as Linux does.
+TEST_F(VtimeProbe, SelectWritesTheTimeLeftIntoItsTimeval) {
+  const Run r = run_mode("select-remaining");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("selrem_rc"), 1);
+  EXPECT_EQ(r.v.at("selrem_left_us"), 70'000) << r.text;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

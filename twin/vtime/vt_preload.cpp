@@ -808,14 +808,24 @@ int select_common(int nfds, fd_set* r, fd_set* w, fd_set* e, ns_t rel, const sig
     Lock l;
     deadline = deadline_after(rel);
   }
+  // select (as Linux does) leaves the time not slept in its timeval.
+  auto left = [&]() {
+    if (!tv_out || deadline == vt::kNever) return;
+    ns_t v = deadline - now_any();
+    if (v < 0) v = 0;
+    *tv_out = timeval{static_cast<time_t>(v / kNs), static_cast<suseconds_t>((v % kNs) / 1000)};
+  };
   for (;;) {
     if (!wait_fds(fds, n, deadline)) {
       const int last = attempt();  // as in poll: ready at the timeout's instant counts
-      if (last == 0 && tv_out) *tv_out = timeval{0, 0};
+      left();
       return last;
     }
     const int again = attempt();
-    if (again != 0) return again;
+    if (again != 0) {
+      left();
+      return again;
+    }
   }
 }
 }  // namespace

@@ -392,6 +392,20 @@ static int yield_zero(void) {
   return 0;
 }
 
+/* select writes the time left into its timeval when a descriptor became ready after a wait */
+static int select_remaining(void) {
+  int tf = timerfd_create(CLOCK_MONOTONIC, 0);
+  struct itimerspec its = {{0, 0}, {0, 30000000}};
+  timerfd_settime(tf, 0, &its, NULL);
+  fd_set r;
+  FD_ZERO(&r);
+  FD_SET(tf, &r);
+  struct timeval tv = {0, 100000};
+  out("selrem_rc", select(tf + 1, &r, NULL, NULL, &tv));
+  out("selrem_left_us", tv.tv_sec * 1000000LL + tv.tv_usec);
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -402,6 +416,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "timerfd-realtime")) return timerfd_realtime();
   if (!strcmp(mode, "tie")) return tie();
   if (!strcmp(mode, "yield-zero")) return yield_zero();
+  if (!strcmp(mode, "select-remaining")) return select_remaining();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
