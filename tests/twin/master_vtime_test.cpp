@@ -409,6 +409,15 @@ TEST_F(VtimeProbe, SelectWritesTheTimeLeftIntoItsTimeval) {
   EXPECT_EQ(r.v.at("selrem_left_us"), 70'000) << r.text;
 }
 
+// Timeouts beyond 2^63 ns (nanosleep({LONG_MAX, 0}), 584 years…) wait for ever instead of
+// overflowing into the past or into a fraction of a second (8 kinds: the sleeps, ppoll, pselect,
+// select, a condition variable, a timerfd).
+TEST_F(VtimeProbe, TimeoutsTooLargeForNanosecondsWaitForEver) {
+  const Run r = run_mode("forever");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("forever_returned"), 0) << r.text;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -88,7 +88,12 @@ int cv_timedwait(pthread_cond_t* c, pthread_mutex_t* m, const timespec* until) {
   return f(c, m, until);
 }
 
-ns_t ts_ns(const timespec& t) { return static_cast<ns_t>(t.tv_sec) * kNs + t.tv_nsec; }
+// Saturated at ±kNever: a timeout of 292 years or more (nanosleep({LONG_MAX, 0})) is for ever.
+ns_t ts_ns(const timespec& t) {
+  if (t.tv_sec >= vt::kNever / kNs) return vt::kNever;
+  if (t.tv_sec <= -vt::kNever / kNs) return -vt::kNever;
+  return static_cast<ns_t>(t.tv_sec) * kNs + t.tv_nsec;
+}
 timespec ns_ts(ns_t v) {
   timespec t;
   t.tv_sec = static_cast<time_t>(v / kNs);
@@ -107,6 +112,11 @@ ns_t wall_ns() {
   return ts_ns(t);
 }
 ns_t add_sat(ns_t a, ns_t b) { return (b > 0 && a > vt::kNever - b) ? vt::kNever : a + b; }
+// An instant `v` on a clock that reads `base` at t = 0, as simulated time; never stays never.
+ns_t minus_base(ns_t v, ns_t base) {
+  if (v == vt::kNever) return vt::kNever;
+  return v < base - vt::kNever ? -vt::kNever : v - base;
+}
 
 void say(const char* fmt, ...) {
   char buf[512];
@@ -335,7 +345,7 @@ void fire_timers() {
     std::uint64_t n = 1;
     if (t.interval > 0) {
       n += static_cast<std::uint64_t>((g.now - t.expiry) / t.interval);
-      t.expiry += static_cast<ns_t>(n) * t.interval;
+      t.expiry = add_sat(t.expiry, static_cast<ns_t>(n) * t.interval);
     } else {
       t.expiry = vt::kNever;
     }
@@ -660,7 +670,7 @@ int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) 
   if (!on()) {
     if (g.ended && (flags & TIMER_ABSTIME) && (is_mono(c) || is_real(c))) {
       // A deadline on the simulated clock, continued on the wall clock.
-      const ns_t left = ts_ns(*req) - base_of(c) - now_any();
+      const ns_t left = minus_base(ts_ns(*req), base_of(c)) - now_any();
       if (left <= 0) return 0;
       const timespec rel = ns_ts(left);
       return real_clock_nanosleep(CLOCK_MONOTONIC, 0, &rel, rem);
@@ -673,7 +683,7 @@ int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) 
   ns_t deadline;
   {
     Lock l;
-    deadline = (flags & TIMER_ABSTIME) ? ts_ns(*req) - base_of(c) : add_sat(g.now, ts_ns(*req));
+    deadline = (flags & TIMER_ABSTIME) ? minus_base(ts_ns(*req), base_of(c)) : add_sat(g.now, ts_ns(*req));
   }
   sleep_until(deadline);
   if (rem && !(flags & TIMER_ABSTIME)) *rem = timespec{0, 0};
@@ -839,7 +849,11 @@ int select(int nfds, fd_set* r, fd_set* w, fd_set* e, timeval* tv) {
     errno = EINVAL;
     return -1;
   }
-  const ns_t rel = tv ? static_cast<ns_t>(tv->tv_sec) * kNs + static_cast<ns_t>(tv->tv_usec) * 1000 : -1;
+  ns_t rel = -1;
+  if (tv) {  // the kernel takes tv_usec beyond a second too
+    const timespec t{tv->tv_sec, 0};
+    rel = add_sat(ts_ns(t), static_cast<ns_t>(tv->tv_usec) * 1000);
+  }
   return select_common(nfds, r, w, e, rel, nullptr, tv);
 }
 
@@ -1032,7 +1046,7 @@ int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
   if (v == 0)
     t.expiry = vt::kNever;
   else
-    t.expiry = (flags & TFD_TIMER_ABSTIME) ? v - base_of(t.clock) : add_sat(g.now, v);
+    t.expiry = (flags & TFD_TIMER_ABSTIME) ? minus_base(v, base_of(t.clock)) : add_sat(g.now, v);
   if (t.expiry != vt::kNever && t.expiry <= g.now) fire_timers();
   return 0;
 }
@@ -1217,13 +1231,13 @@ int pthread_cond_timedwait(pthread_cond_t* c, pthread_mutex_t* m, const timespec
   // The variable's clock is not visible: a deadline below 10^9 s is on the monotonic clock.
   const ns_t v = ts_ns(*abs);
   const bool mono = v < 1'000'000'000LL * kNs;
-  const ns_t deadline = mono ? v - kMonoBase : v - g.epoch;
+  const ns_t deadline = minus_base(v, mono ? kMonoBase : g.epoch);
   if (on()) return cond_wait_virtual(c, m, deadline);
   // After the end: the same instant on the real clock.
   const ns_t left = deadline - now_any();
   timespec real_now;
   syscall(SYS_clock_gettime, mono ? CLOCK_MONOTONIC : CLOCK_REALTIME, &real_now);
-  const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));
+  const timespec until = ns_ts(add_sat(ts_ns(real_now), left > 0 ? left : 0));
   return real_wait(c, m, &until);
 }
 
@@ -1231,12 +1245,12 @@ int pthread_cond_clockwait(pthread_cond_t* c, pthread_mutex_t* m, clockid_t clk,
   static auto real_wait = real<int (*)(pthread_cond_t*, pthread_mutex_t*, clockid_t, const timespec*)>("pthread_cond_clockwait");
   if (!clocked() || !(is_mono(clk) || is_real(clk))) return real_wait(c, m, clk, abs);
   if (abs->tv_nsec < 0 || abs->tv_nsec >= kNs) return EINVAL;
-  const ns_t deadline = ts_ns(*abs) - base_of(clk);
+  const ns_t deadline = minus_base(ts_ns(*abs), base_of(clk));
   if (on()) return cond_wait_virtual(c, m, deadline);
   const ns_t left = deadline - now_any();
   timespec real_now;
   syscall(SYS_clock_gettime, clk, &real_now);
-  const timespec until = ns_ts(ts_ns(real_now) + (left > 0 ? left : 0));
+  const timespec until = ns_ts(add_sat(ts_ns(real_now), left > 0 ? left : 0));
   return real_wait(c, m, clk, &until);
 }
 

@@ -406,6 +406,60 @@ static int select_remaining(void) {
   return 0;
 }
 
+/* waits "for ever" (timeouts beyond 2^63 ns): none of them may return within 1 s. 18446744074 s
+ * (584 years) is 2^64 ns and 0.29 s, LONG_MAX s wraps to -1 s in 64-bit ns. */
+static volatile int returned;
+static void* forever(void* arg) {
+  const long k = (long)(intptr_t)arg;
+  struct timespec big = {LONG_MAX, 0}, rel = {18446744074L, 0};
+  int r = 0;
+  switch (k) {
+    case 0: r = nanosleep(&big, NULL); break;
+    case 1: r = clock_nanosleep(CLOCK_MONOTONIC, 0, &rel, NULL); break;
+    case 2: r = clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &big, NULL); break;
+    case 3: r = ppoll(NULL, 0, &rel, NULL); break;
+    case 4: r = pselect(0, NULL, NULL, NULL, &rel, NULL); break;
+    case 5: {
+      struct timeval tv = {18446744074L, 0};
+      r = select(0, NULL, NULL, NULL, &tv);
+      break;
+    }
+    case 6: {
+      pthread_mutex_t m = PTHREAD_MUTEX_INITIALIZER;
+      pthread_cond_t c = PTHREAD_COND_INITIALIZER;
+      pthread_mutex_lock(&m);
+      r = pthread_cond_timedwait(&c, &m, &big);
+      pthread_mutex_unlock(&m);
+      break;
+    }
+    case 7: {
+      int tf = timerfd_create(CLOCK_MONOTONIC, 0);
+      struct itimerspec its = {{0, 0}, {18446744074L, 0}};
+      timerfd_settime(tf, 0, &its, NULL);
+      uint64_t n;
+      r = (int)read(tf, &n, sizeof n);
+      break;
+    }
+  }
+  pthread_mutex_lock(&mu);
+  printf("forever%ld_rc %d\n", k, r);
+  fflush(stdout);
+  ++returned;
+  pthread_mutex_unlock(&mu);
+  return NULL;
+}
+static int forevers(void) {
+  for (long k = 0; k < 8; ++k) {
+    pthread_t t;
+    pthread_create(&t, NULL, forever, (void*)(intptr_t)k);
+  }
+  sleep(1);
+  pthread_mutex_lock(&mu);
+  out("forever_returned", returned);
+  pthread_mutex_unlock(&mu);
+  _exit(0); /* the others still wait */
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -417,6 +471,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "tie")) return tie();
   if (!strcmp(mode, "yield-zero")) return yield_zero();
   if (!strcmp(mode, "select-remaining")) return select_remaining();
+  if (!strcmp(mode, "forever")) return forevers();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
