@@ -418,6 +418,17 @@ TEST_F(VtimeProbe, TimeoutsTooLargeForNanosecondsWaitForEver) {
   EXPECT_EQ(r.v.at("forever_returned"), 0) << r.text;
 }
 
+// recv(MSG_WAITALL) on a blocking stream socket: the whole length, or what came by SO_RCVTIMEO.
+TEST_F(VtimeProbe, WaitallReceivesTheWholeLength) {
+  const Run r = run_mode("waitall");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("waitall_rc"), 4) << r.text;
+  EXPECT_EQ(r.v.at("waitall_ok"), 1);
+  EXPECT_EQ(r.v.at("waitall_at"), 1'000'000) << r.text;
+  EXPECT_EQ(r.v.at("waitall_part_rc"), 2) << r.text;  // "ef" at 2 ms, then the timeout
+  EXPECT_EQ(r.v.at("waitall_part_at"), 1'000'000 + r.v.at("waitall_rcvtimeo_ns")) << r.text;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -583,9 +583,11 @@ ns_t rcvtimeo(int fd) {
   return v == 0 ? -1 : v;
 }
 
+constexpr ns_t kNoDeadline = INT64_MIN;  // receive(): the socket's SO_RCVTIMEO from now
+
 // A receive as the kernel would do it on simulated time. `attempt(flags)` is the real call.
 template <class Attempt>
-ssize_t receive(int fd, int flags, Attempt attempt) {
+ssize_t receive(int fd, int flags, Attempt attempt, ns_t deadline = kNoDeadline) {
   const ssize_t n = attempt(flags | MSG_DONTWAIT);
   if (n >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) {
     if (n >= 0) t_spin = 0;
@@ -595,8 +597,7 @@ ssize_t receive(int fd, int flags, Attempt attempt) {
     spun();
     return attempt(flags | MSG_DONTWAIT);  // a frame that came meanwhile, or EAGAIN again
   }
-  ns_t deadline;
-  {
+  if (deadline == kNoDeadline) {
     Lock l;
     deadline = deadline_after(rcvtimeo(fd));
   }
@@ -617,6 +618,32 @@ ssize_t receive(int fd, int flags, Attempt attempt) {
     const ssize_t r = attempt(flags | MSG_DONTWAIT);
     if (r >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK)) return r;
   }
+}
+
+// MSG_WAITALL on a blocking stream socket: receives until `len` bytes, the end of the stream, an
+// error or SO_RCVTIMEO, which bounds the whole call as in the kernel (then what came is
+// returned). `chunk(flags, off)` is the real call into the buffer from `off`.
+template <class Chunk>
+ssize_t receive_all(int fd, int flags, std::size_t len, Chunk chunk) {
+  int type = 0;
+  if (!(flags & MSG_WAITALL) || (flags & MSG_PEEK) || len == 0 || nonblocking(fd, flags) ||
+      !is_socket(fd, nullptr, &type) || type != SOCK_STREAM)
+    return receive(fd, flags, [&](int f) { return chunk(f, 0); });
+  flags &= ~MSG_WAITALL;
+  ns_t deadline;
+  {
+    Lock l;
+    deadline = deadline_after(rcvtimeo(fd));
+  }
+  std::size_t got = 0;
+  while (got < len) {
+    const std::size_t off = got;
+    const ssize_t n = receive(fd, flags, [&](int f) { return chunk(f, off); }, deadline);
+    if (n < 0) return got > 0 ? static_cast<ssize_t>(got) : n;
+    if (n == 0) break;  // the end of the stream
+    got += static_cast<std::size_t>(n);
+  }
+  return static_cast<ssize_t>(got);
 }
 
 }  // namespace
@@ -902,13 +929,16 @@ int epoll_wait(int epfd, epoll_event* ev, int max, int timeout_ms) {
 ssize_t recv(int fd, void* buf, size_t len, int flags) {
   REAL(recv);
   if (!on()) return real_recv(fd, buf, len, flags);
-  return receive(fd, flags, [&](int f) { return real_recv(fd, buf, len, f); });
+  return receive_all(fd, flags, len,
+                     [&](int f, std::size_t off) { return real_recv(fd, static_cast<char*>(buf) + off, len - off, f); });
 }
 
 ssize_t recvfrom(int fd, void* buf, size_t len, int flags, sockaddr* from, socklen_t* fromlen) {
   REAL(recvfrom);
   if (!on()) return real_recvfrom(fd, buf, len, flags, from, fromlen);
-  return receive(fd, flags, [&](int f) { return real_recvfrom(fd, buf, len, f, from, fromlen); });
+  return receive_all(fd, flags, len, [&](int f, std::size_t off) {
+    return real_recvfrom(fd, static_cast<char*>(buf) + off, len - off, f, from, fromlen);
+  });
 }
 
 ssize_t recvmsg(int fd, msghdr* m, int flags) {

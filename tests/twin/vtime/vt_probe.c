@@ -460,6 +460,39 @@ static int forevers(void) {
   _exit(0); /* the others still wait */
 }
 
+/* recv(MSG_WAITALL) on a blocking stream socket: all of it, or what came by SO_RCVTIMEO */
+static int sv[2];
+static void* write_pieces(void* arg) {
+  (void)arg;
+  ssize_t w = write(sv[1], "ab", 2);
+  usleep(1000);
+  w = write(sv[1], "cd", 2);
+  usleep(1000);
+  w = write(sv[1], "ef", 2);
+  (void)w;
+  return NULL;
+}
+static int waitall(void) {
+  socketpair(AF_UNIX, SOCK_STREAM, 0, sv);
+  t0 = mono();
+  pthread_t t;
+  pthread_create(&t, NULL, write_pieces, NULL);
+  usleep(100);
+  char b[8];
+  out("waitall_rc", recv(sv[0], b, 4, MSG_WAITALL));
+  out("waitall_ok", memcmp(b, "abcd", 4) == 0);
+  out("waitall_at", since());
+  struct timeval rt = {0, 5000};
+  setsockopt(sv[0], SOL_SOCKET, SO_RCVTIMEO, &rt, sizeof rt);
+  socklen_t rl = sizeof rt;
+  getsockopt(sv[0], SOL_SOCKET, SO_RCVTIMEO, &rt, &rl);
+  out("waitall_rcvtimeo_ns", (rt.tv_sec * 1000000LL + rt.tv_usec) * 1000LL);
+  out("waitall_part_rc", recvfrom(sv[0], b, 4, MSG_WAITALL, NULL, NULL));
+  out("waitall_part_at", since());
+  pthread_join(t, NULL);
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -472,6 +505,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "yield-zero")) return yield_zero();
   if (!strcmp(mode, "select-remaining")) return select_remaining();
   if (!strcmp(mode, "forever")) return forevers();
+  if (!strcmp(mode, "waitall")) return waitall();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
