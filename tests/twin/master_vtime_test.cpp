@@ -429,6 +429,12 @@ TEST_F(VtimeProbe, WaitallReceivesTheWholeLength) {
   EXPECT_EQ(r.v.at("waitall_part_at"), 1'000'000 + r.v.at("waitall_rcvtimeo_ns")) << r.text;
 }
 
+TEST_F(VtimeProbe, GettimeofdayTakesANullTimeval) {
+  const Run r = run_mode("gtod-null");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("gtod_null_rc"), 0);
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -493,6 +493,14 @@ static int waitall(void) {
   return 0;
 }
 
+/* gettimeofday with only the (obsolete) timezone */
+static int gtod_null(void) {
+  struct timezone tz;
+  struct timeval* volatile none = NULL; /* glibc declares it non-null; the kernel takes NULL */
+  out("gtod_null_rc", gettimeofday(none, &tz));
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -506,6 +514,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "select-remaining")) return select_remaining();
   if (!strcmp(mode, "forever")) return forevers();
   if (!strcmp(mode, "waitall")) return waitall();
+  if (!strcmp(mode, "gtod-null")) return gtod_null();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
