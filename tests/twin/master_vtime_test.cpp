@@ -435,6 +435,26 @@ TEST_F(VtimeProbe, GettimeofdayTakesANullTimeval) {
   EXPECT_EQ(r.v.at("gtod_null_rc"), 0);
 }
 
+// O_NONBLOCK set on a timerfd after its creation (fcntl, ioctl FIONBIO) and cleared again; and
+// timerfd_settime's EINVALs.
+TEST_F(VtimeProbe, TimerfdsFollowTheirDescriptorsFlagsAndCheckTheirArguments) {
+  const Run r = run_mode("timerfd-flags");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("fcntl_read_rc"), -1) << r.text;
+  EXPECT_EQ(r.v.at("fcntl_read_errno"), EAGAIN);
+  EXPECT_EQ(r.v.at("fionbio_read_rc"), -1);
+  EXPECT_EQ(r.v.at("fionbio_read_errno"), EAGAIN);
+  EXPECT_EQ(r.v.at("nonblock_at"), 0);
+  EXPECT_EQ(r.v.at("blocking_read_rc"), 8);
+  EXPECT_EQ(r.v.at("blocking_read_at"), 1'000'000);
+  EXPECT_EQ(r.v.at("neg_rc"), -1);
+  EXPECT_EQ(r.v.at("neg_errno"), EINVAL);
+  EXPECT_EQ(r.v.at("neg_interval_rc"), -1);
+  EXPECT_EQ(r.v.at("neg_interval_errno"), EINVAL);
+  EXPECT_EQ(r.v.at("bad_flags_rc"), -1);
+  EXPECT_EQ(r.v.at("bad_flags_errno"), EINVAL);
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -144,11 +144,12 @@ struct Waiter {
   Waiter* next = nullptr;
 };
 
-struct Timer {  // a timerfd, simulated: an eventfd the leader writes expirations into
+// A timerfd, simulated: an eventfd the leader writes expirations into. The eventfd carries the
+// program's own O_NONBLOCK (TFD_NONBLOCK, fcntl, FIONBIO); the library reads it only when ready.
+struct Timer {
   bool used = false;
   ns_t expiry = vt::kNever;  // simulated time [ns]
   ns_t interval = 0;
-  bool nonblock = false;     // the program asked for TFD_NONBLOCK (the eventfd always is)
   clockid_t clock = CLOCK_MONOTONIC;  // TFD_TIMER_ABSTIME instants are on this clock
 };
 
@@ -352,6 +353,13 @@ void fire_timers() {
     ssize_t w = syscall(SYS_write, fd, &n, sizeof n);
     (void)w;
   }
+}
+
+// Whether the timerfd `fd` holds expirations (its eventfd is readable).
+bool has_expired(int fd) {
+  pollfd p{fd, POLLIN, 0};
+  const timespec zero{0, 0};
+  return syscall(SYS_ppoll, &p, 1, &zero, nullptr, 8) > 0;
 }
 
 ns_t earliest_timer() {
@@ -959,25 +967,44 @@ ssize_t read(int fd, void* buf, size_t len) {
   REAL(read);
   REAL(recv);
   if (!on()) return real_read(fd, buf, len);
-  bool timer = false, timer_nonblock = false;
+  bool timer = false;
   if (fd >= 0 && fd < kMaxFd) {
     Lock l;
     timer = g.timers[fd].used;
-    timer_nonblock = g.timers[fd].nonblock;
   }
   if (!timer && !is_socket(fd)) return real_read(fd, buf, len);
   if (timer) {
-    // A timerfd: its eventfd holds the expirations; a blocking read waits for the next one.
+    // A timerfd: its eventfd holds the expirations. Read only when there (under the lock: no
+    // other reader of the library's takes them meanwhile); else EAGAIN if the descriptor is
+    // non-blocking now, or a wait on simulated time for the next expiration.
+    if (len < sizeof(std::uint64_t)) {
+      errno = EINVAL;
+      return -1;
+    }
     for (;;) {
-      const ssize_t r = static_cast<ssize_t>(syscall(SYS_read, fd, buf, len));
-      if (r >= 0 || errno != EAGAIN || timer_nonblock) {
-        if (r < 0 && errno == EAGAIN) spun();
-        return r;
+      bool nonblock;
+      {
+        Lock l;
+        if (has_expired(fd)) {
+          t_spin = 0;
+          return static_cast<ssize_t>(syscall(SYS_read, fd, buf, len));
+        }
+        const long fl = syscall(SYS_fcntl, fd, F_GETFL);
+        nonblock = fl >= 0 && (fl & O_NONBLOCK);
+      }
+      if (nonblock) {
+        spun();
+        errno = EAGAIN;
+        return -1;
       }
       pollfd p{fd, POLLIN, 0};
       if (!wait_fds(&p, 1, vt::kNever)) {
-        Lock l;
-        if (g.ended) return real_read(fd, buf, len);
+        bool ended;
+        {
+          Lock l;
+          ended = g.ended;
+        }
+        if (ended) return real_read(fd, buf, len);
       }
     }
   }
@@ -1033,7 +1060,7 @@ int timerfd_create(int clockid, int flags) {
     errno = EINVAL;
     return -1;
   }
-  const int fd = eventfd(0, EFD_NONBLOCK | (flags & TFD_CLOEXEC ? EFD_CLOEXEC : 0));
+  const int fd = eventfd(0, (flags & TFD_NONBLOCK ? EFD_NONBLOCK : 0) | (flags & TFD_CLOEXEC ? EFD_CLOEXEC : 0));
   if (fd < 0) return fd;
   if (fd >= kMaxFd) {
     syscall(SYS_close, fd);
@@ -1041,7 +1068,7 @@ int timerfd_create(int clockid, int flags) {
     return -1;
   }
   Lock l;
-  g.timers[fd] = Timer{true, vt::kNever, 0, (flags & TFD_NONBLOCK) != 0, clockid};
+  g.timers[fd] = Timer{true, vt::kNever, 0, clockid};
   if (fd >= g.timers_end) g.timers_end = fd + 1;
   return fd;
 }
@@ -1058,8 +1085,9 @@ int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
     errno = EFAULT;
     return -1;
   }
-  if (nv->it_value.tv_nsec < 0 || nv->it_value.tv_nsec >= kNs || nv->it_interval.tv_nsec < 0 ||
-      nv->it_interval.tv_nsec >= kNs) {
+  // As Linux: unknown flags and a negative or denormal value or interval are EINVAL.
+  auto bad = [](const timespec& v) { return v.tv_sec < 0 || v.tv_nsec < 0 || v.tv_nsec >= kNs; };
+  if ((flags & ~(TFD_TIMER_ABSTIME | TFD_TIMER_CANCEL_ON_SET)) || bad(nv->it_value) || bad(nv->it_interval)) {
     errno = EINVAL;
     return -1;
   }
@@ -1069,9 +1097,11 @@ int timerfd_settime(int fd, int flags, const itimerspec* nv, itimerspec* old) {
     old->it_interval = ns_ts(t.interval);
     old->it_value = ns_ts(t.expiry == vt::kNever ? 0 : t.expiry - g.now);
   }
-  std::uint64_t drop = 0;
-  ssize_t r = syscall(SYS_read, fd, &drop, sizeof drop);  // re-arming clears pending expirations
-  (void)r;
+  if (has_expired(fd)) {  // re-arming clears pending expirations
+    std::uint64_t drop = 0;
+    ssize_t r = syscall(SYS_read, fd, &drop, sizeof drop);
+    (void)r;
+  }
   const ns_t v = ts_ns(nv->it_value);
   t.interval = ts_ns(nv->it_interval);
   if (v == 0)

@@ -501,6 +501,43 @@ static int gtod_null(void) {
   return 0;
 }
 
+/* timerfd flags: O_NONBLOCK set later (fcntl, FIONBIO) and cleared again; settime's checks */
+static int timerfd_flags(void) {
+  t0 = mono();
+  uint64_t n;
+  int tf = timerfd_create(CLOCK_MONOTONIC, 0);
+  fcntl(tf, F_SETFL, fcntl(tf, F_GETFL) | O_NONBLOCK);
+  errno = 0;
+  out("fcntl_read_rc", read(tf, &n, sizeof n));
+  out("fcntl_read_errno", errno);
+  int tf2 = timerfd_create(CLOCK_MONOTONIC, 0);
+  int on = 1;
+  ioctl(tf2, FIONBIO, &on);
+  errno = 0;
+  out("fionbio_read_rc", read(tf2, &n, sizeof n));
+  out("fionbio_read_errno", errno);
+  out("nonblock_at", since());
+  /* blocking again: a read waits for the expiry */
+  fcntl(tf, F_SETFL, fcntl(tf, F_GETFL) & ~O_NONBLOCK);
+  struct itimerspec its = {{0, 0}, {0, 1000000}};
+  timerfd_settime(tf, 0, &its, NULL);
+  out("blocking_read_rc", read(tf, &n, sizeof n));
+  out("blocking_read_at", since());
+  struct itimerspec neg = {{0, 0}, {-1, 0}};
+  errno = 0;
+  out("neg_rc", timerfd_settime(tf, 0, &neg, NULL));
+  out("neg_errno", errno);
+  struct itimerspec neg_iv = {{-1, 0}, {1, 0}};
+  errno = 0;
+  out("neg_interval_rc", timerfd_settime(tf, 0, &neg_iv, NULL));
+  out("neg_interval_errno", errno);
+  struct itimerspec one = {{0, 0}, {1, 0}};
+  errno = 0;
+  out("bad_flags_rc", timerfd_settime(tf, 4, &one, NULL));
+  out("bad_flags_errno", errno);
+  return 0;
+}
+
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -515,6 +552,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "forever")) return forevers();
   if (!strcmp(mode, "waitall")) return waitall();
   if (!strcmp(mode, "gtod-null")) return gtod_null();
+  if (!strcmp(mode, "timerfd-flags")) return timerfd_flags();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
