@@ -455,6 +455,14 @@ TEST_F(VtimeProbe, TimerfdsFollowTheirDescriptorsFlagsAndCheckTheirArguments) {
   EXPECT_EQ(r.v.at("bad_flags_errno"), EINVAL);
 }
 
+// poll on 100 descriptors: the 100th becoming ready ends the wait.
+TEST_F(VtimeProbe, PollSeesEveryDescriptorNotJustTheFirst64) {
+  const Run r = run_mode("many-fds");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("many_rc"), 1) << r.text;
+  EXPECT_EQ(r.v.at("many_at"), 1'000'000) << r.text;
+}
+
 // ---- the command line -----------------------------------------------------------------------
 
 class CliVtime : public CliTest {

@@ -329,13 +329,12 @@ bool has_socket(const Waiter& w) {
   return false;
 }
 
+// Polls the waiter's own array, all of it (lock held: its thread waits). Only revents change,
+// and every caller asks the kernel again once woken.
 bool fds_ready(const Waiter& w, ns_t grace_ns) {
   if (w.nfds == 0) return false;
-  pollfd copy[64];
-  const nfds_t n = w.nfds < 64 ? w.nfds : 64;
-  for (nfds_t i = 0; i < n; ++i) copy[i] = {w.fds[i].fd, static_cast<short>(w.fds[i].events), 0};
   timespec ts = ns_ts(grace_ns);
-  return syscall(SYS_ppoll, copy, n, &ts, nullptr, 8) > 0;
+  return syscall(SYS_ppoll, w.fds, w.nfds, &ts, nullptr, 8) > 0;
 }
 
 // Simulated timerfds that expired by now: their eventfds count the expirations.

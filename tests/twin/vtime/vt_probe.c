@@ -538,6 +538,28 @@ static int timerfd_flags(void) {
   return 0;
 }
 
+/* poll on more than 64 descriptors, the one that becomes ready last */
+static void* write_after_1ms(void* arg) {
+  usleep(1000);
+  ssize_t w = write((int)(intptr_t)arg, "x", 1);
+  (void)w;
+  return NULL;
+}
+static int many_fds(void) {
+  enum { kN = 100 };
+  struct pollfd p[kN];
+  for (int i = 0; i < kN; ++i) p[i] = (struct pollfd){-1, POLLIN, 0};
+  int pfd[2];
+  if (pipe(pfd) != 0) return 1;
+  p[kN - 1].fd = pfd[0];
+  t0 = mono();
+  pthread_t t;
+  pthread_create(&t, NULL, write_after_1ms, (void*)(intptr_t)pfd[1]);
+  out("many_rc", poll(p, kN, 1000));
+  out("many_at", since());
+  pthread_join(t, NULL);
+  return 0;
+}
 
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
@@ -553,6 +575,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "waitall")) return waitall();
   if (!strcmp(mode, "gtod-null")) return gtod_null();
   if (!strcmp(mode, "timerfd-flags")) return timerfd_flags();
+  if (!strcmp(mode, "many-fds")) return many_fds();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
