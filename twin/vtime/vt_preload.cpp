@@ -316,6 +316,16 @@ __attribute__((constructor)) void vt_init() {
   pthread_condattr_init(&a);
   pthread_condattr_setclock(&a, CLOCK_MONOTONIC);
   pthread_cond_init(&g.cv, &a);
+  // The clock reads find their real functions now (not active yet: straight through), so that
+  // a signal handler's clock read never runs dlsym or a static's first initialisation while
+  // the code it interrupted does (recursive_init_error: abort).
+  timespec ts;
+  timeval tv;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  gettimeofday(&tv, nullptr);
+  time(nullptr);
+  timespec_get(&ts, TIME_UTC);
+  wall_ns();
   connect_channel();
   if (g.active) pthread_atfork(nullptr, nullptr, after_fork_child);
 }
