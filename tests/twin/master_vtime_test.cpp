@@ -19,6 +19,7 @@
 
 #include <map>
 #include <sstream>
+#include <thread>
 
 #include "tests/twin/cli_support.hpp"
 #include "twin/master_process.hpp"
@@ -298,6 +299,10 @@ TEST_F(VtimeProbe, AForkedChildIsRefusedAndEnds) {
   EXPECT_GT(twin.server.other_pid(), 0);
   EXPECT_NE(twin.server.other_pid(), p.pid());
   p.stop(std::chrono::milliseconds(500));
+  // The child says so once the Refuse reaches it: give it up to 2 s.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+  while (!contains(read_bytes(log), "the twin refused process") && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
   EXPECT_TRUE(contains(read_bytes(log), "the twin refused process")) << read_bytes(log);
 }
 
