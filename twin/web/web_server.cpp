@@ -2,12 +2,21 @@
 #include "twin/web/web_server.hpp"
 
 #include <httplib.h>
+#include <netdb.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <set>
 #include <stdexcept>
 
 namespace omnitwin::twin {
@@ -30,7 +39,143 @@ std::string sse_message(const std::string& event, const json& data) {
   return "event: " + event + "\ndata: " + data.dump(-1, ' ', false, json::error_handler_t::replace) + "\n\n";
 }
 
+using Clock = std::chrono::steady_clock;
+
+// Waits until `sock` has `events` (POLLIN, POLLOUT) or `until` passed (false).
+bool wait_socket(socket_t sock, short events, Clock::time_point until) {
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - Clock::now()).count();
+    pollfd p{sock, events, 0};
+    const int n = ::poll(&p, 1, static_cast<int>(std::clamp<long long>(left, 0, 1000)));
+    if (n > 0) return true;
+    if (n < 0 && errno != EINTR) return false;
+    if (n == 0 && left <= 1000) return false;
+  }
+}
+
+// A connection's stream for one request, as httplib's SocketStream but with a deadline for the
+// whole of the request's reading (its line and headers) instead of one per byte: a client
+// trickling a byte a second kept a worker for ever.
+class ConnectionStream final : public httplib::Stream {
+ public:
+  ConnectionStream(socket_t sock, Clock::time_point read_deadline, Clock::duration write_timeout)
+      : sock_(sock), read_deadline_(read_deadline), write_timeout_(write_timeout) {}
+
+  bool is_readable() const override {
+    if (wait_socket(sock_, POLLIN, read_deadline_)) return true;
+    timed_out_ = true;
+    return false;
+  }
+  // A read found the deadline passed: the connection is to be closed (its client trickles).
+  bool timed_out() const { return timed_out_; }
+  bool is_writable() const override {
+    if (!wait_socket(sock_, POLLOUT, Clock::now() + write_timeout_)) return false;
+    // Gone when readable with nothing to read (the page closed its end).
+    pollfd p{sock_, POLLIN, 0};
+    if (::poll(&p, 1, 0) <= 0) return true;
+    char c;
+    return ::recv(sock_, &c, 1, MSG_PEEK | MSG_DONTWAIT) > 0;
+  }
+  ssize_t read(char* ptr, std::size_t size) override {
+    if (off_ < len_) {
+      const std::size_t n = std::min(size, len_ - off_);
+      std::memcpy(ptr, buf_ + off_, n);
+      off_ += n;
+      return static_cast<ssize_t>(n);
+    }
+    if (!is_readable()) return -1;
+    if (size >= sizeof buf_) return ::recv(sock_, ptr, size, 0);
+    const ssize_t got = ::recv(sock_, buf_, sizeof buf_, 0);
+    if (got <= 0) return got;
+    len_ = static_cast<std::size_t>(got);
+    off_ = std::min(size, len_);
+    std::memcpy(ptr, buf_, off_);
+    return static_cast<ssize_t>(off_);
+  }
+  ssize_t write(const char* ptr, std::size_t size) override {
+    if (!is_writable()) return -1;
+    return ::send(sock_, ptr, size, MSG_NOSIGNAL);
+  }
+  void get_remote_ip_and_port(std::string& ip, int& port) const override { address(true, ip, port); }
+  void get_local_ip_and_port(std::string& ip, int& port) const override { address(false, ip, port); }
+  socket_t socket() const override { return sock_; }
+
+ private:
+  void address(bool remote, std::string& ip, int& port) const {
+    sockaddr_storage a{};
+    socklen_t len = sizeof a;
+    auto* sa = reinterpret_cast<sockaddr*>(&a);
+    if ((remote ? ::getpeername(sock_, sa, &len) : ::getsockname(sock_, sa, &len)) != 0) return;
+    char host[NI_MAXHOST], serv[NI_MAXSERV];
+    if (::getnameinfo(sa, len, host, sizeof host, serv, sizeof serv, NI_NUMERICHOST | NI_NUMERICSERV) != 0) return;
+    ip = host;
+    port = std::atoi(serv);
+  }
+
+  socket_t sock_;
+  Clock::time_point read_deadline_;
+  Clock::duration write_timeout_;
+  char buf_[4096];
+  std::size_t off_ = 0, len_ = 0;
+  mutable bool timed_out_ = false;
+};
+
 }  // namespace
+
+// httplib's server with its connections under our control: httplib 0.11.4 reads a request
+// with a timeout per byte and keeps a connection for as long as its client sends, and its
+// stop() joins every worker, so clients trickling requests held all 32 workers (no page
+// loaded) and kept the process from exiting (found in review: 20 s after Ctrl-C). Here each
+// connection has a deadline per request and an idle timeout, and close_connections() shuts
+// them all down, so that stop() finds every worker ending.
+class WebServer::Http : public httplib::Server {
+ public:
+  Http(double request_timeout_s, double keep_alive_timeout_s)
+      : request_timeout_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(request_timeout_s))),
+        keep_alive_timeout_(
+            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(keep_alive_timeout_s))) {}
+
+  // Reads and writes on every connection fail from now on, and new ones are closed at once.
+  void close_connections() {
+    std::lock_guard<std::mutex> lk(mu_);
+    closing_ = true;
+    for (const socket_t s : open_) ::shutdown(s, SHUT_RDWR);
+  }
+
+ private:
+  // Overrides httplib's (the same loop: up to keep_alive_max_count_ requests on a connection).
+  bool process_and_close_socket(socket_t sock) override {
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      if (closing_) {
+        ::close(sock);
+        return false;
+      }
+      open_.insert(sock);
+    }
+    bool ok = false;
+    for (std::size_t left = keep_alive_max_count_; left > 0 && !closing_ && svr_sock_ != INVALID_SOCKET; --left) {
+      if (!wait_socket(sock, POLLIN, Clock::now() + keep_alive_timeout_)) break;  // idle
+      if (closing_) break;
+      ConnectionStream strm(sock, Clock::now() + request_timeout_, std::chrono::seconds(5));
+      bool closed = false;
+      ok = process_request(strm, left == 1, closed, nullptr);
+      if (!ok || closed || strm.timed_out()) break;
+    }
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      open_.erase(sock);  // under the lock: close_connections() never shuts a reused number
+    }
+    ::shutdown(sock, SHUT_RDWR);
+    ::close(sock);
+    return ok;
+  }
+
+  const Clock::duration request_timeout_, keep_alive_timeout_;
+  std::mutex mu_;
+  std::set<socket_t> open_;
+  std::atomic<bool> closing_{false};
+};
 
 WebSettings parse_web_address(const std::string& spec) {
   WebSettings s;
@@ -55,11 +200,15 @@ std::string default_web_assets_dir() {
 }
 
 WebServer::WebServer(const WebSettings& settings, json scene)
-    : settings_(settings), http_(std::make_unique<httplib::Server>()), scene_(scene.dump()) {
+    : settings_(settings),
+      http_(std::make_unique<Http>(settings.request_timeout_s, settings.keep_alive_timeout_s)),
+      scene_(scene.dump()) {
   check_assets(settings_.assets_dir);
   // Each open page holds a worker with its event stream and a few with keep-alive
   // connections: more workers than httplib's default (8) so that several pages fit.
   http_->new_task_queue = [] { return new httplib::ThreadPool(32); };
+  // What the Keep-Alive header announces (Http closes idle connections itself).
+  http_->set_keep_alive_timeout(static_cast<time_t>(std::ceil(settings_.keep_alive_timeout_s)));
   // SO_REUSEADDR only: httplib's default adds SO_REUSEPORT, with which a second view on a port
   // in use would bind too and share the connections instead of failing.
   http_->set_socket_options([](socket_t sock) {
@@ -90,6 +239,9 @@ WebServer::~WebServer() {
     stopping_ = true;
   }
   changed_.notify_all();
+  // Shut every connection down first: stop() joins the workers, and one still reading from a
+  // client that trickles its request (or writing to one that reads nothing) held the process.
+  http_->close_connections();
   http_->stop();
   if (listener_.joinable()) listener_.join();
 }

@@ -5,8 +5,11 @@
 // reconnect) draws the run from its start. A recorded run (`omnitwin view`) is one JSON
 // document on /api/run, with the run directory (its video) under /run/.
 //
-// The server runs on its own threads (httplib's pool); nothing here is called from a run's
-// cyclic path: the live observer (web_observer) decimates and batches on its own thread.
+// The server runs on its own threads (httplib's pool of 32); nothing here is called from a
+// run's cyclic path: the live observer (web_observer) decimates and batches on its own thread.
+// No client holds a worker or the process for long: a request must arrive whole within
+// request_timeout_s, an idle connection closes after keep_alive_timeout_s, and the destructor
+// shuts every connection down.
 // URLs and messages: docs/web-view.md.
 #pragma once
 
@@ -22,10 +25,6 @@
 
 #include <nlohmann/json.hpp>
 
-namespace httplib {
-class Server;
-}
-
 namespace omnitwin::twin {
 
 struct WebSettings {
@@ -36,6 +35,11 @@ struct WebSettings {
   // but the first (the run's info) are dropped, and such a page starts after the gap. 256 MiB
   // is hours of a run at 20 samples per second (about 1.5 kB per sample).
   std::size_t history_cap_bytes = 256u << 20;
+  // A request's line and headers must arrive whole within this [s] of its first byte, and a
+  // kept-alive connection idle this long is closed: a client that trickles its request or
+  // keeps idle connections frees its worker within seconds.
+  double request_timeout_s = 2.0;
+  double keep_alive_timeout_s = 2.0;
 };
 
 // "[ADDR:]PORT" (e.g. "8080", "0.0.0.0:8080", "127.0.0.1:0"), with the assets directory filled
@@ -88,7 +92,8 @@ class WebServer {
   void add_routes();
 
   WebSettings settings_;
-  std::unique_ptr<httplib::Server> http_;
+  class Http;  // httplib::Server with bounded connections (web_server.cpp)
+  std::unique_ptr<Http> http_;
   std::thread listener_;
   std::atomic<bool> listener_done_{false};  // listen_after_bind() returned
   int port_ = 0;
