@@ -41,6 +41,10 @@ std::string sse_message(const std::string& event, const json& data) {
 
 using Clock = std::chrono::steady_clock;
 
+// Set by a handler whose answer ends its connection (a refused stream): its client would
+// otherwise keep the connection, and a worker with it, for the keep-alive time.
+thread_local bool t_close_connection = false;
+
 // Waits until `sock` has `events` (POLLIN, POLLOUT) or `until` passed (false).
 bool wait_socket(socket_t sock, short events, Clock::time_point until) {
   for (;;) {
@@ -159,8 +163,9 @@ class WebServer::Http : public httplib::Server {
       if (closing_) break;
       ConnectionStream strm(sock, Clock::now() + request_timeout_, std::chrono::seconds(5));
       bool closed = false;
+      t_close_connection = false;
       ok = process_request(strm, left == 1, closed, nullptr);
-      if (!ok || closed || strm.timed_out()) break;
+      if (!ok || closed || strm.timed_out() || t_close_connection) break;
     }
     {
       std::lock_guard<std::mutex> lk(mu_);
@@ -277,6 +282,18 @@ void WebServer::add_routes() {
     res.set_header("Cache-Control", "no-cache");
     {
       std::lock_guard<std::mutex> lk(mu_);
+      // Each open stream holds a worker: past the cap the pool would have none left for the
+      // pages' other requests (found in review: 32 open streams and /api/info timed out).
+      if (open_streams_ >= settings_.max_streams) {
+        ++stats_.streams_refused;
+        res.status = 503;
+        res.set_header("Retry-After", "10");
+        res.set_header("Connection", "close");
+        res.set_content("{\"error\": \"" + std::to_string(open_streams_) + " event streams are open; close a page\"}",
+                        "application/json");
+        t_close_connection = true;
+        return;
+      }
       ++open_streams_;
       ++stats_.streams_opened;
     }
@@ -363,10 +380,17 @@ bool WebServer::wait_for_client(const std::atomic<bool>* interrupt) {
 }
 
 void WebServer::serve_recorded(json run, const std::string& run_dir) {
-  std::lock_guard<std::mutex> lk(mu_);
-  info_ = run["info"];
-  recorded_ = run.dump(-1, ' ', false, json::error_handler_t::replace);
+  {
+    std::lock_guard<std::mutex> lk(mu_);
+    info_ = run["info"];
+    recorded_ = run.dump(-1, ' ', false, json::error_handler_t::replace);
+  }
   http_->set_mount_point("/run", run_dir);
+  // The page reads /api/run; a stream gets the run's info and end and ends. Nothing closed it
+  // before: it sent ": idle" for ever and held its worker (found in review).
+  publish("info", run["info"]);
+  if (run.contains("end") && !run["end"].is_null()) publish("end", run["end"]);
+  close_streams();
 }
 
 WebServer::Stats WebServer::stats() const {

@@ -7,9 +7,9 @@
 //
 // The server runs on its own threads (httplib's pool of 32); nothing here is called from a
 // run's cyclic path: the live observer (web_observer) decimates and batches on its own thread.
-// No client holds a worker or the process for long: a request must arrive whole within
-// request_timeout_s, an idle connection closes after keep_alive_timeout_s, and the destructor
-// shuts every connection down.
+// No client holds the pool or the process: at most max_streams event streams are open (one
+// more is answered 503), a request must arrive whole within request_timeout_s, an idle
+// connection closes after keep_alive_timeout_s, and the destructor shuts every connection down.
 // URLs and messages: docs/web-view.md.
 #pragma once
 
@@ -35,6 +35,9 @@ struct WebSettings {
   // but the first (the run's info) are dropped, and such a page starts after the gap. 256 MiB
   // is hours of a run at 20 samples per second (about 1.5 kB per sample).
   std::size_t history_cap_bytes = 256u << 20;
+  // Event streams open at once (each holds one of the pool's 32 workers while open): one more
+  // is answered 503, so that the other workers always answer the pages' other requests.
+  int max_streams = 16;
   // A request's line and headers must arrive whole within this [s] of its first byte, and a
   // kept-alive connection idle this long is closed: a client that trickles its request or
   // keeps idle connections frees its worker within seconds.
@@ -75,14 +78,15 @@ class WebServer {
   // Blocks until a page has opened /api/stream (true), or *interrupt is set (false).
   bool wait_for_client(const std::atomic<bool>* interrupt);
 
-  // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video).
-  // Before start().
+  // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video);
+  // /api/stream sends the run's info and end, then ends. Before start().
   void serve_recorded(nlohmann::json run, const std::string& run_dir);
 
   struct Stats {
     std::uint64_t messages = 0;      // published
     std::uint64_t bytes = 0;         // published (SSE text)
     std::uint64_t streams_opened = 0;
+    std::uint64_t streams_refused = 0;  // answered 503: max_streams were open
     std::uint64_t history_dropped = 0;  // oldest messages dropped over the history cap
   };
   Stats stats() const;

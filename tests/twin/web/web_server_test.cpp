@@ -64,17 +64,17 @@ class RawClient {
   RawClient(const RawClient&) = delete;
   RawClient& operator=(const RawClient&) = delete;
   void send(const std::string& s) const { (void)::send(fd_, s.data(), s.size(), MSG_NOSIGNAL); }
-  // What arrived within `wait_s` (until the server closes the connection).
-  std::string receive(double wait_s) const {
-    timeval tv{0, 100000};
+  // The answer's status line and headers (what arrived within `wait_s` if less).
+  std::string response_head(double wait_s) const {
+    timeval tv{0, 50000};
     ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
     std::string got;
     const auto t0 = Clock::now();
-    char buf[4096];
-    while (seconds_since(t0) < wait_s) {
-      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+    char c;
+    while (got.find("\r\n\r\n") == std::string::npos && seconds_since(t0) < wait_s) {
+      const ssize_t n = ::recv(fd_, &c, 1, 0);
       if (n == 0) break;
-      if (n > 0) got.append(buf, static_cast<std::size_t>(n));
+      if (n > 0) got += c;
     }
     return got;
   }
@@ -215,6 +215,37 @@ TEST(WebServer, StreamsHistoryThenLiveThenEndsAndALatePageGetsItAll) {
   EXPECT_EQ(w.stats().messages, 4u);
 }
 
+// Past 16 open event streams one more is answered 503 and its connection closed, so that the
+// pool (32 workers) always has workers for the pages' other requests: each stream held a
+// worker, and with 32 open /api/info went unanswered (found in review).
+TEST(WebServer, StreamsPastTheCapAreRefusedAndPagesStillAnswered) {
+  omnitwin::testing::TempDir dir("webserver");
+  write_assets(dir.path());
+  WebServer w(loopback_settings(dir.path()), json::object());
+  w.set_info({{"mode", "live"}});
+  w.start();
+  w.publish("info", {{"mode", "live"}});
+  std::vector<std::unique_ptr<RawClient>> streams;
+  for (int k = 0; k < 40; ++k) {
+    streams.push_back(std::make_unique<RawClient>(port_of(w)));
+    streams.back()->send("GET /api/stream HTTP/1.1\r\nHost: x\r\n\r\n");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // httplib's listen backlog is 5
+  }
+  httplib::Client c("127.0.0.1", port_of(w));
+  c.set_read_timeout(3, 0);
+  auto r = c.Get("/api/info");
+  ASSERT_TRUE(r) << httplib::to_string(r.error());
+  EXPECT_EQ(r->status, 200);
+  int open = 0, refused = 0;
+  for (const auto& s : streams) {
+    const std::string head = s->response_head(2.0);
+    open += head.rfind("HTTP/1.1 200", 0) == 0;
+    refused += head.rfind("HTTP/1.1 503", 0) == 0 && head.find("Connection: close") != std::string::npos;
+  }
+  EXPECT_EQ(open, 16);
+  EXPECT_EQ(refused, 24);
+}
+
 // Over the history cap the oldest messages but the first go, and an open page still gets
 // every new one: the history used to drop by erasing its second element without moving its
 // numbering, so once full the stream's end stopped moving and open pages froze (found in
@@ -344,6 +375,28 @@ TEST(WebServer, ServesARecordedRunAndItsVideoInRanges) {
   ASSERT_TRUE(r);
   EXPECT_EQ(r->status, 206);  // the browser seeks the video so
   EXPECT_EQ(r->body, "234");
+}
+
+// A recorded run's stream sends the run's info and end and ends (the page reads /api/run):
+// nothing closed it, and it sent ": idle" for ever, each holding a worker (found in review).
+TEST(WebServer, ARecordedRunsStreamEnds) {
+  omnitwin::testing::TempDir dir("webserver");
+  write_assets(dir.path());
+  fs::create_directories(dir / "run");
+  WebServer w(loopback_settings(dir.path()), json::object());
+  w.serve_recorded({{"info", {{"mode", "recorded"}}}, {"samples", json::array()}, {"end", {{"passed", true}}}},
+                   (dir / "run").string());
+  w.start();
+  httplib::Client c("127.0.0.1", port_of(w));
+  std::string got;
+  const auto t0 = Clock::now();
+  auto r = c.Get("/api/stream", [&](const char* data, std::size_t n) {
+    got.append(data, n);
+    return seconds_since(t0) < 3.0;  // an endless stream: give up
+  });
+  ASSERT_TRUE(r) << httplib::to_string(r.error()) << "\n" << got;
+  EXPECT_EQ(r->status, 200);
+  EXPECT_EQ(got, "event: info\ndata: {\"mode\":\"recorded\"}\n\nevent: end\ndata: {\"passed\":true}\n\n");
 }
 
 TEST(WebServer, RefusesAPortInUse) {
