@@ -39,6 +39,38 @@ std::string sse_message(const std::string& event, const json& data) {
   return "event: " + event + "\ndata: " + data.dump(-1, ' ', false, json::error_handler_t::replace) + "\n\n";
 }
 
+// The file /run/`sub` names in the run directory `root` (canonical): a regular file whose real
+// path (symbolic links resolved) lies inside `root`, named by no part that starts with a dot,
+// before or after resolving. Else empty: a link to /etc/passwd, a link to a directory outside,
+// the .omnitwin-run marker, a directory.
+fs::path run_file(const fs::path& root, const std::string& sub) {
+  const auto dotted = [](const fs::path& p) {
+    for (const auto& part : p)
+      if (!part.empty() && part.string()[0] == '.') return true;
+    return false;
+  };
+  const fs::path rel = fs::path(sub).relative_path();
+  if (rel.empty() || dotted(rel)) return {};
+  std::error_code ec;
+  const fs::path real = fs::canonical(root / rel, ec);
+  if (ec || !fs::is_regular_file(real, ec)) return {};
+  const auto [in_root, in_real] = std::mismatch(root.begin(), root.end(), real.begin(), real.end());
+  if (in_root != root.end() || dotted(real.lexically_relative(root))) return {};
+  return real;
+}
+
+const char* content_type(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  if (ext == ".mp4") return "video/mp4";
+  if (ext == ".json") return "application/json";
+  if (ext == ".csv") return "text/csv";
+  if (ext == ".png") return "image/png";
+  if (ext == ".html") return "text/html; charset=utf-8";
+  if (ext == ".xml") return "application/xml";
+  if (ext == ".yaml" || ext == ".log" || ext == ".txt") return "text/plain; charset=utf-8";
+  return "application/octet-stream";
+}
+
 using Clock = std::chrono::steady_clock;
 
 // Set by a handler whose answer ends its connection (a refused stream): its client would
@@ -385,7 +417,24 @@ void WebServer::serve_recorded(json run, const std::string& run_dir) {
     info_ = run["info"];
     recorded_ = run.dump(-1, ' ', false, json::error_handler_t::replace);
   }
-  http_->set_mount_point("/run", run_dir);
+  // /run/ before any route: httplib's mount point followed symbolic links (found in review:
+  // /run/pw with pw -> /etc/passwd served it) and served dotfiles.
+  std::error_code ec;
+  fs::path root = fs::canonical(run_dir, ec);
+  if (ec) root = fs::absolute(run_dir).lexically_normal();
+  http_->set_pre_routing_handler([root](const httplib::Request& req, httplib::Response& res) {
+    if (req.path != "/run" && req.path.rfind("/run/", 0) != 0) return httplib::Server::HandlerResponse::Unhandled;
+    const fs::path file =
+        (req.method == "GET" || req.method == "HEAD") ? run_file(root, req.path.substr(4)) : fs::path();
+    std::ifstream f(file, std::ios::binary);
+    if (file.empty() || !f) {
+      res.status = 404;
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    // The status (200, or 206 with the byte ranges asked for) is httplib's, as for its files.
+    res.set_content(std::string(std::istreambuf_iterator<char>(f), {}), content_type(file));
+    return httplib::Server::HandlerResponse::Handled;
+  });
   // The page reads /api/run; a stream gets the run's info and end and ends. Nothing closed it
   // before: it sent ": idle" for ever and held its worker (found in review).
   publish("info", run["info"]);

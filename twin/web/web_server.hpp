@@ -3,7 +3,7 @@
 // and the run's data. A live run streams as Server-Sent Events on /api/stream: every message
 // is kept in a history that each new page gets first, so a page opened mid-run (or after a
 // reconnect) draws the run from its start. A recorded run (`omnitwin view`) is one JSON
-// document on /api/run, with the run directory (its video) under /run/.
+// document on /api/run, with the run directory's own files (its video) under /run/.
 //
 // The server runs on its own threads (httplib's pool of 32); nothing here is called from a
 // run's cyclic path: the live observer (web_observer) decimates and batches on its own thread.
@@ -78,8 +78,10 @@ class WebServer {
   // Blocks until a page has opened /api/stream (true), or *interrupt is set (false).
   bool wait_for_client(const std::atomic<bool>* interrupt);
 
-  // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video);
-  // /api/stream sends the run's info and end, then ends. Before start().
+  // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video): its
+  // regular files whose real path lies inside the run directory's, none named with a dot (a
+  // symbolic link out of it, or the .omnitwin-run marker, is 404). /api/stream sends the
+  // run's info and end, then ends. Before start().
   void serve_recorded(nlohmann::json run, const std::string& run_dir);
 
   struct Stats {

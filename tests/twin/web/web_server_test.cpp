@@ -377,6 +377,44 @@ TEST(WebServer, ServesARecordedRunAndItsVideoInRanges) {
   EXPECT_EQ(r->body, "234");
 }
 
+// /run/ serves the run directory's regular files and nothing outside it: httplib's mount point
+// followed symbolic links (found in review: /run/pw with pw -> /etc/passwd was served, and
+// /run/etclink/hostname), and served dotfiles such as the .omnitwin-run marker.
+TEST(WebServer, ServesOnlyTheRunDirectorysOwnFiles) {
+  omnitwin::testing::TempDir dir("webserver");
+  write_assets(dir.path());
+  fs::create_directories(dir / "run/sub");
+  fs::create_directories(dir / "elsewhere");
+  std::ofstream(dir / "run/video.mp4", std::ios::binary) << "0123456789";
+  std::ofstream(dir / "run/sub/notes.txt") << "notes";
+  std::ofstream(dir / "run/.omnitwin-run") << "marker";
+  std::ofstream(dir / "elsewhere/secret") << "secret";
+  fs::create_symlink(dir / "elsewhere/secret", dir / "run/pw");
+  fs::create_directory_symlink(dir / "elsewhere", dir / "run/elsewhere_link");
+  fs::create_symlink(".omnitwin-run", dir / "run/marker_link");
+  fs::create_symlink("video.mp4", dir / "run/video_link.mp4");  // inside the run: served
+  WebServer w(loopback_settings(dir.path()), json::object());
+  w.serve_recorded({{"info", {{"mode", "recorded"}}}, {"samples", json::array()}}, (dir / "run").string());
+  w.start();
+  httplib::Client c("127.0.0.1", port_of(w));
+  for (const char* path : {"/run/pw", "/run/elsewhere_link/secret", "/run/.omnitwin-run", "/run/marker_link",
+                           "/run/sub/../.omnitwin-run", "/run/../elsewhere/secret", "/run/", "/run/sub", "/run"}) {
+    auto r = c.Get(path);
+    ASSERT_TRUE(r) << path;
+    EXPECT_EQ(r->status, 404) << path << ": " << r->body;
+    EXPECT_EQ(r->body.find("secret"), std::string::npos) << path;
+  }
+  auto r = c.Get("/run/sub/notes.txt");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 200);
+  EXPECT_EQ(r->body, "notes");
+  r = c.Get("/run/video_link.mp4", httplib::Headers{{"Range", "bytes=2-4"}});
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 206);
+  EXPECT_EQ(r->body, "234");
+  EXPECT_EQ(r->get_header_value("Content-Type"), "video/mp4");
+}
+
 // A recorded run's stream sends the run's info and end and ends (the page reads /api/run):
 // nothing closed it, and it sent ": idle" for ever, each holding a worker (found in review).
 TEST(WebServer, ARecordedRunsStreamEnds) {
