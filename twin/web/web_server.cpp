@@ -327,15 +327,27 @@ void WebServer::add_routes() {
         return;
       }
       ++open_streams_;
-      ++stats_.streams_opened;
     }
-    changed_.notify_all();
-    auto cursor = std::make_shared<std::uint64_t>(0);
+    struct Stream {
+      std::uint64_t cursor = 0;
+      bool opened = false;
+    };
+    auto stream = std::make_shared<Stream>();
     res.set_chunked_content_provider(
         "text/event-stream",
-        [this, cursor](std::size_t, httplib::DataSink& sink) {
+        [this, stream](std::size_t, httplib::DataSink& sink) {
+          // A page opened the stream once a GET's content is asked for: a HEAD has none, and
+          // counted as a page (found in review: a HEAD started a --web-wait run).
+          if (!stream->opened) {
+            stream->opened = true;
+            {
+              std::lock_guard<std::mutex> lk(mu_);
+              ++stats_.streams_opened;
+            }
+            changed_.notify_all();
+          }
           std::string out;
-          const bool more = stream_chunk(*cursor, out);
+          const bool more = stream_chunk(stream->cursor, out);
           if (!out.empty() && !sink.write(out.data(), out.size())) return false;
           if (!more) sink.done();
           return true;

@@ -75,7 +75,8 @@ class WebServer {
   void close_streams();
   // Waits until every open stream has sent the whole history, or timeout_s passed.
   void wait_streams_drained(double timeout_s);
-  // Blocks until a page has opened /api/stream (true), or *interrupt is set (false).
+  // Blocks until a page has opened /api/stream (true: a GET began receiving it; a HEAD does
+  // not count), or *interrupt is set (false).
   bool wait_for_client(const std::atomic<bool>* interrupt);
 
   // Recorded mode: /api/run answers `run` and /run/ serves the run directory (the video): its
@@ -87,7 +88,7 @@ class WebServer {
   struct Stats {
     std::uint64_t messages = 0;      // published
     std::uint64_t bytes = 0;         // published (SSE text)
-    std::uint64_t streams_opened = 0;
+    std::uint64_t streams_opened = 0;   // GETs of /api/stream that began receiving it
     std::uint64_t streams_refused = 0;  // answered 503: max_streams were open
     std::uint64_t history_dropped = 0;  // oldest messages dropped over the history cap
   };

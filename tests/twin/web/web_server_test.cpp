@@ -341,6 +341,40 @@ TEST(WebServer, EndsAtOnceWhateverItsClientsDo) {
   EXPECT_TRUE(prompt) << "still ending after " << took << " s";
 }
 
+// A HEAD of /api/stream is no page: it counted as one opened, and started a --web-wait run
+// (found in review). A GET is one.
+TEST(WebServer, AHeadOfTheStreamIsNoPage) {
+  omnitwin::testing::TempDir dir("webserver");
+  write_assets(dir.path());
+  WebServer w(loopback_settings(dir.path()), json::object());
+  w.start();
+  httplib::Client c("127.0.0.1", port_of(w));
+  auto r = c.Head("/api/stream");
+  ASSERT_TRUE(r) << httplib::to_string(r.error());
+  EXPECT_EQ(r->status, 200);
+  std::atomic<bool> stop{false};
+  std::thread t([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    stop.store(true);
+  });
+  EXPECT_FALSE(w.wait_for_client(&stop)) << "a HEAD counted as a page";
+  t.join();
+  EXPECT_EQ(w.stats().streams_opened, 0u);
+  std::atomic<bool> opened{false}, give_up{false};
+  std::thread guard([&] {
+    for (int k = 0; k < 300 && !opened; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    give_up.store(true);
+  });
+  auto page = std::async(std::launch::async, [&] { return read_stream(port_of(w)); });
+  EXPECT_TRUE(w.wait_for_client(&give_up));
+  opened.store(true);
+  guard.join();
+  w.publish("end", {{"passed", true}});
+  w.close_streams();
+  EXPECT_NE(page.get().find("event: end"), std::string::npos);
+  EXPECT_EQ(w.stats().streams_opened, 1u);
+}
+
 TEST(WebServer, WaitForAPageEndsOnInterrupt) {
   omnitwin::testing::TempDir dir("webserver");
   write_assets(dir.path());
