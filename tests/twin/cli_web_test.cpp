@@ -64,6 +64,17 @@ class Tricklers {
 
 class CliWeb : public CliTest {
  protected:
+  // A recorded run of a still platform, `duration` seconds on bus direct: its directory, or
+  // "" (with a test failure) when the run failed.
+  fs::path recorded_run(const std::string& duration) {
+    const fs::path out = dir_ / "rec", scenario = dir_ / "still.yaml";
+    std::ofstream(scenario) << "name: still\nplatform: {variant: capsule}\nduration: " << duration << "\n";
+    const Finished f = run({"run", scenario.string(), "--bus", "direct", "--out", out.string(), "--no-progress",
+                            "--no-video", "--no-report"});
+    EXPECT_EQ(f.code, 0) << f.out << f.err;
+    return f.code == 0 ? out : fs::path();
+  }
+
   // The port of the "web view: http://127.0.0.1:PORT/" line on the child's stderr (0: none
   // within 20 s).
   static int web_port(Child& c) {
@@ -124,11 +135,8 @@ TEST_F(CliWeb, TwinStreamsItsRunToAPage) {
 }
 
 TEST_F(CliWeb, ViewServesARecordedRunUntilSigterm) {
-  const fs::path out = dir_ / "rec", scenario = dir_ / "still.yaml";
-  std::ofstream(scenario) << "name: still\nplatform: {variant: capsule}\nduration: 2\n";
-  const Finished f = run({"run", scenario.string(), "--bus", "direct", "--out", out.string(), "--no-progress",
-                          "--no-video", "--no-report"});
-  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const fs::path out = recorded_run("2");
+  ASSERT_FALSE(out.empty());
   Child c({"view", out.string(), "--web", "127.0.0.1:0"}, work(), io());
   const int port = web_port(c);
   ASSERT_GT(port, 0) << c.err();
@@ -151,11 +159,8 @@ TEST_F(CliWeb, ViewServesARecordedRunUntilSigterm) {
 // and Ctrl-C ends the program at once although two clients trickle requests and one is idle
 // (found in review: 20 s, the server's workers waiting for the trickling clients).
 TEST_F(CliWeb, ViewsStreamEndsAndCtrlCEndsItWhateverClientsDo) {
-  const fs::path out = dir_ / "rec", scenario = dir_ / "still.yaml";
-  std::ofstream(scenario) << "name: still\nplatform: {variant: capsule}\nduration: 0.5\n";
-  const Finished f = run({"run", scenario.string(), "--bus", "direct", "--out", out.string(), "--no-progress",
-                          "--no-video", "--no-report"});
-  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const fs::path out = recorded_run("0.5");
+  ASSERT_FALSE(out.empty());
   Child c({"view", out.string(), "--web", "127.0.0.1:0"}, work(), io());
   const int port = web_port(c);
   ASSERT_GT(port, 0) << c.err();

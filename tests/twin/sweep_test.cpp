@@ -29,6 +29,14 @@ fs::path write_spec(const fs::path& dir, const std::string& name, const std::str
   return dir / name;
 }
 
+// An `sbatch` of the test's own on PATH: a shell script with `body`.
+void stand_in_sbatch(const fs::path& bin, const std::string& body) {
+  fs::create_directories(bin);
+  std::ofstream(bin / "sbatch") << "#!/bin/sh\n" << body;
+  fs::permissions(bin / "sbatch", fs::perms::owner_all);
+  ::setenv("PATH", (bin.string() + ":" + std::getenv("PATH")).c_str(), 1);
+}
+
 class Sweep : public CliTest {};
 
 TEST_F(Sweep, GridIsTheCartesianProductLastKeyFastest) {
@@ -143,15 +151,8 @@ TEST_F(Sweep, RealtimePointsRunOneAtATimeWhateverTheJobs) {
 // array), and the sweep ends at once with exit 3. It used to wait for every task (found in
 // review). A stand-in sbatch on PATH that only waits, and says when it is told to stop.
 TEST_F(Sweep, SigtermDuringSlurmPassesOnToSbatchAndEnds) {
-  const fs::path bin = dir_ / "bin";
-  fs::create_directories(bin);
-  {
-    std::ofstream f(bin / "sbatch");
-    f << "#!/bin/sh\nsleep 60 &\ntrap 'kill $!; echo cancelled > " << (dir_ / "sbatch-term").string()
-      << "; exit 143' TERM\nwait $!\n";
-  }
-  fs::permissions(bin / "sbatch", fs::perms::owner_all);
-  ::setenv("PATH", (bin.string() + ":" + std::getenv("PATH")).c_str(), 1);
+  stand_in_sbatch(dir_ / "bin", "sleep 60 &\ntrap 'kill $!; echo cancelled > " + (dir_ / "sbatch-term").string() +
+                                    "; exit 143' TERM\nwait $!\n");
   const fs::path out = dir_ / "slurm";
   Child c({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--slurm", "--out", out.string()}, work(), io());
   ASSERT_TRUE(c.wait_for_output("submitting")) << c.out() << c.err();
@@ -219,15 +220,8 @@ TEST_F(Sweep, AnEarlierSweepsResultsAreNotReadAsThisOnesAndStringsAreQuoted) {
 // a space. The name's command ran when the script did, and the quoted paths broke the exec
 // line (found in review). A stand-in sbatch runs the script as task 1.
 TEST_F(Sweep, TheSlurmScriptQuotesWhatItIsGiven) {
-  const fs::path bin = dir_ / "bin";
-  fs::create_directories(bin);
-  {
-    std::ofstream f(bin / "sbatch");
-    f << "#!/bin/sh\nfor a; do last=$a; done\nprintf '%s\\n' \"$@\" > '" << (dir_ / "args").string()
-      << "'\nSLURM_ARRAY_TASK_ID=1 sh \"$last\"\n";
-  }
-  fs::permissions(bin / "sbatch", fs::perms::owner_all);
-  ::setenv("PATH", (bin.string() + ":" + std::getenv("PATH")).c_str(), 1);
+  stand_in_sbatch(dir_ / "bin", "for a; do last=$a; done\nprintf '%s\\n' \"$@\" > '" + (dir_ / "args").string() +
+                                    "'\nSLURM_ARRAY_TASK_ID=1 sh \"$last\"\n");
   const fs::path pwned = dir_ / "PWNED";
   const fs::path spec = write_spec(dir_ / "q'd ir", "s.yaml",
                                    "name: \"x\\ntouch " + pwned.string() + "\"\nscenario: line.yaml\n"
