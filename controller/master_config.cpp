@@ -25,6 +25,7 @@ namespace omnitwin::controller {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kMinPeriod = 1e-4, kMaxPeriod = 1.0;  // [s] the loop period's bounds
 constexpr const char* kCodeFile = "<config>";  // "file" of configurations built in code
 
 std::string format_error(const std::string& file, int line, const std::string& key,
@@ -93,6 +94,13 @@ class Reader {
       fail(it, fmt::format("expected a number, got '{}'", text));
     }
     if (lo_open ? !(v > lo) : !(v >= lo)) fail(it, fmt::format("must be {} {}", lo_open ? ">" : ">=", lo));
+    return v;
+  }
+
+  // A finite number in [lo, hi].
+  double bounded(const Item& it, double lo, double hi) const {
+    const double v = number(it);
+    if (v < lo || v > hi) fail(it, fmt::format("must be in [{}, {}]", lo, hi));
     return v;
   }
 
@@ -250,7 +258,9 @@ void read_geometry(const Reader& r, const Item& g, PlatformLoopConfig& loop) {
 // The platform-loop keys; false if `m` is not one of them.
 bool read_loop_key(const Reader& r, const Item& m, PlatformLoopConfig& loop) {
   const std::string& n = m.name;
-  if (n == "period") loop.period = r.number(m, 0.0, true);
+  // Bounded as CANopen's cycle: 0 ns would divide by zero in the wall loop, and a huge one
+  // overflows its nanosecond arithmetic (found in review).
+  if (n == "period") loop.period = r.bounded(m, kMinPeriod, kMaxPeriod);
   else if (n == "kp") loop.kp = r.gains(m);
   else if (n == "ki") loop.ki = r.gains(m);
   else if (n == "feedforward") loop.feedforward = r.boolean(m);

@@ -149,7 +149,13 @@ TEST(MasterConfig, MissingRequiredKeys) {
 
 TEST(MasterConfig, WrongTypesAndRangesAreErrors) {
   const std::string p(kMinimal);
-  EXPECT_EQ(error_of("period: 0\n" + p), "cfg.yaml:1: period: must be > 0");
+  EXPECT_EQ(error_of("period: 0\n" + p), "cfg.yaml:1: period: must be in [0.0001, 1]");
+  // Found in review: 1e-10 became 0 ns (SIGFPE in the wall loop), 1e11 overflowed it.
+  EXPECT_EQ(error_of("period: 1e-10\n" + p), "cfg.yaml:1: period: must be in [0.0001, 1]");
+  EXPECT_EQ(error_of("period: 1e11\n" + p), "cfg.yaml:1: period: must be in [0.0001, 1]");
+  EXPECT_EQ(error_of("period: 1e300\n" + p), "cfg.yaml:1: period: must be in [0.0001, 1]");
+  EXPECT_EQ(error_of("period: 1\n" + p), "");
+  EXPECT_EQ(error_of("period: 0.0001\n" + p), "");
   EXPECT_EQ(error_of("period: fast\n" + p), "cfg.yaml:1: period: expected a number, got 'fast'");
   EXPECT_EQ(error_of("period:\n" + p), "cfg.yaml:1: period: missing value");
   EXPECT_EQ(error_of("kp: [1, 2]\n" + p), "cfg.yaml:1: kp: expected a list of three numbers [x, y, phi]");
