@@ -120,7 +120,8 @@ bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64
 // LoopFailure / simclock::ChannelError). Returns 0.
 template <class Runner>
 int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd) {
-  simclock::Client client(sim_clock, std::chrono::seconds(10));
+  simclock::Client client(sim_clock, std::chrono::seconds(10), sigfd);
+  if (client.stopped()) return 0;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
   for (;;) {
     simclock::Grant g;

@@ -9,7 +9,10 @@
 #include <sys/signalfd.h>
 #include <unistd.h>
 
+#include <fmt/format.h>
+
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -70,12 +73,26 @@ void try_realtime(int priority) {
   if (::mlockall(MCL_CURRENT | MCL_FUTURE) != 0) spdlog::debug("mlockall not permitted ({})", std::strerror(errno));
 }
 
-void write_stats_file(const std::string& path, const std::string& text) {
+bool write_stats_file(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";
   std::ofstream f(tmp);
   f << text << "\n";
   f.close();
-  if (!f || std::rename(tmp.c_str(), path.c_str()) != 0) spdlog::error("--stats {}: cannot write", path);
+  if (f && std::rename(tmp.c_str(), path.c_str()) == 0) return true;
+  const int err = errno;
+  std::remove(tmp.c_str());  // no stray PATH.tmp when the rename fails (found in review)
+  spdlog::error("--stats {}: cannot write ({})", path, std::strerror(err));
+  return false;
+}
+
+std::string time_value_problem(const std::string& text, double max) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(begin, &end);
+  if (text.empty() || end != begin + text.size()) return fmt::format("'{}' is not a number", text);
+  if (!std::isfinite(v) || v < 0 || v > max) return fmt::format("{} is not in [0, {}]", text, max);
+  return "";
 }
 
 }  // namespace omnitwin::controller

@@ -33,8 +33,17 @@ std::int64_t realtime_ns();
 timespec to_timespec(std::int64_t ns);
 
 // --stats: writes `text` to path.tmp and renames it to `path`, so a reader never sees half a
-// file; logs an error when it cannot. Not real-time safe (the program's end).
-void write_stats_file(const std::string& path, const std::string& text);
+// file; logs an error, removes path.tmp and returns false when it cannot (the caller then
+// exits 3: a record that cannot be written is a runtime failure). Not real-time safe.
+[[nodiscard]] bool write_stats_file(const std::string& path, const std::string& text);
+
+// A time option's text (--duration, --seconds, --timeout-ms): "" when it is a finite number
+// in [0, max], else a short message. For a CLI11 check: CLI::NonNegativeNumber lets NaN
+// through, prints DBL_MAX in full, and a huge value overflows the programs' int64 ns deadlines.
+// Set-up only.
+std::string time_value_problem(const std::string& text, double max);
+// The largest --duration / --seconds the programs take [s] (11.6 days).
+inline constexpr double kMaxRunSeconds = 1e6;
 // SCHED_FIFO at `priority` and locked memory where permitted; a debug line where not. Set-up.
 void try_realtime(int priority);
 

@@ -427,8 +427,9 @@ bool retry_connect(int err) {
   return err == ENOENT || err == ECONNREFUSED || err == EINTR || err == EAGAIN;
 }
 
-// Connects a new socket to `sa`, retrying while the listener is missing until `deadline`.
-int connect_until(const SocketAddress& sa, Clock::time_point deadline, const std::string& path) {
+// Connects a new socket to `sa`, retrying while the listener is missing until `deadline`;
+// -1 when `stop_fd` (>= 0) becomes readable meanwhile.
+int connect_until(const SocketAddress& sa, Clock::time_point deadline, const std::string& path, int stop_fd) {
   for (;;) {
     int fd = make_socket(0);
     if (::connect(fd, reinterpret_cast<const sockaddr*>(&sa.sa), sa.len) == 0) return fd;
@@ -437,7 +438,14 @@ int connect_until(const SocketAddress& sa, Clock::time_point deadline, const std
     const auto left = deadline - Clock::now();
     if (!retry_connect(err) || left <= Clock::duration::zero())
       throw ChannelError("sim-clock: cannot connect to " + path + ": " + errno_text(err));
-    std::this_thread::sleep_for(std::min<Clock::duration>(left, kConnectRetry));
+    const auto wait = std::min<Clock::duration>(left, kConnectRetry);
+    if (stop_fd < 0) {
+      std::this_thread::sleep_for(wait);
+      continue;
+    }
+    pollfd p{stop_fd, POLLIN, 0};
+    const auto ms = std::chrono::ceil<std::chrono::milliseconds>(wait).count();
+    if (::poll(&p, 1, static_cast<int>(ms)) > 0 && (p.revents & POLLIN)) return -1;
   }
 }
 
@@ -549,11 +557,15 @@ void Server::end(std::int64_t t_ns) {
 // ---------------------------------------------------------------------------------------------
 // Client (master end).
 
-Client::Client(std::string_view address, std::chrono::milliseconds timeout) {
+Client::Client(std::string_view address, std::chrono::milliseconds timeout, int stop_fd) {
   // Connect (waiting for the twin's listener), then introduce ourselves.
   const std::string path = parse_address(address);
   const SocketAddress sa = socket_address(path);
-  int fd = connect_until(sa, deadline_after(timeout), path);
+  int fd = connect_until(sa, deadline_after(timeout), path, stop_fd);
+  if (fd < 0) {
+    stopped_ = true;
+    return;
+  }
   if (!send_message(fd, Hello{static_cast<std::uint32_t>(::getpid())})) {
     const int err = errno;
     close_fd(fd);

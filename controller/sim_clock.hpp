@@ -178,8 +178,11 @@ class Server {
 class Client {
  public:
   // Connects (retrying until `timeout` while the twin has not yet created the socket) and
-  // sends Hello. Throws ChannelError when it cannot.
-  Client(std::string_view address, std::chrono::milliseconds timeout);
+  // sends Hello. Throws ChannelError when it cannot. With `stop_fd` >= 0 (the program's
+  // signalfd) the wait also ends when that fd becomes readable: no connection, stopped() true
+  // (the fd is only polled; the signal stays there to be read). Without it a Ctrl-C waited up
+  // to `timeout` (found in review).
+  Client(std::string_view address, std::chrono::milliseconds timeout, int stop_fd = -1);
   ~Client();
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;
@@ -191,9 +194,12 @@ class Client {
   // twin's HORIZON (ok), End or the twin's death (closed), or anything else (protocol).
   WaitStatus exchange(const Sent& sent, Horizon& horizon, std::chrono::milliseconds timeout);
   int fd() const { return fd_; }
+  // The connect wait ended on `stop_fd` (then fd() is -1).
+  bool stopped() const { return stopped_; }
 
  private:
   int fd_ = -1;
+  bool stopped_ = false;
 };
 
 }  // namespace omnitwin::simclock

@@ -32,7 +32,7 @@ namespace omnitwin::controller::canopen {
 
 namespace {
 
-constexpr int kExitOk = 0, kExitUsage = 2;
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
 
 // The CANopen master core and the platform loop, one SYNC period at a time: the wheels' speeds
 // go into RPDO1 once every drive is operation enabled.
@@ -65,11 +65,11 @@ class Runner : public CanRunner<Runner, CoMaster> {
   }
 };
 
-void write_stats(const std::string& path, const Runner& r) {
+bool write_stats(const std::string& path, const Runner& r) {
   nlohmann::json j = r.stats();
   j["frames_tx"] = r.frames_tx();
   j["frames_rx"] = r.frames_rx;
-  write_stats_file(path, j.dump());
+  return write_stats_file(path, j.dump());
 }
 
 void log_end(const Runner& r) {
@@ -121,9 +121,9 @@ int run_canopen_program(const ProgramOptions& o) {
                pc.sync_producer ? fmt::format("node {}", pc.sync_producer) : std::string("the master"),
                std::llround(master_tick(pc) * 1e6), pc.nodes[0], pc.nodes[1], pc.nodes[2], pc.nodes[3],
                pc.mode == WheelMode::csv ? "CSV" : "PV");
-  const int code = run_can_master(o, *runner, *tr, std::llround(master_tick(pc) * 1e9));
+  int code = run_can_master(o, *runner, *tr, std::llround(master_tick(pc) * 1e9));
   log_end(*runner);
-  if (!o.stats.empty()) write_stats(o.stats, *runner);
+  if (!o.stats.empty() && !write_stats(o.stats, *runner)) code = kExitRuntime;
   return code;
 }
 

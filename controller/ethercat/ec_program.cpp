@@ -318,7 +318,8 @@ struct Botnana {
 };
 
 int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
-  simclock::Client client(o.sim_clock, kConnectTimeout);
+  simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
+  if (client.stopped()) return kExitOk;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
   for (;;) {
     simclock::Grant g;
@@ -485,7 +486,7 @@ int run_ethercat_program(const ProgramOptions& o) {
       per.push_back({{"emergencies", m.slave(i).emergencies}, {"last_emergency", m.slave(i).last_emergency}});
     nlohmann::json out = j;
     out["slave_emergencies"] = per;
-    write_stats_file(o.stats, out.dump());
+    if (!write_stats_file(o.stats, out.dump())) code = kExitRuntime;
   }
   for (int i = 0; i < m.slave_count(); ++i) {
     const SlaveStatus& sl = m.slave(i);

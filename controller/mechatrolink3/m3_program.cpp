@@ -337,11 +337,11 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
   return r->failed() ? kExitRuntime : kExitOk;
 }
 
-void write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std::uint64_t rx) {
+bool write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std::uint64_t rx) {
   nlohmann::json j = r.stats();
   j["frames_tx"] = tx;
   j["frames_rx"] = rx;
-  controller::write_stats_file(path, j.dump());
+  return controller::write_stats_file(path, j.dump());
 }
 
 void log_end(const Runner& r) {
@@ -399,16 +399,18 @@ int run_m3_program(const ProgramOptions& o) {
   std::uint64_t tx = 0, rx = 0;
   try {
     if (o.clock == "sim") {
-      simclock::Client client(o.sim_clock, kConnectTimeout);
-      MasterLockstep ls(*tr, client);
-      runner = std::make_unique<Runner>(pc, platform, [&ls](std::span<const std::uint8_t> f, SimTime t) { ls.emit(f, t); });
-      try {
-        code = run_sim(*runner, ls, sigfd, cycle_ns);
-      } catch (const RuntimeFailure&) {
+      simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
+      if (!client.stopped()) {  // else SIGINT/SIGTERM while waiting for the twin's socket: exit 0
+        MasterLockstep ls(*tr, client);
+        runner = std::make_unique<Runner>(pc, platform, [&ls](std::span<const std::uint8_t> f, SimTime t) { ls.emit(f, t); });
+        try {
+          code = run_sim(*runner, ls, sigfd, cycle_ns);
+        } catch (const RuntimeFailure&) {
+          tx = ls.frames_sent(), rx = ls.frames_received();
+          throw;
+        }
         tx = ls.frames_sent(), rx = ls.frames_received();
-        throw;
       }
-      tx = ls.frames_sent(), rx = ls.frames_received();
     } else {
       auto make = [&] {
         return std::make_unique<Runner>(pc, platform, [&tr, &tx](std::span<const std::uint8_t> f, SimTime) {
@@ -428,7 +430,7 @@ int run_m3_program(const ProgramOptions& o) {
   if (runner) {
     if (runner->failed()) code = kExitRuntime;
     log_end(*runner);
-    if (!o.stats.empty()) write_stats(o.stats, *runner, tx, rx);
+    if (!o.stats.empty() && !write_stats(o.stats, *runner, tx, rx)) code = kExitRuntime;
   }
   if (sigfd >= 0) ::close(sigfd);
   return code;

@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -43,6 +44,7 @@
 #include "controller/master_config.hpp"
 #include "controller/omni_master.hpp"
 #include "controller/program_support.hpp"
+#include "controller/programs/cli_checks.hpp"
 #include "controller/sim_clock.hpp"
 
 using namespace omnitwin;
@@ -189,7 +191,11 @@ bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::i
 
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
             LoopStats& ls, Outbox& ob) {
-  simclock::Client client(o.sim_clock, kConnectTimeout);
+  simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
+  if (client.stopped()) {  // SIGINT/SIGTERM while waiting for the twin's socket
+    ls.interrupted = true;
+    return kExitOk;
+  }
   spdlog::debug("connected to the twin's sim clock at {}", o.sim_clock);
   StateLog log;
   log.reset(m.state());
@@ -307,7 +313,7 @@ void add_options(CLI::App& app, Options& o) {
       ->capture_default_str();
   app.add_option("--sim-clock", o.sim_clock, "the twin's sim-clock address unix:PATH (with --clock sim)");
   app.add_option("--duration", o.duration, "wall clock: stop after S seconds (default: until SIGINT/SIGTERM)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(controller::time_check(controller::kMaxRunSeconds));
   app.add_option("--log-level", o.log_level, "trace, debug, info, warn, error, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
       ->capture_default_str();
@@ -319,6 +325,15 @@ std::string usage_problem(const Options& o) {
   if (o.config.empty()) return "--config is required";
   if (o.bus != "can" && o.bus != "canopen" && o.bus != "tml" && o.bus != "ethercat" && o.bus != "m3")
     return fmt::format("--bus {}: not supported (can, canopen, tml, ethercat or m3)", o.bus);
+  if (!o.script.empty() && o.bus != "ethercat") return "--script needs --bus ethercat (Botnana scripts drive the EtherCAT master)";
+  if (!o.script.empty() && std::filesystem::is_directory(o.script)) return fmt::format("--script {}: a directory, not a script", o.script);
+  // Every bus: a bad address is bad usage (exit 2) before anything starts, not a failed
+  // connect (exit 3) after the configuration and transport (found in review).
+  try {
+    if (o.clock == "sim" && !o.sim_clock.empty()) simclock::parse_address(o.sim_clock);
+  } catch (const std::exception& e) {
+    return e.what();
+  }
   if (o.bus == "m3" || o.bus == "canopen" || o.bus == "tml") {
     if (o.clock == "sim" && o.sim_clock.empty()) return "--clock sim needs --sim-clock unix:PATH";
     if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
@@ -333,7 +348,6 @@ std::string usage_problem(const Options& o) {
   if (o.clock == "wall" && !o.sim_clock.empty()) return "--sim-clock is only used with --clock sim";
   if (o.clock == "sim" && o.duration >= 0) return "--duration is only used with --clock wall (the twin ends a sim run)";
   try {
-    if (o.clock == "sim") simclock::parse_address(o.sim_clock);
     can::parse_transport_spec(normalize_iface(o.iface));
   } catch (const std::exception& e) {
     return e.what();
@@ -430,7 +444,9 @@ int main(int argc, char** argv) {
     return kExitUsage;
   }
   if (shell->parsed()) o.shell = true, o.bus = "ethercat", o.clock = "wall";
-  if (!o.script.empty()) o.bus = "ethercat";  // Botnana scripts drive the EtherCAT master
+  // Botnana scripts drive the EtherCAT master: --script alone picks it; another --bus is an
+  // error (usage_problem), not silently overridden (found in review).
+  if (!o.script.empty() && app.get_option("--bus")->count() == 0) o.bus = "ethercat";
   setup_logging(o.log_level);
   if (o.bus == "ethercat" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34980";
   if (o.bus == "m3" && o.iface == kDefaultIface) o.iface = "udp:127.0.0.1:34997";

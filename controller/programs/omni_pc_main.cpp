@@ -29,6 +29,7 @@
 
 #include "bus_emulators/can/transport.hpp"
 #include "controller/program_support.hpp"
+#include "controller/programs/cli_checks.hpp"
 #include "bus_emulators/omni/omni_codec.hpp"
 
 using namespace omnitwin;
@@ -195,14 +196,17 @@ int main(int argc, char** argv) {
   detect->add_option("--timeout-ms", o.timeout_ms, "how long to collect answers [ms]")->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   auto* start = app.add_subcommand("start", "NMT start (0x000 [node 01]); default node: the master 0x02");
-  start->add_option("--node", o.node, "target node id (0 = all)");
+  // Range-checked here: -1 stands for "not given", so a negative --node silently became the
+  // default target (found in review).
+  start->add_option("--node", o.node, "target node id (0 = all)")->check(CLI::Range(0, 0xFF));
   auto* stop = app.add_subcommand("stop", "NMT stop (0x000 [node 02]); default node: 0 = all");
-  stop->add_option("--node", o.node, "target node id (0 = all)");
+  stop->add_option("--node", o.node, "target node id (0 = all)")->check(CLI::Range(0, 0xFF));
   auto* param = app.add_subcommand("param", "slave controller setting to the master (0x702 [01 0C value])");
   param->add_option("VALUE", o.value, "the value (4 bytes, big-endian on the wire)")->required();
   param->add_option("--type", o.data_type, "data type (default 0x0C, slave controller setting)");
   auto* monitor = app.add_subcommand("monitor", "print every frame with its decoded meaning");
-  monitor->add_option("--seconds", o.seconds, "stop after S seconds")->check(CLI::NonNegativeNumber);
+  monitor->add_option("--seconds", o.seconds, "stop after S seconds")
+      ->check(controller::time_check(controller::kMaxRunSeconds));
   monitor->add_option("--count", o.count, "stop after N frames")->check(CLI::NonNegativeNumber);
   try {
     app.parse(argc, argv);

@@ -51,6 +51,7 @@
 #include "bus_emulators/tml/tml_pty.hpp"
 #include "bus_emulators/tml/tml_relay.hpp"
 #include "bus_emulators/tml/tml_serial.hpp"
+#include "controller/programs/cli_checks.hpp"
 
 using namespace omnitwin;
 using namespace omnitwin::tml;
@@ -222,10 +223,16 @@ void print_expected(const Options& o, const Message& m) {
   else fmt::print("           {}\n", describe(make(*value, &q)));
 }
 
-int run_encode(const Options& o) {
+// The destination ID code of --axis (and --group), checked: group_mask() makes a group number
+// over 8 a 0 mask, i.e. a broadcast to every drive (found in review: `send --group` did).
+std::uint16_t destination(const Options& o) {
   if (o.axis < 0 || o.axis > 255 || o.host < 0 || o.host > 255) throw InputError{"--axis and --host take 0-255"};
   if (o.group && o.axis > 8) throw InputError{"with --group, --axis is a group number 1-8 (0 = broadcast)"};
-  const std::uint16_t dest = o.group ? group_id_code(group_mask(o.axis)) : axis_id_code(static_cast<std::uint8_t>(o.axis));
+  return o.group ? group_id_code(group_mask(o.axis)) : axis_id_code(static_cast<std::uint8_t>(o.axis));
+}
+
+int run_encode(const Options& o) {
+  const std::uint16_t dest = destination(o);
   const auto host_axis = static_cast<std::uint8_t>(o.host);
   const std::uint16_t sender = o.protocol == "rs232" ? host_id_code(host_axis) : axis_id_code(host_axis);
   const Message m = build_message(o, dest, sender);
@@ -402,8 +409,7 @@ int run_send(const Options& o) {
   const bool serial = o.protocol == "rs232" || o.protocol == "rs485";
   if (o.protocol == "raw") throw InputError{"send needs a line protocol: rs232, rs485, tmlcan or techcan"};
   if (serial ? o.port.empty() : o.iface.empty()) throw InputError{serial ? "send on a serial line needs --port PATH" : "send on CAN needs --iface SPEC"};
-  if (o.axis < 0 || o.axis > 255 || o.host < 0 || o.host > 255) throw InputError{"--axis and --host take 0-255"};
-  const std::uint16_t dest = o.group ? group_id_code(group_mask(o.axis)) : axis_id_code(static_cast<std::uint8_t>(o.axis));
+  const std::uint16_t dest = destination(o);
   const auto host_axis = static_cast<std::uint8_t>(o.host);
   const Message m = build_message(o, dest, o.protocol == "rs232" ? host_id_code(host_axis) : axis_id_code(host_axis));
   fmt::print("message:   {}\n", describe(m));
@@ -488,6 +494,14 @@ void add_common(CLI::App* sub, Options& o) {
       ->capture_default_str();
 }
 
+// --baud: only the rates open_serial() and the pty set (found in review: 0 aborted in the line
+// timing, any other rate opened the port at 9600 while printing the rate asked for).
+void add_baud(CLI::App* sub, Options& o) {
+  sub->add_option("--baud", o.baud, "serial bit rate (9600, 19200, 38400, 57600, 115200)")
+      ->check(CLI::IsMember(std::vector<std::uint32_t>{9600, 19200, 38400, 57600, 115200}))
+      ->capture_default_str();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -510,19 +524,22 @@ int main(int argc, char** argv) {
   add_common(send, o);
   send->add_option("--port", o.port, "rs232/rs485: the serial device (e.g. the path omni-tml drive prints)");
   send->add_option("--iface", o.iface, "tmlcan/techcan: the CAN transport (udp:GROUP:PORT, socketcan:IFACE)");
-  send->add_option("--baud", o.baud, "serial bit rate (9600, 19200, 38400, 57600, 115200)")->capture_default_str();
+  add_baud(send, o);
   send->add_option("--axis,-a", o.axis, "destination axis ID (with --group: group number)")->capture_default_str();
   send->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
   send->add_flag("--group,-g", o.group, "--axis is a group number");
   send->add_flag("--raw", o.raw, "the instruction is OPCODE [DATA...] in hex");
-  send->add_option("--timeout-ms", o.timeout_ms, "how long to wait for answers")->capture_default_str();
+  send->add_option("--timeout-ms", o.timeout_ms, "how long to wait for answers")
+      ->check(controller::time_check(controller::kMaxRunSeconds * 1e3))
+      ->capture_default_str();
   send->add_option("INSTRUCTION", o.input, "'NAME=VALUE', '?NAME', '??NAME' (or with --raw: OPCODE DATA...)")->required();
   CLI::App* drv = app.add_subcommand("drive", "run one emulated IDM drive on a pseudo-terminal");
   add_common(drv, o);
   drv->add_option("--axis,-a", o.axis, "the drive's axis ID")->capture_default_str();
   drv->add_option("--host", o.host, "the host's axis ID")->capture_default_str();
-  drv->add_option("--baud", o.baud, "serial bit rate")->capture_default_str();
-  drv->add_option("--duration", o.duration, "seconds (default: until Ctrl-C)");
+  add_baud(drv, o);
+  drv->add_option("--duration", o.duration, "seconds (default: until Ctrl-C)")
+      ->check(controller::time_check(controller::kMaxRunSeconds));
   drv->add_option("--drop", o.drops, "RS-485: more drives on the same line (axis IDs)");
   drv->add_option("--relay", o.relay, "be the relay axis: forward other axes' messages to this CAN transport");
   drv->add_option("--relay-protocol", o.relay_protocol, "the relay's CAN protocol: tmlcan or techcan")

@@ -25,7 +25,7 @@ namespace omnitwin::controller::tml {
 
 namespace {
 
-constexpr int kExitOk = 0, kExitUsage = 2;
+constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
 
 // The TML master core and the platform loop, one tick at a time: each wheel's speed goes into
 // its axis's CSPD once every axis is on.
@@ -54,7 +54,7 @@ class Runner : public CanRunner<Runner, TmlMaster> {
   const TmlProgramConfig& pc_;
 };
 
-void write_stats(const std::string& path, const Runner& r) { write_stats_file(path, r.stats().dump()); }
+bool write_stats(const std::string& path, const Runner& r) { return write_stats_file(path, r.stats().dump()); }
 
 }  // namespace
 
@@ -82,12 +82,12 @@ int run_tml_program(const ProgramOptions& o) {
   spdlog::info("TML master on {} ({}, clock {}, tick {} µs, axes {} {} {} {}, host axis {})", tr->spec(),
                pc.techcan ? "TechCAN" : "TMLCAN", o.clock, std::llround(pc.cycle * 1e6), pc.axes[0], pc.axes[1], pc.axes[2],
                pc.axes[3], pc.host_axis);
-  const int code = run_can_master(o, runner, *tr, std::llround(pc.cycle * 1e9));
+  int code = run_can_master(o, runner, *tr, std::llround(pc.cycle * 1e9));
   const TmlMasterStats& s = runner.master().stats();
   spdlog::info("end: phase {}, reason {}, ticks {}, answers {}, axes lost {}, frames tx {} rx {}",
                to_string(runner.master().phase()), simclock::to_string(runner.master().reason()), s.ticks, s.answers,
                s.axes_lost, runner.frames_tx(), runner.frames_rx);
-  if (!o.stats.empty()) write_stats(o.stats, runner);
+  if (!o.stats.empty() && !write_stats(o.stats, runner)) code = kExitRuntime;
   return code;
 }
 

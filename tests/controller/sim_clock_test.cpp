@@ -620,6 +620,31 @@ TEST(SimClockChannel, AnAbstractAddressWorksWithoutAFileAndFreesItsNameAtTheEnd)
   Server again(address);  // freed with the first server
 }
 
+// Found in review: the connect retry slept through a Ctrl-C (blocked for the signalfd) for the
+// whole timeout. A readable stop fd ends the wait at once, unconsumed; without one it times out.
+TEST(SimClockChannel, AReadableStopFdEndsTheConnectWait) {
+  testing::TempDir dir{"omnitwin-simclock"};
+  const std::string address = "unix:" + (dir / "nobody.sock").string();
+  int p[2];
+  ASSERT_EQ(::pipe(p), 0);
+  std::thread writer([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(::write(p[1], "x", 1), 1);
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  Client c(address, std::chrono::seconds(10), p[0]);
+  const auto took = std::chrono::steady_clock::now() - t0;
+  writer.join();
+  EXPECT_TRUE(c.stopped());
+  EXPECT_EQ(c.fd(), -1);
+  EXPECT_LT(took, std::chrono::seconds(2));
+  char b = 0;
+  EXPECT_EQ(::read(p[0], &b, 1), 1);  // still there for the program's own signal check
+  ::close(p[0]);
+  ::close(p[1]);
+  EXPECT_THROW(Client(address, std::chrono::milliseconds(30), -1), ChannelError);
+}
+
 TEST(SimClockChannel, OverLongPathThrowsWithItsLength) {
   Fixture f;
   const std::string path = (f.dir / std::string(120, 'x')).string();

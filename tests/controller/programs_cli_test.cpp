@@ -1,0 +1,166 @@
+// Tests the master-side programs' command lines (omni-master, omni-pc, omni-tml) as a user
+// runs them: the checks a review found missing. omni-tml send --group with a group number
+// over 8 (a broadcast to every drive) and an unsupported --baud (abort / silently 9600);
+// omni-pc --node out of range (silently the default target); time options that are NaN,
+// negative or too large for the ns deadlines; a bad --sim-clock address on every bus; Ctrl-C
+// while waiting for the twin's sim-clock socket; a --stats file that cannot be written; and
+// --script with another bus or a directory. Each is exit 2 with a short message (3 for
+// --stats; 0 for the signal, as for any signal), within a second or two. UDP ports 48310-48319.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+
+#include <chrono>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/twin/cli_support.hpp"
+
+namespace omnitwin::controller {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using twin::cli::Child;
+using twin::cli::contains;
+using testing::binary_path;
+using testing::source_path;
+using testing::TempDir;
+
+constexpr const char* kCanIface = "udp:239.74.163.9:48310";
+
+class ProgramsCli : public ::testing::Test {
+ protected:
+  struct Result {
+    int code;
+    std::string err;
+  };
+  // Runs controller/PROGRAM with `args`; -1 when it has not ended within `limit`.
+  Result run(const std::string& program, const std::vector<std::string>& args, std::chrono::milliseconds limit = 3s) {
+    Child c(binary_path("controller/" + program), args, dir_.path(), dir_.path(), "p" + std::to_string(++n_));
+    const int code = c.wait(limit);
+    return {code, c.err()};
+  }
+  // Exit 2 and a one-line message holding `part`, not CLI11's range text with DBL_MAX in full.
+  void expect_usage(const Result& r, const std::string& part) {
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_TRUE(contains(r.err, part)) << r.err;
+    EXPECT_LT(r.err.size(), 200u) << r.err;
+  }
+  static std::string data(const std::string& rel) { return source_path("tests/data/" + rel); }
+
+  TempDir dir_{"omni-programs-cli"};
+  int n_ = 0;
+};
+
+// Found in review: run_send lacked encode's check; group_mask(9) is 0, a broadcast.
+TEST_F(ProgramsCli, TmlSendRefusesAGroupNumberOver8) {
+  const std::vector<std::string> line{"send", "-p", "rs485", "--port", "/dev/null", "--timeout-ms", "50"};
+  auto args = line;
+  args.insert(args.end(), {"--group", "-a", "9", "KPP=5"});
+  expect_usage(run("omni-tml", args), "group number 1-8");
+  args = line;
+  args.insert(args.end(), {"--group", "KPP=5"});  // the default --axis 255
+  expect_usage(run("omni-tml", args), "group number 1-8");
+}
+
+// Found in review: --baud 0 aborted (exit 134), 4800 opened the port at 9600.
+TEST_F(ProgramsCli, TmlTakesOnlyTheSupportedBaudRates) {
+  expect_usage(run("omni-tml", {"drive", "--baud", "0", "--duration", "0"}), "--baud");
+  expect_usage(run("omni-tml", {"send", "-p", "rs232", "--port", "/dev/null", "--baud", "4800", "--timeout-ms", "50",
+                                "KPP=5"}),
+               "--baud");
+}
+
+// Found in review: -1 meant "not given", so --node -7 sent NMT to the default target.
+TEST_F(ProgramsCli, PcRefusesANodeOutOfRange) {
+  expect_usage(run("omni-pc", {"--iface", kCanIface, "start", "--node", "-7"}), "--node");
+  expect_usage(run("omni-pc", {"--iface", kCanIface, "stop", "--node", "256"}), "--node");
+}
+
+// Found in review: 1e10 s overflowed the int64 ns deadline (the run ended at once), NaN ran
+// until a signal, a negative timeout was taken.
+TEST_F(ProgramsCli, TimeOptionsMustBeFiniteNonNegativeAndBounded) {
+  const std::string cfg = data("master/loopback.yaml");
+  for (const std::string v : {"1e10", "nan", "-1", "inf"})
+    expect_usage(run("omni-master", {"--config", cfg, "--iface", kCanIface, "--duration", v}), "--duration");
+  expect_usage(run("omni-master", {"--bus", "canopen", "--config", data("canopen/drives_only.yaml"), "--iface",
+                                   kCanIface, "--duration", "1e10"}),
+               "--duration");
+  expect_usage(run("omni-pc", {"--iface", kCanIface, "monitor", "--seconds", "1e10"}), "--seconds");
+  for (const std::string v : {"1e10", "nan"})
+    expect_usage(run("omni-tml", {"drive", "--duration", v}), "--duration");
+  for (const std::string v : {"-100", "nan"})
+    expect_usage(run("omni-tml", {"send", "-p", "tmlcan", "--iface", kCanIface, "--timeout-ms", v, "KPP=5"}),
+                 "--timeout-ms");
+}
+
+// Found in review: only --bus can parsed the address up front; the others failed to connect (3).
+TEST_F(ProgramsCli, ABadSimClockAddressIsUsageOnEveryBus) {
+  const std::vector<std::vector<std::string>> buses{
+      {"can", data("master/loopback.yaml"), kCanIface},
+      {"canopen", data("canopen/drives_only.yaml"), kCanIface},
+      {"tml", data("tml/drives_only.yaml"), kCanIface},
+      {"ethercat", data("ethercat/drives_only.yaml"), "udp:127.0.0.1:48311"},
+      {"m3", data("m3/servos_only.yaml"), "udp:127.0.0.1:48312"}};
+  for (const auto& b : buses) {
+    SCOPED_TRACE(b[0]);
+    expect_usage(run("omni-master", {"--bus", b[0], "--config", b[1], "--iface", b[2], "--clock", "sim", "--sim-clock",
+                                     "tcp:localhost"}),
+                 "expected unix:PATH");
+  }
+}
+
+// Found in review: SIGINT/SIGTERM are blocked for the signalfd, and the connect retry slept
+// through them for up to 10 s. Now the wait ends at once and the program exits as on a signal.
+TEST_F(ProgramsCli, CtrlCEndsTheWaitForTheSimClockSocket) {
+  const std::string sock = "unix:" + (dir_.path() / "nobody.sock").string();
+  const std::vector<std::vector<std::string>> buses{{"can", data("master/loopback.yaml"), "udp:239.74.163.9:48313"},
+                                                    {"canopen", data("canopen/drives_only.yaml"), "udp:239.74.163.9:48314"}};
+  for (const auto& b : buses) {
+    SCOPED_TRACE(b[0]);
+    Child c(binary_path("controller/omni-master"),
+            {"--bus", b[0], "--config", b[1], "--iface", b[2], "--clock", "sim", "--sim-clock", sock}, dir_.path(),
+            dir_.path(), "sig" + b[0]);
+    // Both log their start line right around opening the signalfd; then give it a moment.
+    const auto until = std::chrono::steady_clock::now() + 3s;
+    while (!contains(c.err(), "info:") && c.running() && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(10ms);
+    std::this_thread::sleep_for(200ms);
+    ASSERT_TRUE(c.running()) << c.err();
+    c.signal(SIGINT);
+    EXPECT_EQ(c.wait(2s), 0) << c.err();
+  }
+}
+
+// Found in review: an unwritable --stats logged "cannot write" and exited 0, and a failed
+// rename left PATH.tmp behind.
+TEST_F(ProgramsCli, AStatsFileThatCannotBeWrittenIsExit3WithoutAStrayTempFile) {
+  const std::string cfg = data("canopen/drives_only.yaml");
+  const fs::path missing = dir_.path() / "no-such-dir" / "stats.json";
+  Result r = run("omni-master", {"--bus", "canopen", "--config", cfg, "--iface", "udp:239.74.163.9:48315",
+                                 "--duration", "0.05", "--stats", missing.string()});
+  EXPECT_EQ(r.code, 3) << r.err;
+  EXPECT_TRUE(contains(r.err, "cannot write")) << r.err;
+  const fs::path dir = dir_.path() / "a-directory";  // path.tmp is written, the rename fails
+  fs::create_directories(dir);
+  r = run("omni-master", {"--bus", "canopen", "--config", cfg, "--iface", "udp:239.74.163.9:48315", "--duration",
+                          "0.05", "--stats", dir.string()});
+  EXPECT_EQ(r.code, 3) << r.err;
+  EXPECT_FALSE(fs::exists(dir.string() + ".tmp"));
+}
+
+// Found in review: --script switched any --bus to EtherCAT, and a directory ran as an empty script.
+TEST_F(ProgramsCli, ScriptNeedsTheEthercatBusAndAFile) {
+  expect_usage(run("omni-master", {"--bus", "canopen", "--config", data("canopen/drives_only.yaml"), "--iface",
+                                   kCanIface, "--script", data("ethercat/pp_test.fs")}),
+               "--script needs --bus ethercat");
+  expect_usage(run("omni-master", {"--bus", "ethercat", "--config", data("ethercat/drives_only.yaml"), "--iface",
+                                   "udp:127.0.0.1:48316", "--script", dir_.path().string(), "--duration", "0.5"}),
+               "a directory");
+}
+
+}  // namespace
+}  // namespace omnitwin::controller
