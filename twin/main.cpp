@@ -700,7 +700,7 @@ int main(int argc, char** argv) {
     if (*replay) {
       std::vector<Override> ov;
       for (const auto& v : replay_sets) ov.push_back(parse_override(v));
-      return cmd_replay(replay_scenario, replay_dir, ov);
+      return cmd_replay(replay_scenario, replay_dir, ov, &g_interrupt);
     }
     if (*sweep) {
       so.interrupt = &g_interrupt;
