@@ -7,6 +7,7 @@
 #include "twin/experiment.hpp"
 
 #include <sys/wait.h>
+#include <unistd.h>
 #include <array>
 #include <cstdlib>
 #include <exception>
@@ -85,6 +86,16 @@ int run_experiment(const std::string& name, const ExperimentOptions& options) {
     // Any exception is a runtime failure (exit 3), never a crash of the CLI.
     try {
       return r.run(options);
+    } catch (const ScenarioError& e) {
+      // A bad scenario (--model, a key) is bad input, as for run (found in review: it was 3).
+      std::cerr << "omnitwin experiment " << name << ": " << e.what() << "\n";
+      return kExperimentUnknown;
+    } catch (const experiment::BadInput& e) {
+      std::cerr << "omnitwin experiment " << name << ": " << e.what() << "\n";
+      return kExperimentUnknown;
+    } catch (const experiment::Interrupted& e) {
+      std::cerr << "omnitwin experiment " << name << ": " << e.what() << "\n";
+      return kExperimentRuntimeError;
     } catch (const std::exception& e) {
       std::cerr << "omnitwin experiment " << name << ": " << e.what() << "\n";
       return kExperimentRuntimeError;
@@ -98,18 +109,42 @@ int run_experiment(const std::string& name, const ExperimentOptions& options) {
 
 namespace experiment {
 
+void stop_if_interrupted(const std::atomic<bool>* interrupt) {
+  if (interrupt && interrupt->load()) throw Interrupted("interrupted (Ctrl-C or SIGTERM); no summary files written");
+}
+
+void stop_if_interrupted(const ExperimentOptions& options) { stop_if_interrupted(options.interrupt); }
+
 std::filesystem::path output_dir(const std::string& name, const ExperimentOptions& options) {
+  stop_if_interrupted(options);
   const std::filesystem::path dir =
       options.out_dir.empty() ? std::filesystem::path("out") / name : std::filesystem::path(options.out_dir);
+  std::error_code ec;
+  if (std::filesystem::exists(dir, ec) && !std::filesystem::is_directory(dir, ec))
+    throw BadInput("--out " + dir.string() + " is an existing file, not a folder");
   std::filesystem::create_directories(dir);
   return dir;
 }
 
 void write_text(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  f << text;
-  f.close();
-  if (!f) throw std::runtime_error("cannot write " + path.string());
+  // Found in review: written in place, an interrupt or a full disk left half a file.
+  const std::filesystem::path tmp = path.string() + ".tmp" + std::to_string(::getpid());
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    f << text;
+    f.close();
+    if (!f) {
+      std::error_code ec;
+      std::filesystem::remove(tmp, ec);
+      throw std::runtime_error("cannot write " + path.string());
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw std::runtime_error("cannot write " + path.string());
+  }
 }
 
 bool plot(const std::string& kind, const std::filesystem::path& csv, const std::filesystem::path& out_dir) {

@@ -10,8 +10,10 @@
 // files, the matplotlib script) is in namespace experiment below and shared by all of them.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -30,14 +32,17 @@ struct ExperimentOptions {
   // thesis_line_fitted.yaml when it exists, else thesis_line.yaml); thesis-calibrate: where to
   // write the fitted scenario (default: that fitted file; in quick mode: the output folder).
   std::string model;
-  int budget = 0;       // thesis-calibrate: objective evaluations (0: its default)
+  int budget = 0;       // thesis-calibrate: objective evaluations (0: its default; else >= 9)
+  // Set by SIGINT/SIGTERM: checked between runs and passed to each run; an interrupted
+  // experiment exits 3 and writes no summary files.
+  const std::atomic<bool>* interrupt = nullptr;
 };
 
 // Exit codes of run_experiment() and of each experiment function.
 inline constexpr int kExperimentOk = 0;
 inline constexpr int kExperimentCheckFailed = 1;   // a direction (or claimed accuracy) check failed
-inline constexpr int kExperimentUnknown = 2;       // unknown name; the known names go to stderr
-inline constexpr int kExperimentRuntimeError = 3;  // outputs could not be written, or not built yet
+inline constexpr int kExperimentUnknown = 2;       // unknown name (the known names go to stderr), bad input
+inline constexpr int kExperimentRuntimeError = 3;  // outputs could not be written, a run failed, or interrupted
 
 // Runs experiment `name` (one of experiment_names()) into options.out_dir. Prints a short
 // summary and the output paths on stdout. Returns one of the exit codes above.
@@ -85,7 +90,8 @@ struct FastModelRow {
 // interleaved, into dir/reference and dir/fast, with `fast_overrides` applied to the fast runs
 // only; compares the last pair. Throws what load_scenario and run_scenario throw.
 FastModelRow compare_fast_model(const std::string& scenario, const std::filesystem::path& dir, int reps,
-                                const std::vector<Override>& fast_overrides = {});
+                                const std::vector<Override>& fast_overrides = {},
+                                const std::atomic<bool>* interrupt = nullptr);
 
 // ---- the m3-cycle verification: one configuration run on the in-process M-III rig ----
 
@@ -195,11 +201,27 @@ DropoutResult run_dropout_trial(const DropoutTrial& trial);
 // ---- helpers shared by the experiment files ----
 namespace experiment {
 
-// The output folder for `name` (options.out_dir, else out/<name>), created with its parents.
-// Throws std::filesystem::filesystem_error when it cannot be created.
+// Bad input found by an experiment (an --out that is a file, an unwritable --model): exit 2.
+struct BadInput : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+// A signal (options.interrupt) ended the experiment: exit 3, no summary files.
+struct Interrupted : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+// Throws Interrupted when options.interrupt (or `interrupt`) is set.
+void stop_if_interrupted(const ExperimentOptions& options);
+void stop_if_interrupted(const std::atomic<bool>* interrupt);
+
+// The output folder for `name` (options.out_dir, else out/<name>), created with its parents,
+// after checking for an interrupt (most experiments ask for it just before writing). Throws
+// BadInput when the path is an existing non-directory, std::filesystem::filesystem_error when
+// it cannot be created otherwise.
 std::filesystem::path output_dir(const std::string& name, const ExperimentOptions& options);
 
-// Writes `text` to `path`, replacing it. Throws std::runtime_error when that fails.
+// Writes `text` to `path`, replacing it atomically (a temporary file beside it, then a rename:
+// a reader or an interrupted write never sees half a file). Throws std::runtime_error when
+// that fails.
 void write_text(const std::filesystem::path& path, const std::string& text);
 
 // Runs media/plots/plot_experiment.py KIND CSV OUT_DIR with the Debian python3. Returns true

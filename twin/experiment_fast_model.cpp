@@ -79,7 +79,8 @@ struct ModelRun {
 
 // One run of `scenario` on `variant` into `dir`, timed from load to records closed.
 ModelRun run_model(const std::string& scenario, const char* variant, const std::vector<Override>& extra,
-                   const fs::path& dir) {
+                   const fs::path& dir, const std::atomic<bool>* interrupt) {
+  experiment::stop_if_interrupted(interrupt);
   std::vector<Override> o{{"bus", "direct"}, {"clock", "lockstep"}, {"platform.sim.variant", variant}};
   o.insert(o.end(), extra.begin(), extra.end());
   const auto t0 = std::chrono::steady_clock::now();
@@ -87,7 +88,9 @@ ModelRun run_model(const std::string& scenario, const char* variant, const std::
   s.outputs.video.enabled = false, s.outputs.report = false;
   RunOptions ro;
   ro.out_dir = dir.string();
+  ro.interrupt = interrupt;
   const RunResult r = run_scenario(s, ro);
+  experiment::stop_if_interrupted(interrupt);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return {r.metrics.at("sim_time_s").get<double>() / wall, r.exit_code, ro.out_dir};
 }
@@ -101,14 +104,14 @@ double median(std::vector<double> v) {
 }  // namespace
 
 FastModelRow compare_fast_model(const std::string& scenario, const fs::path& dir, int reps,
-                                const std::vector<Override>& fast_overrides) {
+                                const std::vector<Override>& fast_overrides, const std::atomic<bool>* interrupt) {
   FastModelRow row;
   row.scenario = fs::path(scenario).stem().string();
   std::vector<double> ref_rtf, fast_rtf;
   ModelRun ref, fast;
   for (int k = 0; k < std::max(1, reps); ++k) {
-    ref = run_model(scenario, "rollers", {}, dir / "reference");
-    fast = run_model(scenario, "capsule", fast_overrides, dir / "fast");
+    ref = run_model(scenario, "rollers", {}, dir / "reference", interrupt);
+    fast = run_model(scenario, "capsule", fast_overrides, dir / "fast", interrupt);
     ref_rtf.push_back(ref.rtf), fast_rtf.push_back(fast.rtf);
   }
   row.rtf_reference = median(ref_rtf), row.rtf_fast = median(fast_rtf);
@@ -178,7 +181,8 @@ int run_fast_model(const ExperimentOptions& options) {
   for (const char* name : {"thesis_line", "circle", "rotate"}) {
     const std::string scenario = std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/" + name + ".yaml";
     for (const auto& [label, overrides] : configs) {
-      rows.push_back(compare_fast_model(scenario, dir / "runs" / fmt::format("{}_{}", name, label[0]), reps, overrides));
+      rows.push_back(compare_fast_model(scenario, dir / "runs" / fmt::format("{}_{}", name, label[0]), reps, overrides,
+                                        options.interrupt));
       FastModelRow& r = rows.back();
       r.config = label;
       accurate = accurate && r.agreement.twist_error <= kFastModelTwistBound;
@@ -188,6 +192,7 @@ int run_fast_model(const ExperimentOptions& options) {
                                r.rtf_reference, r.rtf_fast);
     }
   }
+  experiment::stop_if_interrupted(options);
   experiment::write_text(dir / "fast_model.csv", csv_text(rows));
   experiment::write_text(dir / "fast_model.md", markdown(rows, reps, accurate));
   std::cout << "wrote " << (dir / "fast_model.md").string() << " and fast_model.csv\n";

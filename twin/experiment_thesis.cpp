@@ -78,6 +78,7 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
   Scenario s = load_scenario(setup.scenario, o);
   if (!setup.records) s.outputs.video.enabled = false, s.outputs.report = false;
   RunOptions ro;
+  ro.interrupt = setup.interrupt;
   ro.out_dir =
       (setup.dir / fmt::format("{}_{}k_{}_t{}", clock.name, rate_kbps, sync ? "sync" : "nosync", trial)).string();
   const RunResult r = run_scenario(s, ro);

@@ -4,6 +4,8 @@
 // experiment_thesis_calibrate.cpp for the fit).
 #pragma once
 
+#include <atomic>
+
 #include <array>
 #include <filesystem>
 #include <string>
@@ -65,6 +67,7 @@ struct RunSetup {
   std::filesystem::path dir;        // run folders go under it
   bool quick = false;               // 40 cm in 4 s instead of 200 cm in 20 s
   bool records = true;              // false: no video and no report (the figures need neither)
+  const std::atomic<bool>* interrupt = nullptr;  // passed to each run (SIGINT/SIGTERM)
 };
 
 // One run of clock reading `clock` at `rate_kbps`, with or without sync; trial t draws the

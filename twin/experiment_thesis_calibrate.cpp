@@ -16,6 +16,8 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -255,14 +257,33 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
 
 }  // namespace
 
+namespace {
+
+// Refuses a fit file that cannot be written (a folder, a missing or read-only parent) before
+// the search: found in review, it failed only after the whole search, losing its results.
+void check_writable(const std::string& model) {
+  std::error_code ec;
+  const fs::path p = fs::absolute(model, ec);
+  if (fs::is_directory(p, ec)) throw experiment::BadInput("--model " + model + " is a folder, not a file");
+  const fs::path parent = p.parent_path();
+  if (!fs::is_directory(parent, ec)) throw experiment::BadInput("--model " + model + ": no such folder " + parent.string());
+  if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(p, ec) && ::access(p.c_str(), W_OK) != 0))
+    throw experiment::BadInput("--model " + model + " cannot be written");
+}
+
+}  // namespace
+
 int run_thesis_calibrate(const ExperimentOptions& options) {
+  if (options.budget != 0 && options.budget < 9)
+    throw experiment::BadInput("--budget must be 0 (the default) or at least 9 (the simplex's first points)");
+  if (!options.model.empty()) check_writable(options.model);
   const fs::path dir = experiment::output_dir("thesis-calibrate", options);
   const Scenario base = load_scenario(thesis::plain_scenario(), {{"bus", "can"}});
   const thesis::ClockReading fast = thesis::clock_readings(base)[0];
   const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
   const int trials = options.quick ? 1 : 2;
   const int budget = options.budget > 0 ? options.budget : (options.quick ? 10 : 130);
-  thesis::RunSetup setup{thesis::plain_scenario(), {}, dir / "runs", options.quick, false};
+  thesis::RunSetup setup{thesis::plain_scenario(), {}, dir / "runs", options.quick, false, options.interrupt};
   std::vector<Evaluation> evals;
   int runs = 0;  // each run its own UDP port, 46200 … 46799 (no test or scenario uses them)
   // One evaluation: the fitted configuration's trials at box point u.
@@ -273,6 +294,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     std::vector<thesis::Result> ts;
     for (int t = 0; t < trials; ++t) {
       ts.push_back(thesis::run_one(setup, fast, thesis::kFitRateKbps, false, t, 46200 + runs++ % 600));
+      experiment::stop_if_interrupted(options);
       // A failed run ends the search (run_experiment reports it, exit 3): its figures mean nothing.
       if (ts.back().exit_code == 3)
         throw std::runtime_error("a run failed (see " + ts.back().run_dir + ")");
@@ -299,10 +321,12 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   const fs::path folder = fs::absolute(model).parent_path().lexically_normal();
   const std::string params =
       thesis::source_relative(folder).empty() ? platform.string() : platform.lexically_relative(folder).string();
-  experiment::write_text(model,
-                         fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params));
+  experiment::stop_if_interrupted(options);
+  // The trace and report first: should the fit file still fail, the search is not lost.
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
   experiment::write_text(dir / "thesis_calibrate.md", report_md(evals, r, *best, model, trials, options.quick));
+  experiment::write_text(model,
+                         fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params));
   std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
                            r.evaluations, evals.front().j, best->j, model, dir.string());
   return kExperimentOk;

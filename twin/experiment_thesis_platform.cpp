@@ -409,13 +409,14 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
 }  // namespace
 
 int run_thesis_platform(const ExperimentOptions& options) {
-  const fs::path dir = experiment::output_dir("thesis-platform", options);
-  const std::vector<int> rates = options.quick ? std::vector<int>{250, 1000} : std::vector<int>{125, 250, 500, 1000};
+  // The scenario first: a bad --model is refused before any folder is made (found in review).
   const std::string scenario = options.model.empty() ? thesis::default_scenario() : options.model;
   const Scenario sc = load_scenario(scenario, {{"bus", "can"}});
+  const fs::path dir = experiment::output_dir("thesis-platform", options);
+  const std::vector<int> rates = options.quick ? std::vector<int>{250, 1000} : std::vector<int>{125, 250, 500, 1000};
   const std::array<ClockReading, 2> clocks = thesis::clock_readings(sc);
   const int trials = options.quick ? 2 : kTrials;
-  const thesis::RunSetup setup{scenario, {}, dir / "runs", options.quick, false};
+  const thesis::RunSetup setup{scenario, {}, dir / "runs", options.quick, false, options.interrupt};
   std::vector<Result> rs;  // one per configuration: the mean of its trials
   int port = 46000, runs = 0;  // 46000 … 46079: no test or scenario uses them
   for (const ClockReading& clock : clocks) {
@@ -424,6 +425,7 @@ int run_thesis_platform(const ExperimentOptions& options) {
         std::vector<Result> ts;
         for (int trial = 0; trial < trials; ++trial, ++runs) {
           ts.push_back(thesis::run_one(setup, clock, rate, sync, trial, port++));
+          experiment::stop_if_interrupted(options);
           if (ts.back().exit_code == 3) {
             std::cerr << "thesis-platform: the run at " << rate << " kbit/s (" << clock.name << " clocks, trial "
                       << trial << ") failed (see " << (dir / "runs").string() << ")\n";
@@ -439,6 +441,7 @@ int run_thesis_platform(const ExperimentOptions& options) {
       }
     }
   }
+  experiment::stop_if_interrupted(options);
   const int differ = failed(effects(rs, clocks[0].name));
   experiment::write_text(dir / "thesis_platform.csv", to_csv(rs));
   experiment::write_text(dir / "thesis_platform.md", to_markdown(rs, clocks, options.quick, scenario, sc));

@@ -607,6 +607,51 @@ TEST_F(CliModel, RollersMatchesCheckedInMjcf) { expect_checked_in_mjcf("rollers"
 // The capsule model (see expect_checked_in_mjcf).
 TEST_F(CliModel, CapsuleMatchesCheckedInMjcf) { expect_checked_in_mjcf("capsule"); }
 
+// Found in review: experiments ignored Ctrl-C (exit 0, summary written), bad input was a
+// runtime failure (3) and a bad --model still created the output folder.
+class CliExperiment : public CliTest {};
+
+TEST_F(CliExperiment, ASignalEndsAnExperimentWithExitThreeAndNoSummary) {
+  const fs::path out = dir_ / "fm";
+  Child c({"experiment", "fast-model", "--quick", "--out", out.string()}, work(), io());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(std::chrono::seconds(5)), 3) << c.out() << c.err();
+  EXPECT_TRUE(contains(c.err(), "interrupted")) << c.err();
+  EXPECT_FALSE(fs::exists(out / "fast_model.md"));
+  EXPECT_FALSE(fs::exists(out / "fast_model.csv"));
+}
+
+TEST_F(CliExperiment, BadInputIsExitTwoBeforeAnythingIsWritten) {
+  // A --model that is no scenario: refused before the output folder exists.
+  std::ofstream(dir_ / "bad.yaml") << "name: [\n";
+  Finished f = run({"experiment", "thesis-platform", "--quick", "--model", (dir_ / "bad.yaml").string(), "--out",
+                    (dir_ / "tp").string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "tp"));
+  // --out onto an existing file.
+  std::ofstream(dir_ / "file") << "x";
+  f = run({"experiment", "can-timing", "--quick", "--out", (dir_ / "file").string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "not a folder")) << f.err;
+  EXPECT_EQ(read_bytes(dir_ / "file"), "x");
+  // A budget the simplex cannot start with: refused at parse time.
+  for (const char* b : {"1", "8"}) {
+    f = run({"experiment", "thesis-calibrate", "--quick", "--budget", b, "--out", (dir_ / "tc").string()});
+    EXPECT_EQ(f.code, 2) << f.err;
+    EXPECT_TRUE(contains(f.err, "at least 9")) << f.err;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "tc"));
+  // thesis-calibrate: a fit file that cannot be written is refused before the search.
+  Child c({"experiment", "thesis-calibrate", "--quick", "--model", (dir_ / "missing" / "fit.yaml").string(), "--out",
+           (dir_ / "tc").string()},
+          work(), io());
+  EXPECT_EQ(c.wait(std::chrono::seconds(5)), 2) << c.out() << c.err();
+  EXPECT_TRUE(contains(c.err(), "no such folder")) << c.err();
+  EXPECT_FALSE(fs::exists(dir_ / "tc"));
+}
+
+
 }  // namespace
 }  // namespace omnitwin::twin
 

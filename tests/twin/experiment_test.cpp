@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <map>
@@ -63,6 +64,34 @@ TEST(Experiment, RegistryListsEveryExperimentAndRejectsUnknownNames) {
   omnitwin::testing::TempDir dir("omnitwin-exp");
   EXPECT_EQ(run_experiment("no-such-experiment", {dir.path().string(), true}), kExperimentUnknown);
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));  // nothing written for an unknown name
+}
+
+// Found in review: write_text rewrote a file in place, so an interrupt or a full disk left
+// half of it. It writes a temporary file and renames it: a hard link to the old file keeps
+// the old content (in place, it would change too), and no temporary file is left.
+TEST(Experiment, WriteTextReplacesTheFileAtomically) {
+  omnitwin::testing::TempDir dir("omnitwin-exp");
+  const std::filesystem::path a = dir.path() / "a.csv", b = dir.path() / "b.csv";
+  experiment::write_text(a, "old\n");
+  std::filesystem::create_hard_link(a, b);
+  experiment::write_text(b, "new\n");
+  EXPECT_EQ(omnitwin::testing::read_bytes(a), "old\n");
+  EXPECT_EQ(omnitwin::testing::read_bytes(b), "new\n");
+  int files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path())) ++files, (void)e;
+  EXPECT_EQ(files, 2);
+}
+
+// Found in review: an experiment ignored SIGINT/SIGTERM and wrote its summary. With the
+// interrupt set it returns 3 and writes no summary file.
+TEST(Experiment, AnInterruptedExperimentExitsThreeWithoutItsSummary) {
+  omnitwin::testing::TempDir dir("omnitwin-exp");
+  const std::atomic<bool> stop{true};
+  ExperimentOptions o((dir.path() / "ct").string(), true);
+  o.interrupt = &stop;
+  EXPECT_EQ(run_experiment("can-timing", o), kExperimentRuntimeError);
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "ct" / "can_timing.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "ct" / "can_timing.md"));
 }
 
 TEST(Experiment, CanTimingReproducesEveryClaimedCellOfTable22) {
