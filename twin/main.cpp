@@ -23,6 +23,8 @@
 #include <optional>
 #include <thread>
 
+#include <unistd.h>
+
 #include "media/run_video.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "twin/check.hpp"
@@ -503,9 +505,40 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
       std::cout << xml;
       return 0;
     }
-    std::ofstream f(out, std::ios::binary);
-    f << xml;
-    if (!f.flush()) throw std::runtime_error("cannot write " + out);
+    // Found in review: any file was overwritten in place (a run's metrics.json too), and an
+    // unusable path was a runtime failure. Bad paths are bad input; the write is atomic.
+    std::error_code ec;
+    const fs::path target(out);
+    const fs::path parent = fs::absolute(target, ec).parent_path();
+    if (fs::is_directory(target, ec)) {
+      std::cerr << "omnitwin model: --out " << out << " is a folder, not a file\n";
+      return 2;
+    }
+    if (!fs::is_directory(parent, ec)) {
+      std::cerr << "omnitwin model: --out " << out << ": no such folder " << parent.string() << "\n";
+      return 2;
+    }
+    if (fs::exists(parent / ".omnitwin-run", ec)) {
+      std::cerr << "omnitwin model: --out " << out << " is inside a run directory (" << parent.string()
+                << " holds .omnitwin-run); its records are not overwritten\n";
+      return 2;
+    }
+    const fs::path tmp = parent / (target.filename().string() + ".tmp" + std::to_string(::getpid()));
+    {
+      std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+      f << xml;
+      if (!f.flush()) {
+        fs::remove(tmp, ec);
+        std::cerr << "omnitwin model: cannot write " << out << "\n";
+        return 2;
+      }
+    }
+    fs::rename(tmp, target, ec);
+    if (ec) {
+      fs::remove(tmp, ec);
+      std::cerr << "omnitwin model: cannot write " << out << ": " << ec.message() << "\n";
+      return 3;
+    }
     std::cout << out << "\n";
     return 0;
   } catch (const ScenarioError& e) {
@@ -560,6 +593,17 @@ int main(int argc, char** argv) {
   run->add_flag("--no-progress", ra.no_progress, "never draw the progress bar");
   add_output_flags(run, ra);
 
+  // CLI11's Range lets NaN through (every comparison with NaN is false), and "inf" too where
+  // the bound is open; every double option with a Range takes this first (found in review:
+  // `twin --duration nan` ran).
+  const CLI::Validator finite_number(
+      [](std::string& v) {
+        char* end = nullptr;
+        const double d = std::strtod(v.c_str(), &end);
+        return end != v.c_str() && !std::isfinite(d) ? std::string("must be a finite number") : std::string();
+      },
+      "");
+
   RunArgs ta;
   ta.external_master = true;
   CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, ethercat or m3, realtime) for an external master");
@@ -571,6 +615,7 @@ int main(int argc, char** argv) {
   twin->add_option("--set", ta.sets, "override a scenario key, e.g. --set bus.bit_rate=500000")->type_name("KEY=VALUE");
   twin->add_flag("--no-progress", ta.no_progress, "never draw the progress bar");
   twin->add_option("--duration", ta.duration, "end after S seconds (default: run until Ctrl-C or SIGTERM)")
+      ->check(finite_number)
       ->check(CLI::Range(1e-3, 1e6))
       ->type_name("S");
   add_output_flags(twin, ta);
@@ -618,7 +663,7 @@ int main(int argc, char** argv) {
   render->add_option("--out", render_out, "MP4 file (default RUN_DIR/video.mp4)");
   render->add_option("--width", rv.width, "frame width [px], even")->check(CLI::Range(64, 3840))->capture_default_str();
   render->add_option("--height", rv.height, "frame height [px], even")->check(CLI::Range(48, 2160))->capture_default_str();
-  render->add_option("--fps", rv.fps, "frames per simulated second")->check(CLI::Range(1.0, 120.0))->capture_default_str();
+  render->add_option("--fps", rv.fps, "frames per simulated second")->check(finite_number)->check(CLI::Range(1.0, 120.0))->capture_default_str();
   render->add_flag("--no-inset", render_no_inset, "no overview inset");
   render->add_flag("--report", render_report, "also (re)write report.html");
 
@@ -640,7 +685,9 @@ int main(int argc, char** argv) {
   const CLI::Validator not_negative(
       [](std::string& v) { return v.starts_with('-') ? std::string("must not be negative") : std::string(); }, "");
   echo->add_option("--count", eo.count, "exit after N samples (0: never)")->check(not_negative);
-  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)")->check(not_negative);
+  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)")
+      ->check(not_negative)
+      ->check(finite_number);
   echo->add_flag("--json", eo.json, "JSON lines instead of text");
 
   std::string exp_name, exp_out, exp_model;

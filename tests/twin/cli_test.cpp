@@ -607,6 +607,51 @@ TEST_F(CliModel, RollersMatchesCheckedInMjcf) { expect_checked_in_mjcf("rollers"
 // The capsule model (see expect_checked_in_mjcf).
 TEST_F(CliModel, CapsuleMatchesCheckedInMjcf) { expect_checked_in_mjcf("capsule"); }
 
+// Found in review: `model --out FILE` overwrote anything in place (a run's metrics.json too)
+// and an unusable path was a runtime failure (3). A file in a run directory, a folder and a
+// missing parent are bad input (2), and nothing is touched.
+TEST_F(CliModel, OutIntoARunDirectoryAFolderOrAMissingFolderIsRefused) {
+  const fs::path run_dir = dir_ / "run";
+  ASSERT_EQ(run_test_scenario("run_short_line.yaml", run_dir).code, 0);
+  const std::string metrics = read_bytes(run_dir / "metrics.json");
+  Finished f = run({"model", "--out", (run_dir / "metrics.json").string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, ".omnitwin-run")) << f.err;
+  EXPECT_EQ(read_bytes(run_dir / "metrics.json"), metrics);
+  f = run({"model", "--out", dir_.path().string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "is a folder")) << f.err;
+  f = run({"model", "--out", (dir_ / "missing" / "m.xml").string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "no such folder")) << f.err;
+  // A good path: written whole, no temporary file left beside it.
+  const fs::path out = dir_ / "models";
+  fs::create_directories(out);
+  EXPECT_EQ(run({"model", "--out", (out / "m.xml").string()}).code, 0);
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(out)) names.push_back(e.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"m.xml"});
+}
+
+// Found in review: CLI11's Range lets NaN through, so `twin --duration nan` started a twin
+// that never ended. Every double option with a Range refuses non-finite values (exit 2).
+class CliTwin : public CliTest {};
+
+TEST_F(CliTwin, NonFiniteDoubleOptionsAreBadUsage) {
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"twin", test_scenario("run_short_line.yaml"), "--duration", "nan", "--out",
+                                 (dir_ / "t1").string()},
+        std::vector<std::string>{"twin", test_scenario("run_short_line.yaml"), "--duration", "inf", "--out",
+                                 (dir_ / "t2").string()},
+        std::vector<std::string>{"render", (dir_ / "none").string(), "--fps", "nan"},
+        std::vector<std::string>{"echo", "--timeout", "nan", "--count", "1"}}) {
+    Child c(args, work(), io());
+    const int code = c.wait(std::chrono::seconds(5));
+    EXPECT_EQ(code, 2) << args[0] << " " << args[args.size() - 3] << ": " << c.err();
+    EXPECT_TRUE(contains(c.err(), "finite")) << c.err();
+  }
+}
+
 // Found in review: experiments ignored Ctrl-C (exit 0, summary written), bad input was a
 // runtime failure (3) and a bad --model still created the output folder.
 class CliExperiment : public CliTest {};
@@ -650,7 +695,6 @@ TEST_F(CliExperiment, BadInputIsExitTwoBeforeAnythingIsWritten) {
   EXPECT_TRUE(contains(c.err(), "no such folder")) << c.err();
   EXPECT_FALSE(fs::exists(dir_ / "tc"));
 }
-
 
 }  // namespace
 }  // namespace omnitwin::twin
