@@ -737,6 +737,8 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
     f.wheel = read_fault_node(v, true, true);
     f.rate = v.required("rate").number(Bounds::closed(0, 1));
     read_integer(v, "burst", f.burst, Bounds::at_least(1));
+    // The M-III line loses frames one at a time: bursts are the CAN wire's.
+    if (m3 && f.burst != 1) v["burst"].fail("burst is a CAN wire setting; on bus: m3 frames are lost one at a time");
   } else if (kind == "delay") {
     v.allow_keys({"node", "at", "duration", "extra_ms", "jitter_ms"});
     f.kind = K::delay;
@@ -765,6 +767,10 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
     f.kind = kind == "power_loss" ? K::power_loss : K::bus_off;
     f.wheel = read_fault_node(v, false, false);
   }
+  // The EtherCAT segment loses and delays whole frames: a slave cannot be singled out.
+  if (ethercat && (f.kind == K::frame_loss || f.kind == K::delay) && f.wheel < FaultSpec::kMaster)
+    v["node"].fail(fmt::format("{} on bus: ethercat acts on the whole segment: node must be master{}", kind,
+                               f.kind == K::frame_loss ? " or all" : ""));
   f.at = v.required("at").number(Bounds::non_negative());
   read_number(v, "duration", f.duration, Bounds::non_negative());
   return f;
@@ -772,8 +778,10 @@ FaultSpec read_fault(const YamlField& item, const BusSpec& bus) {
 
 // The newest fault (faults.back()) must start inside the run and must not overlap an earlier
 // fault of the same kind on the same wheel/node: the first one's end would otherwise cancel
-// the second early.
-void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& faults, double run_duration) {
+// the second early. The EtherCAT and M-III lines keep one state per bus fault kind for the
+// whole line, so there any two bus faults of one kind must not overlap, whatever their node.
+void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& faults, double run_duration,
+                        BusKind bus) {
   const FaultSpec& f = faults.back();
   const YamlField v = item.single_member(kFaultKinds);
   if (f.at >= run_duration)
@@ -782,7 +790,9 @@ void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& fau
   const auto end_of = [](const FaultSpec& x) { return x.duration > 0 ? x.at + x.duration : 1e300; };
   for (std::size_t i = 0; i + 1 < faults.size(); ++i) {
     const FaultSpec& g = faults[i];
-    if (g.kind == f.kind && g.wheel == f.wheel && f.at < end_of(g) && g.at < end_of(f))
+    const bool line_wide =
+        (bus == BusKind::ethercat || bus == BusKind::m3) && f.kind != FaultSpec::Kind::wheel_slip;
+    if (g.kind == f.kind && (g.wheel == f.wheel || line_wide) && f.at < end_of(g) && g.at < end_of(f))
       v["at"].fail(fmt::format("overlaps the {} fault at line {}", to_string(g.kind), g.line));
   }
 }
@@ -908,7 +918,7 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
                           kMaxRunSeconds));
   for (const auto& item : root["faults"].elements()) {
     s.faults.push_back(read_fault(item, s.bus));
-    check_fault_timing(item, s.faults, s.duration);
+    check_fault_timing(item, s.faults, s.duration, s.bus.kind);
   }
   for (const auto& m : root["expect"].members()) s.expectations.push_back(read_expectation(m));
   s.outputs = read_outputs(root["outputs"], s.controller.period);

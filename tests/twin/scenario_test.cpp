@@ -565,6 +565,22 @@ TEST(ScenarioErrors, EthercatSettingsAndFaultsOfTheOtherBus) {
   expect_error(load_error(scenario("bad_ethercat_esi.yaml")), scenario("bad_ethercat_esi.yaml"), 4, "bus.esi");
 }
 
+// Found in review: EtherCAT and M-III keep one fault state per kind for the whole line, so
+// overlapping faults of one kind (any nodes) cancelled each other; a slave node on an
+// EtherCAT frame_loss/delay was applied to the whole segment; M-III ignored `burst`.
+TEST(ScenarioErrors, LineBusFaultsOverlapNodesAndBurst) {
+  const std::string eo = scenario("bad_ethercat_fault_overlap.yaml"), mo = scenario("bad_m3_fault_overlap.yaml");
+  expect_error(load_error(eo), eo, 6, "faults.1.frame_loss.at");
+  expect_error(load_error(mo), mo, 6, "faults.1.frame_loss.at");
+  const std::string en = scenario("bad_ethercat_fault_node.yaml");
+  expect_error(load_error(en), en, 5, "faults.0.delay.node");
+  const std::string mb = scenario("bad_m3_burst.yaml");
+  expect_error(load_error(mb), mb, 5, "faults.0.frame_loss.burst");
+  // On CAN the same overlap on other nodes and a burst stay valid.
+  EXPECT_NO_THROW(load_scenario(eo, {{"bus", "can"}}));
+  EXPECT_NO_THROW(load_scenario(mb, {{"bus", "can"}}));
+}
+
 TEST(ScenarioM3, SettingsAndFaultsAreRead) {
   const Scenario s = load_scenario(scenario("good_m3.yaml"));
   const M3Spec& m = s.bus.m3;
