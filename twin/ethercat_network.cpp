@@ -65,7 +65,7 @@ int ethercat_extra_slaves(const EthercatSpec& e) {
 }
 
 EthercatNetwork::EthercatNetwork(const Scenario& s, Scheduler& sched, Hooks hooks)
-    : s_(s), spec_(s.bus.ethercat), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.ethercat.seed) {
+    : s_(s), spec_(s.bus.ethercat), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.ethercat.seed), jitter_rng_(s.bus.ethercat.seed ^ 0x6a09e667f3bcc908ULL) {
   const std::vector<ethercat::DeviceDescription> devices = ethercat::load_esi(ethercat_esi_path(spec_));
   if (devices.empty()) throw std::runtime_error(fmt::format("{}: no Device in the file", ethercat_esi_path(spec_)));
   device_ = devices.front();
@@ -203,7 +203,10 @@ void EthercatNetwork::process_frame(Pending& p) {
     return;
   }
   // Back at the master after the line's round trip (plus any delay fault).
-  send_reply(p, chain_.last_return_time() + std::llround(delay_ns_));
+  // The jitter is drawn per frame (FaultSpec), from its own generator so the loss draws stay.
+  const double jitter =
+      delay_jitter_ns_ > 0 ? std::uniform_real_distribution<double>(0, delay_jitter_ns_)(jitter_rng_) : 0.0;
+  send_reply(p, chain_.last_return_time() + std::llround(delay_ns_ + jitter));
 }
 
 // One record of the capture: with the addresses the frame carried when the transport knows them.
@@ -223,7 +226,7 @@ void EthercatNetwork::send_reply(const Pending& p, SimTime t) {
   const std::uint8_t* pdu = p.pdu.data();
   const std::size_t size = p.size;
   capture(p, std::span<const std::uint8_t>(pdu, size), t, ethercat::Direction::back);
-  if (!batch_ && delay_ns_ <= 0) {
+  if (!batch_ && delay_ns_ + delay_jitter_ns_ <= 0) {
     if (transport_->send(std::span<const std::uint8_t>(pdu, size)))
       ++to_transport_;
     else
@@ -261,7 +264,7 @@ void EthercatNetwork::release_replies(SimTime t) {
 void EthercatNetwork::flush_transport() {
   // Lockstep: everything that returned by now goes before the grant; a delayed reply that is
   // not back yet waits for a later grant (the master sees a lost frame meanwhile).
-  release_replies(batch_ && delay_ns_ <= 0 ? std::numeric_limits<SimTime>::max() : sched_.now());
+  release_replies(batch_ && delay_ns_ + delay_jitter_ns_ <= 0 ? std::numeric_limits<SimTime>::max() : sched_.now());
 }
 
 SimTime EthercatNetwork::next_master_event() const {
@@ -383,7 +386,11 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       what = fmt::format("frame_loss rate {} burst {}", f.rate, f.burst);
       break;
     case FaultSpec::Kind::delay:
-      delay_ns_ = begin ? f.extra_ms * 1e6 + std::uniform_real_distribution<double>(0, f.jitter_ms * 1e6)(rng_) : 0.0;
+      // The jitter is drawn per frame (process_frame). The one draw at the start stays so the
+      // frame-loss draws after it, and so the runs of existing scenarios, are unchanged.
+      if (begin) (void)std::uniform_real_distribution<double>(0, f.jitter_ms * 1e6)(rng_);
+      delay_ns_ = begin ? f.extra_ms * 1e6 : 0.0;
+      delay_jitter_ns_ = begin ? f.jitter_ms * 1e6 : 0.0;
       what = fmt::format("delay of returned frames {} ms", f.extra_ms);
       break;
     case FaultSpec::Kind::drift: {

@@ -152,7 +152,9 @@ class EthercatNetwork final : public BusNetwork {
   std::mt19937_64 rng_;
   double loss_rate_ = 0;
   int loss_burst_ = 1, loss_left_ = 0;
-  double delay_ns_ = 0;
+  double delay_ns_ = 0;                    // delay fault: the fixed part [ns]
+  double delay_jitter_ns_ = 0;             // delay fault: per frame uniform in [0, jitter) [ns]
+  std::mt19937_64 jitter_rng_;             // the per frame jitter draws (seeded from bus.seed)
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
   std::uint64_t lost_frames_ = 0, not_returned_ = 0, send_failures_ = 0, overflow_ = 0;
   std::int64_t busy_ns_ = 0;

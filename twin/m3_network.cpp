@@ -34,7 +34,7 @@ m3::SegmentConfig segment_config(const Scenario& s) {
 }  // namespace
 
 M3Network::M3Network(const Scenario& s, Scheduler& sched, Hooks hooks)
-    : spec_(s.bus.m3), clock_(s.clock), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.m3.seed) {
+    : spec_(s.bus.m3), clock_(s.clock), sched_(sched), hooks_(std::move(hooks)), rng_(s.bus.m3.seed), jitter_rng_(s.bus.m3.seed ^ 0x6a09e667f3bcc908ULL) {
   open_transport(s);
   segment_ = std::make_unique<m3::M3Segment>(segment_config(s), *transport_);
   segment_->line().set_fault_hook(
@@ -43,6 +43,8 @@ M3Network::M3Network(const Scenario& s, Scheduler& sched, Hooks hooks)
   powered_.assign(static_cast<std::size_t>(n), true);
   loss_.assign(static_cast<std::size_t>(n), 0.0);
   corrupt_.assign(static_cast<std::size_t>(n), 0.0);
+  delay_ns_.assign(static_cast<std::size_t>(n), 0);
+  jitter_ns_.assign(static_cast<std::size_t>(n), 0);
   last_.assign(static_cast<std::size_t>(n), {});
   shafts_.resize(static_cast<std::size_t>(n - 4));  // the servos beyond the wheels turn no wheel
   // Each servo's drive period, a little apart (they follow the master's SYNC for
@@ -81,6 +83,11 @@ std::string M3Network::pcap_error() const {
 m3::Fate M3Network::fate(bool from_master, int k, std::span<const std::uint8_t>) {
   if (k < 0 || k >= spec_.stations) return m3::Fate::deliver;
   const auto i = static_cast<std::size_t>(k);
+  // A delay fault's jitter, drawn per response: the line adds the extra delay it is given here
+  // to this very frame (Line::from_slave asks the fate first).
+  if (!from_master && jitter_ns_[i] > 0)
+    segment_->line().set_extra_delay(
+        k, delay_ns_[i] + std::llround(std::uniform_real_distribution<double>(0, double(jitter_ns_[i]))(jitter_rng_)));
   const double loss = from_master ? std::max(loss_[i], master_loss_) : loss_[i];
   if (loss > 0 && std::uniform_real_distribution<double>(0, 1)(rng_) < loss) {
     ++lost_;
@@ -240,9 +247,17 @@ void M3Network::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       what = fmt::format("corruption {} rate {}", who, f.rate);
       break;
     case FaultSpec::Kind::delay: {
-      const SimTime extra = begin ? std::llround(f.extra_ms * 1e6 + std::uniform_real_distribution<double>(0, f.jitter_ms * 1e6)(rng_)) : 0;
+      // The jitter is drawn per frame (fate()). The one draw at the start stays so the loss and
+      // corruption draws after it, and so the runs of existing scenarios, are unchanged.
+      if (begin) (void)std::uniform_real_distribution<double>(0, f.jitter_ms * 1e6)(rng_);
+      const SimTime extra = begin ? std::llround(f.extra_ms * 1e6) : 0;
+      const SimTime jitter = begin ? std::llround(f.jitter_ms * 1e6) : 0;
       for (int i = 0; i < spec_.stations; ++i)
-        if (master || i == k) segment_->line().set_extra_delay(i, extra);
+        if (master || i == k) {
+          delay_ns_[static_cast<std::size_t>(i)] = extra;
+          jitter_ns_[static_cast<std::size_t>(i)] = jitter;
+          segment_->line().set_extra_delay(i, extra);
+        }
       what = fmt::format("delay of {}'s responses {} ms", master ? std::string("every slave") : who, f.extra_ms);
       break;
     }

@@ -120,6 +120,10 @@ class M3Network final : public BusNetwork {
   bool second_master_ = false;             // fault: another C1 master on the line
   std::uint8_t second_sequence_ = 0;
   std::mt19937_64 rng_;
+  // Delay fault, per station: the fixed part and the per frame jitter [ns], and the jitter's
+  // own generator (seeded from bus.seed) so the loss and corruption draws stay as they were.
+  std::vector<SimTime> delay_ns_, jitter_ns_;
+  std::mt19937_64 jitter_rng_;
   std::uint64_t lost_ = 0, corrupted_ = 0;
   SimTime running_since_ns_ = -1;
 };

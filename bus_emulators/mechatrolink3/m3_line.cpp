@@ -60,6 +60,7 @@ void Line::from_slave(int k, std::span<const std::uint8_t> frame, SimTime t_star
   if (k < 0 || k >= topology_.slaves() || !reachable_[static_cast<std::size_t>(k)]) return void(++dropped_);
   if (frame.size() < kHeaderSize + kFcsSize) return void(++dropped_);
   const SimTime length = frame_time_ns(frame.size() - kHeaderSize - kFcsSize);
+  // The fault hook runs first: it may set this frame's extra delay (a per frame jitter).
   const Fate fate = fault_ ? fault_(false, k, frame) : Fate::deliver;
   const auto i = static_cast<std::size_t>(k);
   put(-1, frame, t_start + one_way_[i] + extra_[i] + length, fate);

@@ -13,6 +13,7 @@
 #include <array>
 #include <filesystem>
 #include <memory>
+#include <set>
 #include <vector>
 
 #include "bus_emulators/ethercat/device/ec_slave.hpp"
@@ -228,6 +229,33 @@ TEST_F(EthercatNetworkTest, StoppedMasterTripsTheWatchdogs) {
   net_->apply_fault(f, false, sched_.now());
   run_until(3.0);
   for (int i = 0; i < 4; ++i) EXPECT_EQ(esc(i).al_state(), ethercat::AlState::op) << "slave " << i + 1;
+}
+
+// Found in review: the delay fault's jitter was drawn once per fault, so every returned frame
+// came back equally late; it is drawn per frame (FaultSpec), so the return times spread.
+TEST_F(EthercatNetworkTest, DelayJitterIsDrawnPerFrame) {
+  build("ecnet-jitter");
+  run_until(1.0);
+  ASSERT_TRUE(master_->operational());
+  FaultSpec f;
+  f.kind = FaultSpec::Kind::delay;
+  f.wheel = FaultSpec::kMaster;
+  f.jitter_ms = 0.3;
+  net_->apply_fault(f, true, sched_.now());
+  run_until(1.1);
+  net_.reset();  // closes the capture
+  char err[PCAP_ERRBUF_SIZE];
+  pcap_t* p = pcap_open_offline_with_tstamp_precision((dir_ / "bus-ethercat.pcap").c_str(), PCAP_TSTAMP_PRECISION_NANO, err);
+  ASSERT_NE(p, nullptr) << err;
+  std::set<std::int64_t> phases;  // each record's time within its 1 ms cycle
+  pcap_pkthdr* h = nullptr;
+  const u_char* data = nullptr;
+  while (pcap_next_ex(p, &h, &data) == 1) {
+    const std::int64_t t = static_cast<std::int64_t>(h->ts.tv_sec) * 1'000'000'000 + h->ts.tv_usec;
+    if (t > 1'001'000'000 && t < 1'099'000'000) phases.insert(t % kCycle);
+  }
+  pcap_close(p);
+  EXPECT_GT(phases.size(), 50u) << "one delay for all frames gives a handful of phases";
 }
 
 TEST_F(EthercatNetworkTest, DriftFaultChangesOneSlavesOscillator) {

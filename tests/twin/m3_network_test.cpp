@@ -214,6 +214,25 @@ TEST_F(M3NetworkTest, ALateStationsResponsesAreLateAtTheMaster) {
   EXPECT_EQ(master_->counters(2).late, late) << "on time again";
 }
 
+// Found in review: the delay fault's jitter was drawn once per fault; it is drawn per response,
+// so with a jitter about the station's T_RSP margin some responses are late and some are not.
+TEST_F(M3NetworkTest, DelayJitterIsDrawnPerResponse) {
+  build("m3net-jitter");
+  run_until(0.1);
+  FaultSpec f;
+  f.kind = FaultSpec::Kind::delay;
+  f.wheel = 2;
+  f.jitter_ms = 0.01;  // 0 … 10 µs, across the margin the 5 µs test above exceeds
+  const m3::SlaveCounters before = master_->counters(2);
+  net_->apply_fault(f, true, sched_.now());
+  run_until(0.2);
+  const std::uint64_t late = master_->counters(2).late - before.late;
+  const std::uint64_t exchanges = master_->counters(2).exchanges - before.exchanges;
+  EXPECT_GT(late, 5u);
+  EXPECT_LT(late, exchanges * 9 / 10) << "late " << late << " of " << exchanges;
+  EXPECT_EQ(master_->counters(1).late, 0u);
+}
+
 // Stations beyond the four wheels: on the line at the next addresses, started like the
 // wheels, their servos turning shafts of their own; the wheels are unaffected.
 TEST_F(M3NetworkTest, StationsBeyondTheWheelsAreOnTheLineWithShaftsOfTheirOwn) {
