@@ -166,11 +166,14 @@ void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::bus_off:
       if (begin) {
         wire_.bus().corrupt_frames_of(f.wheel + 1, 32);  // 32 × 8 > 255: bus-off
-      } else if (!wire_.bus().request_recovery(f.wheel + 1, t)) {
-        hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
+        hooks_.log(t, "fault", fmt::format("bus_off of {} ({})", who, edge));
         return;
       }
-      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}{})", who, edge, begin ? "" : ": recovery requested"));
+      // The fault ends: corruptions the node did not use (it was off the bus, say) go with it.
+      wire_.bus().clear_corruptions_of(f.wheel + 1);
+      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}: {})", who, edge,
+                                         wire_.bus().request_recovery(f.wheel + 1, t) ? "recovery requested"
+                                                                            : "not bus-off, no recovery needed"));
       return;
     case FaultSpec::Kind::wheel_slip:
       return;

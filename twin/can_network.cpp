@@ -184,15 +184,14 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
         wire_.bus().detach(bus_node(f.wheel), t);
         sched_.cancel(timers_[n]);
         powered_[n] = false;
-        dropouts_before_[n] += slaves_[n]->stats().dropouts;
-        samples_before_[n] += slaves_[n]->stats().samples;
-        slaves_[n]->reset_statistics();  // carried over: count them once while it is off
         hooks_.set_setpoint(f.wheel, 0.0);
       } else {
         // Power-on reset: a fresh node, stopped, counter from zero at the shaft's angle, on the
         // oscillator it had (a drift fault still running goes on).
         const double drift = slaves_[n]->drift();
+        const omni::OmniSlaveStats kept = slaves_[n]->stats();  // every counter goes on
         make_slave(f.wheel);
+        slaves_[n]->carry_statistics(kept);
         slaves_[n]->set_drift(drift);
         wire_.bus().reattach(bus_node(f.wheel), t);
         powered_[n] = true;
@@ -203,11 +202,14 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::bus_off:
       if (begin) {
         wire_.bus().corrupt_frames_of(bus_node(f.wheel), 32);  // 32 × 8 > 255: bus-off
-      } else if (!wire_.bus().request_recovery(bus_node(f.wheel), t)) {
-        hooks_.log(t, "fault", fmt::format("bus_off of {}: not bus-off, no recovery needed", who));
+        hooks_.log(t, "fault", fmt::format("bus_off of {} ({})", who, edge));
         return;
       }
-      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}{})", who, edge, begin ? "" : ": recovery requested"));
+      // The fault ends: corruptions the node did not use (it was off the bus, say) go with it.
+      wire_.bus().clear_corruptions_of(bus_node(f.wheel));
+      hooks_.log(t, "fault", fmt::format("bus_off of {} ({}: {})", who, edge,
+                                         wire_.bus().request_recovery(bus_node(f.wheel), t) ? "recovery requested"
+                                                                            : "not bus-off, no recovery needed"));
       return;
     case FaultSpec::Kind::wheel_slip:
       return;  // physics, not the bus
@@ -225,8 +227,8 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
   const std::size_t n = static_cast<std::size_t>(i);
   const omni::OmniSlave& sl = *slaves_[n];
   const omni::OmniSlaveStats& st = sl.stats();
-  const std::uint64_t samples = samples_before_[n] + st.samples;
-  const std::uint64_t dropouts = dropouts_before_[n] + st.dropouts;
+  const std::uint64_t samples = st.samples;
+  const std::uint64_t dropouts = st.dropouts;
   const can::NodeStats& ns = wire_.bus().node_stats(bus_node(i));
   return {{"node", sl.config().node_id},
           {"state", powered_[n] ? omni::to_string(sl.state()) : "off"},
@@ -263,7 +265,7 @@ BusSample OmniCanNetwork::bus_sample() const {
   b.frames_rx = wire_.from_transport();
   std::uint64_t bad = 0;
   for (std::size_t i = 0; i < 4; ++i) {
-    b.dropouts += dropouts_before_[i] + slaves_[i]->stats().dropouts;
+    b.dropouts += slaves_[i]->stats().dropouts;
     bad += slaves_[i]->stats().bad_frames;
   }
   b.errors = wire_.errors() + bad;
@@ -306,7 +308,7 @@ WheelRecord OmniCanNetwork::wheel_record(int axis0) const {
 nlohmann::json OmniCanNetwork::bus_metrics(SimTime now) const {
   const BusSample b = bus_sample();
   std::uint64_t samples = 0;
-  for (std::size_t i = 0; i < 4; ++i) samples += samples_before_[i] + slaves_[i]->stats().samples;
+  for (std::size_t i = 0; i < 4; ++i) samples += slaves_[i]->stats().samples;
   nlohmann::json m = wire_.metrics("can", now);
   m.update({{"dropouts", b.dropouts},
             {"dropout_rate", samples ? static_cast<double>(b.dropouts) / static_cast<double>(samples) : 0.0},

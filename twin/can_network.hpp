@@ -130,8 +130,6 @@ class OmniCanNetwork final : public BusNetwork {
   std::array<double, 4> start_phase_{};  // each slave's timer phase at NMT start [fraction of a period]
   bool bus_stopped_ = false;  // the last NMT command to all nodes was stop
   SimTime master_start_ns_ = -1;
-  // Slave statistics carried over power cycles (a returning node starts from zero).
-  std::array<std::uint64_t, 4> dropouts_before_{}, samples_before_{};
 };
 
 }  // namespace omnitwin::twin

@@ -494,6 +494,12 @@ bool CanBus::corrupt_frames_of(BusNode id, int count) {
   return true;
 }
 
+bool CanBus::clear_corruptions_of(BusNode id) {
+  if (id < 0 || id >= static_cast<int>(nodes_.size())) return false;
+  nodes_[static_cast<std::size_t>(id)].corrupt_tx = 0;
+  return true;
+}
+
 bool CanBus::request_recovery(BusNode id, std::int64_t now_ns) {
   if (id < 0 || id >= static_cast<int>(nodes_.size())) return false;
   if (nodes_[static_cast<std::size_t>(id)].state != ErrorState::bus_off ||

@@ -174,6 +174,9 @@ class CanBus {
   // that node): 32 in a row take an error-active node to bus-off. Returns false for an
   // unknown node. Real-time safe.
   bool corrupt_frames_of(BusNode node, int count);
+  // Drops the node's corruptions still pending (the end of a bus_off fault whose node did not
+  // use them all, e.g. it was off the bus). Returns false for an unknown node. Real-time safe.
+  bool clear_corruptions_of(BusNode node);
   // Power loss: runs events up to now_ns, then the node stops: its queue is emptied, it no
   // longer receives or acknowledges; a frame it was sending is cut off (receivers see an
   // error frame). Returns false if it was already off or is unknown. Real-time safe.

@@ -247,6 +247,9 @@ class OmniSlave {
   const OmniSlaveConfig& config() const { return config_; }
   const OmniSlaveStats& stats() const { return stats_; }
   void reset_statistics() { stats_ = OmniSlaveStats{}; }
+  // A power-on reset that keeps the node's counts (the twin's power_loss fault): the counters
+  // go on from these.
+  void carry_statistics(const OmniSlaveStats& s) { stats_ = s; }
 
   // The real timer period of this node, round(timer_period_ns·(1 + drift)) [ns].
   std::int64_t actual_period_ns() const { return actual_period_ns_; }
