@@ -144,6 +144,7 @@ class PlatformRun {
   // run.json and platform.xml: what ran, for render and report (before the first step).
   void write_run_description() const;
   void on_fault(const FaultSpec& f, bool begin, SimTime t);
+  void log_faults_still_active();
   // A bus network: the master process, the sim-clock tick, the master's report.
   bool on_bus() const { return net_ != nullptr; }
   void start_master();
@@ -736,6 +737,20 @@ void PlatformRun::record_bus(SimTime t, const physics::Pose& p, const Eigen::Vec
   }
 }
 
+// Each fault that began and never ended (duration 0, or an end past the run's) gets its last
+// line in events.log, so that every "(begins)" there has its counterpart.
+void PlatformRun::log_faults_still_active() {
+  if (!events_) return;
+  const SimTime t = std::min(sched_.now(), end_);
+  for (const FaultSpec& f : s_.faults) {
+    const SimTime from = seconds_to_ns(f.at);
+    if (from > t || (f.duration > 0 && from + seconds_to_ns(f.duration) <= t)) continue;
+    note(log_event(t, "fault", fmt::format("{} of line {}, from {} s (still active at the end of the run)",
+                                           to_string(f.kind), f.line, f.at)),
+         *events_);
+  }
+}
+
 void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
   if (f.kind != FaultSpec::Kind::wheel_slip) return net_->apply_fault(f, begin, t);
   const double scale = begin ? f.friction_scale : 1.0;
@@ -860,6 +875,7 @@ RunResult PlatformRun::execute() {
     if (error_.empty()) error_ = e.what();
   }
   const double wall_s = (monotonic_ns() - wall0) * 1e-9;
+  log_faults_still_active();
   if (realtime) realtime->flush_window();
   if (progress_) progress_->finish();
   stop_master();

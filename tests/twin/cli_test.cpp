@@ -184,6 +184,18 @@ TEST_F(CliRun, PassingRunExitsZeroAndPrintsRecords) {
   }
 }
 
+// Found in review: a fault that lasts past the run's end (or to it, duration 0) logged its
+// begin and never an end; now each gets a line at the end of the run.
+TEST_F(CliRun, FaultsStillActiveAtTheEndAreLogged) {
+  const fs::path out = dir_ / "out";
+  const Finished f = run({"run", test_scenario("run_fault_past_end.yaml"), "--out", out.string(), "--no-progress"});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const std::string events = read_bytes(out / "events.log");
+  EXPECT_TRUE(contains(events, "wheel_slip of line 10, from 3 s (still active at the end of the run)")) << events;
+  EXPECT_TRUE(contains(events, "wheel_slip of line 11, from 1 s (still active at the end of the run)")) << events;
+  EXPECT_FALSE(contains(events, "line 12, from")) << events;  // ended at 2 s
+}
+
 // Without --out, `run` writes into out/<scenario name>/ under the working directory.
 TEST_F(CliRun, DefaultRunDirectoryIsOutScenarioName) {
   const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--no-progress"});
