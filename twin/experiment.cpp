@@ -6,8 +6,9 @@
 // CSV and markdown are always written first.
 #include "twin/experiment.hpp"
 
+#include "twin/records.hpp"
+
 #include <sys/wait.h>
-#include <unistd.h>
 #include <array>
 #include <cstdlib>
 #include <exception>
@@ -128,23 +129,7 @@ std::filesystem::path output_dir(const std::string& name, const ExperimentOption
 
 void write_text(const std::filesystem::path& path, const std::string& text) {
   // Found in review: written in place, an interrupt or a full disk left half a file.
-  const std::filesystem::path tmp = path.string() + ".tmp" + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    f << text;
-    f.close();
-    if (!f) {
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      throw std::runtime_error("cannot write " + path.string());
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw std::runtime_error("cannot write " + path.string());
-  }
+  write_text_atomic(path.string(), text);
 }
 
 bool plot(const std::string& kind, const std::filesystem::path& csv, const std::filesystem::path& out_dir) {

@@ -23,7 +23,6 @@
 #include <optional>
 #include <thread>
 
-#include <unistd.h>
 
 #include "media/run_video.hpp"
 #include "physics/platform_mjcf.hpp"
@@ -35,6 +34,7 @@
 #include "twin/junit.hpp"
 #include "twin/progress.hpp"
 #include "twin/records.hpp"
+#include "twin/run_directory.hpp"
 #include "twin/run.hpp"
 #include "twin/run_outputs.hpp"
 #include "twin/scenario.hpp"
@@ -518,25 +518,15 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
       std::cerr << "omnitwin model: --out " << out << ": no such folder " << parent.string() << "\n";
       return 2;
     }
-    if (fs::exists(parent / ".omnitwin-run", ec)) {
+    if (fs::exists(parent / kRunMarker, ec)) {
       std::cerr << "omnitwin model: --out " << out << " is inside a run directory (" << parent.string()
-                << " holds .omnitwin-run); its records are not overwritten\n";
+                << " holds " << kRunMarker << "); its records are not overwritten\n";
       return 2;
     }
-    const fs::path tmp = parent / (target.filename().string() + ".tmp" + std::to_string(::getpid()));
-    {
-      std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-      f << xml;
-      if (!f.flush()) {
-        fs::remove(tmp, ec);
-        std::cerr << "omnitwin model: cannot write " << out << "\n";
-        return 2;
-      }
-    }
-    fs::rename(tmp, target, ec);
-    if (ec) {
-      fs::remove(tmp, ec);
-      std::cerr << "omnitwin model: cannot write " << out << ": " << ec.message() << "\n";
+    try {
+      write_text_atomic(out, xml);
+    } catch (const std::runtime_error& e) {
+      std::cerr << "omnitwin model: " << e.what() << "\n";
       return 3;
     }
     std::cout << out << "\n";

@@ -116,12 +116,10 @@ bool DdsPublisher::offer(const StateSample& s) {
   return true;
 }
 
-void DdsPublisher::event(const RunEvent& e) { queue_event(e, pushed_.load(std::memory_order_acquire)); }
-
-void DdsPublisher::queue_event(const RunEvent& e, std::uint64_t after) {
+void DdsPublisher::event(const RunEvent& e) {
   {
     std::lock_guard lock(events_mutex_);
-    events_.emplace_back(e, after);
+    events_.emplace_back(e, pushed_.load(std::memory_order_acquire));
   }
   wake();
 }

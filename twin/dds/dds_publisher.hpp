@@ -69,7 +69,6 @@ class DdsPublisher {
  private:
   struct Writers;
   void run_thread();
-  void queue_event(const RunEvent& e, std::uint64_t after);
   bool publish_in_order();
   void publish_event(const RunEvent& e);
   bool publish_sample();
