@@ -114,10 +114,10 @@ std::vector<Fault> read_faults(const fs::path& p) {
 }
 
 physics::ModelPtr load_model(const fs::path& p) {
-  if (!fs::exists(p)) throw std::runtime_error(fmt::format("cannot read {}", p.string()));
+  if (!fs::exists(p)) throw BadRunRecord(fmt::format("cannot read {}", p.string()));
   char err[1024] = "";
   physics::ModelPtr m(mj_loadXML(p.string().c_str(), nullptr, err, sizeof err));
-  if (!m) throw std::runtime_error(fmt::format("{}: MuJoCo cannot load the model: {}", p.string(), err));
+  if (!m) throw BadRunRecord(fmt::format("{}: MuJoCo cannot load the model: {}", p.string(), err));
   return m;
 }
 
@@ -153,21 +153,18 @@ namespace {
 // The recorded run, ready to be sampled at any sim time.
 class Recording {
  public:
-  explicit Recording(const fs::path& dir)
-      : traj_(read_csv(dir / "trajectory.csv")), faults_(read_faults(dir / "run.json")) {
-    if (fs::exists(dir / "bus.csv")) bus_ = read_csv(dir / "bus.csv");
-    t_ = &traj_.need("t");
-    x_ = &traj_.need("x");
-    y_ = &traj_.need("y");
-    phi_ = &traj_.need("phi");
-    vx_ = &traj_.need("vx");
-    vy_ = &traj_.need("vy");
-    for (int i = 0; i < 4; ++i) wheel_[i] = &traj_.need(fmt::format("w{}_angle_rad", i + 1));
-    check_rows();
-    build_paths();
+  explicit Recording(const fs::path& dir) {
+    try {
+      traj_ = read_csv(dir / "trajectory.csv");
+      columns();
+    } catch (const std::runtime_error& e) {
+      throw BadRunRecord(e.what());
+    }
+    read_optional(dir);
   }
 
   double end_time() const { return t_->back(); }
+
   const std::vector<PathPoint>& reference() const { return reference_; }
 
   // The frame state at sim time t [s]. The returned trace points into this object.
@@ -188,7 +185,41 @@ class Recording {
   }
 
  private:
+  // trajectory.csv's columns, checked; then the paths drawn from them.
+  void columns() {
+    t_ = &traj_.need("t");
+    x_ = &traj_.need("x");
+    y_ = &traj_.need("y");
+    phi_ = &traj_.need("phi");
+    vx_ = &traj_.need("vx");
+    vy_ = &traj_.need("vy");
+    for (int i = 0; i < 4; ++i) wheel_[i] = &traj_.need(fmt::format("w{}_angle_rad", i + 1));
+    check_rows();
+    build_paths();
+  }
+
   static double finite_or_zero(double v) { return std::isfinite(v) ? v : 0.0; }
+
+  // run.json (faults) and bus.csv (bus health) only feed the overlay, and an older run has
+  // neither: one that is absent or unreadable drops its overlay line with a warning, as the
+  // report does, rather than failing the whole video (found in review).
+  void read_optional(const fs::path& dir) {
+    try {
+      if (fs::exists(dir / "run.json")) faults_ = read_faults(dir / "run.json");
+      else spdlog::warn("{} is absent: the video shows no faults", (dir / "run.json").string());
+    } catch (const std::exception& e) {
+      spdlog::warn("{}; the video shows no faults", e.what());
+    }
+    try {
+      if (fs::exists(dir / "bus.csv")) {
+        bus_ = read_csv(dir / "bus.csv");
+        bus_->need("t");
+      }
+    } catch (const std::exception& e) {
+      bus_.reset();
+      spdlog::warn("{}; the video shows no bus health", e.what());
+    }
+  }
 
   // Times must increase; the pose must be known in every row.
   void check_rows() const {
@@ -331,6 +362,9 @@ VideoResult render_run(const std::string& run_dir, const std::string& out_file, 
   VideoResult res;
   try {
     res = render_or_throw(run_dir, out_file, o, backend, stop);
+  } catch (const BadRunRecord& e) {
+    if (!removed_old) throw;
+    throw BadRunRecord(fmt::format("{}; the older {} was removed", e.what(), out_file));
   } catch (const std::runtime_error& e) {
     if (!removed_old) throw;
     throw std::runtime_error(fmt::format("{}; the older {} was removed", e.what(), out_file));

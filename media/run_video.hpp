@@ -14,6 +14,7 @@
 
 #include <atomic>
 #include <functional>
+#include <stdexcept>
 #include <string>
 
 namespace omnitwin::media {
@@ -43,6 +44,13 @@ struct VideoResult {
   double render_s = 0;       // wall time spent [s]
 };
 
+// A run directory's record that render_run needs is missing or malformed (trajectory.csv,
+// platform.xml): bad input, not a failure of the renderer. The message names the file and,
+// where there is one, the line.
+struct BadRunRecord : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // "" when out_file may be written, else why not: it exists and is not an MP4 (a run's record,
 // any other file: a typo in --out would have deleted it; found in review) or not a regular
 // file. Not real-time safe.
@@ -54,8 +62,10 @@ std::string video_file_problem(const std::string& out_file);
 // passes for this render. `stop` (may be null) is polled before every frame: once it is true
 // the frames so far are finalised into a playable file (finalising reads no flag, so more
 // stop requests cannot cut it) and the result says stopped_early. Throws
-// std::runtime_error with a message naming the file (missing or malformed run files, unknown
-// camera, unwritable output, disk full; "; the older FILE was removed" when one was), after
+// BadRunRecord for a missing or malformed trajectory.csv or platform.xml (run.json and
+// bus.csv are optional: one that is absent or unreadable only drops its overlay line, with a
+// warning), std::runtime_error otherwise (unknown camera, unwritable output, disk full), each
+// with a message naming the file ("; the older FILE was removed" when one was), after
 // which nothing is under out_file; std::invalid_argument for bad options or an out_file that
 // video_file_problem() refuses (nothing removed). The frames are at k/fps and, when the
 // run's length T is not a whole number of frames, one more at T: the final state is the

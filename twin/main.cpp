@@ -121,9 +121,11 @@ OutputPlan output_plan(const RunArgs& a, const Scenario& s) {
   return p;
 }
 
-// Renders and reports after the run; prints where they are. Returns false if one failed.
+// Renders and reports after the run; prints where they are. Returns false if one failed;
+// *bad_record (may be null) then says the video failed on a missing or malformed record.
 // `before_report` (may be empty) runs between the video and the report.
-bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<void()> before_report = {}) {
+bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<void()> before_report = {},
+                  bool* bad_record = nullptr) {
   plan.before_report = std::move(before_report);
   if (!plan.video && !plan.report) return true;
   if (plan.video)
@@ -143,6 +145,7 @@ bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<voi
     std::cout << "  no video: stopped before its first frame\n";
   if (!o.report.empty()) std::cout << "  " << o.report << "\n";
   for (const std::string& e : o.errors) std::cerr << "omnitwin: " << e << "\n";
+  if (bad_record) *bad_record = o.bad_record;
   return o.errors.empty();
 }
 
@@ -468,14 +471,17 @@ int cmd_render(const std::string& run_dir, const std::string& out, const VideoSp
   plan.video_spec = v;
   plan.report = report;
   const int signals_before = g_signals.load();
-  const bool ok = make_outputs(run_dir, plan);
+  bool bad_record = false;
+  const bool ok = make_outputs(run_dir, plan, {}, &bad_record);
   // Ctrl-C or SIGTERM stops the rendering with a playable but shorter video: exit 3, as the
   // README says for a signal in any phase (it was 0; found in review).
   if (g_signals.load() > signals_before) {
     std::cout << "  INTERRUPTED: the video holds the frames rendered so far\n";
     return 3;
   }
-  return ok ? 0 : 3;
+  // A missing or malformed trajectory.csv or platform.xml is bad input (exit 2, as for a
+  // directory that is no run); a renderer or disk failure is a runtime failure (exit 3).
+  return ok ? 0 : bad_record ? 2 : 3;
 }
 
 int cmd_echo(const EchoOptions& o) {

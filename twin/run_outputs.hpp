@@ -35,6 +35,7 @@ struct OutputsResult {
   std::string report;               // report.html ("" if none)
   double report_wall_s = 0;
   std::vector<std::string> errors;  // one line per output that could not be made
+  bool bad_record = false;          // the video failed on a missing or malformed run record
 };
 
 // Renders the video and/or writes the report of the run in `run_dir`. `stop` (may be

@@ -246,14 +246,30 @@ std::string error_of(const std::string& dir, const std::string& file, const Vide
   return "";
 }
 
-TEST_F(RunVideo, MissingRunFilesAreClearErrorsNamingTheFile) {
-  for (const char* name : {"trajectory.csv", "run.json", "platform.xml"}) {
+TEST_F(RunVideo, MissingRunFilesAreBadRecordsNamingTheFile) {
+  for (const char* name : {"trajectory.csv", "platform.xml"}) {
     const fs::path moved = dir_ / (std::string(name) + ".away");
     fs::rename(dir_ / name, moved);
-    const std::string msg = error_of(run_dir(), out(), small());
-    EXPECT_NE(msg.find((dir_ / name).string()), std::string::npos) << name << ": " << msg;
+    try {
+      render_run(run_dir(), out(), small());
+      ADD_FAILURE() << name << ": rendered without it";
+    } catch (const BadRunRecord& e) {
+      EXPECT_NE(std::string(e.what()).find((dir_ / name).string()), std::string::npos) << name << ": " << e.what();
+    }
     fs::rename(moved, dir_ / name);
   }
+}
+
+// run.json and bus.csv only feed the overlay (and an older run has neither): one that is
+// absent or unreadable costs its overlay line, not the video (it failed the whole video).
+TEST_F(RunVideo, AnAbsentOrMalformedRunJsonOrBusCsvStillRenders) {
+  fs::remove(dir_ / "run.json");
+  EXPECT_EQ(render_run(run_dir(), out(), small()).frames, 21);
+  std::ofstream(dir_ / "run.json") << "{ not json";
+  std::ofstream(dir_ / "bus.csv") << "t,frames_tx\n0,1\n0.5,zwei\n";
+  EXPECT_EQ(render_run(run_dir(), out(), small()).frames, 21);
+  std::ofstream(dir_ / "bus.csv") << "frames_tx,frames_rx\n1,1\n";  // no t column
+  EXPECT_EQ(render_run(run_dir(), out(), small()).frames, 21);
 }
 
 TEST_F(RunVideo, MalformedTrajectoryIsAnErrorWithFileAndLine) {
@@ -262,6 +278,7 @@ TEST_F(RunVideo, MalformedTrajectoryIsAnErrorWithFileAndLine) {
                                          << "0.01,zero" << trajectory_row(0.01).substr(4) << "\n";
   const std::string msg = error_of(run_dir(), out(), small());
   EXPECT_NE(msg.find("trajectory.csv:3"), std::string::npos) << msg;
+  EXPECT_THROW(render_run(run_dir(), out(), small()), BadRunRecord);
   std::ofstream(dir_ / "trajectory.csv") << "t,x,y\n0,0,0\n";
   EXPECT_NE(error_of(run_dir(), out(), small()).find("no column \"phi\""), std::string::npos);
 }

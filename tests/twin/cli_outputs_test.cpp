@@ -167,6 +167,17 @@ TEST_F(CliOutputs, RunVideoAndRenderAgree) {
   const Finished bad = run({"render", (dir_ / "nothing").string()});
   EXPECT_EQ(bad.code, 2);
   EXPECT_TRUE(contains(bad.err, "not a run directory")) << bad.err;
+  // A malformed record is bad input too (exit 2, it was 3), naming file and line; a malformed
+  // bus.csv only loses the overlay's bus line (it failed the video).
+  std::ofstream(out / "bus.csv", std::ios::app) << "1.0,garbage\n";
+  const Finished no_bus = run({"render", out.string(), "--out", again.string(), "--width", "160", "--height", "120",
+                               "--fps", "10"});
+  EXPECT_EQ(no_bus.code, 0) << no_bus.err;
+  EXPECT_TRUE(contains(no_bus.out + no_bus.err, "bus.csv")) << no_bus.out << no_bus.err;
+  std::ofstream(out / "trajectory.csv", std::ios::app) << "1.0,garbage\n";
+  const Finished torn = run({"render", out.string(), "--out", again.string()});
+  EXPECT_EQ(torn.code, 2) << torn.err;
+  EXPECT_TRUE(contains(torn.err, "trajectory.csv:")) << torn.err;
 }
 
 // SIGINT half-way through a long lockstep CAN run: exit 3, metrics say interrupted, the CSV
