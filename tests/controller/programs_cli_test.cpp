@@ -5,13 +5,16 @@
 // negative or too large for the ns deadlines; a bad --sim-clock address on every bus; Ctrl-C
 // while waiting for the twin's sim-clock socket; a --stats file that cannot be written; and
 // --script with another bus or a directory. Each is exit 2 with a short message (3 for
-// --stats; 0 for the signal, as for any signal), within a second or two. UDP ports 48310-48319.
+// --stats; 0 for the signal, as for any signal), within a second or two; --sim-clock with the wall clock
+// on every bus, and --stats on bus can. UDP ports 48310-48319.
 #include <gtest/gtest.h>
 
 #include <signal.h>
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <thread>
 #include <vector>
@@ -111,6 +114,37 @@ TEST_F(ProgramsCli, ABadSimClockAddressIsUsageOnEveryBus) {
                                      "tcp:localhost"}),
                  "expected unix:PATH");
   }
+}
+
+// Found in review: --sim-clock with --clock wall was refused on bus can only; the other four
+// ran on the wall clock and ignored the address.
+TEST_F(ProgramsCli, ASimClockAddressWithTheWallClockIsUsageOnEveryBus) {
+  const std::vector<std::vector<std::string>> buses{
+      {"can", data("master/loopback.yaml"), kCanIface},
+      {"canopen", data("canopen/drives_only.yaml"), kCanIface},
+      {"tml", data("tml/drives_only.yaml"), kCanIface},
+      {"ethercat", data("ethercat/drives_only.yaml"), "udp:127.0.0.1:48311"},
+      {"m3", data("m3/servos_only.yaml"), "udp:127.0.0.1:48312"}};
+  for (const auto& b : buses) {
+    SCOPED_TRACE(b[0]);
+    expect_usage(run("omni-master", {"--bus", b[0], "--config", b[1], "--iface", b[2], "--clock", "wall", "--sim-clock",
+                                     "unix:/tmp/x.sock", "--duration", "0.05"}),
+                 "--sim-clock is only used with --clock sim");
+  }
+}
+
+// Found in review: --stats was silently ignored on bus can (the help named the other four).
+TEST_F(ProgramsCli, TheOmniCanMasterWritesItsStatsToo) {
+  const fs::path stats = dir_.path() / "can-stats.json";
+  const Result r = run("omni-master", {"--bus", "can", "--config", data("master/loopback.yaml"), "--iface",
+                                       "udp:239.74.163.9:48317", "--duration", "0.1", "--stats", stats.string()});
+  EXPECT_EQ(r.code, 0) << r.err;
+  ASSERT_TRUE(fs::exists(stats)) << r.err;
+  std::ifstream in(stats);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(contains(text, "\"ticks\":")) << text;
+  EXPECT_TRUE(contains(text, "\"detection_requests\":")) << text;
+  EXPECT_TRUE(contains(text, "\"state\":")) << text;
 }
 
 // Found in review: SIGINT/SIGTERM are blocked for the signalfd, and the connect retry slept
