@@ -11,6 +11,7 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -636,6 +637,8 @@ EdsDevice parse_eds(const std::string& text, const std::string& name) {
 }
 
 EdsDevice load_eds(const std::string& path) {
+  // A directory opens as a stream of nothing on Linux: name it, not its "missing" contents.
+  if (std::filesystem::is_directory(path)) throw EdsError(fmt::format("{}:0: a directory, not a file", path));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw EdsError(fmt::format("{}:0: cannot open the file", path));
   std::ostringstream ss;

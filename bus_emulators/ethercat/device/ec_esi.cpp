@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <pugixml.hpp>
@@ -439,6 +440,8 @@ std::vector<DeviceDescription> parse_esi(const std::string& xml, const std::stri
 }
 
 std::vector<DeviceDescription> load_esi(const std::string& path) {
+  // A directory opens as a stream of nothing on Linux: name it, not its "missing" contents.
+  if (std::filesystem::is_directory(path)) throw EsiError(fmt::format("{}:0: a directory, not a file", path));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw EsiError(fmt::format("{}:0: cannot open the file", path));
   std::ostringstream ss;

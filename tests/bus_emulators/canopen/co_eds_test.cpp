@@ -443,6 +443,11 @@ TEST(CoEds, MissingFileIsLineZero) {
   EXPECT_EQ(error_of_file(data("no_such.eds")), data("no_such.eds") + ":0: cannot open the file");
 }
 
+// Found in review: a directory read as an empty file ("section [DeviceInfo] missing").
+TEST(CoEds, ADirectoryIsNamedAsOne) {
+  EXPECT_EQ(error_of_file(data("")), data("") + ":0: a directory, not a file");
+}
+
 TEST(CoEds, InlineErrors) {
   struct Case {
     std::string text, offending, what;

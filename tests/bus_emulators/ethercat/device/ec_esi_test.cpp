@@ -198,6 +198,12 @@ TEST(EcEsi, MissingFile) {
   EXPECT_NE(e.find("does_not_exist.xml:0: cannot open"), std::string::npos) << e;
 }
 
+// Found in review: a directory read as an empty file ("malformed XML: No document element").
+TEST(EcEsi, ADirectoryIsNamedAsOne) {
+  const std::string e = error_of(data(""));
+  EXPECT_NE(e.find(":0: a directory, not a file"), std::string::npos) << e;
+}
+
 TEST(EcEsi, MalformedXmlNamesTheLine) {
   const std::string e = error_of(data("malformed.xml"));
   EXPECT_NE(e.find("malformed.xml:10: malformed XML"), std::string::npos) << e;
