@@ -103,6 +103,7 @@ bool NmtSlave::apply(NmtTransition t, SimTime now, const SendFn& send) {
 void ErrorControlProducer::restart(SimTime now) {
   period_ms_ = 0;  // re-armed from the parameters at the next on_time
   next_heartbeat_ = now;
+  from_restart_ = true;
 }
 
 void ErrorControlProducer::reset(SimTime now) {
@@ -115,21 +116,25 @@ void ErrorControlProducer::reset(SimTime now) {
 LifeGuardEvent ErrorControlProducer::on_time(SimTime now, const ErrorControlParams& p, NmtState s, const SendFn& send) {
   if (s == NmtState::initialising) return LifeGuardEvent::none;
   if (p.heartbeat_ms != 0) {
-    // A new period (or the first) re-arms the timer from the last heartbeat or the restart.
+    const SimTime period = p.heartbeat_ms * kMs;
+    // The first period counts from the restart (boot-up); a new 0x1017 (also after 0) from now.
     if (p.heartbeat_ms != period_ms_) {
-      next_heartbeat_ = (period_ms_ == 0 ? next_heartbeat_ : now) + p.heartbeat_ms * kMs;
+      next_heartbeat_ = (from_restart_ ? next_heartbeat_ : now) + period;
       period_ms_ = p.heartbeat_ms;
+      from_restart_ = false;
     }
-    while (next_heartbeat_ <= now) {
+    if (next_heartbeat_ <= now) {
       can::Frame f = frame11(cob::heartbeat + node_id_, 1);
       f.data[0] = static_cast<std::uint8_t>(s);
       send(f, now);
       ++heartbeats_;
-      next_heartbeat_ += p.heartbeat_ms * kMs;
+      next_heartbeat_ += period;
+      if (next_heartbeat_ <= now) next_heartbeat_ = now + period;  // a late caller: no catch-up burst
     }
     return LifeGuardEvent::none;
   }
   period_ms_ = 0;
+  from_restart_ = false;
   // Life guarding: active once the master has guarded us and both parameters are set.
   const SimTime life = static_cast<SimTime>(p.guard_time_ms) * p.life_factor * kMs;
   if (life == 0 || last_guard_ < 0 || lost_) return LifeGuardEvent::none;

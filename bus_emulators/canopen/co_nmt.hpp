@@ -73,10 +73,11 @@ class ErrorControlProducer {
  public:
   explicit ErrorControlProducer(std::uint8_t node_id) : node_id_(node_id) {}
 
-  // Restarts the heartbeat timer (boot-up, a new 0x1017): the first heartbeat follows one
-  // period after `now`.
+  // Restarts the heartbeat timer (boot-up): the first heartbeat follows one period after `now`.
   void restart(SimTime now);
-  // Sends heartbeats due by `now` and checks life guarding. Returns lost when the master's
+  // Sends the heartbeat due by `now` (one at most: a caller more than a period late gets one,
+  // and the next a period later) and checks life guarding. A changed 0x1017 (also 0 → n) takes
+  // effect from `now`: the next heartbeat one new period later. Returns lost when the master's
   // guarding stopped for guard time × life factor (once), resumed when it came back.
   LifeGuardEvent on_time(SimTime now, const ErrorControlParams& p, NmtState s, const SendFn& send);
   // A remote frame on 0x700+id: the guarding answer [toggle | state] (node guarding only;
@@ -93,6 +94,7 @@ class ErrorControlProducer {
   std::uint8_t node_id_;
   SimTime next_heartbeat_ = 0;
   std::uint16_t period_ms_ = 0;  // the period the timer was armed with
+  bool from_restart_ = false;    // armed from the restart time, not from the first on_time
   SimTime last_guard_ = -1;      // -1: guarding not started
   bool toggle_ = false, lost_ = false;
   std::uint64_t heartbeats_ = 0, guard_answers_ = 0;

@@ -83,6 +83,40 @@ TEST(ErrorControlProducer, HeartbeatsAtTheConfiguredPeriodWithTheState) {
   EXPECT_EQ(p.heartbeats_sent(), 3u);
 }
 
+// 0x1017 written long after boot-up: the first heartbeat one period after the write, then one
+// per period — no burst catching up from the boot-up time.
+TEST(ErrorControlProducer, AHeartbeatTimeWrittenLongAfterBootUpStartsOnePeriodLater) {
+  Wire w;
+  ErrorControlProducer p(3);
+  p.restart(0);
+  ErrorControlParams par;  // 0x1017 = 0: no heartbeat
+  for (SimTime t = kMs; t <= 10'000 * kMs; t += kMs) p.on_time(t, par, NmtState::operational, w.fn());
+  EXPECT_TRUE(w.sent.empty());
+  par.heartbeat_ms = 100;
+  for (SimTime t = 10'001 * kMs; t <= 10'301 * kMs; t += kMs) p.on_time(t, par, NmtState::operational, w.fn());
+  ASSERT_EQ(w.sent.size(), 3u);
+  EXPECT_EQ(w.sent[0].t, 10'101 * kMs);
+  EXPECT_EQ(w.sent[1].t, 10'201 * kMs);
+  EXPECT_EQ(w.sent[2].t, 10'301 * kMs);
+}
+
+// A caller that comes late (several periods overdue) gets one heartbeat, and the next one a
+// period after it.
+TEST(ErrorControlProducer, SendsAtMostOneHeartbeatPerCall) {
+  Wire w;
+  ErrorControlProducer p(3);
+  p.restart(0);
+  ErrorControlParams par;
+  par.heartbeat_ms = 100;
+  p.on_time(0, par, NmtState::operational, w.fn());
+  p.on_time(1'000 * kMs, par, NmtState::operational, w.fn());
+  ASSERT_EQ(w.sent.size(), 1u);
+  p.on_time(1'099 * kMs, par, NmtState::operational, w.fn());
+  EXPECT_EQ(w.sent.size(), 1u);
+  p.on_time(1'100 * kMs, par, NmtState::operational, w.fn());
+  EXPECT_EQ(w.sent.size(), 2u);
+}
+
 TEST(ErrorControlProducer, AnswersGuardingWithAToggleAndDetectsLifeGuarding) {
   Wire w;
   ErrorControlProducer p(3);
