@@ -13,7 +13,7 @@ EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od)
 
 std::uint8_t EmcyProducer::error_register() const {
   std::uint8_t r = 0;
-  for (int i = 0; i < active_n_; ++i) r |= static_cast<std::uint8_t>(error_register::generic | register_bit_of(active_[static_cast<std::size_t>(i)]));
+  for (int i = 0; i < active_n_; ++i) r |= static_cast<std::uint8_t>(error_register::generic | register_bit_of(active_[static_cast<std::size_t>(i)].code));
   return r;
 }
 
@@ -38,9 +38,15 @@ void EmcyProducer::push_history(std::uint16_t code, std::array<std::uint8_t, 5> 
   n->set_int(std::min<std::int64_t>(n->as_int() + 1, cap));
 }
 
+EmcyProducer::Pending* EmcyProducer::find_active(std::uint16_t code) {
+  Pending* end = active_.begin() + active_n_;
+  Pending* it = std::find_if(active_.begin(), end, [code](const Pending& p) { return p.code == code; });
+  return it == end ? nullptr : it;
+}
+
 bool EmcyProducer::raise(std::uint16_t code, SimTime now, const SendFn& send, std::array<std::uint8_t, 5> mfr) {
-  if (std::find(active_.begin(), active_.begin() + active_n_, code) != active_.begin() + active_n_) return true;
-  if (active_n_ < kActive) active_[static_cast<std::size_t>(active_n_++)] = code;
+  if (find_active(code)) return true;
+  if (active_n_ < kActive) active_[static_cast<std::size_t>(active_n_++)] = {code, 0, mfr};
   update_register();
   push_history(code, mfr);
   const std::size_t before = dropped_;
@@ -49,10 +55,9 @@ bool EmcyProducer::raise(std::uint16_t code, SimTime now, const SendFn& send, st
 }
 
 bool EmcyProducer::clear(std::uint16_t code, SimTime now, const SendFn& send) {
-  auto* end = active_.begin() + active_n_;
-  auto* it = std::find(active_.begin(), end, code);
-  if (it == end) return false;
-  std::copy(it + 1, end, it);
+  Pending* it = find_active(code);
+  if (!it) return false;
+  std::copy(it + 1, active_.begin() + active_n_, it);
   --active_n_;
   update_register();
   if (active_n_ == 0) enqueue({emcy_code::reset, 0, {}}, now, send);
@@ -71,7 +76,31 @@ void EmcyProducer::reset_communication() {
   last_sent_ = -1;
 }
 
+void EmcyProducer::set_nmt_state(NmtState s, SimTime now, const SendFn& send) {
+  const bool may_send = s == NmtState::pre_operational || s == NmtState::operational;
+  if (may_send == may_send_) return;
+  may_send_ = may_send;
+  if (!may_send) {
+    missed_ = missed_ || queue_n_ > 0;  // what was waiting for the inhibit time is not sent
+    queue_n_ = 0;
+    return;
+  }
+  if (!missed_) return;
+  missed_ = false;
+  // Back: the master hears the present state — every active error, or that none is left.
+  if (active_n_ == 0) enqueue({emcy_code::reset, 0, {}}, now, send);
+  for (int i = 0; i < active_n_; ++i) {
+    Pending p = active_[static_cast<std::size_t>(i)];
+    p.reg = error_register();
+    enqueue(p, now, send);
+  }
+}
+
 void EmcyProducer::enqueue(const Pending& p, SimTime now, const SendFn& send) {
+  if (!may_send_) {  // not in this NMT state: recorded only, signalled on the way back
+    missed_ = true;
+    return;
+  }
   if (queue_n_ >= kQueue) {
     ++dropped_;
     return;

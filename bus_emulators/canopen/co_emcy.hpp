@@ -6,8 +6,12 @@
 // [100 µs] after the previous one (later ones wait in a small queue, dropped and counted when
 // it is full). It enters 0x1003 as the newest entry (sub 1), older ones move down; the error
 // register gets the error's class bit (generic bit 0 always). When the last active error is
-// cleared, an "error reset or no error" EMCY (code 0x0000) is sent. The node owns the
-// dictionary; the producer reads 0x1014/0x1015 and writes 0x1001/0x1003 through it.
+// cleared, an "error reset or no error" EMCY (code 0x0000) is sent. EMCYs are sent only in
+// PRE-OPERATIONAL and OPERATIONAL (CiA 301): in STOPPED (and INITIALISING) errors that occur or
+// end are recorded in 0x1001/0x1003 but not sent, and on the way back the master is brought up
+// to date — one EMCY per active error, or the "error reset" when none is left (our choice; as
+// CANopenNode, whose EMCYs wait for PRE-OPERATIONAL). The node owns the dictionary; the
+// producer reads 0x1014/0x1015 and writes 0x1001/0x1003 through it.
 // Real-time safe: no allocation after construction.
 #pragma once
 
@@ -51,6 +55,10 @@ class EmcyProducer {
   void on_time(SimTime now, const SendFn& send);
   // NMT reset communication: forget the queue and the inhibit timer (errors stay active).
   void reset_communication();
+  // The node's NMT state after each transition: leaving PRE-OPERATIONAL/OPERATIONAL drops the
+  // queued EMCYs; coming back after an error occurred or ended (or was dropped) sends the
+  // active errors, or the reset EMCY when none is left. Real-time safe.
+  void set_nmt_state(NmtState s, SimTime now, const SendFn& send);
 
   std::uint8_t error_register() const;
   int active_count() const { return active_n_; }
@@ -63,6 +71,7 @@ class EmcyProducer {
     std::uint8_t reg = 0;
     std::array<std::uint8_t, 5> mfr{};
   };
+  Pending* find_active(std::uint16_t code);
   void enqueue(const Pending& p, SimTime now, const SendFn& send);
   void emit(const Pending& p, SimTime now, const SendFn& send);
   void update_register();
@@ -70,11 +79,13 @@ class EmcyProducer {
 
   ObjectDictionary& od_;
   std::uint8_t node_id_;
-  std::array<std::uint16_t, kActive> active_{};
+  std::array<Pending, kActive> active_{};  // the active errors (reg unused)
   int active_n_ = 0;
   std::array<Pending, kQueue> queue_{};
   int queue_n_ = 0;
   SimTime last_sent_ = -1;
+  bool may_send_ = true;  // PRE-OPERATIONAL or OPERATIONAL
+  bool missed_ = false;   // an EMCY was not sent in another NMT state
   std::uint64_t sent_ = 0, dropped_ = 0;
 };
 

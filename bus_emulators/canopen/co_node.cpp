@@ -83,6 +83,7 @@ void Node::power_on(SimTime now) {
 void Node::apply(NmtTransition tr, SimTime now) {
   const NmtState before = nmt_.state();
   if (!nmt_.apply(tr, now, send_counted_)) return;
+  emcy_.set_nmt_state(nmt_.state(), now, send_counted_);
   switch (tr) {
     case NmtTransition::reset_node:
       if (hooks_.on_nmt) hooks_.on_nmt(tr, now);  // the application resets first
@@ -114,6 +115,7 @@ void Node::reset_communication(SimTime now) {
   ec_.reset(now);
   configure_consumer();
   nmt_.apply(NmtTransition::boot_up, now, send_counted_);
+  emcy_.set_nmt_state(nmt_.state(), now, send_counted_);  // after the boot-up message
   ec_.restart(now);
   if (hooks_.on_nmt) hooks_.on_nmt(NmtTransition::boot_up, now);
 }

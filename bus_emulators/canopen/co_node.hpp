@@ -65,7 +65,8 @@ class Node {
   void on_time(SimTime now);
   // The CAN controller recovered from bus-off (the twin's wire model tells us). Real-time safe.
   void on_bus_off_recovered(SimTime now);
-  // An application error: EMCY with `code` (raise) or its end (clear). Real-time safe.
+  // An application error: EMCY with `code` (raise) or its end (clear); while STOPPED recorded
+  // only (0x1001, 0x1003) and signalled when the node is back (co_emcy). Real-time safe.
   void raise_error(std::uint16_t code, SimTime now, std::array<std::uint8_t, 5> mfr = {});
   void clear_error(std::uint16_t code, SimTime now);
 

@@ -179,5 +179,23 @@ TEST_F(DriveNodeTest, LosingTheMastersHeartbeatWhileEnabledFaultsTheDrive) {
   EXPECT_EQ(d->stats().comm_faults, 1u);
 }
 
+// NMT stop while enabled faults the drive (0x6007 = 1), but a STOPPED node sends no EMCY: the
+// fault's EMCY 0x8100 follows when the master takes the node back to PRE-OPERATIONAL.
+TEST_F(DriveNodeTest, StoppingTheNodeWhileEnabledSignalsTheFaultOnlyWhenItIsBack) {
+  d->on_frame(can::make_data(0, {0x01, 3}), now);
+  for (std::uint16_t cw : {0x06, 0x07, 0x0F}) period(cw, 0), period(cw, 0);
+  ASSERT_EQ(d->drive().state(), drive::State::operation_enabled);
+  take();
+  d->on_frame(can::make_data(0, {0x02, 3}), now);
+  for (int i = 0; i < 20; ++i) now += kMs, d->step(now, drive::Feedback{});
+  EXPECT_EQ(d->drive().state(), drive::State::fault);
+  for (const can::Frame& f : take()) EXPECT_NE(f.id, 0x83u) << can::to_string(f);
+  d->on_frame(can::make_data(0, {0x80, 3}), now);
+  const auto f = take();
+  ASSERT_EQ(f.size(), 1u);
+  EXPECT_EQ(f[0].id, 0x83u);
+  EXPECT_EQ(get_u16(f[0].data.data()), 0x8100);
+}
+
 }  // namespace
 }  // namespace omnitwin::canopen

@@ -64,6 +64,29 @@ TEST_F(EmcyTest, InhibitTimeSpacesTheMessages) {
   EXPECT_EQ(sent[1].first.data[0], 0x20);
 }
 
+// Outside PRE-OPERATIONAL/OPERATIONAL nothing is sent: an EMCY still waiting for the inhibit
+// time is dropped, and on the way back the active errors are signalled once each.
+TEST_F(EmcyTest, StoppedDropsTheQueueAndTheActiveErrorsFollowOnTheWayBack) {
+  ASSERT_EQ(od.write(0x1015, 0, OdState::preop, test::le(50, 2)), SdoAbort::none);  // 5 ms
+  EmcyProducer e(od, 5);
+  e.raise(0x8110, 0, send);
+  e.raise(0x8120, kMs, send);  // waits for the inhibit time
+  e.set_nmt_state(NmtState::stopped, 2 * kMs, send);
+  e.on_time(10 * kMs, send);
+  e.raise(0x2310, 11 * kMs, send);
+  EXPECT_EQ(sent.size(), 1u);
+  EXPECT_EQ(od.entry(0x1003, 0)->as_int(), 3);
+  e.set_nmt_state(NmtState::pre_operational, 20 * kMs, send);
+  for (SimTime t = 21 * kMs; t <= 40 * kMs; t += kMs) e.on_time(t, send);
+  ASSERT_EQ(sent.size(), 4u);
+  EXPECT_EQ(sent[3].second, 30 * kMs);  // spaced by the inhibit time
+  EXPECT_EQ(sent[1].first, can::make_data(0x085, {0x10, 0x81, 0x13, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(sent[2].first.data[1], 0x81);
+  EXPECT_EQ(sent[3].first.data[1], 0x23);
+  e.set_nmt_state(NmtState::operational, 50 * kMs, send);  // nothing missed: nothing sent
+  EXPECT_EQ(sent.size(), 4u);
+}
+
 TEST_F(EmcyTest, AnInvalidCobIdRecordsButDoesNotSend) {
   ASSERT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x80000085, 4)), SdoAbort::none);
   EmcyProducer e(od, 5);

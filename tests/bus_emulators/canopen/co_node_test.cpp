@@ -105,6 +105,32 @@ TEST_F(NodeTest, StoppedNodeAnswersOnlyNmtAndGuarding) {
   EXPECT_EQ(node->state(), NmtState::pre_operational);
 }
 
+// CiA 301: a STOPPED node sends no EMCY. The error is recorded (0x1001, 0x1003) and signalled
+// when the node is back in PRE-OPERATIONAL.
+TEST_F(NodeTest, StoppedNodeRecordsAnErrorWithoutEmcyAndSignalsItWhenBack) {
+  nmt(0x02);
+  take();
+  node->raise_error(0x2310, kMs);
+  EXPECT_TRUE(take().empty());
+  EXPECT_EQ(od.entry(0x1001, 0)->as_int(), 0x03);  // generic + current
+  EXPECT_EQ(od.entry(0x1003, 0)->as_int(), 1);
+  EXPECT_EQ(od.entry(0x1003, 1)->as_int() & 0xFFFF, 0x2310);
+  nmt(0x80, 2 * kMs);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x85, {0x10, 0x23, 0x03, 0, 0, 0, 0, 0})}));
+}
+
+// An error that came and went while STOPPED leaves the master, which saw the error before the
+// stop, with the "error reset" EMCY when the node comes back.
+TEST_F(NodeTest, AnErrorClearedWhileStoppedIsResetWhenBack) {
+  node->raise_error(0x2310, kMs);
+  nmt(0x02, 2 * kMs);
+  take();
+  node->clear_error(0x2310, 3 * kMs);
+  EXPECT_TRUE(take().empty());
+  nmt(0x01, 4 * kMs);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x85, {0, 0, 0, 0, 0, 0, 0, 0})}));
+}
+
 TEST_F(NodeTest, ConsumesTimeStamps) {
   EXPECT_FALSE(node->last_time());
   node->on_frame(encode_time(TimeOfDay{1000, 15000}), 5 * kMs);
