@@ -64,11 +64,11 @@ bool EmcyProducer::clear(std::uint16_t code, SimTime now, const SendFn& send) {
   return true;
 }
 
-void EmcyProducer::clear_all(SimTime now, const SendFn& send) {
-  if (active_n_ == 0) return;
+void EmcyProducer::forget_all() {
   active_n_ = 0;
+  queue_n_ = 0;
+  missed_ = false;
   update_register();
-  enqueue({emcy_code::reset, 0, {}}, now, send);
 }
 
 void EmcyProducer::reset_communication() {

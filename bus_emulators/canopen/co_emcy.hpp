@@ -49,8 +49,9 @@ class EmcyProducer {
   bool raise(std::uint16_t code, SimTime now, const SendFn& send, std::array<std::uint8_t, 5> mfr = {});
   // Error `code` is gone; the last one sends the reset EMCY. Returns whether it was active.
   bool clear(std::uint16_t code, SimTime now, const SendFn& send);
-  // Everything gone (NMT reset, fault reset of the device): one reset EMCY if any was active.
-  void clear_all(SimTime now, const SendFn& send);
+  // NMT reset node: every error gone with the application, nothing sent (a node in
+  // INITIALISING sends nothing before its boot-up message). Real-time safe.
+  void forget_all();
   // Sends queued EMCYs whose inhibit time has passed. Real-time safe.
   void on_time(SimTime now, const SendFn& send);
   // NMT reset communication: forget the queue and the inhibit timer (errors stay active).

@@ -88,7 +88,7 @@ void Node::apply(NmtTransition tr, SimTime now) {
     case NmtTransition::reset_node:
       if (hooks_.on_nmt) hooks_.on_nmt(tr, now);  // the application resets first
       restore_defaults(od_, 0x2000, 0xFFFF);
-      emcy_.clear_all(now, send_counted_);
+      emcy_.forget_all();  // no "error reset" EMCY: the boot-up message comes first
       reset_communication(now);
       return;
     case NmtTransition::reset_communication:

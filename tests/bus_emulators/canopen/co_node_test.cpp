@@ -131,6 +131,17 @@ TEST_F(NodeTest, AnErrorClearedWhileStoppedIsResetWhenBack) {
   EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x85, {0, 0, 0, 0, 0, 0, 0, 0})}));
 }
 
+// Reset node: the application's errors are gone, but a node in INITIALISING sends nothing
+// before its boot-up message — no "error reset" EMCY.
+TEST_F(NodeTest, ResetNodeSendsOnlyTheBootUpMessage) {
+  node->raise_error(0x2310, kMs);
+  take();
+  nmt(0x81, 2 * kMs);
+  EXPECT_EQ(take(), (std::vector<can::Frame>{can::make_data(0x705, {0x00})}));
+  EXPECT_EQ(od.entry(0x1001, 0)->as_int(), 0);
+  EXPECT_EQ(node->emcy().active_count(), 0);
+}
+
 TEST_F(NodeTest, ConsumesTimeStamps) {
   EXPECT_FALSE(node->last_time());
   node->on_frame(encode_time(TimeOfDay{1000, 15000}), 5 * kMs);
