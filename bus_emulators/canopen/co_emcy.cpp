@@ -9,7 +9,19 @@ namespace omnitwin::canopen {
 
 std::uint8_t register_bit_of(std::uint16_t code) { return drive::error_class_bit(code); }
 
-EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od), node_id_(node_id) {}
+EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od), node_id_(node_id) {
+  if (OdObject* h = od_.find(0x1003)) {
+    // CiA 301: only 0 may be written to sub 0, and it deletes the history.
+    h->check = [](const OdObject&, std::uint8_t sub, std::span<const std::uint8_t> d) {
+      return sub == 0 && d[0] != 0 ? SdoAbort::value_range : SdoAbort::none;
+    };
+    h->after_write = [](OdObject& o, std::uint8_t sub) {
+      if (sub != 0) return;
+      for (OdEntry& e : o.entries)
+        if (e.subindex != 0) e.set_int(0);
+    };
+  }
+}
 
 std::uint8_t EmcyProducer::error_register() const {
   std::uint8_t r = 0;

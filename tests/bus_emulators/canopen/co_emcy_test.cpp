@@ -95,6 +95,23 @@ TEST_F(EmcyTest, AnInvalidCobIdRecordsButDoesNotSend) {
   EXPECT_EQ(od.entry(0x1001, 0)->as_int(), 0x11);
 }
 
+// CiA 301: only 0 may be written to 0x1003:0, and it deletes the history; any other value is
+// refused with 0x06090030.
+TEST_F(EmcyTest, Writing0To1003DeletesTheHistoryAndOtherValuesAreRefused) {
+  EmcyProducer e(od, 5);
+  e.raise(0x8110, 0, send);
+  e.raise(0x8120, 0, send);
+  EXPECT_EQ(od.write(0x1003, 0, OdState::preop, test::le(5, 1)), SdoAbort::value_range);
+  EXPECT_EQ(od.entry(0x1003, 0)->as_int(), 2);
+  ASSERT_EQ(od.write(0x1003, 0, OdState::preop, test::le(0, 1)), SdoAbort::none);
+  EXPECT_EQ(od.entry(0x1003, 0)->as_int(), 0);
+  for (std::uint8_t s = 1; s <= 4; ++s) EXPECT_EQ(od.entry(0x1003, s)->as_int(), 0) << int{s};
+  e.raise(0x8130, 0, send);
+  EXPECT_EQ(od.entry(0x1003, 0)->as_int(), 1);
+  EXPECT_EQ(od.entry(0x1003, 1)->as_int() & 0xFFFF, 0x8130);
+  EXPECT_EQ(od.entry(0x1003, 2)->as_int(), 0);
+}
+
 TEST(EmcyRegister, ClassesFollowCia301) {
   EXPECT_EQ(register_bit_of(0x2310), error_register::current);
   EXPECT_EQ(register_bit_of(0x3210), error_register::voltage);
