@@ -21,6 +21,18 @@ EmcyProducer::EmcyProducer(ObjectDictionary& od, std::uint8_t node_id) : od_(od)
         if (e.subindex != 0) e.set_int(0);
     };
   }
+  if (OdObject* c = od_.find(0x1014)) {
+    c->check = [](const OdObject& o, std::uint8_t, std::span<const std::uint8_t> d) {
+      const auto before = static_cast<std::uint32_t>(o.entries.front().as_int());
+      const std::uint32_t v = get_u32(d.data());
+      if (v & cob::frame_29) return SdoAbort::value_range;  // 29-bit identifiers: not supported
+      if (v & cob::invalid) return SdoAbort::none;
+      if ((v & cob::id_mask_11) == 0) return SdoAbort::value_range;
+      // As for PDOs: the identifier changes only while the EMCY is invalid (bit 31 set).
+      const bool valid_now = !(before & cob::invalid);
+      return valid_now && (v & cob::id_mask_11) != (before & cob::id_mask_11) ? SdoAbort::value_range : SdoAbort::none;
+    };
+  }
 }
 
 std::uint8_t EmcyProducer::error_register() const {

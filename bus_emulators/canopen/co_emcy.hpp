@@ -42,8 +42,9 @@ class EmcyProducer {
  public:
   static constexpr int kActive = 8, kQueue = 8;
 
-  // Installs the dictionary's hooks: 0x1003:0 takes only 0, which deletes the history (else
-  // 0x06090030). Set-up.
+  // Installs the dictionary's hooks: 0x1003:0 takes only 0, which deletes the history; 0x1014
+  // takes a new identifier only while the EMCY is invalid (bit 31 set), 11-bit and not 0
+  // (both: else 0x06090030). Set-up.
   EmcyProducer(ObjectDictionary& od, std::uint8_t node_id);
 
   // Error `code` occurred at now: one EMCY (inhibit time permitting) and an 0x1003 entry.

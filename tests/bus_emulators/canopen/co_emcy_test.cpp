@@ -112,6 +112,23 @@ TEST_F(EmcyTest, Writing0To1003DeletesTheHistoryAndOtherValuesAreRefused) {
   EXPECT_EQ(od.entry(0x1003, 2)->as_int(), 0);
 }
 
+// As a PDO's: the EMCY's identifier changes only while it is invalid (bit 31 set); a new
+// identifier with bit 31 clear while valid, a 29-bit one, or 0 is refused with 0x06090030.
+TEST_F(EmcyTest, TheCobIdChangesOnlyWhileTheEmcyIsInvalid) {
+  EmcyProducer e(od, 5);
+  EXPECT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x90, 4)), SdoAbort::value_range);
+  EXPECT_EQ(od.entry(0x1014, 0)->as_int(), 0x85);
+  EXPECT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x85, 4)), SdoAbort::none);  // the same: fine
+  EXPECT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0xA0000085, 4)), SdoAbort::value_range);  // 29-bit
+  EXPECT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x80000000, 4)), SdoAbort::none);
+  EXPECT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x00000000, 4)), SdoAbort::value_range);  // the NMT's
+  ASSERT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x80000085, 4)), SdoAbort::none);
+  ASSERT_EQ(od.write(0x1014, 0, OdState::preop, test::le(0x90, 4)), SdoAbort::none);
+  e.raise(0x8110, 0, send);
+  ASSERT_EQ(sent.size(), 1u);
+  EXPECT_EQ(sent[0].first.id, 0x90u);
+}
+
 TEST(EmcyRegister, ClassesFollowCia301) {
   EXPECT_EQ(register_bit_of(0x2310), error_register::current);
   EXPECT_EQ(register_bit_of(0x3210), error_register::voltage);
