@@ -43,6 +43,11 @@ Node::Node(ObjectDictionary& od, std::uint8_t node_id, SendFn send, NodeHooks ho
   pdo_.attach();
   pdo_.set_error_handler(&Node::pdo_error, this);
   if (OdObject* c = od_.find(0x1016)) c->after_write = [this](OdObject&, std::uint8_t) { configure_consumer(); };
+  if (OdObject* c = od_.find(0x1019)) c->check = [this](const OdObject&, std::uint8_t, std::span<const std::uint8_t> d) {
+    // CiA 301: not while a communication cycle period is set; 1 and 241..255 are reserved.
+    if (sync_period_ && sync_period_->as_int() != 0) return SdoAbort::state;
+    return d[0] == 1 || d[0] > 240 ? SdoAbort::value_range : SdoAbort::none;
+  };
 }
 
 bool Node::send(const can::Frame& f, SimTime t) {

@@ -12,7 +12,8 @@
 //
 // SYNC producer: with bit 30 (gen) of 0x1005 set and 0x1006 > 0 [µs] the node sends SYNC itself
 // every 0x1006 µs (with a counter when 0x1019 is 2..240) and acts on it as on one received (a
-// CAN controller does not receive its own frames).
+// CAN controller does not receive its own frames). 0x1019 takes 0 or 2..240 (else 0x06090030),
+// and only while 0x1006 is 0 (else 0x08000022), as CiA 301 asks.
 // Communication errors (heartbeat consumer timeout, life guarding, bus-off recovery) raise an
 // EMCY and take the NMT state given by 0x1029:1 (0 → pre-operational if operational, 1 → no
 // change, 2 → stopped; 0 when the object is absent), as CiA 301 §7.2.8.3.

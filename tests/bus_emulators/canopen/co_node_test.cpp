@@ -142,6 +142,16 @@ TEST_F(NodeTest, ResetNodeSendsOnlyTheBootUpMessage) {
   EXPECT_EQ(node->emcy().active_count(), 0);
 }
 
+// 0x1019: 0 (no counter) or 2..240; other values are refused (0x06090030), and no value while
+// the node produces SYNC with a cycle period 0x1006 ≠ 0 (0x08000022), as CiA 301 asks.
+TEST_F(NodeTest, SyncCounterOverflowTakesOnly0Or2To240AndNotWhileTheCyclePeriodIsSet) {
+  for (int v : {1, 241, 250, 255}) EXPECT_EQ(od.write(0x1019, 0, OdState::preop, test::le(v, 1)), SdoAbort::value_range) << v;
+  for (int v : {2, 240, 0}) EXPECT_EQ(od.write(0x1019, 0, OdState::preop, test::le(v, 1)), SdoAbort::none) << v;
+  ASSERT_EQ(od.write(0x1006, 0, OdState::preop, test::le(2000, 4)), SdoAbort::none);
+  EXPECT_EQ(od.write(0x1019, 0, OdState::preop, test::le(3, 1)), SdoAbort::state);
+  EXPECT_EQ(od.entry(0x1019, 0)->as_int(), 0);
+}
+
 TEST_F(NodeTest, ConsumesTimeStamps) {
   EXPECT_FALSE(node->last_time());
   node->on_frame(encode_time(TimeOfDay{1000, 15000}), 5 * kMs);
