@@ -489,4 +489,8 @@ std::uint8_t error_class_bit(std::uint16_t code) {
   }
 }
 
+bool quick_stop_option_supported(int code) noexcept { return code >= 0 && code <= 8; }
+bool halt_option_supported(int code) noexcept { return code == 1 || code == 2; }
+bool fault_reaction_option_supported(int code) noexcept { return code >= 0 && code <= 4; }
+
 }  // namespace omnitwin::drive

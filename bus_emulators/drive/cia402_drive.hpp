@@ -62,6 +62,13 @@ inline constexpr std::uint16_t kErrorExternal = 0x6320;    // raise_fault defaul
 // by the CANopen EMCY producer and the EtherCAT CoE emergency.
 std::uint8_t error_class_bit(std::uint16_t code);
 
+// The option codes this drive implements (the dictionaries refuse the others, cia402_od):
+// quick stop 0x605A 0..8, halt 0x605D 1 and 2 (the two ramps: current and voltage limit are not
+// modelled for halt), fault reaction 0x605E 0..4; no manufacturer-specific (negative) codes.
+bool quick_stop_option_supported(int code) noexcept;
+bool halt_option_supported(int code) noexcept;
+bool fault_reaction_option_supported(int code) noexcept;
+
 // The CiA 402 objects of one axis in their OD types and units (B binds the OD to these).
 struct Objects {
   std::uint16_t controlword = 0;             // 0x6040

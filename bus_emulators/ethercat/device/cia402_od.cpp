@@ -4,6 +4,28 @@
 
 namespace omnitwin::ethercat {
 
+namespace {
+
+// A signed entry's value from the data of a write (little endian, its own size).
+std::int32_t signed_le(std::span<const std::uint8_t> d) {
+  std::uint32_t raw = 0;
+  for (std::size_t i = 0; i < d.size() && i < 4; ++i) raw |= std::uint32_t{d[i]} << (8 * i);
+  const std::size_t bits = 8 * d.size();
+  if (bits < 32 && ((raw >> (bits - 1)) & 1u)) raw |= ~0u << bits;  // sign extension
+  return static_cast<std::int32_t>(raw);
+}
+
+// The object at index accepts only the values `supported` says the drive implements.
+void accept_only(ObjectDictionary& od, std::uint16_t index, bool (*supported)(int) noexcept) {
+  if (OdObject* o = od.find(index)) {
+    o->check = [supported](const OdObject&, std::uint8_t, std::span<const std::uint8_t> data) {
+      return supported(signed_le(data)) ? SdoAbort::none : SdoAbort::value_range;
+    };
+  }
+}
+
+}  // namespace
+
 void bind_cia402_objects(ObjectDictionary& od, drive::Cia402Drive& d, std::uint16_t off) {
   auto& o = d.objects();
   auto b = [&](std::uint16_t idx, std::uint8_t sub, auto& field) { od.bind(static_cast<std::uint16_t>(idx + off), sub, field); };
@@ -64,6 +86,11 @@ void bind_cia402_objects(ObjectDictionary& od, drive::Cia402Drive& d, std::uint1
       return SdoAbort::none;
     };
   }
+  // Option codes and homing methods: only what the drive core implements.
+  accept_only(od, static_cast<std::uint16_t>(0x605A + off), &drive::quick_stop_option_supported);
+  accept_only(od, static_cast<std::uint16_t>(0x605D + off), &drive::halt_option_supported);
+  accept_only(od, static_cast<std::uint16_t>(0x605E + off), &drive::fault_reaction_option_supported);
+  accept_only(od, static_cast<std::uint16_t>(0x6098 + off), &drive::homing_method_supported);
 }
 
 }  // namespace omnitwin::ethercat

@@ -3,8 +3,9 @@
 // own variables without copies. Shared by every bus whose dictionary is CiA 301's: the EtherCAT
 // (CoE) drive slaves and the CANopen drive nodes (bus_emulators/canopen/co_drive).
 //
-// Set-up code (binding; installs a check hook on 0x6060 that accepts only the modes the drive
-// advertises in 0x6502, and 0 = none).
+// Set-up code (binding; installs check hooks: 0x6060 accepts only the modes the drive
+// advertises in 0x6502, and 0 = none; 0x605A, 0x605D, 0x605E and 0x6098 only the option codes
+// and homing methods the drive core implements — else 0x06090030).
 #pragma once
 
 #include <cstdint>
