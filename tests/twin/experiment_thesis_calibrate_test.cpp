@@ -82,7 +82,10 @@ TEST(ThesisCalibrate, TheCommittedFitLoadsInsideItsBoundsAndSaysWhatItWasFittedT
   EXPECT_EQ(thesis::default_scenario(), thesis::fitted_scenario());
   const Scenario s = load_scenario(thesis::fitted_scenario());
   const std::vector<double> v = fitted_values(s);
-  const std::vector<std::pair<double, double>> bounds{{0.5, 8}, {0, 8}, {5, 150}, {0, 40}, {0, 0.3}, {0, 1.5}, {0, 0.05}, {0, 0.4}};
+  // The bounds the report documents (docs/results/thesis-calibrate/thesis_calibrate.md); the
+  // velocity PI's were 5 … 150 and 0 … 40 here, stricter than the search's own 1 … 150 and
+  // 0 … 60, which the re-fit of 2026-11-27 (velocity kp 1, at its bound) showed.
+  const std::vector<std::pair<double, double>> bounds{{0.5, 8}, {0, 8}, {1, 150}, {0, 60}, {0, 0.3}, {0, 1.5}, {0, 0.05}, {0, 0.4}};
   for (std::size_t k = 0; k < v.size(); ++k) {
     EXPECT_GE(v[k], bounds[k].first) << k;
     EXPECT_LE(v[k], bounds[k].second) << k;
