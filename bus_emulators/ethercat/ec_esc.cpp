@@ -183,6 +183,18 @@ void Esc::update_sm_registers(int i) {
   }
 }
 
+// ESC datasheet Section II (SyncManager registers): start address, length and control are
+// writable only while the SM is disabled (+0x6 bit 0 = 0). A write reaching an enabled SM keeps
+// them; only its activate byte takes effect, so one write that disables and moves the SM
+// disables it in place.
+void Esc::restore_sm_area(int i) {
+  const std::size_t base = reg::kSm0 + static_cast<std::size_t>(i) * reg::kSmSize;
+  const SyncManager& r = sms_[static_cast<std::size_t>(i)].reg;
+  put_u16(&mem_[base], r.start);
+  put_u16(&mem_[base + 2], r.length);
+  mem_[base + 4] = r.control;
+}
+
 void Esc::refresh_for_read(std::uint32_t a, std::uint32_t n, SimTime t) {
   if (overlaps(a, n, reg::kEepromControl, 2)) {
     put_u16(&mem_[reg::kEepromControl], sii_.control(&mem_[reg::kEepromConfig], t));
@@ -210,6 +222,7 @@ void Esc::after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_i
       if (!overlaps(a, n, base, reg::kSmSize)) continue;
       auto& u = sms_[static_cast<std::size_t>(i)];
       const bool repeat_before = (u.reg.activate & 0x02) != 0;
+      if (u.reg.enabled) restore_sm_area(i);  // start, length, control: writable while disabled only
       u.configure(&mem_[base]);
       if (u.reg.enabled && !sm_in_process_ram(u.reg)) u.reg.enabled = false;  // not activated
       const bool repeat_now = (u.reg.activate & 0x02) != 0;

@@ -27,7 +27,9 @@
 // reading 0x0130), bit 4 + i: SM i is a read mailbox holding a reply (i < 8).
 //
 // SyncManagers act on process RAM (>= 0x1000) only: one configured over the registers or past
-// the end of RAM is not activated (see Esc::sm_in_process_ram). SYNC0 pulses: at most
+// the end of RAM is not activated (see Esc::sm_in_process_ram). An enabled SM keeps its start,
+// length and control registers: writes change only its activate byte until it is disabled
+// (Esc::restore_sm_area). SYNC0 pulses: at most
 // kMaxSync0PerAdvance per advance(), the rest are dropped (Stats::sync0_dropped).
 //
 // Model choices: all datagrams of a frame reach one ESC at the same time t (the frame's arrival);
@@ -174,6 +176,7 @@ class Esc {
   void update_al_registers();
   void update_dl_status();
   void update_sm_registers(int i);
+  void restore_sm_area(int i);  // SM i's start/length/control registers from its state
   void reload_from_sii();
   void init_registers();
   int find_sm(bool mailbox, bool ecat_writes) const;

@@ -309,6 +309,30 @@ TEST(EcEsc, MailboxFullAndEmptyRefusals) {
   EXPECT_EQ(e.read8(reg::kSm0 + 8 + reg::kSmPdiControl) & 0x02, 0x00);
 }
 
+// ESC datasheet Section II (SyncManager registers): start address, length and control can be
+// written only while the SM is disabled (+0x6 bit 0 = 0); the activate byte always.
+TEST(EcEsc, SyncManagerAreaCannotBeMovedWhileEnabled) {
+  App app;
+  Esc e(EscConfig{}, &app);
+  setup_mailbox(e);
+  EXPECT_EQ(apwr(e, reg::kSm0 + 8, sm_bytes(0x1400, 64, 0x26, true)), 1);  // WKC as on an ESC
+  EXPECT_EQ(e.sm(1).start, 0x1080);
+  EXPECT_EQ(e.sm(1).length, 128);
+  EXPECT_EQ(e.sm(1).control, 0x22);
+  EXPECT_TRUE(e.sm(1).enabled);
+  EXPECT_EQ(u16(aprd(e, reg::kSm0 + 8, 2)), 0x1080);
+  // Disabling and re-addressing in one write: the bytes before the activate byte still meet an
+  // enabled SM.
+  apwr(e, reg::kSm0 + 8, sm_bytes(0x1400, 64, 0x22, false));
+  EXPECT_FALSE(e.sm(1).enabled);
+  EXPECT_EQ(e.sm(1).start, 0x1080);
+  // Disabled, it takes a new area.
+  apwr(e, reg::kSm0 + 8, sm_bytes(0x1400, 64, 0x22, true));
+  EXPECT_TRUE(e.sm(1).enabled);
+  EXPECT_EQ(e.sm(1).start, 0x1400);
+  EXPECT_EQ(e.sm(1).length, 64);
+}
+
 TEST(EcEsc, EventsReachTheIrqFieldUnderTheMask) {
   App app;
   Esc e(EscConfig{}, &app);
@@ -519,6 +543,7 @@ TEST(EcEsc, SmPastTheEndOfRamIsNotActivated) {
   EXPECT_TRUE(e.sm(2).enabled);
   apwr(e, reg::kSm0, sm_bytes(0x2FF8, 8, 0x26, true));       // mailbox: one buffer, fits
   EXPECT_TRUE(e.sm(0).enabled);
+  apwr(e, reg::kSm0, sm_bytes(0x2FF8, 8, 0x26, false));      // disabled first: an enabled SM keeps its area
   apwr(e, reg::kSm0, sm_bytes(0x0FF8, 16, 0x26, true));      // starts in the registers
   EXPECT_FALSE(e.sm(0).enabled);
 }

@@ -86,14 +86,22 @@ class Segment {
   static Bytes fmmu(std::uint32_t logical, std::uint16_t len, std::uint16_t phys, std::uint8_t type) {
     return ec_test::fmmu_bytes(logical, len, phys, type);
   }
+  // One SM block as a master reprogramming it writes it: disabled first (an enabled SM keeps its
+  // start, length and control), then the new block.
+  void write_sm(int i, std::uint16_t reg, const Bytes& block) {
+    Bytes off = block;
+    off[6] = 0;
+    fpwr(i, reg, off);
+    fpwr(i, reg, block);
+  }
   void mailbox_sms(int i) {
-    fpwr(i, 0x0800, sm(0x1000, 128, 0x26, true));
-    fpwr(i, 0x0808, sm(0x1080, 128, 0x22, true));
+    write_sm(i, 0x0800, sm(0x1000, 128, 0x26, true));
+    write_sm(i, 0x0808, sm(0x1080, 128, 0x22, true));
   }
   // SM2/SM3 and FMMUs: slave i's outputs at kLogical + i·kOut, inputs after all outputs.
   void pd_sms(int i) {
-    fpwr(i, 0x0810, sm(0x1100, kOut, 0x64, true));
-    fpwr(i, 0x0818, sm(0x1180, kIn, 0x20, true));
+    write_sm(i, 0x0810, sm(0x1100, kOut, 0x64, true));
+    write_sm(i, 0x0818, sm(0x1180, kIn, 0x20, true));
     fpwr(i, 0x0600, fmmu(kLogical + kOut * i, kOut, 0x1100, 2));
     fpwr(i, 0x0610, fmmu(kLogical + kOut * size() + kIn * i, kIn, 0x1180, 1));
   }
@@ -246,7 +254,7 @@ TEST(EcConformance, ProcessDataSyncManagerChecksOfPreopToSafeop) {
     Segment seg(1);
     ASSERT_TRUE(seg.to_preop(0));
     seg.pd_sms(0);
-    seg.fpwr(0, b.reg, b.sm);
+    seg.write_sm(0, b.reg, b.sm);
     EXPECT_EQ(seg.request(0, SAFEOP), PREOP | 0x10);
     EXPECT_EQ(seg.read16(0, 0x0134), b.code);
     seg.pd_sms(0);

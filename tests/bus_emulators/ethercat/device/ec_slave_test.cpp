@@ -82,6 +82,12 @@ class Master {
     return read16(0x0130);
   }
   void set_address() { exchange(Cmd::apwr, 0, 0x0010, {kStation & 0xFF, kStation >> 8}); }
+  // A master resizing SM2/SM3 disables them first: an enabled SM keeps its start, length and
+  // control (only its activate byte takes writes).
+  void disable_pd_sms() {
+    fpwr(0x0816, {0});
+    fpwr(0x081E, {0});
+  }
   void mailbox_sms(std::uint16_t mbx = 128) {
     fpwr(0x0800, sm(0x1000, mbx, 0x26, true));
     fpwr(0x0808, sm(0x1080, mbx, 0x22, true));
@@ -205,9 +211,11 @@ TEST_F(EcSlave, WrongSm2LengthRefusesSafeop) {
   m.pd_sms(0x1100, 16, 0x1180, 24);  // RxPDO 0x1600 needs 18 bytes
   EXPECT_EQ(m.request(4), 0x12);
   EXPECT_EQ(m.read16(0x0134), 0x001D);
+  m.disable_pd_sms();
   m.pd_sms(0x1100, 18, 0x1180, 20);
   EXPECT_EQ(m.request(0x14), 0x12);
   EXPECT_EQ(m.read16(0x0134), 0x001E);
+  m.disable_pd_sms();
   m.pd_sms(0x1100, 18, 0x1180, 24);
   EXPECT_EQ(m.request(0x14), 4);
 }
@@ -344,6 +352,7 @@ TEST_F(EcSlave, PdoMappingRulesAndSizes) {
   m.pd_sms(0x1100, 18, 0x1180, 24);
   EXPECT_EQ(m.request(4), 0x12);  // SM2 still 18 bytes: refused
   EXPECT_EQ(m.read16(0x0134), 0x001D);
+  m.disable_pd_sms();
   m.pd_sms(0x1100, 6, 0x1180, 24);
   EXPECT_EQ(m.request(0x14), 4);
   EXPECT_EQ(slave.rx_layout().size(), 2u);
