@@ -265,8 +265,8 @@ void CoeServer::download_initiate(std::span<const std::uint8_t> p, OdState s) {
     const OdEntry* e = o->entry(sub);
     if (!e) return abort(index, sub, SdoAbort::no_subindex);
     if (size > e->bytes()) return abort(index, sub, SdoAbort::too_long);
-  } else if (!od_.find(index)) {
-    return abort(index, sub, SdoAbort::no_object);
+  } else if (const SdoAbort a = od_.complete_access_check(index, sub); a != SdoAbort::none) {
+    return abort(index, sub, a);
   }
   if (size > t_buf_.size()) return abort(index, sub, SdoAbort::out_of_memory);
   std::copy_n(p.begin() + kCoeHeader + kSdoHeader, here, t_buf_.begin());

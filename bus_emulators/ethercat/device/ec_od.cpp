@@ -237,11 +237,18 @@ std::size_t ObjectDictionary::complete_size(std::uint16_t index, std::uint8_t su
   return n;
 }
 
-SdoAbort ObjectDictionary::read_complete(std::uint16_t index, std::uint8_t sub, OdState state,
-                                         std::span<std::uint8_t> out, std::size_t& len) const noexcept {
+SdoAbort ObjectDictionary::complete_access_check(std::uint16_t index, std::uint8_t sub) const noexcept {
   const OdObject* o = find(index);
   if (!o) return SdoAbort::no_object;
-  if (sub > 1) return SdoAbort::unsupported_access;
+  // Complete access spans the entries of an ARRAY or RECORD; a VAR has none to span.
+  if (sub > 1 || o->object_code == 7) return SdoAbort::unsupported_access;
+  return SdoAbort::none;
+}
+
+SdoAbort ObjectDictionary::read_complete(std::uint16_t index, std::uint8_t sub, OdState state,
+                                         std::span<std::uint8_t> out, std::size_t& len) const noexcept {
+  if (auto a = complete_access_check(index, sub); a != SdoAbort::none) return a;
+  const OdObject* o = find(index);
   const std::size_t total = complete_size(index, sub);
   if (total > out.size()) return SdoAbort::object_too_long;
   std::size_t at = 0;
@@ -267,9 +274,8 @@ SdoAbort ObjectDictionary::read_complete(std::uint16_t index, std::uint8_t sub, 
 
 SdoAbort ObjectDictionary::write_complete(std::uint16_t index, std::uint8_t sub, OdState state,
                                           std::span<const std::uint8_t> data) noexcept {
+  if (auto a = complete_access_check(index, sub); a != SdoAbort::none) return a;
   OdObject* o = find(index);
-  if (!o) return SdoAbort::no_object;
-  if (sub > 1) return SdoAbort::unsupported_access;
   std::size_t at = 0;
   std::optional<std::uint8_t> count;
   if (sub == 0) {

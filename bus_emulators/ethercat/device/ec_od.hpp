@@ -154,7 +154,9 @@ class ObjectDictionary {
   // and after-write hook. Strings accept shorter data (rest zeroed). RT-safe apart from hooks.
   SdoAbort write(std::uint16_t index, std::uint8_t sub, OdState state, std::span<const std::uint8_t> data) noexcept;
   // Complete access: all entries from sub (0 or 1) in order, subindex 0 as 8 bits padded to 16,
-  // every other entry in whole bytes.
+  // every other entry in whole bytes. Only ARRAY and RECORD objects: a VAR (object code 7), or a
+  // sub above 1, is refused with unsupported_access (0x06010000), never answered truncated.
+  SdoAbort complete_access_check(std::uint16_t index, std::uint8_t sub) const noexcept;
   SdoAbort read_complete(std::uint16_t index, std::uint8_t sub, OdState state, std::span<std::uint8_t> out,
                          std::size_t& len) const noexcept;
   SdoAbort write_complete(std::uint16_t index, std::uint8_t sub, OdState state,

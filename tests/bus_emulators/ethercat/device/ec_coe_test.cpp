@@ -263,6 +263,14 @@ TEST_F(EcCoe, CompleteAccess) {
   EXPECT_EQ(od.entry(0x1C12, 1)->as_int(), 0x1601);
 }
 
+// Complete access to a VAR is refused with 0x06010000 (see ObjectDictionary::read_complete); a
+// segmented one at its initiate, before any segment is taken.
+TEST_F(EcCoe, CompleteAccessToAVarIsRefused) {
+  EXPECT_EQ(abort_of(sdo(0x50, 0x1000, 0)), 0x06010000u);
+  EXPECT_EQ(abort_of(sdo(0x31, 0x6081, 0, 4, Bytes{0x10, 0x27, 0, 0})), 0x06010000u);
+  EXPECT_EQ(abort_of(sdo(0x31, 0x2200, 0, 300, Bytes(112, 1))), 0x06010000u);
+}
+
 TEST_F(EcCoe, RepeatedCounterIsAnsweredAgainNotExecuted) {
   int writes = 0;
   od.find(0x6098)->after_write = [&](OdObject&, std::uint8_t) { ++writes; };

@@ -136,6 +136,22 @@ TEST_F(EcOd, CompleteAccessLayout) {
   EXPECT_EQ(od.complete_size(0x1018, 0), 2u + 16u);
 }
 
+// Complete access addresses all entries of an ARRAY or RECORD. A VAR (object code 7) is refused
+// with 0x06010000: its upload was cut to 2 bytes, a download wrote the size byte into it.
+TEST_F(EcOd, CompleteAccessToAVarIsRefused) {
+  ASSERT_EQ(od.find(0x1000)->object_code, 7);
+  EXPECT_EQ(od.read_complete(0x1000, 0, OdState::preop, buf, len), SdoAbort::unsupported_access);
+  EXPECT_EQ(od.read_complete(0x6081, 0, OdState::preop, buf, len), SdoAbort::unsupported_access);
+  const auto profile_velocity = od.entry(0x6081, 0)->as_int();
+  const std::uint8_t four[4] = {0x10, 0x27, 0, 0};
+  EXPECT_EQ(od.write_complete(0x6081, 0, OdState::preop, four), SdoAbort::unsupported_access);
+  EXPECT_EQ(od.entry(0x6081, 0)->as_int(), profile_velocity);
+  const auto mode = od.entry(0x6060, 0)->as_int();
+  const std::uint8_t two[2] = {8, 0};
+  EXPECT_EQ(od.write_complete(0x6060, 0, OdState::preop, two), SdoAbort::unsupported_access);
+  EXPECT_EQ(od.entry(0x6060, 0)->as_int(), mode);
+}
+
 // Entries without a default (empty default_value, whose data() may be null): added, bound and
 // restored without copying from it — the value is zero and bound storage keeps its value.
 TEST(EcOdNoDefault, EntriesWithoutADefaultStartAtZero) {
