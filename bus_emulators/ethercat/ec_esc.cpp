@@ -23,7 +23,8 @@ Esc::Esc(EscConfig config, EscApplication* app)
       dc_(cfg_.oscillator_drift, cfg_.power_on_time_ns, 0) {
   cfg_.fmmus = std::min<std::uint8_t>(cfg_.fmmus, kMaxFmmus);
   cfg_.sync_managers = std::min<std::uint8_t>(cfg_.sync_managers, kMaxSyncManagers);
-  last_reply_.assign(mem_.size(), 0);
+  last_read_.assign(mem_.size(), 0);
+  parked_.assign(mem_.size(), 0);
   init_registers();
 }
 
@@ -56,7 +57,8 @@ void Esc::init_registers() {
   code_ = AlStatusCode::none;
   wd_expired_ = false;
   latch_pending_ = false;
-  last_reply_len_ = 0;
+  last_read_len_ = 0;
+  parked_sm_ = -1;
   reload_from_sii();
   update_al_registers();
   update_dl_status();
@@ -226,14 +228,9 @@ void Esc::after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_i
       u.configure(&mem_[base]);
       if (u.reg.enabled && !sm_in_process_ram(u.reg)) u.reg.enabled = false;  // not activated
       const bool repeat_now = (u.reg.activate & 0x02) != 0;
+      if (i == parked_sm_ && !u.full()) parked_sm_ = -1;  // reconfigured: its content is gone
       if (repeat_before != repeat_now && u.reg.enabled && u.reg.mailbox() && !u.reg.ecat_writes()) {
-        // Repeat request: put the last reply back into the read mailbox, then acknowledge.
-        const std::size_t len = std::min<std::size_t>(u.reg.length, last_reply_len_);
-        if (last_reply_len_ > 0 && static_cast<std::size_t>(u.reg.start) + u.reg.length <= mem_.size()) {
-          std::memset(&mem_[u.reg.start], 0, u.reg.length);
-          std::memcpy(&mem_[u.reg.start], last_reply_.data(), len);
-          u.set_full(true);
-        }
+        repeat_mailbox(i);  // then acknowledge
         u.reg.pdi_control = static_cast<std::uint8_t>((u.reg.pdi_control & ~0x02) | (repeat_now ? 0x02 : 0));
       }
       update_sm_registers(i);
@@ -330,6 +327,8 @@ void Esc::set_sm_deactivated(int i, bool off) {
   if (u.reg.pdi_deactivated() == off) return;
   u.reg.pdi_control = static_cast<std::uint8_t>(off ? (u.reg.pdi_control | 0x01) : (u.reg.pdi_control & ~0x01));
   u.reset();  // buffers start afresh either way
+  if (i == parked_sm_) parked_sm_ = -1;
+  if (u.reg.mailbox() && !u.reg.ecat_writes()) last_read_len_ = 0;  // nothing left to repeat
   update_sm_registers(i);
 }
 
@@ -433,7 +432,9 @@ void Esc::sm_event(int i, SmEvent e, SimTime t) {
   switch (e) {
     case SmEvent::none:
     case SmEvent::buffer_read:
+      break;
     case SmEvent::mailbox_read:
+      mailbox_read(i);
       break;
     case SmEvent::mailbox_written:
       if (app_ != nullptr && static_cast<std::size_t>(u.reg.start) + u.reg.length <= mem_.size()) {
@@ -688,13 +689,41 @@ bool Esc::post_mailbox(std::span<const std::uint8_t> reply) {
   if (u.full() || reply.size() > u.reg.length || !sm_in_process_ram(u.reg)) {
     return false;
   }
-  std::memset(&mem_[u.reg.start], 0, u.reg.length);
-  std::memcpy(&mem_[u.reg.start], reply.data(), reply.size());
-  std::memcpy(last_reply_.data(), reply.data(), reply.size());
-  last_reply_len_ = reply.size();
-  u.set_full(true);
+  fill_mailbox(i, reply);
   update_sm_registers(i);
   return true;
+}
+
+void Esc::fill_mailbox(int i, std::span<const std::uint8_t> data) {
+  auto& u = sms_[static_cast<std::size_t>(i)];
+  std::memset(&mem_[u.reg.start], 0, u.reg.length);
+  std::memcpy(&mem_[u.reg.start], data.data(), std::min<std::size_t>(data.size(), u.reg.length));
+  u.set_full(true);
+}
+
+// The master read the whole reply in read mailbox SM i: it is what a repeat request brings back.
+// A reply a repeat set aside follows now (ESC Technology Section I §8.6).
+void Esc::mailbox_read(int i) {
+  const auto& r = sms_[static_cast<std::size_t>(i)].reg;
+  if (!sm_in_process_ram(r)) return;
+  std::memcpy(last_read_.data(), &mem_[r.start], r.length);
+  last_read_len_ = r.length;
+  if (parked_sm_ != i) return;
+  parked_sm_ = -1;
+  fill_mailbox(i, std::span<const std::uint8_t>(parked_.data(), parked_len_));
+}
+
+// Repeat request on read mailbox SM i: the reply the master last read goes back in. A newer one
+// already waiting there is set aside until the repeated one has been read, so none is lost.
+void Esc::repeat_mailbox(int i) {
+  const auto& u = sms_[static_cast<std::size_t>(i)];
+  if (last_read_len_ == 0 || !sm_in_process_ram(u.reg)) return;
+  if (u.full() && parked_sm_ < 0) {
+    std::memcpy(parked_.data(), &mem_[u.reg.start], u.reg.length);
+    parked_len_ = u.reg.length;
+    parked_sm_ = i;
+  }
+  fill_mailbox(i, std::span<const std::uint8_t>(last_read_.data(), last_read_len_));
 }
 
 std::span<const std::uint8_t> Esc::outputs(int i) const {

@@ -36,7 +36,11 @@
 // logical writes do not trigger register side effects (FMMUs map RAM); the AL watchdog reaction
 // (OP → SAFE-OP + 0x001B, outputs zeroed) is done here rather than by the firmware, which is told
 // through EscApplication::on_al_fallback; the SM0
-// mailbox is read by the firmware (emptied) right after on_mailbox returns.
+// mailbox is read by the firmware (emptied) right after on_mailbox returns. The mailbox repeat
+// (0x080E bit 1 toggled, acknowledged in 0x080F bit 1) is also done here for the firmware: the
+// data the master last read from the read mailbox goes back into it; a newer reply waiting
+// there is set aside and follows once the repeated one has been read (ESC Technology Section I
+// §8.6). Deactivating the read mailbox (set_sm_deactivated) forgets both.
 #pragma once
 
 #include <array>
@@ -170,6 +174,9 @@ class Esc {
   void refresh_for_read(std::uint32_t a, std::uint32_t n, SimTime t);
   void after_write(std::uint32_t a, std::uint32_t n, const std::uint8_t* st_in, SimTime t);
   void sm_event(int i, SmEvent e, SimTime t);
+  void fill_mailbox(int i, std::span<const std::uint8_t> data);  // SM i's buffer, marked full
+  void mailbox_read(int i);
+  void repeat_mailbox(int i);
   void al_control_written(SimTime t);
   void enter_state(AlState s, SimTime t);
   void raise_event(std::uint16_t bits, bool on);  // ECAT event request 0x0210
@@ -186,8 +193,11 @@ class Esc {
   EscConfig cfg_;
   EscApplication* app_;
   std::vector<std::uint8_t> mem_;
-  std::vector<std::uint8_t> last_reply_;
-  std::size_t last_reply_len_ = 0;
+  std::vector<std::uint8_t> last_read_;  // the read-mailbox data the master last read (repeat)
+  std::size_t last_read_len_ = 0;
+  std::vector<std::uint8_t> parked_;     // a newer reply a repeat request set aside
+  std::size_t parked_len_ = 0;
+  int parked_sm_ = -1;                   // … and its SM (-1: none)
   std::array<SmUnit, kMaxSyncManagers> sms_{};
   std::array<Fmmu, kMaxFmmus> fmmus_{};
   SiiEeprom sii_;

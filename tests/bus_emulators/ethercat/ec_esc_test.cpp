@@ -309,6 +309,38 @@ TEST(EcEsc, MailboxFullAndEmptyRefusals) {
   EXPECT_EQ(e.read8(reg::kSm0 + 8 + reg::kSmPdiControl) & 0x02, 0x00);
 }
 
+// ESC Technology Section I §8.6 (fig. 26): the repeat request brings back the data the master
+// last read (A), even when the firmware has meanwhile posted the next reply (B) into SM1; B
+// follows once A has been read again, so no reply is lost.
+TEST(EcEsc, RepeatRequestBringsBackTheLostReplyAndTheNewerOneFollows) {
+  App app;
+  Esc e(EscConfig{}, &app);
+  setup_mailbox(e);
+  const std::vector<std::uint8_t> a{4, 0, 0, 0, 0, 0x13, 0xAA, 0xAA, 0xAA, 0xAA};
+  const std::vector<std::uint8_t> b{4, 0, 0, 0, 0, 0x23, 0xBB, 0xBB, 0xBB, 0xBB};
+  auto head = [](const Reply& r) { return std::vector<std::uint8_t>(r.data.begin(), r.data.begin() + 10); };
+  ASSERT_TRUE(e.post_mailbox(a));
+  ASSERT_EQ(aprd(e, 0x1080, 128).wkc, 1);  // read, but lost on the way back
+  ASSERT_TRUE(e.post_mailbox(b));          // the firmware posts the next reply
+  // SOEM's repeat: the status/activate word at 0x080D with 0x080E bit 1 toggled.
+  const std::uint16_t sm1 = static_cast<std::uint16_t>(e.read16(reg::kSm0 + 8 + reg::kSmStatus) ^ 0x0200);
+  apwr(e, reg::kSm0 + 8 + reg::kSmStatus, le16(sm1));
+  EXPECT_EQ(e.read8(reg::kSm0 + 8 + reg::kSmPdiControl) & 0x02, 0x02);  // acknowledged
+  Reply r = aprd(e, 0x1080, 128);
+  ASSERT_EQ(r.wkc, 1);
+  EXPECT_EQ(head(r), a);
+  EXPECT_FALSE(e.post_mailbox(a));  // B is waiting: nothing may overtake it
+  r = aprd(e, 0x1080, 128);
+  ASSERT_EQ(r.wkc, 1);
+  EXPECT_EQ(head(r), b);
+  EXPECT_EQ(aprd(e, 0x1080, 128).wkc, 0);
+  // A second repeat now brings back B, the last data read.
+  apwr(e, reg::kSm0 + 8 + reg::kSmActivate, {0x01});
+  r = aprd(e, 0x1080, 128);
+  ASSERT_EQ(r.wkc, 1);
+  EXPECT_EQ(head(r), b);
+}
+
 // ESC datasheet Section II (SyncManager registers): start address, length and control can be
 // written only while the SM is disabled (+0x6 bit 0 = 0); the activate byte always.
 TEST(EcEsc, SyncManagerAreaCannotBeMovedWhileEnabled) {

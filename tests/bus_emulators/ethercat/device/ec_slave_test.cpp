@@ -130,6 +130,12 @@ class Master {
     m[8] = cmd;
     return mailbox(m);
   }
+  // SOEM's repeat request after a lost SM1 read: 0x080D/0x080E written back with 0x080E bit 1
+  // toggled.
+  void repeat_request() {
+    const auto st = static_cast<std::uint16_t>(read16(0x080D) ^ 0x0200);
+    fpwr(0x080D, {static_cast<std::uint8_t>(st), static_cast<std::uint8_t>(st >> 8)});
+  }
   std::uint32_t sdo_abort(std::uint8_t cmd, std::uint16_t index, std::uint8_t sub, std::uint32_t d4 = 0) {
     auto r = sdo(cmd, index, sub, d4);
     EXPECT_EQ(r[8], 0x80);
@@ -305,6 +311,54 @@ TEST_F(EcSlave, RepeatedMailboxWriteThroughTheEsc) {
   EXPECT_EQ(Bytes(again.data.begin() + 6, again.data.begin() + 16), Bytes(r.data.begin() + 6, r.data.begin() + 16));
   EXPECT_EQ(slave.axis(0).objects().homing_method, 3);
   EXPECT_EQ(slave.coe().stats().repeats, 2u);
+}
+
+// ESC Technology Section I §8.6: a repeat request brings back the reply the master lost, even
+// when the firmware has posted the next one (here the second fragment of an SDO information
+// object list) into SM1 meanwhile; that one follows, nothing is lost.
+TEST_F(EcSlave, RepeatRequestBringsBackALostFragmentBeforeTheNextOne) {
+  to_preop();
+  Bytes q(128, 0);  // SDO information: get object list, all objects
+  put_u16(q.data(), 8);
+  q[5] = 3 | (1 << 4);
+  put_u16(q.data() + 6, 0x8000);
+  q[8] = 0x01;
+  put_u16(q.data() + 12, 1);
+  ASSERT_EQ(m.fpwr(0x1000, q), 1);
+  slave.cycle(m.t);
+  const auto first = m.fprd(0x1080, 128);  // lost on its way back to the master
+  ASSERT_EQ(first.wkc, 1);
+  ASSERT_EQ(first.data[8], 0x82);          // object list response, more fragments follow
+  const std::uint16_t left = get_u16(first.data.data() + 10);
+  ASSERT_GE(left, 1);
+  slave.cycle(m.t);                        // the firmware posts the next fragment
+  m.repeat_request();
+  const auto again = m.fprd(0x1080, 128);
+  ASSERT_EQ(again.wkc, 1);
+  EXPECT_EQ(again.data, first.data);
+  slave.cycle(m.t);
+  const auto next = m.fprd(0x1080, 128);
+  ASSERT_EQ(next.wkc, 1);
+  EXPECT_EQ(get_u16(next.data.data() + 10), left - 1);
+}
+
+// The same with an emergency queued behind a lost SDO reply: the reply comes back first, then
+// the emergency.
+TEST_F(EcSlave, RepeatRequestBringsBackALostSdoReplyBeforeAQueuedEmergency) {
+  to_preop();
+  const Bytes reply = m.sdo(0x40, 0x1018, 4);  // read, but lost on its way back
+  ASSERT_EQ(reply[8], 0x43);
+  slave.axis(0).objects().error_code = drive::kErrorFollowing;
+  slave.cycle(m.t);                             // the emergency goes into SM1
+  m.repeat_request();
+  const auto again = m.fprd(0x1080, 128);
+  ASSERT_EQ(again.wkc, 1);
+  EXPECT_EQ(again.data, reply);
+  const auto emcy = m.fprd(0x1080, 128);
+  ASSERT_EQ(emcy.wkc, 1);
+  EXPECT_EQ(get_u16(emcy.data.data() + 6) >> 12, 1);  // emergency service
+  EXPECT_EQ(get_u16(emcy.data.data() + 8), drive::kErrorFollowing);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);
 }
 
 TEST_F(EcSlave, SegmentedUploadThroughSmallMailbox) {
