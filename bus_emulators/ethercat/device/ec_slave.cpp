@@ -106,6 +106,14 @@ DriveSlave::DriveSlave(const DeviceDescription& desc, const DriveSlaveConfig& co
   ec.sii = build_sii(desc_, cfg_.alias, cfg_.serial);
   esc_ = std::make_unique<Esc>(std::move(ec), this);
   esc_->set_sm_deactivated(sm_out_, true);  // outputs SM active in SAFE-OP (no error) and OP only
+  close_mailbox(true);
+}
+
+// SSC keeps the mailbox SMs (SM0/SM1) deactivated in INIT (ETG.1000.6: the mailbox starts in
+// PRE-OP); a master's mailbox accesses then get WKC 0. Reactivated at INIT → PRE-OP.
+void DriveSlave::close_mailbox(bool closed) {
+  esc_->set_sm_deactivated(sm_mbx_out_, closed);
+  esc_->set_sm_deactivated(sm_mbx_in_, closed);
 }
 
 void DriveSlave::build_od() {
@@ -364,6 +372,7 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
     coe_->reset();
     outputs_stopped();
     esc_->set_sm_deactivated(sm_out_, true);
+    close_mailbox(true);  // an unread reply in SM1 is dropped with it
     return AlStatusCode::none;
   }
   if (from == AlState::init && to == AlState::preop) {
@@ -374,6 +383,7 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
                     !out.overlaps(in.start, in.length) && in.length <= kCoeMailboxMax;
     if (!ok) return refuse(AlStatusCode::invalid_mailbox_config);
     coe_->set_mailbox_size(in.length);
+    close_mailbox(false);
     return AlStatusCode::none;
   }
   // SYNC0 requested with a cycle the ESC refuses (below DcClock::kMinSyncCycleNs): no process
@@ -449,6 +459,7 @@ void DriveSlave::cycle(SimTime t) noexcept {
 void DriveSlave::power_cycle(SimTime t) {
   esc_->power_cycle(t);
   esc_->set_sm_deactivated(sm_out_, true);
+  close_mailbox(true);
   coe_->reset();
   for (auto& a : axes_) a->power_cycle();
   od_.restore_defaults();

@@ -15,7 +15,10 @@
 //
 // AL transitions the firmware checks (the ESC has already refused illegal ones):
 //   INIT → PRE-OP     SM0/SM1 enabled mailboxes (SM0 master-write, SM1 master-read), ≥ 16 bytes,
-//                     not overlapping; else 0x0016. The CoE reply size becomes SM1's length.
+//                     not overlapping; else 0x0016. The CoE reply size becomes SM1's length,
+//                     and the firmware activates SM0/SM1 (PDI control 0x0807 bit 0 cleared):
+//                     as in SSC, they are deactivated in INIT (from power-on and every return
+//                     to INIT), so the master's mailbox accesses there get WKC 0.
 //   PRE-OP → SAFE-OP  the assigned PDOs' sizes: SM2 (outputs) enabled, buffered, master-write,
 //                     length = RxPDO bytes, else 0x001D; SM3 likewise for TxPDO bytes, else 0x001E
 //                     (a direction with 0 bytes may be disabled). The process-data layout is
@@ -191,6 +194,7 @@ class DriveSlave final : public EscApplication {
   void pack_inputs() noexcept;
   void pump_mailbox() noexcept;
   void outputs_stopped() noexcept;
+  void close_mailbox(bool closed);
   void multiaxis_commands() noexcept;
   void multiaxis_status() noexcept;
   OdState od_state() const;

@@ -361,6 +361,47 @@ TEST_F(EcSlave, RepeatRequestBringsBackALostSdoReplyBeforeAQueuedEmergency) {
   EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);
 }
 
+// ETG.1000.6: the mailbox starts in PRE-OP. As SSC slaves do, the firmware keeps SM0/SM1
+// deactivated (0x0807 bit 0) until INIT → PRE-OP passes, and again from every return to INIT:
+// a master's mailbox accesses in INIT get WKC 0 and no SDO is served.
+TEST_F(EcSlave, MailboxStaysClosedUntilPreopIsAccepted) {
+  m.set_address();
+  m.mailbox_sms();
+  ASSERT_EQ(m.read16(0x0130), 1);
+  Bytes req(128, 0);  // download 0x6060 = 8 (CSP)
+  req[0] = 10;
+  req[5] = 3 | (6 << 4);
+  put_u16(req.data() + 6, 0x2000);
+  req[8] = 0x2F;
+  put_u16(req.data() + 9, 0x6060);
+  req[12] = 8;
+  const auto mode = slave.axis(0).objects().mode;
+  ASSERT_NE(mode, 8);
+  EXPECT_EQ(m.fprd(0x0807, 1).data[0] & 0x01, 0x01);
+  EXPECT_EQ(m.fprd(0x080F, 1).data[0] & 0x01, 0x01);
+  EXPECT_EQ(m.fpwr(0x1000, req), 0);
+  slave.cycle(m.t);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);
+  EXPECT_EQ(slave.axis(0).objects().mode, mode);
+  // PRE-OP opens the mailbox; a reply left unread in SM1 is dropped on the way back to INIT.
+  ASSERT_EQ(m.request(2), 2);
+  EXPECT_EQ(m.fprd(0x080F, 1).data[0] & 0x01, 0x00);
+  ASSERT_EQ(m.fpwr(0x1000, req), 1);
+  EXPECT_EQ(slave.axis(0).objects().mode, 8);
+  ASSERT_EQ(m.request(1), 1);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);
+  EXPECT_EQ(m.fpwr(0x1000, req), 0);
+  ASSERT_EQ(m.request(2), 2);
+  EXPECT_EQ(m.fprd(0x1080, 128).wkc, 0);
+  // After a power cycle the mailbox is closed again.
+  slave.power_cycle(m.t);
+  m.set_address();
+  m.mailbox_sms();
+  EXPECT_EQ(m.fpwr(0x1000, req), 0);
+  ASSERT_EQ(m.request(2), 2);
+  EXPECT_EQ(m.sdo(0x40, 0x1018, 4)[8], 0x43);
+}
+
 TEST_F(EcSlave, SegmentedUploadThroughSmallMailbox) {
   m.set_address();
   m.mailbox_sms(32);  // 32-byte mailboxes: the 21-byte name needs segments
