@@ -403,10 +403,12 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::power_loss:
       powered_[k] = !begin;
       chain_.set_powered(static_cast<int>(k), !begin, t);
-      // Off: the motor coasts (setpoint 0); on again: ESC (the chain restarts it) and drive
-      // both in their power-on state.
+      // Off: the motor coasts (setpoint 0); on again: ESC (the chain restarts it) and the
+      // whole device firmware in their power-on state: object dictionary, CoE, the SyncManagers
+      // it keeps closed until PRE-OP, the drive (only the drive was reset, so the mailbox was
+      // open in INIT after a power loss; found in review).
       hooks_.set_setpoint(static_cast<int>(k), 0.0);
-      if (!begin) slaves_[k]->axis(0).power_cycle();
+      if (!begin) slaves_[k]->power_cycle(t);
       what = fmt::format("power_loss slave {}", k + 1);
       break;
     case FaultSpec::Kind::link_break:
