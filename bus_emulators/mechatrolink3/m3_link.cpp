@@ -102,8 +102,10 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   s_.fcs_in_row = 0;
   const FrameType type = f.type == FrameType::cyclic_command ? FrameType::cyclic_response : FrameType::event_response;
   // A retry of the command just executed (its response was lost or late): answered with the
-  // stored response, not executed again — CONNECT or a POSING must not run twice (ours).
-  if (f.retry() && f.sequence() == s_.last_sequence && f.data.size() == s_.last_length && rsp_[0] == f.data[0]) {
+  // stored response, not executed again — CONNECT or a POSING must not run twice (ours). Only
+  // the very same command is a retry: a new one may come with the same sequence number.
+  const auto last = std::span(cmd_).first(s_.last_length);
+  if (f.retry() && f.sequence() == s_.last_sequence && std::equal(f.data.begin(), f.data.end(), last.begin(), last.end())) {
     ++s_.stats.repeated;
     s_.last_command = t;
     return reply(type, std::span(rsp_).first(s_.last_length), f.sequence(), t + cfg_.response_ns);
@@ -128,6 +130,7 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   put_u16(rsp, 2, pack(st));
   s_.last_sequence = f.sequence();
   s_.last_length = f.data.size();
+  std::copy(f.data.begin(), f.data.end(), cmd_.begin());
   reply(type, rsp, f.sequence(), t + cfg_.response_ns);
 }
 

@@ -144,7 +144,7 @@ class SlaveLink {
     int sync_misses = 0, command_misses = 0, fcs_in_row = 0;
     std::uint8_t last_wdt = 0, own_count = 0;
     bool wdt_seen = false;
-    int last_sequence = -1;           // of the command last executed (its response is in rsp_)
+    int last_sequence = -1;           // of the command last executed (it is in cmd_, its response in rsp_)
     bool cycle_open = false;          // phase 3: a communication cycle was opened by a SYNC
     bool commanded = false;           // and a command has come in it
     std::uint32_t syncs = 0;          // SYNCs since phase 3 (COM_TIM of them per communication cycle)
@@ -152,7 +152,7 @@ class SlaveLink {
     LinkStats stats;
   } s_;
   std::array<std::uint8_t, kMaxFrame> out_{};
-  std::array<std::uint8_t, kMaxData> rsp_{};
+  std::array<std::uint8_t, kMaxData> cmd_{}, rsp_{};
 };
 
 }  // namespace omnitwin::m3

@@ -228,7 +228,12 @@ void C1Master::event_next(SimTime t) {
   queue_head_ = (queue_head_ + 1) % queue_.size();
   --queue_count_;
   attempts_ = 0;
-  sequence_ = static_cast<std::uint8_t>((sequence_ + 1) & 0xF);
+  // A sequence number of the slave's own, one on from its last request: with one count for
+  // all, 16 slaves in turn would each see the same number every time, and a slave would take
+  // the retry of a lost new command for a retry of its previous one.
+  Slave& s = slave_[static_cast<std::size_t>(k)];
+  s.sequence = static_cast<std::uint8_t>((s.sequence + 1) & 0xF);
+  sequence_ = s.sequence;
   event_send(k, t, false);
 }
 

@@ -20,7 +20,8 @@
 //               application requests an exchange with one slave (request()); the master
 //               sends EVT_CMD (64 bytes) and waits up to event_timeout (seed 000: 50 ms) for
 //               EVT_RSP, retrying event_retries times (retries are the driver's job here),
-//               one exchange on the line at a time, requests queued in order
+//               one exchange on the line at a time, requests queued in order; each slave's
+//               requests carry sequence numbers of their own (a retry repeats the number)
 //   failed      a detected slave missing, a configuration that does not fit: why() says
 //
 // Protocol core: frames and simulated time in, frames out through a callback, no sockets, no
@@ -114,6 +115,7 @@ class C1Master {
   struct Slave {
     std::array<std::uint8_t, kMaxData> cmd{}, rsp{};
     bool fresh = false, detected = false, answered = false;
+    std::uint8_t sequence = 0;  // event-driven: the sequence number of its last new request
     SimTime tr_dly = 0, t_rsp = 0;
     SlaveCounters counters;
   };
@@ -158,7 +160,7 @@ class C1Master {
   std::size_t retry_next_ = 0;
   int poll_ = 0;                    // cyclic: next slave to poll; slaves() = retries
   bool interrupted_ = false;        // this cycle's interrupt done
-  std::uint8_t sequence_ = 0, wdt_ = 0;
+  std::uint8_t sequence_ = 0, wdt_ = 0;  // sequence_: of the exchange in progress
   std::array<std::uint8_t, kMaxFrame> out_{};
 };
 

@@ -6,7 +6,8 @@
 // unknown command and a bad subcommand, and COMM_ALM as the profile counts it: FCS errors,
 // missing commands and a stopped master (a warning, then an alarm that drops phase 3 to 2
 // and stops the profile), a stalled WDT (an alarm at once), and ALM_CLR clearing it; a retry
-// of the command just executed is answered from its stored response, never run twice.
+// of the command just executed is answered from its stored response, never run twice, while
+// a new command that comes with the same sequence number is run.
 #include "bus_emulators/mechatrolink3/m3_link.hpp"
 
 #include <gtest/gtest.h>
@@ -173,6 +174,21 @@ TEST_F(M3Link, ARetryOfTheLastCommandIsAnsweredFromItsStoredResponse) {
   EXPECT_TRUE(std::equal(a.data.begin(), a.data.end(), b.data.begin(), b.data.end())) << "the same answer";
   connect();
   EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::phase_error) << "not a retry: executed, and refused in phase 2";
+  EXPECT_EQ(link.stats().repeated, 1u);
+}
+
+// A new command that comes flagged as a retry with the last command's sequence number,
+// length and code (a master whose sequence counter came round to the same number) is
+// executed: only a retry of the very same command is answered from the stored response.
+TEST_F(M3Link, ANewCommandWithTheLastSequenceNumberAndCodeIsExecutedNotAnsweredFromTheStore) {
+  start();
+  connect();
+  command(Command::velctrl, 32, 0, true, false, {{16, 1}});
+  command(Command::velctrl, 32, 0, false, true, {{16, 2}});  // retry flag, sequence 0, other data
+  EXPECT_EQ(profile.executed.size(), 2u) << "a different command, not a retry of the last one";
+  EXPECT_EQ(link.stats().repeated, 0u);
+  command(Command::velctrl, 32, 0, false, true, {{16, 2}});  // now the very same command again
+  EXPECT_EQ(profile.executed.size(), 2u);
   EXPECT_EQ(link.stats().repeated, 1u);
 }
 

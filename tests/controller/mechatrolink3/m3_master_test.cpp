@@ -8,7 +8,8 @@
 // cycle and never reach the slaves as missed commands; a slave off the line is counted
 // missed without disturbing the others; a slave that loses power and returns, and a servo
 // stopped by a communication alarm, are brought back by the application; a master that stops
-// trips every slave's watchdog.
+// trips every slave's watchdog; event-driven, each slave's requests carry their own sequence
+// numbers, so a lost command's retry is run, not taken for a retry of the one before.
 #include "controller/mechatrolink3/m3_master.hpp"
 
 #include <gtest/gtest.h>
@@ -51,7 +52,8 @@ struct Rig {
   SimTime now = 0, next_drive = 0;
   bool master_alive = true;
 
-  explicit Rig(int n, MasterConfig cfg = {}, int attached = -1)
+  explicit Rig(int n, MasterConfig cfg = {}, int attached = -1,
+               std::vector<std::pair<std::uint16_t, std::int32_t>> params = {})
       : topology(Topology::cascade_of(n, 10.0)), line(topology) {
     const std::size_t bytes = cfg.event_driven ? 64 : 32;
     if (cfg.slaves.empty())
@@ -64,7 +66,7 @@ struct Rig {
           [this, k](std::span<const std::uint8_t> f, SimTime t) { line.from_slave(k, f, t); }));
       line.attach_slave(k, [this, k](std::span<const std::uint8_t> f, SimTime t) { links[static_cast<std::size_t>(k)]->on_frame(f, t); });
       axes.emplace_back();
-      apps.emplace_back(fmt_name(k), ServoAxisConfig{.com_tim = 1, .synchronous = !cfg.event_driven, .position_mode = false, .params = {}},
+      apps.emplace_back(fmt_name(k), ServoAxisConfig{.com_tim = 1, .synchronous = !cfg.event_driven, .position_mode = false, .params = params},
                         [this](SimTime, const std::string& s) { log.push_back(s); });
       if (attached < 0 || k < attached) links.back()->power_on(0);
       else line.set_reachable(k, false);
@@ -326,6 +328,51 @@ TEST(M3Master, EventDrivenExchangesAnswerOnRequestWithinTheirOwnResponseTime) {
   EXPECT_GE(latency[1], 3 * cfg.event_timeout_ns);
   EXPECT_GE(rig.master->counters(1).retries, 2u);
   EXPECT_EQ(failures[0], 0) << "the others still answer (one exchange at a time: more slowly)";
+}
+
+// Event-driven with 16 slaves requested round-robin: every slave's new commands carry a
+// sequence number of its own that advances by one, so the retry of a lost command is never
+// mistaken for a retry of the slave's previous command (with one counter for all requests,
+// each of the 16 slaves saw the same number every time, and the slave answered the retried
+// SVPRM_WR 0103h from the stored response of SVPRM_WR 0102h: "done", never written).
+TEST(M3Master, EventDrivenRetriesOfALostCommandRunItWithEachSlavesOwnSequenceNumber) {
+  MasterConfig cfg;
+  cfg.event_driven = true;
+  const int n = 16;
+  Rig rig(n, cfg, -1, {{0x0102, 111111}, {0x0103, 222222}});
+  constexpr int kVictim = 5;  // station 08h
+  int dropped = 0;
+  std::vector<int> sequences;  // of the first attempts to the victim
+  rig.line.set_fault_hook([&](bool from_master, int k, std::span<const std::uint8_t> f) {
+    FrameView v;
+    if (!from_master || k != kVictim || decode(f, v) != FrameStatus::ok || v.type != FrameType::event_command ||
+        v.dst != kFirstSlave + kVictim)
+      return Fate::deliver;
+    if (!v.retry()) sequences.push_back(v.sequence());
+    const bool wr_0103 = v.data[0] == static_cast<std::uint8_t>(Command::svprm_wr) && get_u16(v.data, 12) == 0x0103;
+    if (wr_0103 && !v.retry() && dropped++ == 0) return Fate::drop;
+    return Fate::deliver;
+  });
+  rig.master->on_event([&](int k, bool ok, SimTime) {
+    rig.apps[static_cast<std::size_t>(k)].on_interrupt(rig.master->response(k), ok, rig.master->command(k), rig.now);
+    rig.master->request(k, rig.now);
+  });
+  rig.master->start(0);
+  rig.run_until(1 * kMs);
+  ASSERT_EQ(rig.master->state(), DriverState::event) << rig.master->why();
+  for (int k = 0; k < n; ++k) ASSERT_TRUE(rig.master->request(k, rig.now));
+  rig.run_until(400 * kMs);
+  ASSERT_EQ(dropped, 1);
+  EXPECT_GE(rig.master->counters(kVictim).retries, 1u);
+  for (int k = 0; k < n; ++k) {
+    const auto& o = rig.servos[static_cast<std::size_t>(k)]->drive().objects();
+    EXPECT_EQ(o.profile_acceleration, 111111u) << "station " << k;
+    EXPECT_EQ(o.profile_deceleration, 222222u) << "station " << k << ": SVPRM_WR 0103h carried out";
+    EXPECT_EQ(rig.apps[static_cast<std::size_t>(k)].step(), AxisStep::running) << rig.apps[static_cast<std::size_t>(k)].why();
+  }
+  ASSERT_GE(sequences.size(), 4u);
+  for (std::size_t i = 1; i < sequences.size(); ++i)
+    EXPECT_EQ(sequences[i], (sequences[i - 1] + 1) % 16) << "exchange " << i << " with station 08h";
 }
 
 TEST(M3Master, ACutCableDropsEveryStationBehindItAndTheOthersRunOn) {
