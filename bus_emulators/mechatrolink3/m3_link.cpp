@@ -38,7 +38,7 @@ void SlaveLink::transition(Transition tr, SimTime t) {
       return;
     case Transition::disconnect:
       if (s_.phase == Phase::p5) return;
-      if (s_.phase != Phase::p1) profile_.stop(t);
+      if (s_.phase != Phase::p1) profile_.disconnect(t);
       s_.phase = Phase::p1;
       return;
     case Transition::comm_alarm:

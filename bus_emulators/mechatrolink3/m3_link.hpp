@@ -66,8 +66,12 @@ class Profile {
   virtual CmdAlarm execute_sub(Command, std::span<const std::uint8_t>, std::span<std::uint8_t>) {
     return CmdAlarm::unsupported;
   }
-  // The connection ended or a communication alarm stopped cyclic operation: servo off.
+  // A communication alarm stopped cyclic operation: servo off.
   virtual void stop(SimTime t) = 0;
+  // DISCONNECT ended the connection: after it the slave's state is unknown to the master, which
+  // starts again with CONNECT (seed 000 fig. 8). At least what stop() does; a profile also
+  // forgets what the connection set up (a servo: encoder, POS_SET, home).
+  virtual void disconnect(SimTime t) { stop(t); }
   virtual bool device_alarm() const { return false; }    // CMD_STAT.D_ALM
   virtual bool device_warning() const { return false; }  // CMD_STAT.D_WAR
   virtual bool ready() const { return true; }            // CMD_STAT.CMDRDY

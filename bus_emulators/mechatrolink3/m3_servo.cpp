@@ -35,12 +35,20 @@ void ServoProfile::stop(SimTime) {
   motion_ = Motion::none;
 }
 
+void ServoProfile::disconnect(SimTime t) {
+  stop(t);
+  sensor_on_ = paused_ = new_set_point_ = latched_ = false;
+  user_offset_ = target_ = latch_pos_ = tpos_requested_ = 0;
+  home_lost_ = drive_.homed();
+}
+
 void ServoProfile::power_cycle() {
   drive_.power_cycle();
   want_on_ = sensor_on_ = paused_ = fault_reset_ = new_set_point_ = false;
   motion_ = Motion::none;
   user_offset_ = target_ = 0;
   last_error_ = 0;
+  home_lost_ = false;
 }
 
 CmdAlarm ServoProfile::execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime) {
@@ -297,7 +305,7 @@ void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std:
   const bool positioning = motion_ == Motion::posing || motion_ == Motion::interpolate ||
                            (motion_ == Motion::ex_posing && latched_);
   if (reached && positioning) io |= kIoPset;
-  if (drive_.homed() && std::abs(apos) <= static_cast<std::int64_t>(o.position_window))
+  if (drive_.homed() && !home_lost_ && std::abs(apos) <= static_cast<std::int64_t>(o.position_window))
     io |= kIoZpoint;
   put_u32(rsp, 8, io);
   for (std::size_t i = 0; i < 3; ++i) put_i32(rsp, 12 + 4 * i, monitor(sel[i]));
@@ -358,6 +366,7 @@ drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
   if (motion_ == Motion::none) o.target_velocity = 0;  // no motion: hold at standstill
   o.controlword = controlword();
   const drive::Command out = drive_.step(t, fb);
+  if (!drive_.homed()) home_lost_ = false;  // a new homing started: the drive's flag tells again
   watch_latch();
   if (device_alarm()) {
     note_alarm(o.error_code);

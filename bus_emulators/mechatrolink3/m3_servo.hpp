@@ -25,7 +25,8 @@
 // Rules: SV_ON needs SENS_ON first and CMDRDY stays 0 until the drive is enabled (one FSA
 // step per drive period); motion commands need the servo on, BRK_ON/BRK_OFF and SENS_OFF
 // need it off (else CMD_ALM condition error); a drive fault is D_ALM and servo off until
-// ALM_CLR; a lost connection (stop()) is servo off at once. Subcommands (48-byte mode, region
+// ALM_CLR; a communication alarm (stop()) is servo off at once; DISCONNECT (disconnect())
+// is servo off and SENS_ON, POS_SET, the latch and the home forgotten. Subcommands (48-byte mode, region
 // bytes 32-47: 0 SUB_CMD, 1-3 SUB_CTRL with SEL_MON4/5/6 in bits 12-15/16-19/20-23): SMON →
 // monitors at 4/8/12; SVPRM_RD/WR → NO 4, SIZE 6, MODE 7, PARAMETER 8; ALM_RD → MOD 4, four
 // codes from 8; ALM_CLR → MOD 4. ZRET 12 homing method (CiA 402 number; 0: the parameter)
@@ -73,6 +74,9 @@ class ServoProfile final : public Profile {
   CmdAlarm execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t) override;
   CmdAlarm execute_sub(Command c, std::span<const std::uint8_t> sub, std::span<std::uint8_t> rsp) override;
   void stop(SimTime t) override;
+  // Servo off, and the encoder (SENS_ON), POS_SET's offset, the target, CMD_PAUSE, the latch
+  // and the home (ZPOINT) forgotten: a reconnected servo needs SENS_ON before SV_ON again.
+  void disconnect(SimTime t) override;
   bool device_alarm() const override;
   bool device_warning() const override { return false; }
   bool ready() const override;
@@ -118,6 +122,7 @@ class ServoProfile final : public Profile {
   std::int32_t latch_pos_ = 0;     // LPOS1: where the latch input rose [ref]
   std::int32_t tpos_requested_ = 0;  // the TPOS of the EX_POSING in progress [ref]
   bool latched_ = false, prev_dec_ = false;
+  bool home_lost_ = false;         // DISCONNECT since the drive homed: no ZPOINT until it homes again
 };
 
 // The M-III alarm code the servo reports for a drive core error code (ours: following error

@@ -362,5 +362,74 @@ TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
   EXPECT_EQ(link.comm_alarm(), CommAlarm::normal) << "no missed command or sync on the way";
 }
 
+// After DISCONNECT the slave's state is unknown (seed 000 fig. 8): a reconnected servo starts
+// from CONNECT → SENS_ON → SV_ON again. The encoder is off, POS_SET's offset and the home
+// (ZPOINT) gone, and SV_ON without SENS_ON is a condition error.
+TEST(M3ServoOverTheLink, DisconnectForgetsTheEncoderAndThePositionSoSvOnNeedsSensOnAgain) {
+  ServoProfile servo(config());
+  drive::AxisModel axis;
+  std::vector<std::vector<std::uint8_t>> sent;
+  SlaveLink link(LinkConfig{.address = 0x03}, servo,
+                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
+  SimTime t = 0;
+  std::uint8_t wdt = 0;
+  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
+    std::vector<std::uint8_t> b(kMaxFrame);
+    b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
+    link.on_frame(b, t);
+  };
+  std::vector<std::uint8_t> last;
+  auto exchange = [&](std::vector<std::uint8_t> c) {
+    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+    wdt = static_cast<std::uint8_t>(wdt + 0x10);
+    c[1] = wdt;
+    frame(FrameType::cyclic_command, c, 0x03);
+    axis.step(servo.step(t, axis.feedback()), 1e-3);
+    t += 1'000'000;
+    link.advance(t);
+    FrameView v;
+    EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
+    last.assign(v.data.begin(), v.data.end());
+    return unpack_stat(get_u16(v.data, 2)).cmd_alm;
+  };
+  auto connect = [&] {
+    auto con = cmd(Command::connect);
+    put_u32(con, 4, 0);
+    con[4] = kServoProfileVersion;
+    con[5] = kComModSync;
+    con[6] = 1;
+    con[7] = 0x10;
+    EXPECT_EQ(exchange(con), CmdAlarm::normal);
+    EXPECT_EQ(exchange(cmd(Command::sync_set)), CmdAlarm::normal);
+  };
+  link.power_on(0);
+  std::vector<std::uint8_t> notify(16, 0);
+  put_i32(notify, 0, 1'000'000);
+  frame(FrameType::cycle_notify, notify, kBroadcast);
+  connect();
+  ASSERT_EQ(exchange(cmd(Command::sens_on)), CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::sv_on)), CmdAlarm::normal);
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  ASSERT_TRUE(servo.servo_on());
+  auto zret = cmd(Command::zret, {{20, 2000}});
+  zret[12] = 37;  // CiA 402 method 37: the current position is home
+  for (int k = 0; k < 200; ++k) ASSERT_EQ(exchange(zret), CmdAlarm::normal);
+  ASSERT_NE(static_cast<std::uint32_t>(get_i32(last, 8)) & (1u << 11), 0u) << "ZPOINT";
+  ASSERT_EQ(exchange(cmd(Command::sv_off)), CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::pos_set, {{16, 123456}})), CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::disconnect)), CmdAlarm::normal);
+  EXPECT_FALSE(servo.position_ready());
+  connect();
+  ASSERT_EQ(exchange(cmd(Command::smon)), CmdAlarm::normal);
+  EXPECT_EQ(static_cast<std::uint32_t>(get_i32(last, 4)) & (1u << 10), 0u) << "POS_RDY off";
+  EXPECT_LT(std::abs(get_i32(last, 12)), 20) << "APOS without the old POS_SET offset";
+  EXPECT_EQ(static_cast<std::uint32_t>(get_i32(last, 8)) & (1u << 11), 0u) << "no ZPOINT: the home is forgotten";
+  EXPECT_EQ(exchange(cmd(Command::sv_on)), CmdAlarm::condition_error) << "SV_ON needs SENS_ON first";
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  EXPECT_FALSE(servo.servo_on());
+  EXPECT_EQ(exchange(cmd(Command::sens_on)), CmdAlarm::normal);
+  EXPECT_EQ(exchange(cmd(Command::sv_on)), CmdAlarm::normal);
+}
+
 }  // namespace
 }  // namespace omnitwin::m3
