@@ -180,6 +180,10 @@ CmdAlarm SlaveLink::connect(std::span<const std::uint8_t> cmd, std::span<std::ui
   std::copy_n(cmd.begin() + 4, 4, rsp.begin() + 4);  // the response echoes the parameters
   const bool sub = (mod & kComModSubcommand) != 0;
   if (ver != kServoProfileVersion || com_tim == 0 || profile != profile_.profile_type()) return CmdAlarm::invalid_data;
+  if ((mod & (kComModDtMode | kComModReserved)) != 0) return CmdAlarm::invalid_data;
+  // The communication cycle is checked when the transmission cycle is known (not event-driven).
+  const SimTime comm_cycle = s_.cycle_ns * com_tim;
+  if (s_.cycle_ns > 0 && (comm_cycle < kMinCommCycleNs || comm_cycle > kMaxCommCycleNs)) return CmdAlarm::invalid_data;
   // Event-driven data is 64 bytes whatever the profile (seed 000); cyclic lengths are the profile's.
   const bool event = cmd.size() == kMaxData && (mod & kComModSync) == 0;
   if (!(event || profile_.accepts_length(cmd.size())) || (sub && cmd.size() != 48)) return CmdAlarm::invalid_data;

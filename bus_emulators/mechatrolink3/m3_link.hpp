@@ -48,6 +48,11 @@ struct Connection {
 };
 inline constexpr std::uint8_t kServoProfileVersion = 0x30;
 inline constexpr std::uint8_t kComModSync = 0x02, kComModSubcommand = 0x80;
+// COM_MOD bits 2-3 DTMODE (only 00b, single transfer, is built) and the reserved bits 0, 4-6.
+inline constexpr std::uint8_t kComModDtMode = 0x0C, kComModReserved = 0x71;
+// The communication cycle (transmission cycle × COM_TIM) a slave accepts: 0.125 ms … 32 ms,
+// a typical servo's range (facts/mechatrolink3.md).
+inline constexpr SimTime kMinCommCycleNs = 125'000, kMaxCommCycleNs = 32'000'000;
 
 // The profile above the link (a servo, an I/O station). Called from the cyclic path: must
 // not block or allocate.

@@ -207,6 +207,32 @@ TEST_F(M3Link, ABadConnectIsInvalidDataAndStaysInPhase1) {
   EXPECT_EQ(link.phase(), Phase::p1);
 }
 
+// CONNECT is refused (invalid data, phase 1 kept) when the communication cycle (transmission
+// cycle × COM_TIM) is outside 0.125 ms … 32 ms, the range a typical servo accepts
+// (facts/mechatrolink3.md), or COM_MOD sets a reserved bit or a DTMODE other than single
+// transfer (00b, the only one built).
+TEST_F(M3Link, AConnectOutsideTheCycleRangeOrWithReservedComModBitsIsInvalidData) {
+  auto connect_with = [&](std::uint8_t mod, std::uint8_t com_tim) {
+    command(Command::connect, 32, 0, true, false, {{4, 0x30}, {5, mod}, {6, com_tim}, {7, 0x10}});
+    return last_stat().cmd_alm;
+  };
+  start(kCycle);
+  EXPECT_EQ(connect_with(kComModSync, 255), CmdAlarm::invalid_data) << "255 ms";
+  EXPECT_EQ(connect_with(kComModSync, 33), CmdAlarm::invalid_data) << "33 ms";
+  EXPECT_EQ(connect_with(0x0E, 1), CmdAlarm::invalid_data) << "DTMODE 11b (reserved)";
+  EXPECT_EQ(connect_with(0x06, 1), CmdAlarm::invalid_data) << "DTMODE 01b (consecutive transfer, not built)";
+  EXPECT_EQ(connect_with(0x73, 1), CmdAlarm::invalid_data) << "reserved bits 0, 4-6";
+  EXPECT_EQ(connect_with(0x03, 1), CmdAlarm::invalid_data) << "reserved bit 0";
+  EXPECT_EQ(connect_with(0x12, 1), CmdAlarm::invalid_data) << "reserved bit 4";
+  EXPECT_EQ(link.phase(), Phase::p1);
+  EXPECT_EQ(connect_with(kComModSync, 32), CmdAlarm::normal) << "32 ms, the longest";
+  link.power_off(now);
+  start(62'500);
+  EXPECT_EQ(connect_with(kComModSync, 1), CmdAlarm::invalid_data) << "62.5 µs";
+  EXPECT_EQ(link.phase(), Phase::p1);
+  EXPECT_EQ(connect_with(kComModSync, 2), CmdAlarm::normal) << "125 µs, the shortest";
+}
+
 TEST_F(M3Link, CommandsOutsideTheirPhaseArePhaseErrorsAndNeverReachTheProfile) {
   start();
   command(Command::velctrl);
