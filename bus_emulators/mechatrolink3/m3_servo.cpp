@@ -58,8 +58,8 @@ CmdAlarm ServoProfile::execute(Command c, std::span<const std::uint8_t> cmd, std
   const CmdAlarm a = run(c, cmd, rsp);
   const bool own_fields = c == Command::svprm_rd || c == Command::svprm_wr || c == Command::id_rd ||
                           c == Command::alm_rd;
-  if (!own_fields) fill_status(cmd, rsp);
-  else put_u32(rsp, 4, get_u32(cmd, 4) & (kPauseCmp | kCancelCmp));  // SVCMD_STAT only: no room for monitors
+  fill_status(cmd, rsp);
+  if (!own_fields) fill_monitors(cmd, rsp);  // the others use bytes 12… for their own fields
   return a;
 }
 
@@ -286,11 +286,20 @@ std::int32_t ServoProfile::monitor(std::uint8_t sel) const {
   }
 }
 
+namespace {
+
+// SEL_MON1/2/3 of SVCMD_CTRL.
+std::array<std::uint8_t, 3> selected_monitors(std::uint32_t ctrl) {
+  return {static_cast<std::uint8_t>((ctrl >> 12) & 0xF), static_cast<std::uint8_t>((ctrl >> 16) & 0xF),
+          static_cast<std::uint8_t>((ctrl >> 20) & 0xF)};
+}
+
+}  // namespace
+
+// SVCMD_STAT (bytes 4-7) and SVCMD_IO (8-11), in every servo response.
 void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
   const std::uint32_t ctrl = get_u32(cmd, 4);
-  const std::array<std::uint8_t, 3> sel = {static_cast<std::uint8_t>((ctrl >> 12) & 0xF),
-                                           static_cast<std::uint8_t>((ctrl >> 16) & 0xF),
-                                           static_cast<std::uint8_t>((ctrl >> 20) & 0xF)};
+  const std::array<std::uint8_t, 3> sel = selected_monitors(ctrl);
   std::uint32_t stat = (ctrl & (kPauseCmp | kCancelCmp)) | kPon | kMRdy | (sensor_on_ ? kPosRdy : 0) | (servo_on() ? kSvOn : 0) |
                        (latched_ ? kLCmp1 : 0);
   stat |= static_cast<std::uint32_t>(sel[0]) << 16 | static_cast<std::uint32_t>(sel[1]) << 20 |
@@ -308,6 +317,11 @@ void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std:
   if (drive_.homed() && !home_lost_ && std::abs(apos) <= static_cast<std::int64_t>(o.position_window))
     io |= kIoZpoint;
   put_u32(rsp, 8, io);
+}
+
+// MONITOR1/2/3 (bytes 12-23) as SEL_MON1/2/3 select.
+void ServoProfile::fill_monitors(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
+  const std::array<std::uint8_t, 3> sel = selected_monitors(get_u32(cmd, 4));
   for (std::size_t i = 0; i < 3; ++i) put_i32(rsp, 12 + 4 * i, monitor(sel[i]));
 }
 

@@ -12,7 +12,8 @@
 //            bit 11 PON, bit 12 M_RDY, bit 13 SV_ON, bits 16-19/20-23/24-27 SEL_MON echo),
 //            8-11 SVCMD_IO (bit 0 DEC, 1 P_OT, 2 N_OT, 9 PSET: POSING/INTERPOLATE within the
 //            position window of its target, 11 ZPOINT, 12 BRK_ON),
-//            12-15/16-19/20-23 MONITOR1/2/3 (motion, servo and SMON commands)
+//            12-15/16-19/20-23 MONITOR1/2/3 (motion, servo and SMON commands; SVPRM_RD/WR,
+//            ID_RD and ALM_RD carry SVCMD_STAT and SVCMD_IO but their own fields from 12 on)
 //   VELCTRL 16 VREF [ref/s] 20 P_TLIM u16 [0.1 %]; INTERPOLATE 16 TPOS [ref] 20 VFF [ref/s];
 //   POSING 16 TPOS 20 TSPD 24 ACCR 28 DECR [ref/s²] (0: the parameter); FEED 20 TSPD 24 ACCR
 //   28 DECR; TRQCTRL 16 TQREF [0.1 %]; POS_SET 12 PS_SUBCMD (bit 7 REFE) 16 POS_DATA;
@@ -106,6 +107,7 @@ class ServoProfile final : public Profile {
                       std::size_t codes, std::size_t count) const;
   CmdAlarm id_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   void fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
+  void fill_monitors(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   std::uint16_t controlword();
   void note_alarm(std::uint16_t code);
 

@@ -172,6 +172,29 @@ TEST_F(M3Servo, ServoParametersReadWriteAndRefuseBadNumbers) {
   EXPECT_EQ(prm(Command::svprm_wr, 0x0101, 70000), CmdAlarm::invalid_data);
 }
 
+// SVPRM_RD/WR, ID_RD and ALM_RD use bytes 12… for their own fields, but bytes 4-11 are
+// SVCMD_STAT and SVCMD_IO as in every servo response: a master must not read "servo off".
+TEST_F(M3Servo, ParameterIdAndAlarmReadsCarryTheServoStatusAndIo) {
+  servo_on();
+  send(cmd(Command::smon));
+  const std::uint32_t stat = svcmd_stat(), io = svcmd_io();
+  ASSERT_NE(stat & (1u << 13), 0u) << "SV_ON";
+  auto rd = cmd(Command::svprm_rd);
+  put_u16(rd, 12, 0x0106);
+  rd[14] = 4;
+  ASSERT_EQ(send(rd), CmdAlarm::normal);
+  EXPECT_EQ(svcmd_stat(), stat) << "SVPRM_RD";
+  EXPECT_EQ(svcmd_io(), io);
+  EXPECT_EQ(get_u16(rsp, 12), 0x0106) << "the parameter's own fields stay";
+  EXPECT_EQ(static_cast<std::uint32_t>(get_i32(rsp, 16)), servo.drive().objects().position_window);
+  auto id = cmd(Command::id_rd);
+  id[14] = 4;
+  ASSERT_EQ(send(id), CmdAlarm::normal);
+  EXPECT_EQ(svcmd_stat(), stat) << "ID_RD";
+  ASSERT_EQ(send(cmd(Command::alm_rd)), CmdAlarm::normal);
+  EXPECT_EQ(svcmd_stat(), stat) << "ALM_RD";
+}
+
 TEST_F(M3Servo, IdReadGivesTheDeviceName) {
   auto f = cmd(Command::id_rd);
   f[14] = 8;
