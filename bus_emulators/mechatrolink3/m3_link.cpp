@@ -60,9 +60,10 @@ void SlaveLink::on_frame(std::span<const std::uint8_t> bytes, SimTime t) {
   const FrameStatus s = decode(bytes, f);
   if (s == FrameStatus::bad_fcs) {
     // Only a frame that (by its unchecked destination byte) was ours or everybody's counts.
+    // Before CONNECT there is no communication to supervise: counted, not raised.
     if (!bytes.empty() && (bytes[0] == cfg_.address || bytes[0] == kBroadcast)) {
       ++s_.stats.fcs_errors;
-      raise(++s_.fcs_in_row >= 2 ? CommAlarm::fcs : CommAlarm::fcs_warning, t);
+      if (s_.phase != Phase::p1) raise(++s_.fcs_in_row >= 2 ? CommAlarm::fcs : CommAlarm::fcs_warning, t);
     }
     return;
   }
@@ -116,7 +117,9 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   if (s_.phase == Phase::p3 && !f.retry()) check_watchdog(h.wdt, t);
   s_.last_command = t;
   if (s_.phase == Phase::p3) s_.command_misses = 0, s_.commanded = true;
-  if (ctrl.alm_clr || h.code == static_cast<std::uint8_t>(Command::alm_clr)) s_.comm_alm = CommAlarm::normal;
+  // ALM_CLR (the command or CMD_CTRL.ALM_CLR) clears COMM_ALM only in a phase it is allowed in.
+  const bool clear = allowed_in(Command::alm_clr, s_.phase);
+  if (clear && (ctrl.alm_clr || h.code == static_cast<std::uint8_t>(Command::alm_clr))) s_.comm_alm = CommAlarm::normal;
   const auto rsp = std::span(rsp_).first(f.data.size());
   std::fill(rsp.begin(), rsp.end(), std::uint8_t{0});
   write_header(rsp, CommandHeader{h.code, static_cast<std::uint8_t>((h.wdt & 0xF0) | (s_.own_count++ & 0x0F)), 0});
@@ -125,7 +128,7 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
     run_subcommand(static_cast<Command>(h.code), f.data, rsp);
   if (s_.cmd_alm == CmdAlarm::phase_error) ++s_.stats.phase_errors;
   if (s_.cmd_alm == CmdAlarm::unsupported) ++s_.stats.unsupported;
-  CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(), ctrl.alm_clr,
+  CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(), clear && ctrl.alm_clr,
              ctrl.cmd_id, s_.cmd_alm, s_.comm_alm};
   put_u16(rsp, 2, pack(st));
   s_.last_sequence = f.sequence();

@@ -4,9 +4,10 @@
 // communication start), runs the communication phases of seed 000 fig. 7 with CONNECT,
 // SYNC_SET and DISCONNECT, refuses commands the phase does not allow (CMD_ALM phase error)
 // and codes it does not know (unsupported), keeps the watchdog (WDT) and counts FCS errors,
-// missing commands and missing sync frames into COMM_ALM as the profile does: a warning the
-// first time, an alarm the second time in a row, a WDT error at once; an alarm drops phase 3
-// to phase 2 and tells the application to stop (servo off).
+// missing commands and missing sync frames into COMM_ALM as the profile does (from phase 2
+// on; in phase 1 FCS errors are only counted in the stats): a warning the first time, an
+// alarm the second time in a row, a WDT error at once; an alarm drops phase 3 to phase 2 and
+// tells the application to stop (servo off). ALM_CLR clears COMM_ALM in phases 2 and 3 only.
 //
 // A powered slave answers every command frame addressed to it: CYC_NOTIFY and COMM_START are
 // taken note of, and a slave that comes back after them (power returned) learns the

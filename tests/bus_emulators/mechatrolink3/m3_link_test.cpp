@@ -378,6 +378,44 @@ TEST_F(M3Link, AlarmClearInCmdCtrlClearsCommAlmAndSaysSo) {
   EXPECT_EQ(s.rcmd_id, 1);
 }
 
+// Before CONNECT there is no communication to supervise: corrupted frames are counted, not
+// raised into COMM_ALM.
+TEST_F(M3Link, CorruptedFramesInPhase1AreCountedButRaiseNoCommunicationAlarm) {
+  start();
+  std::vector<std::uint8_t> b(kMaxFrame);
+  std::vector<std::uint8_t> d(32, 0);
+  b.resize(encode(FrameSpec{.dst = 0x03, .type = FrameType::cyclic_command, .data = d}, b));
+  b[10] ^= 0x01;
+  link.on_frame(b, now);
+  link.on_frame(b, now);
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::normal);
+  EXPECT_EQ(link.stats().fcs_errors, 2u);
+  EXPECT_EQ(link.stats().comm_alarms, 0u);
+  connect();
+  link.on_frame(b, now);
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::fcs_warning) << "from phase 2 on they count";
+}
+
+// ALM_CLR refused for its phase (phase 1: CMD_ALM phase error) clears nothing; in phase 2 it does.
+TEST_F(M3Link, AnAlarmClearRefusedInPhase1LeavesCommAlmAsItIs) {
+  to_phase3();
+  now += 10 * kCycle;
+  link.advance(now);
+  ASSERT_EQ(link.comm_alarm(), CommAlarm::no_sync);
+  command(Command::disconnect);
+  ASSERT_EQ(link.phase(), Phase::p1);
+  command(Command::alm_clr);
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::phase_error);
+  EXPECT_EQ(last_stat().comm_alm, CommAlarm::no_sync);
+  command(Command::nop, 32, pack(CmdCtrl{.alm_clr = true, .cmd_id = 0}));
+  EXPECT_EQ(last_stat().comm_alm, CommAlarm::no_sync) << "CMD_CTRL.ALM_CLR is ALM_CLR's clear too";
+  EXPECT_FALSE(last_stat().alm_clr_cmp);
+  connect();
+  command(Command::alm_clr);
+  EXPECT_EQ(last_stat().cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(link.comm_alarm(), CommAlarm::normal);
+}
+
 TEST_F(M3Link, TheResponseCarriesDeviceStateAndTheWatchdogEcho) {
   start();
   connect();
