@@ -141,6 +141,7 @@ CmdAlarm SlaveLink::run_link_command(Command c, std::span<const std::uint8_t> cm
                                      SimTime t) {
   if (!is_known(c)) return CmdAlarm::unsupported;
   if (!allowed_in(c, s_.phase)) return CmdAlarm::phase_error;
+  if (s_.phase != Phase::p3 && profile_.synchronous_only(c)) return CmdAlarm::phase_error;
   switch (c) {
     case Command::nop: return CmdAlarm::normal;
     case Command::connect: return connect(cmd, rsp, t);

@@ -25,7 +25,8 @@
 //                       goes on: the slave waits for CONNECT again)
 //   P3 synchronous   -> communication alarm          -> P2 ; DISCONNECT -> P1
 //   any              -> power_off                    -> P5
-// In P1 only NOP, CONNECT and DISCONNECT execute; INTERPOLATE needs P3 (allowed_in()).
+// In P1 only NOP, CONNECT and DISCONNECT execute; INTERPOLATE needs P3 (allowed_in()), and so
+// do the profile's own synchronous commands (Profile::synchronous_only()).
 #pragma once
 
 #include <array>
@@ -62,6 +63,8 @@ class Profile {
   virtual ~Profile() = default;
   virtual std::uint8_t profile_type() const = 0;                 // 10h servo, 30h I/O
   virtual bool accepts_length(std::size_t data_bytes) const = 0;  // e.g. 32 and 48 for a servo
+  // A profile command that is synchronous (phase 3 only, as INTERPOLATE): e.g. I/O DATA_RWS.
+  virtual bool synchronous_only(Command) const { return false; }
   // Executes a command allowed in the current phase (not NOP, CONNECT, DISCONNECT, SYNC_SET,
   // which the link handles). cmd is the whole information field; rsp (same length) arrives
   // with its header written and the rest zero; `t` is when the command arrived [ns].

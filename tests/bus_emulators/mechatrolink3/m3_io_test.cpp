@@ -1,7 +1,8 @@
 // Tests bus_emulators/mechatrolink3/m3_io: the standard I/O profile through the slave link:
 // CONNECT as profile 30h with its data lengths (16-64 bytes; a servo length of 32 too, but
-// not 8), DATA_RWS/DATA_RWA write the outputs and answer the inputs, ID_RD names the device,
-// a servo command is unsupported, and a lost connection puts the outputs to 0.
+// not 8), DATA_RWA (phases 2 and 3) and DATA_RWS (phase 3 only) write the outputs and answer
+// the inputs, ID_RD names the device, a servo command is unsupported, and a lost connection
+// puts the outputs to 0.
 #include "bus_emulators/mechatrolink3/m3_io.hpp"
 
 #include <gtest/gtest.h>
@@ -67,8 +68,38 @@ TEST_F(M3Io, DataExchangeWritesOutputsAndAnswersInputs) {
   EXPECT_EQ(v.data[7], 0x3C);
   EXPECT_EQ(v.data[8], 0) << "only the station's four input bytes";
   EXPECT_EQ(unpack_stat(get_u16(v.data, 2)).cmd_alm, CmdAlarm::normal);
-  EXPECT_EQ(exchange(kDataRws, d).data[0], kDataRws);
-  EXPECT_EQ(io.writes(), 2u);
+  EXPECT_EQ(io.writes(), 1u);
+}
+
+// DATA_RWS is the synchronous data command: like INTERPOLATE it needs phase 3, and before it
+// is a phase error that writes nothing; DATA_RWA works in phases 2 and 3.
+TEST_F(M3Io, DataRwsNeedsPhase3) {
+  link.power_on(0);
+  std::vector<std::uint8_t> n(16, 0);
+  put_u32(n, 0, 1'000'000);
+  std::vector<std::uint8_t> b(kMaxFrame);
+  b.resize(encode(FrameSpec{.dst = kBroadcast, .type = FrameType::cycle_notify, .data = n}, b));
+  link.on_frame(b, 0);
+  std::vector<std::uint8_t> d(16, 0);
+  d[4] = 0x30;
+  d[5] = kComModSync;
+  d[6] = 1;
+  d[7] = 0x30;
+  ASSERT_EQ(unpack_stat(get_u16(exchange(0x0E, d).data, 2)).cmd_alm, CmdAlarm::normal);
+  std::vector<std::uint8_t> w(16, 0);
+  w[4] = 0xA5;
+  const FrameView v = exchange(kDataRws, w);
+  EXPECT_EQ(v.data[0], kDataRws);
+  EXPECT_EQ(unpack_stat(get_u16(v.data, 2)).cmd_alm, CmdAlarm::phase_error) << "phase 2";
+  EXPECT_EQ(io.output(0), 0);
+  EXPECT_EQ(io.writes(), 0u);
+  ASSERT_EQ(unpack_stat(get_u16(exchange(kDataRwa, w).data, 2)).cmd_alm, CmdAlarm::normal);
+  ASSERT_EQ(unpack_stat(get_u16(exchange(0x0D, d).data, 2)).cmd_alm, CmdAlarm::normal);  // SYNC_SET
+  ASSERT_EQ(link.phase(), Phase::p3);
+  w[4] = 0x5A;
+  EXPECT_EQ(unpack_stat(get_u16(exchange(kDataRws, w).data, 2)).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(io.output(0), 0x5A);
+  EXPECT_EQ(unpack_stat(get_u16(exchange(kDataRwa, w).data, 2)).cmd_alm, CmdAlarm::normal);
 }
 
 // The profile reads its fields at fixed offsets, so a command shorter (or longer) than the
