@@ -44,10 +44,12 @@ void TmlRelay::from_can(const can::Frame& f, SimTime t) {
     TechCanMessage tm;
     if (decode_techcan(f, tm) != CanStatus::ok) return void(++stats_.ignored);
     // TechCAN does not carry the destination of TakeData/TakeData2: every answer on the bus
-    // goes to the host (a relay is the only host-facing node).
+    // goes to the host (a relay is the only host-facing node), addressed to it as on RS-232.
     if (!tm.destination_known) {
       ++stats_.to_host;
-      return to_host_(tm.message, t);
+      Message a = tm.message;
+      a.id_code = host_id_code(drive_.axis());
+      return to_host_(a, t);
     }
     m = tm.message;
   }

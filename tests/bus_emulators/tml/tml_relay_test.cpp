@@ -1,7 +1,8 @@
 // Tests bus_emulators/tml/tml_relay: the relay axis between a host on RS-232 and drives on CAN
 // (seed 003 chapter 2): a host query for another axis goes onto CAN and its answer, addressed to
 // the host (relay axis + HOST bit), comes back; the relay's own axis is served locally and not
-// forwarded; TMLCAN and TechCAN.
+// forwarded; TMLCAN and TechCAN. Found in review: through TechCAN, whose TakeData/TakeData2 carry
+// no destination, the answers reached the host with ID code 0000; the bytes on RS-232 are checked.
 #include "bus_emulators/tml/tml_relay.hpp"
 
 #include <gtest/gtest.h>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "bus_emulators/tml/tml_can_node.hpp"
+#include "bus_emulators/tml/tml_serial.hpp"
 
 namespace omnitwin::tml {
 namespace {
@@ -71,6 +73,24 @@ TEST_P(TmlRelayTest, TheRelaysOwnAxisIsServedLocally) {
   EXPECT_EQ(r.frames, 1);
   ASSERT_TRUE(r.node->drive().read(0x025E, false, v));
   EXPECT_EQ(v, 9u);
+}
+
+TEST_P(TmlRelayTest, AnswersThroughTechCanCarryTheHostsIdCode) {
+  Rig r(GetParam());
+  // Host 20 (ID code 0141) asks axis 5 for KPP and for SR32; both answers go back over RS-232.
+  r.relay->from_host(give_me_data(axis_id_code(5), host_id_code(20), 0x025E, false), 0);
+  r.relay->from_host(give_me_data2(axis_id_code(5), host_id_code(20), 0x090E, true), 0);
+  ASSERT_EQ(r.host.size(), 2u);
+  auto bytes = [](const Message& m) {
+    const Packet p = encode_packet(m);
+    return std::vector<std::uint8_t>(p.bytes.begin(), p.bytes.begin() + p.size);
+  };
+  // TakeData KPP = 0x0120 from axis 5 (sender 0050) to 0141.
+  EXPECT_EQ(bytes(r.host[0]),
+            (std::vector<std::uint8_t>{0x0A, 0x01, 0x41, 0xB4, 0x04, 0x00, 0x50, 0x02, 0x5E, 0x01, 0x20, 0xD5}));
+  // TakeData2 SR32 (SRL 0400: axis off, nothing moving; SRH 0) from axis 5 (D505) to 0141.
+  EXPECT_EQ(bytes(r.host[1]),
+            (std::vector<std::uint8_t>{0x0A, 0x01, 0x41, 0xD5, 0x05, 0x09, 0x0E, 0x04, 0x00, 0x00, 0x00, 0x41}));
 }
 
 INSTANTIATE_TEST_SUITE_P(Protocols, TmlRelayTest, ::testing::Values(Protocol::tmlcan, Protocol::techcan),
