@@ -40,10 +40,11 @@ class TmlPty {
 
   // RS-485 multi-drop: another drive on the same line (the first drive's and this one's
   // protocol must be rs485; std::invalid_argument otherwise). Every drive's link hears every
-  // byte; only the addressed drive acknowledges and answers, group messages are acknowledged
-  // by nobody (tml_serial). The line is half duplex: the host sends one command at a time and
-  // type B never goes to a group on RS-485, so two drives never talk at once; if a host breaks
-  // that rule their bytes interleave, as they would collide on a real line. Set-up.
+  // byte; only the addressed drive acknowledges and answers, group and axis 0 messages are
+  // acknowledged by nobody (tml_serial). The line is half duplex: the host sends one command at
+  // a time and type B never goes to a group or axis 0 on RS-485, so two drives never talk at
+  // once; if a host breaks that rule their bytes interleave, as they would collide on a real
+  // line. Set-up.
   void add_drop(TmlDrive& drive);
 
   // A relay axis (tml_relay): messages from the host go to `from_host` instead of the drive

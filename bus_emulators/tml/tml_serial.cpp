@@ -72,7 +72,8 @@ std::uint16_t host_sender_code(Link link, std::uint8_t host_axis) { return axis_
 bool acknowledged(Link link, const Message& m) {
   const MessageType t = type_of(m);
   if (t != MessageType::a && t != MessageType::b) return false;
-  return !(link == Link::rs485 && is_group(m.id_code));
+  // On RS-485 every drive that takes a group or axis-0 message would answer: their 'O's collide.
+  return !(link == Link::rs485 && (is_group(m.id_code) || id_of(m.id_code) == 0));
 }
 
 LinkCheck check_host_message(Link link, const Message& m) {
@@ -82,6 +83,7 @@ LinkCheck check_host_message(Link link, const Message& m) {
   if (link == Link::rs232) return LinkCheck::ok;
   const MessageType t = type_of(m);
   if (t == MessageType::b && is_group(m.id_code)) return LinkCheck::request_to_group_on_rs485;
+  if (t == MessageType::b && id_of(m.id_code) == 0) return LinkCheck::request_to_axis_0_on_rs485;
   if (t == MessageType::c) return LinkCheck::type_c_on_rs485;
   const bool sender_host = t == MessageType::b && is_host(c.sender);
   if (is_host(m.id_code) || sender_host) return LinkCheck::host_bit_on_rs485;
@@ -94,6 +96,7 @@ const char* to_string(LinkCheck c) {
     case LinkCheck::invalid: return "invalid message (ID code bits 15-13/3-1 set, or more than 4 data words)";
     case LinkCheck::give_me_data_to_group: return "GiveMeData goes to one axis only";
     case LinkCheck::request_to_group_on_rs485: return "RS-485: no type B request to a group (answers would collide)";
+    case LinkCheck::request_to_axis_0_on_rs485: return "RS-485: no type B request to axis 0 (every drive would answer)";
     case LinkCheck::type_c_on_rs485: return "RS-485: type C messages are forbidden";
     case LinkCheck::host_bit_on_rs485: return "RS-485: the HOST bit must be 0";
   }

@@ -7,8 +7,8 @@
 // its stop bits end on the line) and decoded events come out through callbacks.
 //   - SerialReceiver: bytes → packets, 'O' acknowledgements, SYNC bytes; bad checksums are
 //     counted and reported, never acknowledged.
-//   - SerialDriveLink: a drive's port: acknowledges what it accepts with 'O' (not group
-//     messages on RS-485), echoes SYNC bytes between packets on RS-232, sends answers.
+//   - SerialDriveLink: a drive's port: acknowledges what it accepts with 'O' (not group or
+//     axis-0 messages on RS-485), echoes SYNC bytes between packets on RS-232, sends answers.
 //   - SerialHostLink: the host's sender: one command at a time, waits ~2 ms for 'O', recovers
 //     with SYNC bytes (RS-232: one at a time until echoed, 15 at most, then "link broken";
 //     RS-485: 15 at once, wait, resend once), then waits for the answer of a type B request.
@@ -56,11 +56,14 @@ PacketStatus decode_packet(std::span<const std::uint8_t> bytes, Message& out);
 // The host's own ID code as a sender: RS-232 shares the relay's axis with HOST set; RS-485 has
 // its own axis and HOST = 0. RT-safe.
 std::uint16_t host_sender_code(Link link, std::uint8_t host_axis);
-// Whether the drive answers this message with 'O': types A and B, except group messages on
-// RS-485. RT-safe.
+// Whether the drive answers this message with 'O': types A and B, except group and axis-0
+// messages on RS-485 (every drive takes them: the 'O's would collide). RT-safe.
 bool acknowledged(Link link, const Message& m);
 
-enum class LinkCheck : std::uint8_t { ok, invalid, give_me_data_to_group, request_to_group_on_rs485, type_c_on_rs485, host_bit_on_rs485 };
+enum class LinkCheck : std::uint8_t {
+  ok, invalid, give_me_data_to_group, request_to_group_on_rs485, request_to_axis_0_on_rs485, type_c_on_rs485,
+  host_bit_on_rs485
+};
 const char* to_string(LinkCheck c);
 // What the host may send on this link (seed ch. 3 and 6). RT-safe.
 LinkCheck check_host_message(Link link, const Message& m);
@@ -160,8 +163,8 @@ struct DriveLinkStats {
 
 // A drive's serial port. Every packet with a good checksum that is for this drive (RS-232: every
 // packet — the relay forwards the others; RS-485: its axis, axis 0, or one of its groups) goes
-// to the message sink; it is acknowledged with 'O' unless it is a group message on RS-485 or an
-// answer/type C message. Bad checksums: counted, no acknowledgement. SYNC bytes between packets
+// to the message sink; it is acknowledged with 'O' unless it is a group or axis-0 message on
+// RS-485 or an answer/type C message. Bad checksums: counted, no acknowledgement. SYNC bytes between packets
 // are echoed with 0x0D on RS-232. send() puts answers and type C messages on the line.
 class SerialDriveLink {
  public:
@@ -200,7 +203,7 @@ struct HostLinkConfig {
 
 enum class HostEventKind : std::uint8_t {
   acked,                // 'O' for a type A command
-  sent_unacknowledged,  // an RS-485 group message left the line (no 'O' expected)
+  sent_unacknowledged,  // an RS-485 group or axis-0 message left the line (no 'O' expected)
   answer,               // the TakeData / TakeData2 of a type B request ('O' came first)
   answer_timeout,       // 'O' came, the answer did not
   resent,               // the command was sent again after SYNC recovery

@@ -4,9 +4,10 @@
 //   omni-tml encode --protocol rs232|rs485|tmlcan|techcan|raw --axis N [--group] [--host N]
 //                   [--value HEX] [--from N] 'KPP=5' | '?KPP' | '??KPP' | --raw OPCODE [DATA...]
 //     prints the instruction in words, the bytes (or CAN frame) to send and the expected
-//     answer: 'O' on serial links (not for RS-485 group messages) and, for a query, the TakeData
-//     (?NAME) or TakeData2 (??NAME) that comes back; without --value its value and checksum
-//     bytes are shown as ??. With --group, N is a group number 1-8 (0 = broadcast).
+//     answer: 'O' on serial links (not for RS-485 group or axis 0 messages) and, for a query, the
+//     TakeData (?NAME) or TakeData2 (??NAME) that comes back (from a group or axis 0: the answer
+//     of axis --from); without --value its value and checksum bytes are shown as ??. With
+//     --group, N is a group number 1-8 (0 = broadcast).
 //   omni-tml decode --protocol P INPUT...
 //     serial: hex bytes (packets, 'O' 4F, SYNC 0D); CAN: ID#DATA as can-utils' cansend writes
 //     it (3 hex digits: 11-bit, 8: 29-bit); raw: hex words, opcode first.
@@ -201,8 +202,9 @@ void print_expected(const Options& o, const Message& m) {
   const bool serial = o.protocol == "rs232" || o.protocol == "rs485";
   const Link link = o.protocol == "rs485" ? Link::rs485 : Link::rs232;
   if (serial) {
-    fmt::print("expect:    {}\n", acknowledged(link, m) ? "4F   ('O': received, checksum good)"
-                                                        : "nothing (RS-485 group message: no acknowledgement)");
+    fmt::print("expect:    {}\n", acknowledged(link, m)
+                                      ? "4F   ('O': received, checksum good)"
+                                      : "nothing (RS-485 group or axis 0 message: no acknowledgement)");
   }
   const Classified c = classify(m);
   if (c.kind != Kind::give_me_data && c.kind != Kind::give_me_data2) {
@@ -211,6 +213,12 @@ void print_expected(const Options& o, const Message& m) {
   }
   if (is_group(m.id_code) && o.from < 0) {
     fmt::print("answer:    one TakeData2 from each group member, lower axis IDs first (give --from N to see one)\n");
+    return;
+  }
+  // Every drive that hears axis 0 answers with its own axis ID, which the tool does not know.
+  if (id_of(m.id_code) == 0 && o.from < 0) {
+    fmt::print("answer:    one {} from each drive that hears axis 0, with its own axis ID (give --from N to see one)\n",
+               c.kind == Kind::give_me_data ? "TakeData" : "TakeData2");
     return;
   }
   const Query q{c, axis_id_code(static_cast<std::uint8_t>(o.from >= 0 ? o.from : id_of(m.id_code)))};
@@ -346,7 +354,7 @@ int send_serial(const Options& o, const Message& m) {
   SerialHostLink link(cfg, [fd](std::uint8_t b, std::int64_t) { (void)!::write(fd, &b, 1); }, [&](const HostEvent& e) {
     switch (e.kind) {
       case HostEventKind::acked: fmt::print("received:  4F ('O')\n"), done = true; break;
-      case HostEventKind::sent_unacknowledged: fmt::print("sent (no acknowledgement on RS-485 for a group)\n"), done = true; break;
+      case HostEventKind::sent_unacknowledged: fmt::print("sent (no acknowledgement on RS-485 for a group or axis 0)\n"), done = true; break;
       case HostEventKind::answer: fmt::print("received:  4F ('O') and {}\n           {}\n", hex_bytes(encode_packet(e.message).view()), describe(e.message)), done = true; break;
       case HostEventKind::answer_timeout: fmt::print("received:  4F ('O'), then no answer\n"), done = true, code = kExitNoAnswer; break;
       case HostEventKind::resent: fmt::print("no 'O': SYNC bytes echoed, command sent again\n"); break;

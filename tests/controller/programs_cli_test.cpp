@@ -38,13 +38,13 @@ class ProgramsCli : public ::testing::Test {
  protected:
   struct Result {
     int code;
-    std::string err;
+    std::string err, out;
   };
   // Runs controller/PROGRAM with `args`; -1 when it has not ended within `limit`.
   Result run(const std::string& program, const std::vector<std::string>& args, std::chrono::milliseconds limit = 3s) {
     Child c(binary_path("controller/" + program), args, dir_.path(), dir_.path(), "p" + std::to_string(++n_));
     const int code = c.wait(limit);
-    return {code, c.err()};
+    return {code, c.err(), c.out()};
   }
   // Exit 2 and a one-line message holding `part`, not CLI11's range text with DBL_MAX in full.
   void expect_usage(const Result& r, const std::string& part) {
@@ -67,6 +67,22 @@ TEST_F(ProgramsCli, TmlSendRefusesAGroupNumberOver8) {
   args = line;
   args.insert(args.end(), {"--group", "KPP=5"});  // the default --axis 255
   expect_usage(run("omni-tml", args), "group number 1-8");
+}
+
+// Found in review: encode predicted the answer to axis 0 "from 0000"; every drive that takes
+// axis 0 answers with its own axis ID, and on RS-485 the answers (and the 'O's) would collide.
+TEST_F(ProgramsCli, TmlEncodeDoesNotPredictAnAnswerFromAxis0) {
+  expect_usage(run("omni-tml", {"encode", "-p", "rs485", "-a", "0", "?KPP"}), "axis 0");
+  Result r = run("omni-tml", {"encode", "-p", "rs485", "-a", "0", "KPP=5"});
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "expect:    nothing")) << r.out;
+  for (const std::string p : {"rs232", "tmlcan"}) {
+    r = run("omni-tml", {"encode", "-p", p, "-a", "0", "?KPP"});
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(contains(r.out, "give --from N")) << r.out;
+  }
+  r = run("omni-tml", {"encode", "-p", "rs232", "-a", "0", "--from", "3", "--value", "5", "?KPP"});
+  EXPECT_TRUE(contains(r.out, "0A 0F F1 B4 04 00 30 02 5E 00 05")) << r.out;
 }
 
 // Found in review: --baud 0 aborted (exit 134), 4800 opened the port at 9600.

@@ -298,6 +298,23 @@ TEST(TmlDrive, Rs485SendsNoTypeCAndRefusesGroupRequests) {
   EXPECT_EQ(r.sent[0], take_data(0x0FF0, 0x0010, reg::kpp, 0x0120, false));
 }
 
+// Found in review: every drive on an RS-485 line hears axis 0 (seed ch. 2), so a request to
+// axis 0 had every drive answer at once and the answers collided (seed ch. 3).
+TEST(TmlDrive, Rs485DriveDoesNotAnswerARequestToAxisZero) {
+  Rig r(setup_for(1, Protocol::rs485));
+  r.in(give_me_data(axis_id_code(0), axis_id_code(255), reg::kpp, false));
+  r.in(give_me_data2(axis_id_code(0), axis_id_code(255), reg::kpp, false));
+  EXPECT_TRUE(r.sent.empty());
+  EXPECT_EQ(r.d.stats().refused, 2u);
+  r.in(*assign16(axis_id_code(0), reg::kpp, 3));  // a type A message to axis 0 still executes
+  EXPECT_EQ(kpp_of(r), 3);
+  // Point to point (RS-232) the one drive answers axis 0 with its own axis.
+  Rig p(setup_for(1, Protocol::rs232));
+  p.in(give_me_data(axis_id_code(0), host_id_code(1), reg::kpp, false));
+  ASSERT_EQ(p.sent.size(), 1u);
+  EXPECT_EQ(p.sent[0], take_data(host_id_code(1), axis_id_code(1), reg::kpp, 0x0120, false));
+}
+
 TEST(TmlDrive, TechCanSyncSetSyncAndMasterTime) {
   Rig master(setup_for(1, Protocol::techcan)), slave(setup_for(2, Protocol::techcan));
   slave.d.power_on(7 * kMs);  // powered 7 ms later: its clock lags by 7 ms

@@ -373,6 +373,26 @@ TEST(TmlSerialLink, Rs485RefusesWhatTheSeedForbids) {
   EXPECT_TRUE(rig.host_tx.empty());
 }
 
+// Found in review: every drive on an RS-485 line takes axis 0 (seed ch. 2) and each answered
+// it with 'O', so the 'O's collided; a request to axis 0 had every drive answer at once.
+TEST(TmlSerialLink, Rs485AxisZeroIsNotAcknowledgedAndTakesNoRequests) {
+  Rig rig(Link::rs485, 9600, 1);
+  const Message to_all = msg(axis_id_code(0), 0x205E, {5});
+  EXPECT_FALSE(acknowledged(Link::rs485, to_all));
+  EXPECT_TRUE(acknowledged(Link::rs232, to_all));
+  ASSERT_EQ(rig.host.send(to_all, 0), SendStatus::ok);
+  EXPECT_TRUE(rig.host.idle());
+  rig.run(kSecond);
+  EXPECT_TRUE(rig.drive_tx.empty());  // delivered, not acknowledged
+  ASSERT_EQ(rig.delivered.size(), 1u);
+  ASSERT_EQ(rig.kinds(), std::vector<HostEventKind>{HostEventKind::sent_unacknowledged});
+  const Message ask_all = give_me_data(axis_id_code(0), axis_id_code(255), 0x025E, false);
+  EXPECT_EQ(check_host_message(Link::rs485, ask_all), LinkCheck::request_to_axis_0_on_rs485);
+  EXPECT_EQ(check_host_message(Link::rs232, give_me_data(axis_id_code(0), host_id_code(255), 0x025E, false)),
+            LinkCheck::ok);
+  EXPECT_EQ(rig.host.send(ask_all, 2 * kSecond), SendStatus::not_allowed);
+}
+
 TEST(TmlSerialLink, Rs232UnsolicitedTakeData2ReachesTheHost) {
   Rig rig(Link::rs232);
   rig.drive.send(take_data2(master_id(255), 255, 0x090E, 0x02018400, true), 0);
