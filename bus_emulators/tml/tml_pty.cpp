@@ -66,6 +66,7 @@ TmlPty::TmlPty(TmlDrive& drive, std::uint32_t baud)
   const char* name = ptsname(master_);
   if (name == nullptr) fail("ptsname");
   slave_path_ = name;
+  link_.set_groups([this] { return drive_.groups(); });
   slave_keep_ = open(name, O_RDWR | O_NOCTTY);
   if (slave_keep_ < 0) fail("open pty slave");
   make_raw(slave_keep_, baud);
@@ -80,6 +81,7 @@ void TmlPty::add_drop(TmlDrive& drive) {
       link_config(drive, baud_), [this](std::uint8_t b, std::int64_t end_ns) { queue(b, end_ns); },
       [&drive](const Message& m, std::int64_t t) { drive.on_message(m, t); });
   SerialDriveLink* l = link.get();
+  l->set_groups([&drive] { return drive.groups(); });
   drive.set_sender([l](const Message& m, SimTime t) { l->send(m, t); });
   drops_.push_back(std::move(link));
   drop_drives_.push_back(&drive);

@@ -197,7 +197,10 @@ SerialDriveLink::SerialDriveLink(const DriveLinkConfig& cfg, LineTx::Sink tx, Me
       rx_(Role::drive, [this](const RxEvent& e) { on_event(e); }) {}
 
 bool SerialDriveLink::for_us(std::uint16_t id_code) const {
-  if (is_group(id_code)) return is_broadcast(id_code) || (id_of(id_code) & cfg_.groups) != 0;
+  if (is_group(id_code)) {
+    const std::uint8_t mask = groups_ ? groups_() : cfg_.groups;
+    return is_broadcast(id_code) || (id_of(id_code) & mask) != 0;
+  }
   return id_of(id_code) == 0 || id_of(id_code) == cfg_.axis;
 }
 

@@ -153,7 +153,7 @@ class SerialReceiver {
 struct DriveLinkConfig {
   Link link = Link::rs232;
   std::uint8_t axis = 255;        // this drive's axis ID
-  std::uint8_t groups = 1;        // its group ID (mask); default group 1
+  std::uint8_t groups = 1;        // its group ID (mask) when set_groups() gives none; default group 1
   std::uint32_t baud = 9600;
 };
 
@@ -162,7 +162,8 @@ struct DriveLinkStats {
 };
 
 // A drive's serial port. Every packet with a good checksum that is for this drive (RS-232: every
-// packet — the relay forwards the others; RS-485: its axis, axis 0, or one of its groups) goes
+// packet — the relay forwards the others; RS-485: its axis, axis 0, or one of its groups, as the
+// drive's current group mask says when set_groups() gives it) goes
 // to the message sink; it is acknowledged with 'O' unless it is a group or axis-0 message on
 // RS-485 or an answer/type C message. Bad checksums: counted, no acknowledgement. SYNC bytes between packets
 // are echoed with 0x0D on RS-232. send() puts answers and type C messages on the line.
@@ -172,11 +173,15 @@ class SerialDriveLink {
   SerialDriveLink(const DriveLinkConfig& cfg, LineTx::Sink tx, MessageSink on_message);
   SerialDriveLink(const SerialDriveLink&) = delete;
   SerialDriveLink& operator=(const SerialDriveLink&) = delete;
+  // Set-up: where the group mask comes from (the drive's, which GROUPID/ADDGRID/REMGRID change);
+  // empty: cfg.groups.
+  void set_groups(std::function<std::uint8_t()> groups) { groups_ = std::move(groups); }
   // One byte received from the host; t_ns: the end of its stop bits. RT-safe.
   void on_byte(std::uint8_t b, std::int64_t t_ns) { rx_.on_byte(b, t_ns); }
   // Sends a message (answer or type C) after whatever is already on the line. RT-safe.
   void send(const Message& m, std::int64_t now_ns) { tx_.send(encode_packet(m).view(), now_ns); }
-  // Whether this drive takes a message with this destination ID code (RS-485 rules). RT-safe.
+  // Whether this drive takes a message with this destination ID code (RS-485 rules; groups: the
+  // current mask). RT-safe.
   bool for_us(std::uint16_t id_code) const;
   const RxStats& rx_stats() const { return rx_.stats(); }
   const DriveLinkStats& stats() const { return stats_; }
@@ -186,6 +191,7 @@ class SerialDriveLink {
   DriveLinkConfig cfg_;
   LineTx tx_;
   MessageSink on_message_;
+  std::function<std::uint8_t()> groups_;
   SerialReceiver rx_;
   DriveLinkStats stats_;
 };

@@ -2,7 +2,8 @@
 // pseudo-terminal opened by the test with plain termios (8N2, 9600 bit/s). A command to one axis
 // is acknowledged once, by that drive alone, and changes only it; a group message (RS-485: no
 // acknowledgement, seed ch. 3) reaches every member; GiveMeData to one axis is answered by that
-// axis; two drives of other protocols cannot share the line.
+// axis; GROUPID/ADDGRID change which group messages reach a drive (found in review: the ports
+// filtered with the group mask of the set-up); two drives of other protocols cannot share the line.
 #include "bus_emulators/tml/tml_pty.hpp"
 #include "tests/support/raw_serial.hpp"
 
@@ -86,6 +87,24 @@ TEST_F(MultiDrop, AGroupMessageReachesEveryoneUnacknowledged) {
   send(*assign16(group_id_code(group_mask(1)), 0x025E, 7));
   EXPECT_TRUE(receive(100).empty());
   for (int i = 0; i < 3; ++i) EXPECT_EQ(kpp(i), 7u) << i;
+}
+
+TEST_F(MultiDrop, GroupIdAndAddGridChangeWhichGroupMessagesReachADrive) {
+  send(instruction(axis_id_code(2), instr::addgrid, 2));  // axis 2: groups 1 and 2
+  EXPECT_EQ(receive(60), Bytes{0x4F});
+  send(instruction(axis_id_code(3), instr::groupid, 2));  // axis 3: group 2 only
+  EXPECT_EQ(receive(60), Bytes{0x4F});
+  ASSERT_EQ(drives[1]->groups(), 0x03);
+  send(*assign16(group_id_code(group_mask(2)), 0x025E, 9));
+  EXPECT_TRUE(receive(60).empty());
+  EXPECT_EQ(kpp(0), 0x0120u);
+  EXPECT_EQ(kpp(1), 9u);
+  EXPECT_EQ(kpp(2), 9u);
+  send(*assign16(group_id_code(group_mask(1)), 0x025E, 7));
+  EXPECT_TRUE(receive(60).empty());
+  EXPECT_EQ(kpp(0), 7u);
+  EXPECT_EQ(kpp(1), 7u);
+  EXPECT_EQ(kpp(2), 9u);  // no longer in group 1
 }
 
 TEST_F(MultiDrop, GiveMeDataIsAnsweredByTheAddressedAxis) {
