@@ -83,6 +83,7 @@ void TmlDrive::power_on(SimTime t) {
   cacc_ = static_cast<std::int32_t>(kFixed);  // 1 IU: 1 count/sample² (our power-on default)
   motion_ = Motion::position;
   relative_ = want_on_ = halt_ = fault_reset_ = update_pending_ = set_point_high_ = false;
+  motion_complete_ = true;
   t0_ = now_ = t;
   time_offset_ms_ = 0, sync_latch_ms_ = 0, sync_period_ms_ = 0, next_sync_t_ = 0;
   update_status();
@@ -325,6 +326,7 @@ void TmlDrive::emit(const Message& m, SimTime t) {
 
 void TmlDrive::apply_update() {
   drive::Objects& o = core_.objects();
+  motion_complete_ = false;  // a new motion starts (SRL.10 = 0, seed ch. 3 example 3)
   const double acc = std::max(1.0, std::fabs(acc_iu_to_counts_s2(cacc_)));
   o.profile_acceleration = o.profile_deceleration = static_cast<std::uint32_t>(std::min(acc, 4.0e9));
   if (motion_ == Motion::speed) {
@@ -387,8 +389,12 @@ void TmlDrive::update_status() {
   const bool on = axis_on(s);
   srl_ = 0;
   if (on) srl_ |= bits::srl_axis_on;
-  // Motion complete: the core's target reached while on; nothing is moving while off.
-  if (!on || (o.statusword & drive::sw::target_reached)) srl_ |= bits::srl_motion_complete;
+  // Motion complete, latched: set while off (nothing moves) and the first time the core reports
+  // the target of the last UPD reached (not again as the position wavers at the window's edge);
+  // only the next UPD clears it.
+  const bool set_point_taken = !update_pending_ && !set_point_high_;
+  if (!on || (set_point_taken && (o.statusword & drive::sw::target_reached))) motion_complete_ = true;
+  if (motion_complete_) srl_ |= bits::srl_motion_complete;
   srh_ = faulted(s) ? bits::srh_fault : 0;
   mer_ = o.error_code == drive::kErrorFollowing ? bits::mer_control_error : 0;
 }

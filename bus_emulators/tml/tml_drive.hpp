@@ -207,6 +207,7 @@ class TmlDrive {
   Motion motion_ = Motion::position;
   bool relative_ = false, want_on_ = false, halt_ = false, fault_reset_ = false;
   bool update_pending_ = false, set_point_high_ = false;
+  bool motion_complete_ = true;  // SRL.10, latched: cleared by UPD, set when the target is first reached
   // Time.
   SimTime t0_ = 0, now_ = 0;  // power-on time; time of the last message or step
   std::int64_t time_offset_ms_ = 0;

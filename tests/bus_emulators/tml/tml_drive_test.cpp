@@ -240,6 +240,32 @@ TEST(TmlDrive, PositionModeReachesTargetAndSetsMotionComplete) {
   EXPECT_EQ(r.d.stats().take_data2_sent, 4u);
 }
 
+// Found in review: SRL.10 followed the core's target-reached bit, which fell again when the
+// position crossed the window's edge at the end of a move: 1 → 0 → 1 → 0 → 1, and a host saw
+// a new motion start (seed ch. 3 example 3). It is latched now: cleared by UPD, set once.
+TEST(TmlDrive, MotionCompleteIsSetOnceAtTheEndOfAPositionMove) {
+  Rig r(setup_for(5, Protocol::rs232, 3));
+  r.run(10);
+  r.cmd(instr::axison);
+  r.run(100);
+  r.set16(reg::srl_mask, 0x0400);
+  r.set32(reg::cpos, 5000);
+  r.set32(reg::cspd, 0x00050000);  // 5 counts/sample; the default CACC
+  r.cmd(instr::upd);
+  r.run(4000);
+  ASSERT_EQ(r.sent.size(), 2u);  // SRL.10 1 → 0 when the move starts, 0 → 1 when it ends
+  EXPECT_EQ(r.sent[0], take_data2(master_id(3), 5, reg::srl, 0x00008000, true));
+  EXPECT_EQ(r.sent[1], take_data2(master_id(3), 5, reg::srl, 0x00008400, true));
+  EXPECT_NEAR(static_cast<std::int32_t>(r.get(reg::apos, true)), 5000, 10);
+  // The next UPD starts a new motion: SRL.10 falls again, then rises once.
+  r.set32(reg::cpos, 0);
+  r.cmd(instr::upd);
+  r.run(4000);
+  ASSERT_EQ(r.sent.size(), 4u);
+  EXPECT_EQ(r.sent[2], take_data2(master_id(3), 5, reg::srl, 0x00008000, true));
+  EXPECT_EQ(r.sent[3], take_data2(master_id(3), 5, reg::srl, 0x00008400, true));
+}
+
 TEST(TmlDrive, AxisOffSwitchesThePowerStageOff) {
   Rig r(setup_for(5));
   r.cmd(instr::axison);
