@@ -203,6 +203,11 @@ bool TmlDrive::accepts(std::uint16_t id_code) const {
 void TmlDrive::on_message(const Message& m, SimTime t) {
   if (!powered_) return;
   now_ = t;
+  // ID code bits 15–13 and 3–1 are zero (seed ch. 2): a malformed ID code addresses nobody.
+  if (!id_code_valid(m.id_code)) {
+    ++stats_.invalid_id_codes;
+    return;
+  }
   const Kind k = classify(m).kind;
   // Answers of other drives are not for us (TechCAN does not even carry their destination).
   if (k == Kind::take_data || k == Kind::take_data2) {

@@ -123,6 +123,7 @@ struct DriveStats {
   std::uint64_t unknown_opcodes = 0;
   std::uint64_t unknown_addresses = 0;  // reads/writes of addresses we do not model, read-only writes
   std::uint64_t refused = 0;          // well-formed but not allowed (e.g. GiveMeData to a group)
+  std::uint64_t invalid_id_codes = 0;  // ID code bits 15–13 or 3–1 set: dropped
   std::uint64_t syncs_sent = 0;       // as SETSYNC master
   std::uint64_t syncs_received = 0;
   std::uint64_t steps = 0;
@@ -151,7 +152,8 @@ class TmlDrive {
   // Whether a message with this destination ID code is for this drive (axis, axis 0, a group it
   // belongs to, broadcast; HOST bit clear). RT-safe.
   bool accepts(std::uint16_t id_code) const;
-  // One received message at t (any destination: addressing is done here). RT-safe.
+  // One received message at t (any destination: addressing is done here; an ID code with bits
+  // 15–13 or 3–1 set is dropped and counted). RT-safe.
   void on_message(const Message& m, SimTime t);
   // One drive period at t: motion requests → controlword, the drive core's step, status
   // registers, type C TakeData2, SETSYNC master. Returns the command to the physics. RT-safe.

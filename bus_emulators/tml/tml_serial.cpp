@@ -207,6 +207,11 @@ bool SerialDriveLink::for_us(std::uint16_t id_code) const {
 void SerialDriveLink::on_event(const RxEvent& e) {
   switch (e.kind) {
     case RxEventKind::message:
+      // ID code bits 15–13 and 3–1 are zero (seed ch. 2): a malformed one is for nobody, no 'O'.
+      if (!id_code_valid(e.message.id_code)) {
+        ++stats_.invalid_id_codes;
+        return;
+      }
       // RS-485 is multi-drop: only the addressed drives take it; the RS-232 relay takes all.
       if (cfg_.link == Link::rs485 && !for_us(e.message.id_code)) {
         ++stats_.not_for_us;

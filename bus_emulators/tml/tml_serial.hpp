@@ -159,14 +159,16 @@ struct DriveLinkConfig {
 
 struct DriveLinkStats {
   std::uint64_t acks_sent = 0, syncs_echoed = 0, not_for_us = 0, delivered = 0;
+  std::uint64_t invalid_id_codes = 0;  // ID code bits 15–13 or 3–1 set: dropped, no 'O'
 };
 
-// A drive's serial port. Every packet with a good checksum that is for this drive (RS-232: every
+// A drive's serial port. Every packet with a good checksum and a well-formed ID code (bits 15–13
+// and 3–1 zero; others are counted and dropped, no 'O') that is for this drive (RS-232: every
 // packet — the relay forwards the others; RS-485: its axis, axis 0, or one of its groups, as the
-// drive's current group mask says when set_groups() gives it) goes
-// to the message sink; it is acknowledged with 'O' unless it is a group or axis-0 message on
-// RS-485 or an answer/type C message. Bad checksums: counted, no acknowledgement. SYNC bytes between packets
-// are echoed with 0x0D on RS-232. send() puts answers and type C messages on the line.
+// drive's current group mask says when set_groups() gives it) goes to the message sink; it is
+// acknowledged with 'O' unless it is a group or axis-0 message on RS-485 or an answer/type C
+// message. Bad checksums: counted, no acknowledgement. SYNC bytes between packets are echoed
+// with 0x0D on RS-232. send() puts answers and type C messages on the line.
 class SerialDriveLink {
  public:
   using MessageSink = std::function<void(const Message&, std::int64_t t_ns)>;

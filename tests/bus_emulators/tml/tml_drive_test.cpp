@@ -341,6 +341,19 @@ TEST(TmlDrive, Rs485DriveDoesNotAnswerARequestToAxisZero) {
   EXPECT_EQ(p.sent[0], take_data(host_id_code(1), axis_id_code(1), reg::kpp, 0x0120, false));
 }
 
+// Found in review: ID codes with bits 15–13 or 3–1 set (zero by chapter 2) were executed: id_of()
+// of 0x2050 and 0x005E is 5.
+TEST(TmlDrive, MessagesWithMalformedIdCodesAreDropped) {
+  Rig r(setup_for(5, Protocol::rs232, 3));
+  r.in(*assign16(0x2050, reg::kpp, 77));
+  r.in(*assign16(0x005E, reg::kpp, 78));
+  r.in(give_me_data(0x0052, host_id_code(3), reg::kpp, false));
+  EXPECT_EQ(kpp_of(r), 0x0120);
+  EXPECT_TRUE(r.sent.empty());
+  EXPECT_EQ(r.d.stats().invalid_id_codes, 3u);
+  EXPECT_EQ(r.d.stats().handled, 0u);
+}
+
 TEST(TmlDrive, TechCanSyncSetSyncAndMasterTime) {
   Rig master(setup_for(1, Protocol::techcan)), slave(setup_for(2, Protocol::techcan));
   slave.d.power_on(7 * kMs);  // powered 7 ms later: its clock lags by 7 ms

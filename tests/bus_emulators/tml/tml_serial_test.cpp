@@ -393,6 +393,21 @@ TEST(TmlSerialLink, Rs485AxisZeroIsNotAcknowledgedAndTakesNoRequests) {
   EXPECT_EQ(rig.host.send(ask_all, 2 * kSecond), SendStatus::not_allowed);
 }
 
+// Found in review: a packet whose ID code has bits 15–13 or 3–1 set (zero by chapter 2) was
+// acknowledged and delivered; id_of() of 0x2050 and 0x005E is 5.
+TEST(TmlSerialLink, AMalformedIdCodeIsDroppedWithoutAcknowledgement) {
+  for (const Link link : {Link::rs232, Link::rs485}) {
+    Rig rig(link, 9600, 5);
+    for (const std::uint16_t id : {0x2050, 0x005E}) {
+      const Packet p = encode_packet(msg(id, 0x205E, {77}));
+      for (const std::uint8_t b : p.view()) rig.drive.on_byte(b, 0);
+    }
+    EXPECT_TRUE(rig.drive_tx.empty()) << to_string(link);
+    EXPECT_TRUE(rig.delivered.empty()) << to_string(link);
+    EXPECT_EQ(rig.drive.stats().invalid_id_codes, 2u) << to_string(link);
+  }
+}
+
 TEST(TmlSerialLink, Rs232UnsolicitedTakeData2ReachesTheHost) {
   Rig rig(Link::rs232);
   rig.drive.send(take_data2(master_id(255), 255, 0x090E, 0x02018400, true), 0);
