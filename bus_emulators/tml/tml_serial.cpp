@@ -325,6 +325,14 @@ void SerialHostLink::emit(HostEventKind k, std::int64_t t_ns, const Message& m) 
   if (on_event_) on_event_(e);
 }
 
+bool SerialHostLink::answers(const Message& m) const {
+  // GiveMeData (B004/B005) → TakeData (B404/B405), GiveMeData2 (B204/B205) → TakeData2
+  // (D4xx/D5xx), of the same width and address.
+  const Classified q = classify(command_), a = classify(m);
+  const Kind want = q.kind == Kind::give_me_data ? Kind::take_data : Kind::take_data2;
+  return a.kind == want && a.wide == q.wide && a.address == q.address;
+}
+
 void SerialHostLink::on_rx(const RxEvent& e) {
   switch (e.kind) {
     case RxEventKind::ack: return step(Transition::ack, e.t_ns, nullptr);
@@ -355,8 +363,8 @@ void SerialHostLink::step(Transition t, std::int64_t t_ns, const Message* m) {
       transmit_command(t_ns);
       return emit(HostEventKind::resent, t_ns, command_);
     case Transition::message: {
-      const Kind k = classify(*m).kind;
-      if (state_ == State::wait_answer && (k == Kind::take_data || k == Kind::take_data2)) {
+      // Only the answer to the request ends the wait; a type C TakeData2 may arrive before it.
+      if (state_ == State::wait_answer && answers(*m)) {
         state_ = State::idle, deadline_ = kNever;
         return emit(HostEventKind::answer, t_ns, *m);
       }

@@ -212,11 +212,11 @@ struct HostLinkConfig {
 enum class HostEventKind : std::uint8_t {
   acked,                // 'O' for a type A command
   sent_unacknowledged,  // an RS-485 group or axis-0 message left the line (no 'O' expected)
-  answer,               // the TakeData / TakeData2 of a type B request ('O' came first)
+  answer,               // the TakeData / TakeData2 of a type B request ('O' came first): same kind, width, address
   answer_timeout,       // 'O' came, the answer did not
   resent,               // the command was sent again after SYNC recovery
   link_broken,          // recovery failed
-  unsolicited,          // a message that is not the awaited answer (type C)
+  unsolicited,          // a message that is not the awaited answer (type C, or another request's answer)
 };
 const char* to_string(HostEventKind k);
 
@@ -238,7 +238,9 @@ const char* to_string(SendStatus s);
 //   wait_echo   — RS-232: 0x0D echoed → resend, wait_ack (more than max_resends: link_broken);
 //                 no echo by sync_timeout → another SYNC (max_sync in all: link_broken).
 //   wait_resync — RS-485: sync_timeout after the 15th SYNC → resend once, wait_ack.
-//   wait_answer — TakeData/TakeData2 → answer, idle; answer_timeout → answer_timeout, idle.
+//   wait_answer — the TakeData (of a GiveMeData) or TakeData2 (of a GiveMeData2) of the same width
+//                 and address → answer, idle; any other message → unsolicited, still waiting;
+//                 answer_timeout → answer_timeout, idle.
 //   broken      — send() refused until reset().
 class SerialHostLink {
  public:
@@ -270,6 +272,8 @@ class SerialHostLink {
   void start_recovery(std::int64_t now_ns);
   void emit(HostEventKind k, std::int64_t t_ns, const Message& m);
   void on_rx(const RxEvent& e);
+  // Whether m is the answer to the type B command_ (its kind, width and address). RT-safe.
+  bool answers(const Message& m) const;
 
   HostLinkConfig cfg_;
   LineTx tx_;

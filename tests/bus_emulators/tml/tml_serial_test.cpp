@@ -408,6 +408,35 @@ TEST(TmlSerialLink, AMalformedIdCodeIsDroppedWithoutAcknowledgement) {
   }
 }
 
+// Found in review: the host took any TakeData/TakeData2 as the answer; an unsolicited SR32
+// TakeData2 arriving before the TakeData of ?KPP was reported as its answer.
+TEST(TmlSerialLink, OnlyTheMatchingTakeDataAnswersARequest) {
+  Rig rig(Link::rs232);
+  rig.answer = false;
+  ASSERT_EQ(rig.host.send(give_me_data(axis_id_code(255), host_id_code(255), 0x025E, false), 0), SendStatus::ok);
+  rig.run(20'000'000);  // the 'O' is in
+  rig.drive.send(take_data2(0x0FF1, 255, 0x090E, 0x02018400, true), 21'000'000);           // type C
+  rig.drive.send(take_data(0x0FF1, 0x0FF0, 0x022A, 0x0002, false), 21'000'000);            // another address
+  rig.drive.send(take_data(0x0FF1, 0x0FF0, 0x025E, 0x0120, false), 21'000'000);            // the answer
+  rig.run(kSecond);
+  ASSERT_EQ(rig.kinds(), (std::vector<HostEventKind>{HostEventKind::unsolicited, HostEventKind::unsolicited,
+                                                     HostEventKind::answer}));
+  EXPECT_EQ(classify(rig.events[2].message).value, 0x0120u);
+  // GiveMeData2 of SR32 (B205) is answered by a 32-bit TakeData2 (D5xx) of SRL, not by TakeData.
+  ASSERT_EQ(rig.host.send(give_me_data2(axis_id_code(255), host_id_code(255), 0x090E, true), 2 * kSecond),
+            SendStatus::ok);
+  rig.run(2 * kSecond + 20'000'000);
+  rig.drive.send(take_data(0x0FF1, 0x0FF0, 0x090E, 0x8400, false), 2 * kSecond + 21'000'000);
+  rig.drive.send(take_data2(0x0FF1, 255, 0x090E, 0x8400, false), 2 * kSecond + 21'000'000);  // 16-bit
+  rig.drive.send(take_data2(0x0FF1, 255, 0x090E, 0x02018400, true), 2 * kSecond + 21'000'000);
+  rig.run(3 * kSecond);
+  ASSERT_EQ(rig.events.size(), 6u);
+  EXPECT_EQ(rig.events[3].kind, HostEventKind::unsolicited);
+  EXPECT_EQ(rig.events[4].kind, HostEventKind::unsolicited);
+  EXPECT_EQ(rig.events[5].kind, HostEventKind::answer);
+  EXPECT_EQ(classify(rig.events[5].message).value, 0x02018400u);
+}
+
 TEST(TmlSerialLink, Rs232UnsolicitedTakeData2ReachesTheHost) {
   Rig rig(Link::rs232);
   rig.drive.send(take_data2(master_id(255), 255, 0x090E, 0x02018400, true), 0);
