@@ -25,7 +25,7 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
   c.file = file;
   const Members top(file, root, "",
                     {"esi", "cycle", "dc", "expected_slaves", "startup", "wheels", "wheel_mode", "wheel_counts_per_rev",
-                     "platform", "user_pdo", "segment_loss_cycles", "segment_loss_ms"});
+                     "platform", "user_pdo", "segment_loss_cycles", "segment_loss_ms", "startup_timeout"});
   const Val* esi = top.get("esi");
   if (!esi) fail(file, root, "esi", "required (the ESI files describing the slaves)");
   if (esi->node.IsScalar()) {
@@ -65,11 +65,13 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
     if (v < 0 || v > 100000) fail(file, *n, "segment_loss_ms", "must be in 0..100000");
     c.segment_loss_ms = static_cast<int>(v);
   }
+  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, 3600);
   if (const Val* n = top.get("startup")) {
     if (!n->node.IsSequence()) fail(file, *n, "startup", "expected a list");
     for (const Val& e : elements(*n)) {
       const Members m(file, e, "startup", {"slave", "index", "sub", "size", "value"});
       StartupSdo s;
+      s.origin = fmt::format("{}:{}: startup", file, e.line);
       const Val* slave = m.get("slave");
       if (!slave || (slave->node.IsScalar() && slave->node.Scalar() == "all")) {
         s.position = -1;
@@ -166,6 +168,7 @@ EcMasterConfig make_master_config(const EcConfig& c) {
   m.expected_slaves = c.expected_slaves;
   m.segment_loss_cycles = c.segment_loss_cycles;
   m.segment_loss_ns = static_cast<SimTime>(c.segment_loss_ms) * 1'000'000;
+  m.startup_timeout_ns = std::llround(c.startup_timeout * 1e9);
   return m;
 }
 

@@ -3,7 +3,7 @@
 //
 // It names the ESI files to load, the cycle, distributed clocks (on/off, SYNC0 shift), the
 // segment watch (segment_loss_cycles and segment_loss_ms: silent cycles, and how long at least,
-// before leaving OP), the start-up SDOs per
+// before leaving OP), how long to wait for any slave to answer (startup_timeout), the start-up SDOs per
 // slave (e.g. 0x6060 = 9 for CSV), which (slave, channel) drives each of the
 // four wheels, how wheel speeds go out (CSV target velocity or CSP target position) and the
 // wheel encoder counts per revolution, and the platform loop. The file is read with yaml-cpp.
@@ -47,6 +47,7 @@ struct EcConfig {
   // the segment lost, leaves OP and stops its drives; 0 = never.
   int segment_loss_cycles = 10;
   int segment_loss_ms = 10;  // …and at least this long (EcMasterConfig::segment_loss_ns)
+  double startup_timeout = 10;  // [s] no slave answering the count this long → failed (exit 3)
   std::vector<StartupSdo> startup;         // position -1 = every slave
   bool has_wheels = false;                 // `wheels` given: the platform loop runs
   std::array<AxisRef, 4> wheels{};         // wheel i+1 → axis

@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 namespace omnitwin::controller::ethercat {
 
 using botnana::PdsGoal;
@@ -212,6 +214,10 @@ std::optional<PdsState> EcDrives::state(int slave, int ch) const {
 std::uint16_t EcDrives::statusword(int slave, int ch) const {
   const Axis* a = find(slave, ch);
   return a ? a->sw : 0;
+}
+
+bool EcDrives::any_enabled() const {
+  return std::any_of(axes_.begin(), axes_.end(), [](const Axis& a) { return a.state == PdsState::operation_enabled; });
 }
 
 bool EcDrives::all_enabled() const {

@@ -54,6 +54,7 @@ class EcDrives : public botnana::DriveAccess {
   std::optional<PdsState> state(int slave, int ch) const;
   std::uint16_t statusword(int slave, int ch) const;
   bool all_enabled() const;  // every axis in operation enabled (false without axes)
+  bool any_enabled() const;  // some axis in operation enabled
   // Every axis was stopped because the segment was lost (until a new goal is set).
   bool stopped() const { return stopped_; }
   // Homed record per axis: set when the drive reports homing attained (mode display HM,
@@ -74,6 +75,9 @@ class EcDrives : public botnana::DriveAccess {
 
   // The objects behind drive-wpdo1/2 and drive-rpdo1/2 (CiA 402 base indices, every axis).
   void set_user_pdo(botnana::UserPdo which, botnana::ObjectRef object);
+  // Every axis to quick stop, set-points zero (what a lost segment does; see above), e.g. at
+  // the end of a run.
+  void stop_axes();
 
  private:
   struct Axis {
@@ -94,7 +98,6 @@ class EcDrives : public botnana::DriveAccess {
   static std::uint16_t object(int ch, std::uint16_t index);
   bool object_signed(int slave, std::uint16_t index, std::uint8_t sub) const;
   unsigned object_bytes(int slave, std::uint16_t index, std::uint8_t sub) const;
-  void stop_axes();
 
   EcMaster& m_;
   std::vector<Axis> axes_;

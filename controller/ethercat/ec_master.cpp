@@ -200,7 +200,13 @@ void EcMaster::tick(SimTime t) {
   // A cycle with a frame that never came back: the WKC of the frames that did (0 if none).
   if (cycle_parts_ > 0) close_cycle(false, t);
   for (auto& s : slaves_) s.mbx_read_sent = false;
+  if (stopping_) return shutdown_tick();
   if (phase_ == MasterPhase::failed) return;
+  if (first_tick_ < 0) first_tick_ = t;
+  if (phase_ == MasterPhase::count && config_.startup_timeout_ns > 0 && t - first_tick_ >= config_.startup_timeout_ns) {
+    fail(fmt::format("no slave answered within {} s", static_cast<double>(config_.startup_timeout_ns) * 1e-9));
+    return;
+  }
   for (auto& s : slaves_) slave_timeouts(s, t);
   if (phase_ == MasterPhase::failed) return;
   after_frame(t, false);  // progress that needs no reply (every slave waiting at a barrier)
@@ -268,13 +274,7 @@ void EcMaster::tick(SimTime t) {
     case MasterPhase::failed:
       break;
   }
-  bool sent = false;
-  if (b.datagrams() > 0) {
-    const std::size_t n = b.finish();
-    sent = send_ && send_(std::span<const std::uint8_t>(tx_.data(), n));
-    ++(sent ? stats_.frames_sent : stats_.send_failures);
-    awaiting_ = sent;
-  }
+  const bool sent = send_frame(b);
   cycle_back_ = 0;
   cycle_wkc_ = 0;
   if (phase_ == MasterPhase::running && lrw_own_frames_) {
@@ -282,6 +282,54 @@ void EcMaster::tick(SimTime t) {
   } else if (lrw_added && sent) {
     cycle_parts_ = 1;
   }
+}
+
+// The tick's frame out, when it has datagrams; true when the callback took it.
+bool EcMaster::send_frame(ec::PduBuilder& b) {
+  if (b.datagrams() == 0) return false;
+  const std::size_t n = b.finish();
+  const bool sent = send_ && send_(std::span<const std::uint8_t>(tx_.data(), n));
+  ++(sent ? stats_.frames_sent : stats_.send_failures);
+  awaiting_ = sent;
+  return sent;
+}
+
+void EcMaster::shutdown() {
+  if (stopping_) return;
+  stopping_ = true;
+  stop_target_ = AlState::safeop;
+  stop_done_ = slaves_.empty();
+  emit(stop_done_ ? std::string("shutdown: no slaves") : "shutdown: slaves to SAFE-OP, then INIT");
+}
+
+// One frame of the shutdown: BWR AL control (SAFE-OP, or INIT + error acknowledge), BRD AL status.
+void EcMaster::shutdown_tick() {
+  if (stop_done_) return;
+  index_ = static_cast<std::uint8_t>(index_ + index_stride_);
+  index_stride_ = 1;
+  slot_count_ = 0;
+  ec::PduBuilder b(tx_);
+  std::uint8_t al[2];
+  put_u16(al, stop_target_ == AlState::init ? std::uint16_t{0x0011} : static_cast<std::uint16_t>(AlState::safeop));
+  add(b, {SlotKind::stop_control}, Cmd::bwr, 0, kRegAlControl, 2, al);
+  add(b, {SlotKind::stop_status}, Cmd::brd, 0, kRegAlStatus, 2);
+  send_frame(b);
+}
+
+// The shutdown's BRD of the AL status (the states of every slave reached, ORed): no slave in OP
+// any more → ask for INIT; only INIT → done.
+void EcMaster::stop_status(const ec::Datagram& d) {
+  if (d.wkc() == 0) return;  // nobody answered: the caller's bounded wait ends it
+  const std::uint16_t st = get_u16(d.data()) & 0x0F;
+  if (stop_target_ == AlState::safeop) {
+    if (!(st & static_cast<std::uint16_t>(AlState::op))) stop_target_ = AlState::init;
+    return;
+  }
+  if (st != static_cast<std::uint16_t>(AlState::init)) return;
+  stop_done_ = true;
+  if (d.wkc() == slaves_.size())
+    for (auto& s : slaves_) s.al_state = AlState::init;
+  emit(fmt::format("shutdown: {} of {} slaves answered in INIT", d.wkc(), slaves_.size()));
 }
 
 // Overlapped or in several frames: each slave's outputs of group g at its place in wire_ (for
@@ -409,6 +457,7 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
           slaves_[k].station = static_cast<std::uint16_t>(kStationBase + k);
         }
         emit(fmt::format("{} slaves found", n));
+        if (!startup_positions_ok()) return;
         phase_ = MasterPhase::reset;
         reset_ok_ = true;
         break;
@@ -472,13 +521,30 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
       case SlotKind::dc:
         dc_reply(d, sl.slave, sl.sub, t);
         break;
+      case SlotKind::stop_control:
+        break;
+      case SlotKind::stop_status:
+        stop_status(d);
+        break;
     }
     if (phase_ == MasterPhase::failed) return;
   }
+  if (stopping_) return;
   if (sm1_event)  // someone has mail: read every idle mailbox until it is empty
     for (auto& s : slaves_)
       if (!s.job && mbx_ready(s)) s.mbx_poll = true;
   after_frame(t, true);
+}
+
+// Every start-up SDO names a slave the count found (else failed, naming the entry).
+bool EcMaster::startup_positions_ok() {
+  for (const auto& st : config_.startup) {
+    if (st.position < static_cast<int>(slaves_.size())) continue;
+    fail(fmt::format("{}start-up SDO 0x{:04X}:{} names slave {}, but the bus has {} slave(s)",
+                     st.origin.empty() ? "" : st.origin + ": ", st.index, st.sub, st.position + 1, slaves_.size()));
+    return false;
+  }
+  return true;
 }
 
 void EcMaster::after_frame(SimTime t, bool from_frame) {
@@ -561,7 +627,7 @@ void EcMaster::after_frame(SimTime t, bool from_frame) {
 // Supervision of one cyclic exchange (once OP was reached): WKC errors, the search for a
 // missing slave after wkc_loss_cycles, the segment watch. `returned` false: the frame was lost.
 void EcMaster::cyclic_wkc(std::uint16_t wkc, bool returned, SimTime t) {
-  if (!operational_once_) return;
+  if (!operational_once_ || stopping_) return;
   if (returned && wkc == expected_wkc_) {
     wkc_bad_run_ = 0;
     silent_run_ = 0;

@@ -113,6 +113,7 @@ struct StartupSdo {
   std::uint16_t index = 0;
   std::uint8_t sub = 0;
   std::vector<std::uint8_t> data;   // little endian, its size is the object's size
+  std::string origin{};             // where it was configured ("FILE:LINE"), for errors
 };
 
 enum class ImageLayout : std::uint8_t { automatic, separate, overlapped };
@@ -124,6 +125,9 @@ struct EcMasterConfig {
   SimTime sync0_shift_ns = 0;              // SYNC0 shift added to the start time [ns]
   std::vector<StartupSdo> startup;
   int expected_slaves = -1;                // > 0: the bus must have exactly this many
+  // The count phase fails ("no slave answered within … s") when no slave has answered its BRD
+  // this long after the first tick [ns] (0 = wait for ever).
+  SimTime startup_timeout_ns = 10'000'000'000;
   SimTime state_timeout_ns = 2'000'000'000;   // an AL state change [ns]
   SimTime sdo_timeout_ns = 1'000'000'000;     // one SDO transfer [ns]
   SimTime step_timeout_ns = 500'000'000;      // any other step without its WKC [ns]
@@ -247,6 +251,15 @@ class EcMaster {
   std::int64_t read_entry(const EntryLocation& at, bool is_signed) const;
   void write_entry(const EntryLocation& at, std::int64_t value);
 
+  // The end of the run (ticks go on): from the next tick on, instead of the phase's frame,
+  // AL control SAFE-OP to every slave until none reports OP, then INIT (with the error
+  // acknowledge) until every slave that answers reports INIT, read back by a BRD of the AL
+  // status. No supervision, no mailbox, no cyclic image meanwhile. Drives should be stopped
+  // through the image before. shutdown_done(): every slave answered INIT (at once without slaves).
+  void shutdown();
+  bool shutting_down() const { return stopping_; }
+  bool shutdown_done() const { return stop_done_; }
+
   MasterPhase phase() const { return phase_; }
   // A PDU sent at the last tick (its frame or one of the image's own frames) is not back yet.
   bool awaiting_reply() const { return awaiting_ || groups_out_ > 0; }
@@ -264,7 +277,8 @@ class EcMaster {
   void set_event_callback(EventFn fn) { on_event_ = std::move(fn); }
 
  private:
-  enum class SlotKind : std::uint8_t { count, reset, address, step, mbx, repeat, check, al_brd, lrw, frmw, dc, event_mask };
+  enum class SlotKind : std::uint8_t { count, reset, address, step, mbx, repeat, check, al_brd, lrw, frmw, dc, event_mask,
+                                      stop_control, stop_status };
   struct Slot {
     SlotKind kind = SlotKind::count;
     int slave = -1;
@@ -319,6 +333,10 @@ class EcMaster {
 
   void emit(std::string msg);
   void fail(std::string msg);
+  bool send_frame(omnitwin::ethercat::PduBuilder& b);
+  void shutdown_tick();
+  void stop_status(const omnitwin::ethercat::Datagram& d);
+  bool startup_positions_ok();
   void enter(Slave& s, SlaveStep step, SimTime t);
   void slave_fill(Slave& s, omnitwin::ethercat::PduBuilder& b, SimTime t);
   void slave_reply(Slave& s, const omnitwin::ethercat::Datagram& d, int sub, SimTime t);
@@ -389,6 +407,9 @@ class EcMaster {
   std::uint32_t cycle_wkc_ = 0;          // their WKCs so far
   bool layout_done_ = false;
   bool operational_once_ = false;
+  SimTime first_tick_ = -1;       // the start-up timeout counts from here
+  bool stopping_ = false, stop_done_ = false;  // shutdown(): under way / every slave in INIT
+  AlState stop_target_ = AlState::safeop;      // what its AL control writes ask for
   int wkc_bad_run_ = 0;
   int silent_run_ = 0;            // consecutive supervised cycles without any WKC
   bool segment_lost_ = false;

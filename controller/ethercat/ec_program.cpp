@@ -46,6 +46,8 @@ constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
 constexpr auto kConnectTimeout = std::chrono::seconds(10);
 constexpr auto kGrantTimeout = std::chrono::seconds(60);
 constexpr std::int64_t kDrainLimitNs = 5'000'000'000;
+// The end of a wall-clock run: this long for the drives to stop and the slaves to reach INIT.
+constexpr std::int64_t kShutdownNs = 100'000'000;
 constexpr int kRtPriority = 40;
 
 struct RuntimeFailure {
@@ -146,8 +148,9 @@ class Runner {
       r.state = simclock::MasterState::stopped;
       r.reason = simclock::StopReason::startup_timeout;
     } else if (halted_ || master_.segment_lost()) {
-      r.state = simclock::MasterState::stopped;  // the segment went silent (no node: all of them)
+      r.state = simclock::MasterState::stopped;  // a wheel's slave lost (its node), or the segment (no node: all)
       r.reason = simclock::StopReason::node_missing;
+      r.node = static_cast<std::uint8_t>(lost_slave_);
     } else if (finished_) {
       r.state = simclock::MasterState::finished;
     } else if (started_) {
@@ -173,13 +176,22 @@ class Runner {
   }
   const std::optional<std::string>& failure() const { return failure_; }
   bool finished() const { return finished_; }
-  bool halted() const { return halted_; }  // the platform loop stopped: the segment was lost
-  // The program's state for --stats: failed | stopped (segment lost) | finished | running | starting.
+  // The platform loop stopped: the segment was lost, or a wheel's slave (lost_slave(), 1-based).
+  bool halted() const { return halted_; }
+  int lost_slave() const { return lost_slave_; }
+  // The program's state for --stats: failed | stopped (segment or a wheel's slave lost) |
+  // finished | degraded (OP was reached, a slave is not in OP now) | running | starting.
   std::string state() const {
     if (master_.phase() == MasterPhase::failed || failure_) return "failed";
     if (halted_ || master_.segment_lost()) return "stopped";
     if (finished_) return "finished";
+    if (master_.supervising() && !master_.operational()) return "degraded";
     return started_ || (!loop_ && master_.operational()) ? "running" : "starting";
+  }
+  // The end of the run: wheel commands zero and every drive to quick stop (the cycles go on).
+  void stop_drives() {
+    ending_ = true;
+    drives_.stop_axes();
   }
 
   std::uint64_t frames_tx = 0, frames_rx = 0;
@@ -204,19 +216,43 @@ class Runner {
       }
     }
   }
-  // The segment was lost once the drives had goals: the wheels get zero for good.
-  void halt() {
+  // The segment or a wheel's slave was lost once the drives had goals: the wheels get zero for
+  // good, every drive quick stop.
+  void halt(const std::string& why) {
     halted_ = true;
     const WheelCounts c = counts();
     for (int i = 0; i < 4; ++i) target_[i] = c[i];
     wheel_cps_ = {0, 0, 0, 0};
     command(wheel_cps_);
-    spdlog::error("platform loop stopped ({}): wheel commands zero, drives to quick stop", master_.stop_reason());
+    drives_.stop_axes();
+    spdlog::error("platform loop stopped ({}): wheel commands zero, drives to quick stop", why);
+  }
+  // The 1-based slave of the first wheel whose slave is not in OP (0 = none).
+  int lost_wheel_slave() const {
+    for (const auto& w : ec_.wheels)
+      if (w.slave <= master_.slave_count() && master_.slave(w.slave - 1).step != SlaveStep::op) return w.slave;
+    return 0;
+  }
+  // Once counted: every wheel names a slave the bus has (else failed, naming the entry).
+  void check_wheel_slaves() {
+    wheels_checked_ = true;
+    for (std::size_t i = 0; i < ec_.wheels.size(); ++i) {
+      if (ec_.wheels[i].slave <= master_.slave_count()) continue;
+      failure_ = fmt::format("{}: wheels[{}]: slave {}, but the bus has {} slave(s)", ec_.file, i, ec_.wheels[i].slave,
+                             master_.slave_count());
+      spdlog::error("{}", *failure_);
+      return;
+    }
   }
   void platform(SimTime t) {
     if (!loop_ || failure_) return;
-    if (halted_) return command({0, 0, 0, 0});
-    if (goals_set_ && master_.segment_lost()) return halt();
+    if (halted_ || ending_) return command({0, 0, 0, 0});
+    if (!wheels_checked_ && master_.slave_count() > 0) check_wheel_slaves();
+    if (failure_) return;
+    if (goals_set_ && master_.segment_lost()) return halt(master_.stop_reason());
+    if (goals_set_ && (lost_slave_ = lost_wheel_slave()) != 0) {
+      return halt(fmt::format("slave {} of wheel axis lost: {}", lost_slave_, to_string(master_.slave(lost_slave_ - 1).step)));
+    }
     if (!started_) {
       if (!master_.operational()) return;
       if (!goals_set_) {
@@ -271,7 +307,8 @@ class Runner {
   std::optional<PlatformLoop> loop_;
   PlatformLoopOutput out_;
   std::int64_t every_ = 1, n_ = 0;
-  bool goals_set_ = false, started_ = false, finished_ = false, halted_ = false;
+  bool goals_set_ = false, started_ = false, finished_ = false, halted_ = false, ending_ = false, wheels_checked_ = false;
+  int lost_slave_ = 0;  // 1-based slave of the wheel that stopped the platform (0: none / the segment)
   SimTime origin_ = -1;
   WheelCounts counts_{};
   std::array<double, 4> wheel_cps_{}, target_{};
@@ -344,6 +381,32 @@ int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
   }
 }
 
+// Sleeps until `at` [monotonic ns].
+void sleep_until(std::int64_t at) {
+  const timespec ts{static_cast<time_t>(at / 1'000'000'000), static_cast<long>(at % 1'000'000'000)};
+  while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+// The end of a wall-clock run, within kShutdownNs: wheel commands zero and every drive to
+// quick stop (until none is enabled, at most half of it), then the master's shutdown (AL
+// SAFE-OP, then INIT) until every slave answers in INIT. Logs how it ended.
+void shutdown_wall(Runner& r, std::int64_t start, std::int64_t period_ns) {
+  EcMaster& m = r.master();
+  r.stop_drives();
+  const std::int64_t t0 = monotonic_ns();
+  for (std::int64_t at = t0;; at += period_ns) {
+    sleep_until(at);
+    const SimTime t = at - start;
+    r.receive(t, std::chrono::nanoseconds(period_ns / 4));
+    if (!m.shutting_down() && (!r.drives().any_enabled() || at - t0 >= kShutdownNs / 2)) m.shutdown();
+    if (m.shutdown_done() || at - t0 >= kShutdownNs) break;
+    r.cycle(t, nullptr);
+  }
+  if (m.shutdown_done()) spdlog::info("shutdown: drives stopped, slaves in INIT");
+  else spdlog::warn("shutdown: not every slave confirmed INIT within {} ms", kShutdownNs / 1'000'000);
+}
+
 int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::int64_t period_ns) {
   try_realtime(kRtPriority);
   const std::int64_t start = monotonic_ns();
@@ -351,9 +414,7 @@ int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::in
   std::int64_t deadline = start;
   std::uint64_t overruns = 0;
   for (;;) {
-    const timespec at{static_cast<time_t>(deadline / 1'000'000'000), static_cast<long>(deadline % 1'000'000'000)};
-    while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &at, nullptr) == EINTR) {
-    }
+    sleep_until(deadline);
     if (signalled(sigfd) || deadline >= end) break;
     const SimTime t = deadline - start;
     r.receive(t, std::chrono::nanoseconds(period_ns / 4));  // the previous cycle's frame
@@ -368,6 +429,12 @@ int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::in
     }
   }
   if (overruns) spdlog::info("{} cycles overran", overruns);
+  const bool never_op = deadline >= end && !r.master().supervising() && r.master().phase() != MasterPhase::failed;
+  shutdown_wall(r, start, period_ns);
+  if (never_op) {
+    spdlog::error("--duration ended before every slave reached OP (phase {})", to_string(r.master().phase()));
+    return kExitRuntime;
+  }
   return bn.error ? kExitRuntime : kExitOk;
 }
 
@@ -474,7 +541,8 @@ int run_ethercat_program(const ProgramOptions& o) {
                               {"slaves", m.slave_count()}, {"operational", m.operational()},
                               {"segment_lost", m.segment_lost()}, {"stop_reason", m.stop_reason()},
                               {"segment_losses", s.segment_losses}, {"segment_returns", s.segment_returns},
-                              {"platform_stopped", runner.halted()}, {"frames_tx", runner.frames_tx},
+                              {"platform_stopped", runner.halted()}, {"lost_slave", runner.lost_slave()},
+                              {"frames_tx", runner.frames_tx},
                               {"frames_rx", runner.frames_rx}, {"cycles", s.cycles}, {"wkc_errors", s.wkc_errors},
                               {"expected_wkc", s.expected_wkc}, {"last_wkc", s.last_wkc},
                               {"lost_frames", s.lost_frames}, {"stray_frames", s.stray_frames},
@@ -490,9 +558,10 @@ int run_ethercat_program(const ProgramOptions& o) {
   }
   for (int i = 0; i < m.slave_count(); ++i) {
     const SlaveStatus& sl = m.slave(i);
+    // An offline slave's last AL status read is stale: its state is not known.
     spdlog::info("slave {} station 0x{:04X}: step {}, AL {} (code 0x{:04X}), recoveries {}, emergencies {} (last 0x{:04X})",
-                 i, sl.station, to_string(sl.step), to_string(sl.al_state), sl.al_code, sl.recoveries, sl.emergencies,
-                 sl.last_emergency);
+                 i, sl.station, to_string(sl.step), sl.step == SlaveStep::offline ? "unknown" : to_string(sl.al_state),
+                 sl.al_code, sl.recoveries, sl.emergencies, sl.last_emergency);
   }
   if (sigfd >= 0) ::close(sigfd);
   return code;

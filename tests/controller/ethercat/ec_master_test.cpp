@@ -307,6 +307,16 @@ TEST(EcMaster, StartupSdoIsWrittenBeforeOp) {
   EXPECT_NE(b.slaves[0]->axis(0).objects().profile_velocity, 777u);
 }
 
+// Found in review: a start-up SDO for a slave beyond the count was silently never written.
+TEST(EcMaster, AStartupSdoNamingASlaveBeyondTheCountFailsAfterTheCount) {
+  EcMasterConfig cfg;
+  cfg.startup.push_back(StartupSdo{4, 0x6060, 0, {9}});
+  Bench b(4, cfg);
+  for (int k = 0; k < 3; ++k) b.step();
+  EXPECT_EQ(b.master->phase(), MasterPhase::failed);
+  EXPECT_EQ(b.master->error(), "start-up SDO 0x6060:0 names slave 5, but the bus has 4 slave(s)");
+}
+
 TEST(EcMaster, UnknownDeviceIsRefusedByPositionAndIdentity) {
   auto devs = ecbench::drive_esi();
   devs[0].product_code ^= 0x1;

@@ -1,0 +1,216 @@
+// Tests the `--bus ethercat` program path (run_ethercat_program) in process on the wall clock:
+// four of B's CiA 402 drives in an EscChain behind the in-process transport (mem:NAME), served
+// by a thread as the twin would serve them, and the program's exit code, --stats file and the
+// slaves' states after it returned. The end of --duration takes the drives out of operation
+// and the slaves to INIT; a wheel's drive lost mid-path stops the platform naming its slave; a
+// bus where no slave answers fails after startup_timeout, and a run ending before OP is exit 3;
+// a segment that lost a slave after OP reads "degraded", not "starting".
+#include <gtest/gtest.h>
+#include <pthread.h>
+#include <signal.h>
+
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "bus_emulators/ethercat/transport/ec_transport.hpp"
+#include "controller/ethercat/ec_program.hpp"
+#include "tests/controller/ethercat/ec_bench.hpp"
+
+namespace omnitwin::controller::ethercat {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+// The slaves' side of `mem:NAME`: four drives, their firmware stepped every millisecond of wall
+// time, each frame through the chain and back. Slave `power_off` (0-based, -1 = none) loses
+// power `power_off_at` [s] after the start.
+class Segment {
+ public:
+  Segment(const std::string& iface, int power_off = -1, double power_off_at = 0)
+      : tr_(omnitwin::ethercat::open_transport(iface, omnitwin::ethercat::Role::slaves)),
+        power_off_(power_off),
+        power_off_at_ns_(static_cast<std::int64_t>(power_off_at * 1e9)) {
+    for (int i = 0; i < 4; ++i) {
+      omnitwin::ethercat::DriveSlaveConfig sc;
+      sc.serial = static_cast<std::uint32_t>(100 + i);
+      slaves_.push_back(std::make_unique<omnitwin::ethercat::DriveSlave>(devices_[0], sc));
+      models_.emplace_back();
+    }
+    for (auto& s : slaves_) chain_.add(&s->esc());
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~Segment() { stop(); }
+  void stop() {
+    run_ = false;
+    if (thread_.joinable()) thread_.join();
+  }
+  omnitwin::ethercat::AlState al_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->esc().al_state(); }
+  omnitwin::drive::State drive_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->axis(0).state(); }
+
+ private:
+  void serve() {
+    sigset_t set;  // the program reads SIGINT/SIGTERM from its descriptor; this thread never takes them
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set, nullptr);
+    const std::int64_t start = now_ns();
+    std::int64_t next = 0;
+    std::vector<std::uint8_t> buf(2048);
+    while (run_) {
+      const int n = tr_->receive(buf, 2ms);
+      const std::int64_t t = now_ns() - start;
+      for (; next <= t; next += kCycle) firmware(next);
+      if (power_off_ >= 0 && t >= power_off_at_ns_ && chain_.powered(power_off_)) chain_.set_powered(power_off_, false, t);
+      if (n <= 0) continue;
+      chain_.advance(t);
+      std::span<std::uint8_t> pdu(buf.data(), static_cast<std::size_t>(n));
+      if (chain_.process(pdu, t)) tr_->send(pdu);
+    }
+  }
+  void firmware(std::int64_t t) {
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+      if (!chain_.powered(static_cast<int>(i))) continue;
+      const auto cmd = slaves_[i]->axis(0).step(t, models_[i].feedback());
+      models_[i].step(cmd, static_cast<double>(kCycle) * 1e-9);
+      slaves_[i]->cycle(t);
+    }
+  }
+
+  static constexpr std::int64_t kCycle = 1'000'000;
+  std::unique_ptr<omnitwin::ethercat::EcTransport> tr_;
+  std::vector<omnitwin::ethercat::DeviceDescription> devices_ = ecbench::drive_esi();
+  std::vector<std::unique_ptr<omnitwin::ethercat::DriveSlave>> slaves_;
+  std::vector<omnitwin::drive::AxisModel> models_;
+  omnitwin::ethercat::EscChain chain_;
+  int power_off_;
+  std::int64_t power_off_at_ns_;
+  std::atomic<bool> run_{true};
+  std::thread thread_;
+};
+
+constexpr const char* kWheels = R"(cycle: 0.002
+expected_slaves: 4
+startup:
+  - {slave: all, index: 0x6060, size: 1, value: 9}
+wheels: [{slave: 1}, {slave: 2}, {slave: 3}, {slave: 4}]
+wheel_mode: csv
+wheel_counts_per_rev: 10000
+platform:
+  period: 0.010
+  kp: [6, 6, 6]
+  ki: [6, 6, 6]
+  max_speed: 0.5
+  max_yaw_rate: 2.0
+  geometry: {L: 0.25, r: 0.05, counts_per_rev: 10000}
+  settle: 1.0
+  path:
+    start: {x: 0, y: 0, phi_deg: 0}
+    segments:
+      - line: {dx: 0.5, dy: 0, duration: 5}
+)";
+
+constexpr const char* kDrivesOnly = "cycle: 0.002\nexpected_slaves: 4\n";
+
+class EcProgram : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("ec_program_test_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  // A configuration file: the drives' ESI, then `body`.
+  std::string config(const std::string& body) {
+    const fs::path p = dir_ / "ec.yaml";
+    std::ofstream(p) << "esi: [" OMNITWIN_SOURCE_DIR "/models/ethercat/omnitwin_drive.xml]\n" << body;
+    return p.string();
+  }
+  int run(const std::string& iface, const std::string& cfg, double duration) {
+    ProgramOptions o;
+    o.iface = iface;
+    o.config = cfg;
+    o.duration = duration;
+    o.stats = (dir_ / "stats.json").string();
+    return run_ethercat_program(o);
+  }
+  nlohmann::json stats() {
+    std::ifstream in(dir_ / "stats.json");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return nlohmann::json::parse(ss.str());
+  }
+  fs::path dir_;
+};
+
+TEST_F(EcProgram, TheEndOfTheDurationTakesTheDrivesOutOfOperationAndTheSlavesToInit) {
+  Segment seg("mem:ec_program_end");
+  EXPECT_EQ(run("mem:ec_program_end", config(kWheels), 1.5), 0);
+  seg.stop();
+  const nlohmann::json s = stats();
+  EXPECT_EQ(s.at("state"), "running") << s.dump(2);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(seg.al_state(i), omnitwin::ethercat::AlState::init) << "slave " << i + 1;
+    EXPECT_NE(seg.drive_state(i), omnitwin::drive::State::operation_enabled) << "slave " << i + 1;
+  }
+}
+
+TEST_F(EcProgram, AWheelDriveLostMidPathStopsThePlatformNamingItsSlave) {
+  Segment seg("mem:ec_program_lost", 3, 1.0);
+  EXPECT_EQ(run("mem:ec_program_lost", config(kWheels), 2.0), 0);
+  seg.stop();
+  const nlohmann::json s = stats();
+  EXPECT_EQ(s.at("state"), "stopped") << s.dump(2);
+  EXPECT_EQ(s.at("platform_stopped"), true);
+  EXPECT_EQ(s.at("lost_slave"), 4);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NE(seg.drive_state(i), omnitwin::drive::State::operation_enabled) << "slave " << i + 1;
+}
+
+TEST_F(EcProgram, NoSlaveAnsweringFailsAfterTheStartupTimeout) {
+  const int code = run("mem:ec_program_nobody", config(std::string(kDrivesOnly) + "startup_timeout: 0.2\n"), 1.0);
+  EXPECT_EQ(code, 3);
+  const nlohmann::json s = stats();
+  EXPECT_EQ(s.at("state"), "failed") << s.dump(2);
+  EXPECT_NE(s.at("master_error").get<std::string>().find("no slave answered within 0.2 s"), std::string::npos) << s.dump(2);
+}
+
+TEST_F(EcProgram, ADurationEndingBeforeOpIsARuntimeFailure) {
+  EXPECT_EQ(run("mem:ec_program_short", config(kDrivesOnly), 0.3), 3);
+  EXPECT_EQ(stats().at("state"), "starting");
+}
+
+TEST_F(EcProgram, ASlaveLostAfterOpMakesTheSegmentDegradedNotStarting) {
+  Segment seg("mem:ec_program_degraded", 3, 0.8);
+  EXPECT_EQ(run("mem:ec_program_degraded", config(kDrivesOnly), 1.3), 0);
+  seg.stop();
+  const nlohmann::json s = stats();
+  EXPECT_EQ(s.at("state"), "degraded") << s.dump(2);
+  EXPECT_EQ(s.at("slaves_lost"), 1);
+}
+
+TEST_F(EcProgram, AStartupSdoOrAWheelNamingASlaveBeyondTheCountFailsNamingTheEntry) {
+  Segment seg("mem:ec_program_beyond");
+  const std::string cfg = config("cycle: 0.002\nstartup:\n  - {slave: 5, index: 0x6060, size: 1, value: 9}\n");
+  EXPECT_EQ(run("mem:ec_program_beyond", cfg, 1.0), 3);
+  EXPECT_EQ(stats().at("master_error"), cfg + ":4: startup: start-up SDO 0x6060:0 names slave 5, but the bus has 4 slave(s)");
+  std::string wheels = kWheels;
+  wheels.replace(wheels.find("{slave: 4}"), 10, "{slave: 6}");
+  EXPECT_EQ(run("mem:ec_program_beyond", config(wheels), 1.0), 3);
+  EXPECT_EQ(stats().at("state"), "failed");
+}
+
+}  // namespace
+}  // namespace omnitwin::controller::ethercat
