@@ -47,8 +47,17 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
         fail(file, *n, "sync_producer", "master, or the node ID of one of the wheels' drives");
     }
   }
-  if (const Val* n = top.get("tick")) c.tick = bounded(file, *n, "tick", 1e-4, 1.0);
+  if (const Val* n = top.get("tick")) {
+    c.tick = bounded(file, *n, "tick", 1e-4, 1.0);
+    // The master producing SYNC ticks once per cycle: a tick of its own would be ignored.
+    if (c.sync_producer == 0) fail(file, *n, "tick", "only with a wheel's drive as sync_producer (the master ticks every cycle)");
+  }
   if (const Val* n = top.get("master_node_id")) c.master_node_id = static_cast<std::uint8_t>(bounded_int(file, *n, "master_node_id", 0, 127));
+  // The drives watch the master's heartbeat under its node ID: a wheel's would be the drive's own.
+  if (c.master_node_id != 0 && std::find(c.nodes.begin(), c.nodes.end(), c.master_node_id) != c.nodes.end()) {
+    const Val* at = top.get("master_node_id") ? top.get("master_node_id") : top.get("nodes");
+    fail(file, *at, "master_node_id", fmt::format("{} is also a wheel's node ID (the master needs one of its own)", c.master_node_id));
+  }
   for (auto [key, field] : {std::pair{"master_heartbeat_ms", &c.master_heartbeat_ms}, std::pair{"node_heartbeat_ms", &c.node_heartbeat_ms},
                             std::pair{"heartbeat_timeout_ms", &c.heartbeat_timeout_ms}})
     if (const Val* n = top.get(key)) *field = static_cast<std::uint16_t>(bounded_int(file, *n, key, 0, 65535));
