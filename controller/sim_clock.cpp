@@ -40,6 +40,7 @@ const char* to_string(StopReason r) {
     case StopReason::startup_timeout: return "startup_timeout";
     case StopReason::bus_error: return "bus_error";
     case StopReason::drive_fault: return "drive_fault";
+    case StopReason::config_failed: return "config_failed";
   }
   return "unknown";
 }
@@ -212,7 +213,7 @@ Decoded read_done(Reader& r) {
   for (double& v : d.report.reference) floats_ok = r.f32(v) && floats_ok;
   for (double& v : d.report.odometry) floats_ok = r.f32(v) && floats_ok;
   if (state > static_cast<std::uint8_t>(MasterState::finished) ||
-      reason > static_cast<std::uint8_t>(StopReason::drive_fault) || pad != 0 || !floats_ok)
+      reason > static_cast<std::uint8_t>(StopReason::config_failed) || pad != 0 || !floats_ok)
     return DecodeError::bad_value;
   d.report.state = static_cast<MasterState>(state);
   d.report.reason = static_cast<StopReason>(reason);

@@ -104,7 +104,9 @@ CoMaster::CoMaster(const CoProgramConfig& config, const co::EdsDevice& eds, Send
       sdo_([this](const can::Frame& f, SimTime t) { return this->send(f, t); },
            SdoClientConfig{.timeout_ns = std::llround(config.sdo_timeout_ms * 1e6), .channels = 4}),
       consumer_([this](const co::HeartbeatEvent& e) { on_heartbeat_event(e); }),
-      sync_({co::cob::sync, std::llround(config.cycle * 1e9), config.sync_counter}) {
+      sync_({co::cob::sync, std::llround(config.cycle * 1e9), config.sync_counter}),
+      vendor_(eds.device_info.vendor_number),
+      product_(eds.device_info.product_number) {
   for (std::size_t i = 0; i < 4; ++i) {
     Node& n = nodes_[i];
     n.view.id = cfg_.nodes[i];
@@ -159,7 +161,8 @@ void CoMaster::stop(simclock::StopReason r, std::uint8_t node, SimTime t, const 
   reason_ = r;
   reason_node_ = node;
   event(t, why, true);
-  enter(starting && r == simclock::StopReason::startup_timeout ? CoPhase::failed : CoPhase::stopped, t);
+  const bool startup_reason = r == simclock::StopReason::startup_timeout || r == simclock::StopReason::config_failed;
+  enter(starting && startup_reason ? CoPhase::failed : CoPhase::stopped, t);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -208,8 +211,12 @@ void CoMaster::on_heartbeat_event(const co::HeartbeatEvent& e) {
   Node* n = by_id(e.node);
   if (!n) return;
   n->view.nmt = e.state;
+  // Before starting the drives produce no heartbeat yet (0x1017 is configured on the way), and
+  // a failed start-up supervises nothing.
+  const bool supervised = phase_ != CoPhase::resetting && phase_ != CoPhase::configuring && phase_ != CoPhase::failed;
   switch (e.kind) {
     case co::HeartbeatEvent::timeout:
+      if (!supervised) return;
       ++stats_.heartbeat_timeouts;
       n->view.lost = true;
       n->start_sent = false;
@@ -348,7 +355,7 @@ bool CoMaster::run_script(Node& n, SimTime t) {
       const auto code = static_cast<std::uint32_t>(r ? r->code : SdoAbort::general);
       ++stats_.sdo_aborts;
       stats_.last_abort = code;
-      stop(simclock::StopReason::startup_timeout, n.view.id, t,
+      stop(simclock::StopReason::config_failed, n.view.id, t,
            fmt::format("node {}: SDO {} 0x{:04X}:{} ({}) aborted with 0x{:08X} ({})", n.view.id,
                        s.upload ? "upload" : "download", s.index, s.sub, s.what, code,
                        ethercat::to_string(static_cast<SdoAbort>(code))));
@@ -359,8 +366,10 @@ bool CoMaster::run_script(Node& n, SimTime t) {
       const std::uint32_t v = r->data.size() >= 4 ? co::get_u32(r->data.data()) : 0;
       if (s.index == 0x1008) event(t, fmt::format("node {}: {}", n.view.id, std::string(r->data.begin(), r->data.end())));
       else if (s.index == 0x1000 && (v & 0xFFFF) != 402) {
-        stop(simclock::StopReason::startup_timeout, n.view.id, t,
+        stop(simclock::StopReason::config_failed, n.view.id, t,
              fmt::format("node {}: device type 0x{:08X} is not a CiA 402 drive", n.view.id, v));
+        return false;
+      } else if (s.index == 0x1018 && !identity_ok(n, s.sub, v, t)) {
         return false;
       }
     }
@@ -380,6 +389,17 @@ bool CoMaster::run_script(Node& n, SimTime t) {
   }
   n.step_sent = true;
   return true;
+}
+
+// Identity 0x1018 sub 1 (vendor) or 2 (product) read from node n against the EDS's number
+// (not checked when the EDS gives none); a mismatch stops the start-up (config_failed).
+bool CoMaster::identity_ok(Node& n, std::uint8_t sub, std::uint32_t v, SimTime t) {
+  const std::uint32_t expected = sub == 1 ? vendor_ : sub == 2 ? product_ : 0;
+  if (expected == 0 || v == expected) return true;
+  stop(simclock::StopReason::config_failed, n.view.id, t,
+       fmt::format("node {}: {} 0x{:08X}, expected 0x{:08X} (the EDS's)", n.view.id, sub == 1 ? "vendor ID" : "product code",
+                   v, expected));
+  return false;
 }
 
 // CiA 402's power-up from the statusword: fault → reset edge, switch on disabled → shutdown,

@@ -61,7 +61,9 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::ca
 //  resetting   — NMT reset communication sent to all; waits for every drive's boot-up.
 //                Legal: all_booted, startup_timeout.
 //  configuring — each drive's script runs on its own SDO client. Legal: all_configured,
-//                sdo_failed (→ failed), startup_timeout.
+//                config_failed (an SDO aborted, device type not CiA 402, vendor or product
+//                not the EDS's: → failed with that node), startup_timeout.
+//  Heartbeats are supervised from starting on (the drives produce them once configured).
 //  starting    — NMT start all sent, SYNC and heartbeat running; waits for every drive's
 //                heartbeat to say operational. Legal: all_operational, startup_timeout.
 //  enabling    — controlwords take each drive to operation enabled. Legal: all_enabled,
@@ -71,7 +73,8 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::ca
 //                drive that boots again is configured and started again (recovered). Legal:
 //                shutdown.
 //  finished    — the application ended: drives shut down (controlword 0x06). Legal: shutdown.
-//  failed      — start-up did not complete (reason in the report). Legal: shutdown.
+//  failed      — start-up did not complete (reason startup_timeout or config_failed, node,
+//                in the report; no heartbeat supervision). Legal: shutdown.
 enum class CoPhase : std::uint8_t { resetting, configuring, starting, enabling, running, stopped, finished, failed };
 const char* to_string(CoPhase p);
 
@@ -148,6 +151,7 @@ class CoMaster {
   void on_tpdo(Node& n, const can::Frame& f);
   void run_scripts(SimTime t);
   bool run_script(Node& n, SimTime t);
+  bool identity_ok(Node& n, std::uint8_t sub, std::uint32_t v, SimTime t);
   void send_rpdos(SimTime t);
   std::uint16_t controlword_for(Node& n);
   Node* by_id(std::uint8_t id);
@@ -160,6 +164,7 @@ class CoMaster {
   std::array<std::int32_t, 4> velocity_{};
   omnitwin::canopen::HeartbeatConsumer consumer_;
   omnitwin::canopen::SyncProducer sync_;
+  std::uint32_t vendor_ = 0, product_ = 0;  // the EDS's identity (0: not given, not checked)
   CoPhase phase_ = CoPhase::resetting;
   simclock::StopReason reason_ = simclock::StopReason::none;
   std::uint8_t reason_node_ = 0;

@@ -57,8 +57,9 @@ class Runner : public CanRunner<Runner, CoMaster> {
                        {"emcy", v.emcy}, {"last_emcy", v.last_emcy}, {"tpdos", v.tpdos}, {"configured", v.configured},
                        {"lost", v.lost}});
     }
-    return {{"phase", to_string(m.phase())}, {"cycles", s.ticks}, {"syncs", s.syncs},
-            {"sdo_done", s.sdo_done}, {"sdo_aborts", s.sdo_aborts}, {"last_sdo_abort", s.last_abort},
+    return {{"phase", to_string(m.phase())}, {"reason", simclock::to_string(m.reason())}, {"reason_node", m.reason_node()},
+            {"cycles", s.ticks}, {"syncs", s.syncs}, {"sdo_done", s.sdo_done}, {"sdo_aborts", s.sdo_aborts},
+            {"last_sdo_abort", fmt::format("0x{:08X}", s.last_abort)},
             {"emcy", s.emcy}, {"heartbeat_timeouts", s.heartbeat_timeouts}, {"boot_ups", s.boot_ups},
             {"recoveries", s.recoveries}, {"tpdo_rx", s.tpdo_rx}, {"nmt_sent", s.nmt_sent},
             {"send_failures", s.tx_refused}, {"nodes", nodes}};

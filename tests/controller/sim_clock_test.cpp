@@ -206,7 +206,7 @@ TEST(SimClockCodec, BadValueForEnumsAndReservedBytes) {
   auto with = [&](std::size_t at, std::uint8_t v) { Bytes b = done; b[at] = v; return b; };
   EXPECT_EQ(error_of(with(48, 5)), DecodeError::bad_value);    // state past finished
   EXPECT_EQ(error_of(with(48, 255)), DecodeError::bad_value);
-  EXPECT_EQ(error_of(with(49, 7)), DecodeError::bad_value);    // reason past drive_fault
+  EXPECT_EQ(error_of(with(49, 8)), DecodeError::bad_value);    // reason past config_failed
   EXPECT_EQ(error_of(with(51, 1)), DecodeError::bad_value);    // pad
   EXPECT_EQ(error_of(with(7, 1)), DecodeError::bad_value);     // reserved header byte
   EXPECT_EQ(error_of(with(95, 1)), DecodeError::bad_value);    // an unused trailing byte

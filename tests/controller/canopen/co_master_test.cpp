@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <memory>
 #include <vector>
@@ -82,6 +84,46 @@ TEST(CoMaster, StartupFailsWhenTheDrivesDoNotAnswer) {
   n.run(3100);
   EXPECT_EQ(n.master->phase(), CoPhase::failed);
   EXPECT_EQ(n.master->reason(), simclock::StopReason::startup_timeout);
+}
+
+// Found in review: the identity 0x1018 was read but never compared with the EDS.
+TEST(CoMaster, ADriveWhoseProductIsNotTheEdssFailsTheStartupNamingIt) {
+  co::EdsDevice eds = shipped_eds();
+  const std::uint32_t drives = eds.device_info.product_number;
+  eds.device_info.product_number ^= 0x10;
+  Network n(eds);
+  n.run(300);
+  EXPECT_EQ(n.master->phase(), CoPhase::failed);
+  EXPECT_EQ(std::string(simclock::to_string(n.master->reason())), "config_failed");
+  EXPECT_EQ(n.master->reason_node(), 1);
+  const std::string want = fmt::format("node 1: product code 0x{:08X}, expected 0x{:08X} (the EDS's)", drives, eds.device_info.product_number);
+  EXPECT_NE(std::find(n.events.begin(), n.events.end(), want), n.events.end()) << want;
+}
+
+// Found in review: an SDO abort at start-up was reported as startup_timeout 11 ms into the
+// allowance, and heartbeat warnings followed for nodes whose heartbeat was never configured.
+TEST(CoMaster, AnSdoAbortAtStartupIsAConfigurationFailureWithoutHeartbeatWarnings) {
+  co::EdsDevice eds = shipped_eds();  // the master maps 0x60FF with 16 bits: the drives abort
+  for (auto& o : eds.objects)
+    if (o.index == 0x60FF)
+      for (auto& e : o.entries) e.bits = 16;
+  Network n(eds);
+  n.run(1000);
+  EXPECT_EQ(n.master->phase(), CoPhase::failed);
+  EXPECT_EQ(std::string(simclock::to_string(n.master->reason())), "config_failed");
+  EXPECT_NE(n.master->reason_node(), 0);
+  EXPECT_EQ(n.master->stats().last_abort, static_cast<std::uint32_t>(SdoAbort::param_incompatible));
+  // A drive gone during configuration: its SDO times out (a configuration failure too), and
+  // the heartbeat it never got to produce is not reported lost.
+  Network m;
+  m.run(5);
+  m.power(1, false);
+  m.run(1000);
+  EXPECT_EQ(m.master->phase(), CoPhase::failed);
+  EXPECT_EQ(std::string(simclock::to_string(m.master->reason())), "config_failed");
+  EXPECT_EQ(m.master->reason_node(), 2);
+  EXPECT_EQ(m.master->stats().heartbeat_timeouts, 0u);
+  for (const auto& e : m.events) EXPECT_EQ(e.find("heartbeat lost"), std::string::npos) << e;
 }
 
 TEST(StartupScript, FollowsTheCia301MappingProcedureWithEdsSizes) {

@@ -33,11 +33,12 @@ struct Network {
   SimTime now = 0;
   std::function<void(const can::Frame&)> on_master_send;  // sees every frame the master sends
 
-  Network() {
+  // The master reads `master_eds` (the drives are always built from the shipped one).
+  explicit Network(const co::EdsDevice& master_eds = shipped_eds()) {
     for (int i = 0; i < 5; ++i) bus.attach();
-    cfg.eds = shipped_eds().source;
+    cfg.eds = master_eds.source;
     cfg.wheel_counts_per_rev = 10000;
-    master = std::make_unique<CoMaster>(cfg, shipped_eds(), [this](const can::Frame& f, SimTime t) {
+    master = std::make_unique<CoMaster>(cfg, master_eds, [this](const can::Frame& f, SimTime t) {
       if (on_master_send) on_master_send(f);
       return bus.submit(0, f, t) == can::SubmitStatus::queued;
     });
