@@ -250,7 +250,8 @@ class Runner {
     if (!wheels_checked_ && master_.slave_count() > 0) check_wheel_slaves();
     if (failure_) return;
     if (goals_set_ && master_.segment_lost()) return halt(master_.stop_reason());
-    if (goals_set_ && (lost_slave_ = lost_wheel_slave()) != 0) {
+    // A wheel's slave lost before the path is done (once finished, as on CANopen, it stops nothing).
+    if (goals_set_ && !finished_ && (lost_slave_ = lost_wheel_slave()) != 0) {
       return halt(fmt::format("slave {} of wheel axis lost: {}", lost_slave_, to_string(master_.slave(lost_slave_ - 1).step)));
     }
     if (!started_) {
