@@ -25,7 +25,8 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
   c.file = file;
   const Members top(file, root, "",
                     {"esi", "cycle", "dc", "expected_slaves", "startup", "wheels", "wheel_mode", "wheel_counts_per_rev",
-                     "platform", "user_pdo", "segment_loss_cycles", "segment_loss_ms", "startup_timeout"});
+                     "platform", "user_pdo", "segment_loss_cycles", "segment_loss_ms", "startup_timeout",
+                     "wheel_loss_timeout"});
   const Val* esi = top.get("esi");
   if (!esi) fail(file, root, "esi", "required (the ESI files describing the slaves)");
   if (esi->node.IsScalar()) {
@@ -66,6 +67,8 @@ EcConfig parse_ec_config(std::string_view yaml, const std::string& file, const s
     c.segment_loss_ms = static_cast<int>(v);
   }
   if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, 3600);
+  if (const Val* n = top.get("wheel_loss_timeout"))
+    c.wheel_loss_timeout = bounded(file, *n, "wheel_loss_timeout", 0, 3600);
   if (const Val* n = top.get("startup")) {
     if (!n->node.IsSequence()) fail(file, *n, "startup", "expected a list");
     for (const Val& e : elements(*n)) {

@@ -48,6 +48,9 @@ struct EcConfig {
   int segment_loss_cycles = 10;
   int segment_loss_ms = 10;  // …and at least this long (EcMasterConfig::segment_loss_ns)
   double startup_timeout = 10;  // [s] no slave answering the count this long → failed (exit 3)
+  // [s] a wheel's slave out of OP this long, once the drives were enabled, stops the platform
+  // loop; a shorter outage (a power blip the master recovers) lets the loop pull it back.
+  double wheel_loss_timeout = 1.0;
   std::vector<StartupSdo> startup;         // position -1 = every slave
   bool has_wheels = false;                 // `wheels` given: the platform loop runs
   std::array<AxisRef, 4> wheels{};         // wheel i+1 → axis

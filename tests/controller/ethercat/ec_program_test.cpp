@@ -169,7 +169,7 @@ TEST_F(EcProgram, TheEndOfTheDurationTakesTheDrivesOutOfOperationAndTheSlavesToI
 
 TEST_F(EcProgram, AWheelDriveLostMidPathStopsThePlatformNamingItsSlave) {
   Segment seg("mem:ec_program_lost", 3, 1.0);
-  EXPECT_EQ(run("mem:ec_program_lost", config(kWheels), 2.0), 0);
+  EXPECT_EQ(run("mem:ec_program_lost", config(std::string(kWheels) + "wheel_loss_timeout: 0.3\n"), 2.0), 0);
   seg.stop();
   const nlohmann::json s = stats();
   EXPECT_EQ(s.at("state"), "stopped") << s.dump(2);
@@ -177,6 +177,18 @@ TEST_F(EcProgram, AWheelDriveLostMidPathStopsThePlatformNamingItsSlave) {
   EXPECT_EQ(s.at("lost_slave"), 4);
   for (int i = 0; i < 3; ++i)
     EXPECT_NE(seg.drive_state(i), omnitwin::drive::State::operation_enabled) << "slave " << i + 1;
+}
+
+// A wheel's slave out of OP for less than wheel_loss_timeout (default 1 s) does not stop the
+// platform: a power blip the master recovers lets the loop pull the platform back (the
+// regression scenario ethercat_power_loss; the first version of the stop broke it).
+TEST_F(EcProgram, AWheelDriveLostForLessThanTheTimeoutDoesNotStopThePlatform) {
+  Segment seg("mem:ec_program_blip", 3, 1.0);
+  EXPECT_EQ(run("mem:ec_program_blip", config(kWheels), 1.5), 0);
+  seg.stop();
+  const nlohmann::json s = stats();
+  EXPECT_EQ(s.at("platform_stopped"), false) << s.dump(2);
+  EXPECT_EQ(s.at("lost_slave"), 0);
 }
 
 TEST_F(EcProgram, NoSlaveAnsweringFailsAfterTheStartupTimeout) {
