@@ -529,7 +529,8 @@ void read_m3(const YamlField& f, M3Spec& m) {
   if (f["master_iface"].exists()) m.master_iface = f["master_iface"].string();
   if (m.transport.starts_with("raw:") && m.master_iface.empty())
     f["transport"].fail("raw:IFACE needs master_iface: the interface the master sends on");
-  read_number(f, "cycle", m.cycle, Bounds::closed(31.25e-6, 0.064));
+  // The emulated servos take 0.125 … 32 ms at COM_TIM 1 (m3_link's CONNECT check).
+  read_number(f, "cycle", m.cycle, Bounds::closed(125e-6, 0.032));
   read_integer(f, "retry_slots", m.retry_slots, Bounds::closed(0, 4));
   if (f["data_bytes"].exists()) m.data_bytes = std::stoi(f["data_bytes"].choice({"32", "48"}));
   if (f["mode"].exists()) m.mode = f["mode"].choice({"velctrl", "interpolate"});

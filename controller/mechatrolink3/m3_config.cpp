@@ -46,7 +46,9 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
                     {"cycle", "retry_slots", "wheels", "extra_axes", "data_bytes", "communication", "response_us", "margin_us", "software_us",
                      "detect_timeout_ms", "startup_timeout", "lost_cycles", "wheel_command", "wheel_counts_per_rev",
                      "params", "platform"});
-  if (const Val* n = top.get("cycle")) c.cycle = bounded(file, *n, "cycle", 31.25e-6, 0.064);
+  // Our master connects with COM_TIM 1, and a servo takes 0.125 … 32 ms (m3_link's CONNECT
+  // check): a cycle outside is bad input here, not a CONNECT refused at run time.
+  if (const Val* n = top.get("cycle")) c.cycle = bounded(file, *n, "cycle", 125e-6, 0.032);
   if (const Val* n = top.get("retry_slots")) c.retry_slots = static_cast<int>(bounded_int(file, *n, "retry_slots", 0, 4));
   if (const Val* n = top.get("wheels")) read_wheels(file, *n, c);
   if (const Val* n = top.get("extra_axes")) {

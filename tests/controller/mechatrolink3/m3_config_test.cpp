@@ -105,7 +105,11 @@ TEST(M3Config, ADumpReadsBackTheSame) {
 }
 
 TEST(M3Config, ErrorsNameFileLineAndKey) {
-  EXPECT_EQ(error_of("cycle: 0.2\n"), "t.yaml:1: cycle: must be in [3.125e-05, 0.064]");
+  EXPECT_EQ(error_of("cycle: 0.2\n"), "t.yaml:1: cycle: must be in [0.000125, 0.032]");
+  // The servos' CONNECT range (0.125 … 32 ms at COM_TIM 1): 62.5 µs and 64 ms were accepted
+  // and then refused by every servo at CONNECT (found in review).
+  EXPECT_EQ(error_of("cycle: 0.0000625\n"), "t.yaml:1: cycle: must be in [0.000125, 0.032]");
+  EXPECT_EQ(error_of("cycle: 0.064\n"), "t.yaml:1: cycle: must be in [0.000125, 0.032]");
   EXPECT_EQ(error_of("cycle: 0.001\ndata_bytes: 16\n"), "t.yaml:2: data_bytes: the servo profile's lengths are 32 and 48");
   EXPECT_EQ(error_of("retry_slots: 9\n"), "t.yaml:1: retry_slots: must be in 0..4");
   EXPECT_EQ(error_of("wheels: [3, 4, 5]\n"), "t.yaml:1: wheels: expected four station addresses (wheel 1..4)");
