@@ -53,6 +53,14 @@ class ProgramsCli : public ::testing::Test {
     EXPECT_LT(r.err.size(), 200u) << r.err;
   }
   static std::string data(const std::string& rel) { return source_path("tests/data/" + rel); }
+  // {bus, its master configuration, an address} for each of omni-master's five buses.
+  static std::vector<std::vector<std::string>> every_bus() {
+    return {{"can", data("master/loopback.yaml"), kCanIface},
+            {"canopen", data("canopen/drives_only.yaml"), kCanIface},
+            {"tml", data("tml/drives_only.yaml"), kCanIface},
+            {"ethercat", data("ethercat/drives_only.yaml"), "udp:127.0.0.1:48311"},
+            {"m3", data("m3/servos_only.yaml"), "udp:127.0.0.1:48312"}};
+  }
 
   TempDir dir_{"omni-programs-cli"};
   int n_ = 0;
@@ -118,13 +126,7 @@ TEST_F(ProgramsCli, TimeOptionsMustBeFiniteNonNegativeAndBounded) {
 
 // Found in review: only --bus can parsed the address up front; the others failed to connect (3).
 TEST_F(ProgramsCli, ABadSimClockAddressIsUsageOnEveryBus) {
-  const std::vector<std::vector<std::string>> buses{
-      {"can", data("master/loopback.yaml"), kCanIface},
-      {"canopen", data("canopen/drives_only.yaml"), kCanIface},
-      {"tml", data("tml/drives_only.yaml"), kCanIface},
-      {"ethercat", data("ethercat/drives_only.yaml"), "udp:127.0.0.1:48311"},
-      {"m3", data("m3/servos_only.yaml"), "udp:127.0.0.1:48312"}};
-  for (const auto& b : buses) {
+  for (const auto& b : every_bus()) {
     SCOPED_TRACE(b[0]);
     expect_usage(run("omni-master", {"--bus", b[0], "--config", b[1], "--iface", b[2], "--clock", "sim", "--sim-clock",
                                      "tcp:localhost"}),
@@ -135,13 +137,7 @@ TEST_F(ProgramsCli, ABadSimClockAddressIsUsageOnEveryBus) {
 // Found in review: --sim-clock with --clock wall was refused on bus can only; the other four
 // ran on the wall clock and ignored the address.
 TEST_F(ProgramsCli, ASimClockAddressWithTheWallClockIsUsageOnEveryBus) {
-  const std::vector<std::vector<std::string>> buses{
-      {"can", data("master/loopback.yaml"), kCanIface},
-      {"canopen", data("canopen/drives_only.yaml"), kCanIface},
-      {"tml", data("tml/drives_only.yaml"), kCanIface},
-      {"ethercat", data("ethercat/drives_only.yaml"), "udp:127.0.0.1:48311"},
-      {"m3", data("m3/servos_only.yaml"), "udp:127.0.0.1:48312"}};
-  for (const auto& b : buses) {
+  for (const auto& b : every_bus()) {
     SCOPED_TRACE(b[0]);
     expect_usage(run("omni-master", {"--bus", b[0], "--config", b[1], "--iface", b[2], "--clock", "wall", "--sim-clock",
                                      "unix:/tmp/x.sock", "--duration", "0.05"}),
