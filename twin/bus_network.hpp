@@ -47,6 +47,9 @@ struct NetworkHooks {
   // steps it is interpolated with the wheel's speed, so that a device sampling at any instant
   // (a drifting slave timer, a SYNC0 offset) reads its counter then, not at the last step.
   std::function<double(int wheel)> wheel_angle;
+  // The same at an instant t [ns] the scheduler has already passed (a frame's end, delivered
+  // when the bus is next advanced); may be empty, then wheel_angle is used.
+  std::function<double(int wheel, SimTime t)> wheel_angle_at;
   std::function<double(int wheel)> wheel_speed;              // shaft speed [rad/s]
   std::function<void(int wheel, double rad_s)> set_setpoint; // amplifier speed setpoint [rad/s]
   std::function<void(int wheel, double err)> axis_sample;    // velocity error, drive units

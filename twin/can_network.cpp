@@ -104,6 +104,10 @@ void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, cons
   if (!wire_.arrives(i)) return;
   omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
   const std::uint64_t before = sl.stats().steps();
+  // A slave waiting for sync samples in this receive interrupt: its counter reads the angle of
+  // the frame's end, not of the later instant the bus is advanced at (up to a physics step;
+  // found in review).
+  if (sl.waiting_for_sync() && hooks_.wheel_angle_at) sl.observe(hooks_.wheel_angle_at(i, timing.end_ns));
   const omni::TimerAction a = sl.on_frame(f, timing.end_ns);
   after_slave_input(i, before, a);
 }

@@ -70,6 +70,7 @@ void M3Network::open_transport(const Scenario& s) {
 }
 
 void M3Network::flush_pcap() {
+  segment_->flush_capture();
   if (segment_->pcap()) segment_->pcap()->flush();
 }
 
@@ -299,7 +300,9 @@ DriveStateCode M3Network::drive_state(int axis0) const {
   if (!powered_[static_cast<std::size_t>(axis0)]) return DriveStateCode::off;
   const m3::SlaveLink& l = segment_->link(axis0);
   const m3::ServoProfile& servo = segment_->servo(axis0);
-  if (servo.device_alarm() || l.comm_alarm() != m3::CommAlarm::normal) return DriveStateCode::fault;
+  // A communication warning (1h-3h: one frame missed or bad) is no fault: the servo runs on
+  // (it read fault, so drives.faults counted four faulted drives that drove to the goal).
+  if (servo.device_alarm() || m3::is_alarm(l.comm_alarm())) return DriveStateCode::fault;
   // Connected (phase 3 cyclic, phase 2 event-driven) with its servo on.
   const bool connected = l.phase() == m3::Phase::p3 || (l.phase() == m3::Phase::p2 && !l.connection().synchronous);
   return connected && servo.servo_on() ? DriveStateCode::running : DriveStateCode::waiting;

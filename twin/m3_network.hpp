@@ -57,7 +57,10 @@ class M3Network final : public BusNetwork {
 
   void open_pcap(const std::string& path) override { segment_->open_pcap(path); }
   void flush_pcap() override;
-  std::string close_pcap() override { return close_capture(segment_->pcap()); }
+  std::string close_pcap() override {
+    segment_->flush_capture();
+    return close_capture(segment_->pcap());
+  }
   std::string pcap_error() const override;
   // Answers go out as the line delivers them; here, before each grant, a second C1 master
   // (fault) sends its commands.

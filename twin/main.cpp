@@ -257,7 +257,7 @@ void print_summary(const RunResult& r) {
   for (const auto& f : m["expectations"]["failures"]) std::cout << "  FAILED: " << f.get<std::string>() << "\n";
   std::cout << "  expectations: " << (r.passed ? "passed" : "FAILED") << "\n" << std::flush;
   for (const char* f : {"metrics.json", "trajectory.csv", "bus.csv", "events.log", "bus-can.pcap", "bus-ethercat.pcap",
-                        "master.log"})
+                        "bus-m3.pcap", "master.log"})
     if (fs::exists(fs::path(r.out_dir) / f)) std::cout << "  " << (fs::path(r.out_dir) / f).string() << "\n";
 }
 

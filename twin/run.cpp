@@ -247,6 +247,7 @@ double PlatformRun::wheel_angle_now(int wheel) const { return sim_.wheel_angle_a
 void PlatformRun::build_network() {
   BusNetwork::Hooks h;
   h.wheel_angle = [this](int i) { return wheel_angle_now(i); };
+  h.wheel_angle_at = [this](int i, SimTime t) { return sim_.wheel_angle_at(i, ns_to_seconds(t)); };
   h.wheel_speed = [this](int i) { return sim_.wheel_speed(i); };
   h.set_setpoint = [this](int i, double w) {
     bus_setpoint_[static_cast<std::size_t>(i)] = w;
@@ -745,8 +746,9 @@ void PlatformRun::log_faults_still_active() {
   for (const FaultSpec& f : s_.faults) {
     const SimTime from = seconds_to_ns(f.at);
     if (from > t || (f.duration > 0 && from + seconds_to_ns(f.duration) <= t)) continue;
-    note(log_event(t, "fault", fmt::format("{} of line {}, from {} s (still active at the end of the run)",
-                                           to_string(f.kind), f.line, f.at)),
+    // Named as run.json names it (kind and target), so it pairs with its "(begins)" line.
+    note(log_event(t, "fault", fmt::format("{} {} (scenario line {}), from {} s (still active at the end of the run)",
+                                           to_string(f.kind), fault_target(f), f.line, f.at)),
          *events_);
   }
 }

@@ -191,9 +191,9 @@ TEST_F(CliRun, FaultsStillActiveAtTheEndAreLogged) {
   const Finished f = run({"run", test_scenario("run_fault_past_end.yaml"), "--out", out.string(), "--no-progress"});
   ASSERT_EQ(f.code, 0) << f.out << f.err;
   const std::string events = read_bytes(out / "events.log");
-  EXPECT_TRUE(contains(events, "wheel_slip of line 10, from 3 s (still active at the end of the run)")) << events;
-  EXPECT_TRUE(contains(events, "wheel_slip of line 11, from 1 s (still active at the end of the run)")) << events;
-  EXPECT_FALSE(contains(events, "line 12, from")) << events;  // ended at 2 s
+  EXPECT_TRUE(contains(events, "wheel_slip wheel 2 (scenario line 10), from 3 s (still active at the end of the run)")) << events;
+  EXPECT_TRUE(contains(events, "wheel_slip wheel 3 (scenario line 11), from 1 s (still active at the end of the run)")) << events;
+  EXPECT_FALSE(contains(events, "line 12), from")) << events;  // ended at 2 s
 }
 
 // Without --out, `run` writes into out/<scenario name>/ under the working directory.

@@ -138,6 +138,7 @@ TEST_F(M3NetworkTest, TheFourServosStartAndTurnTheirWheels) {
   EXPECT_GT(net_->wire_busy_ns(), 0);
   EXPECT_GE(net_->master_start_ns(), 0) << "the instant all four servos were on";
   ASSERT_EQ(net_->close_pcap(), "");
+  net_->flush_pcap();  // the held records
   EXPECT_EQ(net_->segment().pcap()->written(m3::Direction::out), sent_);
   EXPECT_EQ(net_->segment().pcap()->written(m3::Direction::back), received_);
 }

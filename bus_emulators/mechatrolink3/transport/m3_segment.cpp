@@ -20,14 +20,41 @@ M3Segment::M3Segment(const SegmentConfig& config, M3Transport& transport) : stat
 
 M3Segment::~M3Segment() = default;
 
-void M3Segment::open_pcap(const std::string& path) { pcap_ = std::make_unique<PcapWriter>(path); }
+void M3Segment::open_pcap(const std::string& path) {
+  pcap_ = std::make_unique<PcapWriter>(path);
+  held_.resize(kHeld);
+  order_.reserve(kHeld);
+}
+
+// Into the held records (written in time order by flush_capture); a full hold flushes first.
+void M3Segment::capture(std::span<const std::uint8_t> frame, SimTime t, Direction dir) {
+  if (!pcap_) return;
+  if (held_count_ == held_.size()) flush_capture();
+  Held& h = held_[held_count_++];
+  h.size = std::min(frame.size(), h.bytes.size());
+  std::copy_n(frame.begin(), h.size, h.bytes.begin());
+  h.t = t;
+  h.dir = dir;
+}
+
+void M3Segment::flush_capture() {
+  if (!pcap_ || held_count_ == 0) return;
+  order_.clear();
+  for (std::size_t i = 0; i < held_count_; ++i) order_.push_back(i);
+  std::stable_sort(order_.begin(), order_.end(), [this](std::size_t a, std::size_t b) { return held_[a].t < held_[b].t; });
+  for (const std::size_t i : order_) {
+    const Held& h = held_[i];
+    pcap_->write_frame(std::span<const std::uint8_t>(h.bytes.data(), h.size), h.t, h.dir);
+  }
+  held_count_ = 0;
+}
 
 // A frame whose last bit reached the master at t: onto the transport and into the capture.
 void M3Segment::to_master_frame(std::span<const std::uint8_t> frame, SimTime t) {
   busy_ns_ += wire_ns(frame.size());
   if (transport_.send(frame)) ++to_master_;
   else ++send_failures_;
-  if (pcap_) pcap_->write_frame(frame, t, Direction::back);
+  capture(frame, t, Direction::back);
   last_arrival_ = t;
 }
 
@@ -36,7 +63,7 @@ void M3Segment::enter(int n, SimTime t) {
   ++from_master_;
   busy_ns_ += wire_ns(static_cast<std::size_t>(n));
   const std::span<const std::uint8_t> frame(rx_.data(), static_cast<std::size_t>(n));
-  if (pcap_) pcap_->write_frame(frame, t, Direction::out);
+  capture(frame, t, Direction::out);
   stations_.line().from_master(frame, t);
 }
 
@@ -92,7 +119,7 @@ int M3Segment::poll(SimTime t, SimTime not_before) {
 
 void M3Segment::inject(std::span<const std::uint8_t> frame, SimTime t) {
   busy_ns_ += wire_ns(frame.size());
-  if (pcap_) pcap_->write_frame(frame, t, Direction::out);
+  capture(frame, t, Direction::out);
   if (transport_.send(frame)) ++to_master_;
   else ++send_failures_;
   stations_.line().from_master(frame, t);

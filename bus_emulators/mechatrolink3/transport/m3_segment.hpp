@@ -51,10 +51,17 @@ class M3Segment {
   M3Segment(const M3Segment&) = delete;
   M3Segment& operator=(const M3Segment&) = delete;
 
-  // Starts the capture (both directions); throws std::runtime_error naming the file.
+  // Starts the capture (both directions); throws std::runtime_error naming the file. The
+  // capture is the master's port: its frames as it sent them, the slaves' as they reached it.
+  // Records are held and written in time order by flush_capture(): a response that a delay
+  // fault made late arrives after the master's next command has started, and was written
+  // before it (500 records out of order in a 0.5 s fault; found in review).
   void open_pcap(const std::string& path);
   PcapWriter* pcap() { return pcap_.get(); }
   const PcapWriter* pcap() const { return pcap_.get(); }
+  // Writes the held records, sorted by time (stable), to the capture. Call it at each record
+  // boundary (the twin's control tick) and before closing the capture. Real-time safe.
+  void flush_capture();
 
   SegmentAnswer take_sent(std::uint64_t master_frames, SimTime t_send, std::chrono::nanoseconds wait);
   // Realtime: every frame the transport holds now enters the line when it arrived — t minus
@@ -88,6 +95,7 @@ class M3Segment {
 
  private:
   void to_master_frame(std::span<const std::uint8_t> frame, SimTime t);
+  void capture(std::span<const std::uint8_t> frame, SimTime t, Direction dir);
   void enter(int n, SimTime t);
   void run_dry();
 
@@ -105,6 +113,16 @@ class M3Segment {
     SimTime at = 0;
   };
   std::array<Batched, 8> batch_{};
+  struct Held {  // a capture record waiting for flush_capture()
+    std::array<std::uint8_t, 2 * kMaxFrame> bytes{};
+    std::size_t size = 0;
+    SimTime t = 0;
+    Direction dir = Direction::out;
+  };
+  std::vector<Held> held_;       // kHeld slots, allocated by open_pcap()
+  std::size_t held_count_ = 0;
+  std::vector<std::size_t> order_;  // flush_capture()'s sort, allocated with held_
+  static constexpr std::size_t kHeld = 4096;
 };
 
 }  // namespace omnitwin::m3
