@@ -53,17 +53,21 @@ class Scheduler {
   using Callback = std::function<void(SimTime)>;
   using TimerId = int;
 
-  // Adds a periodic timer: first at `first`, then every period·(1 + drift) [ns, -].
+  // Adds a periodic timer: first at `first`, then every period·(1 + drift) [ns, -]; a drift
+  // that is not finite or <= -1 throws std::invalid_argument.
   // Not real-time safe (allocates); call during set-up.
   TimerId add_periodic(std::string name, Phase phase, SimTime first, SimTime period,
                        Callback cb, double drift = 0.0);
-  // Adds a one-shot event at t. Not real-time safe.
+  // Adds a one-shot event at t (>= now(); earlier throws std::invalid_argument). An event
+  // added from a callback for the running instant runs after the current event, whatever its
+  // phase. Not real-time safe.
   void add_once(std::string name, Phase phase, SimTime t, Callback cb);
 
   // Stops a periodic timer (e.g. a device that lost power). Real-time safe.
   void cancel(TimerId id);
-  // Re-arms a periodic timer so its next firing is at `t`, counting periods from there
-  // (used by device resynchronisation). Real-time safe.
+  // Re-arms a periodic timer so its next firing is at `t` (>= now(); earlier throws
+  // std::invalid_argument), counting periods from there (used by device resynchronisation).
+  // Real-time safe.
   void restart(TimerId id, SimTime t);
   // Changes a periodic timer's oscillator drift from its next firing on (which keeps its
   // time): later firings are every period·(1 + drift). Throws std::invalid_argument for a

@@ -105,6 +105,49 @@ TEST(Scheduler, RejectsBadPeriods) {
   Scheduler s;
   EXPECT_THROW(s.add_periodic("x", Phase::master, 0, 0, [](SimTime) {}), std::invalid_argument);
   EXPECT_THROW(s.add_periodic("x", Phase::master, 0, 10, [](SimTime) {}, -1.5), std::invalid_argument);
+  // Found in review: NaN passed `drift <= -1` and the run never ended (firings at INT64_MIN).
+  EXPECT_THROW(s.add_periodic("x", Phase::master, 0, 10, [](SimTime) {}, std::nan("")), std::invalid_argument);
+  EXPECT_THROW(s.add_periodic("x", Phase::master, 0, 10, [](SimTime) {}, INFINITY), std::invalid_argument);
+  const Scheduler::TimerId ok = s.add_periodic("ok", Phase::master, 0, 10, [](SimTime) {});
+  EXPECT_THROW(s.set_drift(ok, std::nan("")), std::invalid_argument);
+}
+
+// Found in review: a restart (or a one-shot) before now() ran instants already run again,
+// time going from 50 back to 20.
+TEST(Scheduler, TimeNeverRunsBackwards) {
+  Scheduler s;
+  std::vector<SimTime> fired;
+  bool threw = false;
+  Scheduler::TimerId id = -1;
+  id = s.add_periodic("a", Phase::device, 0, 10, [&](SimTime t) {
+    fired.push_back(t);
+    if (t == 50) {
+      try {
+        s.restart(id, 20);
+      } catch (const std::invalid_argument&) {
+        threw = true;
+      }
+      EXPECT_THROW(s.add_once("b", Phase::device, 40, [](SimTime) {}), std::invalid_argument);
+    }
+  });
+  CountingPacer p;
+  s.run_until(80, p);
+  EXPECT_TRUE(threw);
+  EXPECT_EQ(fired, (std::vector<SimTime>{0, 10, 20, 30, 40, 50, 60, 70}));
+}
+
+// Found in review: should_stop was asked after the due entry had been taken off the queue,
+// so a run resumed after it had lost that periodic timer for good (2 firings of 100).
+TEST(Scheduler, ARunResumedAfterShouldStopKeepsItsTimers) {
+  Scheduler s;
+  int fired = 0;
+  s.add_periodic("a", Phase::master, 0, 10, [&](SimTime) { ++fired; });
+  CountingPacer p;
+  int checks = 0;
+  s.run_until(1000, p, [&] { return ++checks == 3; });
+  EXPECT_EQ(fired, 2);
+  s.run_until(1000, p);
+  EXPECT_EQ(fired, 100);
 }
 
 }  // namespace
