@@ -153,6 +153,12 @@ int cmd_param(can::Transport& tr, const Options& o) {
     std::cerr << "omni-pc: VALUE must be 0..4294967295 and --type 0..255\n";
     return kExitUsage;
   }
+  // The slaves' setting (0x0C) travels on as a 2-byte value: the master refuses a larger one,
+  // which was sent with exit 0 (found in review).
+  if (o.data_type == omni::data_type::slave_controller_setting && o.value > 0xFFFF) {
+    std::cerr << "omni-pc: VALUE of a slave setting (--type 0x0C) must be 0..65535: the master forwards 2 bytes\n";
+    return kExitUsage;
+  }
   const omni::ParameterSetup p{node::master, node::pc, static_cast<std::uint8_t>(o.data_type),
                                omni::ParamWidth::four_bytes, static_cast<std::uint32_t>(o.value)};
   return send(tr, p);

@@ -105,6 +105,8 @@ TEST_F(ProgramsCli, TmlTakesOnlyTheSupportedBaudRates) {
 TEST_F(ProgramsCli, PcRefusesANodeOutOfRange) {
   expect_usage(run("omni-pc", {"--iface", kCanIface, "start", "--node", "-7"}), "--node");
   expect_usage(run("omni-pc", {"--iface", kCanIface, "stop", "--node", "256"}), "--node");
+  // Found in review: a slave setting over 0xFFFF was sent (exit 0) and the master refused it.
+  expect_usage(run("omni-pc", {"--iface", kCanIface, "param", "70000"}), "0..65535");
 }
 
 // Found in review: 1e10 s overflowed the int64 ns deadline (the run ended at once), NaN ran
