@@ -6,20 +6,12 @@ namespace omnitwin::ethercat {
 
 namespace {
 
-// A signed entry's value from the data of a write (little endian, its own size).
-std::int32_t signed_le(std::span<const std::uint8_t> d) {
-  std::uint32_t raw = 0;
-  for (std::size_t i = 0; i < d.size() && i < 4; ++i) raw |= std::uint32_t{d[i]} << (8 * i);
-  const std::size_t bits = 8 * d.size();
-  if (bits < 32 && ((raw >> (bits - 1)) & 1u)) raw |= ~0u << bits;  // sign extension
-  return static_cast<std::int32_t>(raw);
-}
-
 // The object at index accepts only the values `supported` says the drive implements.
 void accept_only(ObjectDictionary& od, std::uint16_t index, bool (*supported)(int) noexcept) {
   if (OdObject* o = od.find(index)) {
-    o->check = [supported](const OdObject&, std::uint8_t, std::span<const std::uint8_t> data) {
-      return supported(signed_le(data)) ? SdoAbort::none : SdoAbort::value_range;
+    o->check = [supported](const OdObject& obj, std::uint8_t sub, std::span<const std::uint8_t> data) {
+      const OdEntry* e = obj.entry(sub);
+      return e && supported(static_cast<int>(e->int_of(data))) ? SdoAbort::none : SdoAbort::value_range;
     };
   }
 }

@@ -51,10 +51,10 @@ bool OdEntry::is_signed() const {
          data_type == coe_type::int64 || data_type == 0x0010 /* INT24 */;
 }
 
-std::int64_t OdEntry::as_int() const {
-  const std::size_t n = std::min<std::size_t>(bytes(), 8);
+std::int64_t OdEntry::int_of(std::span<const std::uint8_t> raw) const {
+  const std::size_t n = std::min<std::size_t>({bytes(), raw.size(), 8});
   std::uint64_t v = 0;
-  std::memcpy(&v, data(), n);
+  std::memcpy(&v, raw.data(), n);
   if (bits < 64) {
     v &= (std::uint64_t{1} << bits) - 1;
     if (is_signed() && (v >> (bits - 1)) & 1u) v |= ~((std::uint64_t{1} << bits) - 1);

@@ -91,7 +91,9 @@ struct OdEntry {
   const std::uint8_t* data() const { return bound_ ? bound_ : own_.data(); }
   bool bound() const { return bound_ != nullptr; }
   // The value as an integer (sign-extended for signed types), up to 64 bits. RT-safe.
-  std::int64_t as_int() const;
+  std::int64_t as_int() const { return int_of({data(), bytes()}); }
+  // `raw` (little endian, as a write brings it) read as this entry's type, the same way. RT-safe.
+  std::int64_t int_of(std::span<const std::uint8_t> raw) const;
   void set_int(std::int64_t v);       // stores the low bits() bits. RT-safe.
 
  private:
