@@ -253,8 +253,8 @@ void TmlDrive::execute(const Message& m, SimTime t) {
 void TmlDrive::answer_request(const Message& m, const Classified& c, SimTime t) {
   // GiveMeData goes to one axis only; on RS-485 no request to a group or to axis 0 (every drive
   // on the line takes those: the answers would collide).
-  const bool group = is_group(m.id_code), to_all = group || id_of(m.id_code) == 0;
-  if (!c.complete || (group && c.kind == Kind::give_me_data) || (to_all && setup_.protocol == Protocol::rs485)) {
+  const bool group = is_group(m.id_code);
+  if (!c.complete || (group && c.kind == Kind::give_me_data) || (to_many(m.id_code) && setup_.protocol == Protocol::rs485)) {
     ++stats_.refused;
     return;
   }

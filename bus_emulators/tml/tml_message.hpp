@@ -55,6 +55,9 @@ constexpr std::uint8_t id_of(std::uint16_t id_code) { return static_cast<std::ui
 constexpr bool is_group(std::uint16_t id_code) { return (id_code & kGroupBit) != 0; }
 constexpr bool is_host(std::uint16_t id_code) { return (id_code & kHostBit) != 0; }
 constexpr bool is_broadcast(std::uint16_t id_code) { return is_group(id_code) && id_of(id_code) == 0; }
+// A group code or axis 0: every drive that hears it may take it (seed ch. 2), so on a shared
+// RS-485 line none acknowledges or answers it (their transmissions would collide).
+constexpr bool to_many(std::uint16_t id_code) { return is_group(id_code) || id_of(id_code) == 0; }
 // Only the GROUP, ID and HOST bits are set. RT-safe.
 constexpr bool id_code_valid(std::uint16_t id_code) { return (id_code & ~kIdCodeMask) == 0; }
 

@@ -73,7 +73,7 @@ bool acknowledged(Link link, const Message& m) {
   const MessageType t = type_of(m);
   if (t != MessageType::a && t != MessageType::b) return false;
   // On RS-485 every drive that takes a group or axis-0 message would answer: their 'O's collide.
-  return !(link == Link::rs485 && (is_group(m.id_code) || id_of(m.id_code) == 0));
+  return !(link == Link::rs485 && to_many(m.id_code));
 }
 
 LinkCheck check_host_message(Link link, const Message& m) {
