@@ -488,7 +488,7 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
         if (s.step != SlaveStep::op) break;
         if (d.wkc() != 1) {
           ++stats_.slaves_lost;
-          emit(fmt::format("slave {} (station 0x{:04X}) lost: no answer to the AL status read", s.position + 1, s.station));
+          emit(fmt::format("slave {} (station 0x{:04X}) lost: no answer to the AL status read", s.number(), s.station));
           enter(s, SlaveStep::offline, t);
           s.next_probe = t + config_.probe_every_ns;
           break;
@@ -497,7 +497,7 @@ void EcMaster::on_frame(std::span<std::uint8_t> pdu, SimTime t) {
         s.al_state = static_cast<AlState>(st & 0x0F);
         s.al_code = get_u16(d.data() + 4);
         if ((st & 0x0F) != static_cast<std::uint16_t>(AlState::op) || (st & 0x10)) {
-          emit(fmt::format("slave {} (station 0x{:04X}) left OP: state {}{}, AL status code 0x{:04X} ({})", s.position + 1,
+          emit(fmt::format("slave {} (station 0x{:04X}) left OP: state {}{}, AL status code 0x{:04X} ({})", s.number(),
                            s.station, to_string(s.al_state), (st & 0x10) ? " + error" : "", s.al_code,
                            al_status_text(s.al_code)));
           s.ack = (st & 0x10) != 0;
@@ -575,12 +575,12 @@ void EcMaster::after_frame(SimTime t, bool from_frame) {
         if (!best) {
           fail(fmt::format("slave {} (vendor 0x{:08X}, product 0x{:08X}, revision 0x{:08X}, \"{}\") matches no ESI "
                            "device description",
-                           s.position + 1, s.sii.vendor, s.sii.product, s.sii.revision, s.sii.name));
+                           s.number(), s.sii.vendor, s.sii.product, s.sii.revision, s.sii.name));
           return;
         }
         s.esi = best;
         s.dc = config_.dc && !best->dc.empty();
-        emit(fmt::format("slave {} station 0x{:04X}: {} (vendor 0x{:08X}, product 0x{:08X}, rev 0x{:08X})", s.position + 1,
+        emit(fmt::format("slave {} station 0x{:04X}: {} (vendor 0x{:08X}, product 0x{:08X}, rev 0x{:08X})", s.number(),
                          s.station, best->name, s.sii.vendor, s.sii.product, s.sii.revision));
       }
       phase_ = MasterPhase::configure;
@@ -706,7 +706,7 @@ void EcMaster::layout() {
     const std::uint32_t need = overlapped_ ? std::max(s.out_bytes, s.in_bytes) : s.out_bytes + s.in_bytes;
     if (groups_.empty() || groups_.back().bytes + need > room) {
       if (need > room) {
-        fail(fmt::format("slave {}'s process data of {} bytes does not fit one frame", s.position + 1, need));
+        fail(fmt::format("slave {}'s process data of {} bytes does not fit one frame", s.number(), need));
         return;
       }
       groups_.push_back({at, 0, static_cast<int>(i), 0});
@@ -826,7 +826,7 @@ bool EcMaster::mbx_ready(const Slave& s) const {
 }
 
 void EcMaster::step_failed(Slave& s, const std::string& why, SimTime t) {
-  const std::string msg = fmt::format("slave {} (station 0x{:04X}) {}: {}", s.position + 1, s.station, to_string(s.step), why);
+  const std::string msg = fmt::format("slave {} (station 0x{:04X}) {}: {}", s.number(), s.station, to_string(s.step), why);
   if (!operational_once_) {
     s.step = SlaveStep::error;
     fail(msg);
@@ -1132,7 +1132,7 @@ void EcMaster::slave_reply(Slave& s, const ec::Datagram& d, int sub, SimTime t) 
         }
         const std::string msg =
             fmt::format("slave {} (station 0x{:04X}) refused {}: state {} + error, AL status code 0x{:04X} ({})",
-                        s.position + 1, s.station, to_string(s.target), to_string(s.al_state), s.al_code,
+                        s.number(), s.station, to_string(s.target), to_string(s.al_state), s.al_code,
                         al_status_text(s.al_code));
         enter(s, SlaveStep::ack_error, t);
         if (!operational_once_) {
@@ -1151,7 +1151,7 @@ void EcMaster::slave_reply(Slave& s, const ec::Datagram& d, int sub, SimTime t) 
             if (operational_once_) {
               ++s.recoveries;
               ++stats_.recoveries;
-              emit(fmt::format("slave {} (station 0x{:04X}) back in OP", s.position + 1, s.station));
+              emit(fmt::format("slave {} (station 0x{:04X}) back in OP", s.number(), s.station));
             }
             break;
         }
@@ -1162,7 +1162,7 @@ void EcMaster::slave_reply(Slave& s, const ec::Datagram& d, int sub, SimTime t) 
       if (wkc == 1) {
         if (!operational_once_) {
           s.step = SlaveStep::error;
-          fail(error_.empty() ? fmt::format("slave {} AL error", s.position + 1) : error_);
+          fail(error_.empty() ? fmt::format("slave {} AL error", s.number()) : error_);
         } else {
           enter(s, SlaveStep::offline, t);
           s.next_probe = t + config_.probe_every_ns;
@@ -1189,13 +1189,13 @@ void EcMaster::slave_reply(Slave& s, const ec::Datagram& d, int sub, SimTime t) 
     case SlaveStep::dc_write:
       if (wkc != 1) s.step_ok = false;
       if (sub == 5 && s.step_ok) {
-        emit(fmt::format("slave {} (station 0x{:04X}) rejoins distributed clocks", s.position + 1, s.station));
+        emit(fmt::format("slave {} (station 0x{:04X}) rejoins distributed clocks", s.number(), s.station));
         enter(s, SlaveStep::to_safeop, t);
       }
       break;
     case SlaveStep::offline:
       if (wkc == 1) {
-        emit(fmt::format("slave {} answers again: station 0x{:04X} set, reconfiguring", s.position + 1, s.station));
+        emit(fmt::format("slave {} answers again: station 0x{:04X} set, reconfiguring", s.number(), s.station));
         s.ack = true;
         s.job.reset();
         s.internal_jobs.clear();
@@ -1298,7 +1298,7 @@ bool EcMaster::take_emergency(Slave& s, std::span<const std::uint8_t> mailbox) {
   const std::size_t axis = e->data[0] >= 1 && e->data[0] <= 64 ? e->data[0] : 1;
   if (s.axis_emergency.size() < axis) s.axis_emergency.resize(axis, 0);
   s.axis_emergency[axis - 1] = e->code;
-  emit(fmt::format("slave {} (station 0x{:04X}) emergency 0x{:04X} ({}), error register 0x{:02X}, data {:02X}", s.position + 1,
+  emit(fmt::format("slave {} (station 0x{:04X}) emergency 0x{:04X} ({}), error register 0x{:02X}, data {:02X}", s.number(),
                    s.station, e->code, emergency_text(e->code), e->error_register, fmt::join(e->data, " ")));
   return true;
 }
@@ -1347,7 +1347,7 @@ void EcMaster::finish_job(Slave& s, SdoStatus status) {
     ++stats_.sdo_done;
   } else {
     ++stats_.sdo_failed;
-    const std::string msg = fmt::format("slave {} SDO {} 0x{:04X}:{:02X} {}{}", s.position + 1,
+    const std::string msg = fmt::format("slave {} SDO {} 0x{:04X}:{:02X} {}{}", s.number(),
                                         job.req.upload ? "upload" : "download", job.req.index, job.req.sub,
                                         to_string(status),
                                         status == SdoStatus::aborted

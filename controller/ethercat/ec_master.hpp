@@ -159,6 +159,8 @@ struct EntryLocation {
 
 struct SlaveStatus {
   int position = 0;
+  // The slave's number in messages and in the configuration (`slave:`): position + 1.
+  int number() const { return position + 1; }
   std::uint16_t station = 0;
   SiiInfo sii;
   const DeviceDescription* esi = nullptr;

@@ -575,7 +575,7 @@ int run_ethercat_program(const ProgramOptions& o) {
     const SlaveStatus& sl = m.slave(i);
     // An offline slave's last AL status read is stale: its state is not known.
     spdlog::info("slave {} station 0x{:04X}: step {}, AL {} (code 0x{:04X}), recoveries {}, emergencies {} (last 0x{:04X})",
-                 i + 1, sl.station, to_string(sl.step), sl.step == SlaveStep::offline ? "unknown" : to_string(sl.al_state),
+                 sl.number(), sl.station, to_string(sl.step), sl.step == SlaveStep::offline ? "unknown" : to_string(sl.al_state),
                  sl.al_code, sl.recoveries, sl.emergencies, sl.last_emergency);
   }
   if (sigfd >= 0) ::close(sigfd);
