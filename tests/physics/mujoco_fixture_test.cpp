@@ -17,6 +17,7 @@
 
 #include "physics/platform_sim.hpp"
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace omnitwin::testing {
 namespace {
@@ -37,9 +38,11 @@ std::string box_on_plane(const std::string& size_tag) {
          "</mujoco>\n";
 }
 
-// Loads `xml` through a temp file; fails the test (and returns null) if it does not compile.
+// Loads `xml` through a file in a private temp directory (removed on return); fails the test
+// (and returns null) if it does not compile.
 ModelPtr load(const std::string& xml, const std::string& name) {
-  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_" + name;  // ctest -j: per process
+  const TempDir dir("omnitwin-fixture");
+  const std::string path = dir / name;
   std::ofstream(path) << xml;
   std::array<char, 1000> err{};
   ModelPtr m(mj_loadXML(path.c_str(), nullptr, err.data(), static_cast<int>(err.size())));

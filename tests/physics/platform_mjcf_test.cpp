@@ -17,6 +17,7 @@
 #include <cstdio>
 
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace omnitwin::physics {
 namespace {
@@ -25,14 +26,14 @@ using omnitwin::testing::source_path;
 
 class PlatformMjcf : public omnitwin::testing::MujocoTest {
  protected:
-  // Compiles the generated text through a temporary file; fails the test on errors. The
-  // name is unique per process: ctest -j runs these tests in parallel processes.
+  // Compiles the generated text through a file in a private temp directory (removed on
+  // return, also when the model does not compile); fails the test on errors.
   static mjModel* compile(const std::string& xml) {
-    const std::string path = ::testing::TempDir() + "omni4_mjcf_test_" + std::to_string(::getpid()) + ".xml";
+    const omnitwin::testing::TempDir dir("omnitwin-mjcf");
+    const std::string path = dir / "omni4.xml";
     std::ofstream(path) << xml;
     char err[1024] = "";
     mjModel* m = mj_loadXML(path.c_str(), nullptr, err, sizeof err);
-    std::remove(path.c_str());
     EXPECT_NE(m, nullptr) << err;
     return m;
   }

@@ -24,6 +24,7 @@
 #include "physics/kinematics.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "tests/support/mujoco_fixture.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace omnitwin::physics {
 namespace {
@@ -369,7 +370,8 @@ TEST_F(PlatformSimTest, CommittedModelFileBehavesLikeTheGeneratedOne) {
 }
 
 TEST_F(PlatformSimTest, FromFileRejectsUnloadableFiles) {
-  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_omni4_broken.xml";
+  const omnitwin::testing::TempDir dir("omnitwin-physics");  // removed even when the test fails
+  const std::string path = dir / "omni4_broken.xml";
   std::ofstream(path) << "<mujoco><worldbody><body name=\"chassis\"></worldbody></mujoco>\n";
   try {
     PlatformSim::from_file(path, PlatformParams{});
@@ -387,7 +389,8 @@ TEST_F(PlatformSimTest, FromFileNamesWhatBreaksTheNamingContract) {
   const std::string motor3 = "name=\"motor3\"", hinge2 = "name=\"wheel2\" type=\"hinge\"";
   xml.replace(xml.find(motor3), motor3.size(), "name=\"drive3\"");
   xml.replace(xml.find(hinge2), hinge2.size(), "name=\"wheel2\" type=\"slide\"");
-  const std::string path = ::testing::TempDir() + std::to_string(::getpid()) + "_omni4_misnamed.xml";
+  const omnitwin::testing::TempDir dir("omnitwin-physics");
+  const std::string path = dir / "omni4_misnamed.xml";
   std::ofstream(path) << xml;
   try {
     PlatformSim::from_file(path, PlatformParams{});

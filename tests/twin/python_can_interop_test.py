@@ -41,8 +41,13 @@ def receive_for(bus, seconds, until=None):
 
 
 def main():
+    # The run's records go to a private directory, removed also when a check fails.
+    with tempfile.TemporaryDirectory(prefix="omnitwin-pycan-") as out:
+        check(out)
+
+
+def check(out):
     omnitwin, scenario, port = sys.argv[1], sys.argv[2], int(sys.argv[3])
-    out = tempfile.mkdtemp(prefix="omnitwin-pycan-")
     spec = f"udp:{GROUP}:{port}"
     bus = can.Bus(interface="udp_multicast", channel=GROUP, port=port, receive_own_messages=False)
     run = subprocess.Popen([omnitwin, "run", scenario, "--bus", "can", "--clock", "realtime", "--out", out,

@@ -90,8 +90,13 @@ def upload_segmented(bus, index, sub):
 
 
 def main():
+    # The run's records go to a private directory, removed also when a check fails.
+    with tempfile.TemporaryDirectory(prefix="omnitwin-pycanopen-") as out:
+        check(out)
+
+
+def check(out):
     omnitwin, scenario, eds, port = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
-    out = tempfile.mkdtemp(prefix="omnitwin-pycanopen-")
     spec = f"udp:{GROUP}:{port}"
     bus = can.Bus(interface="udp_multicast", channel=GROUP, port=port, receive_own_messages=False)
     run = subprocess.Popen([omnitwin, "run", scenario, "--bus", "canopen", "--clock", "realtime", "--out", out,
