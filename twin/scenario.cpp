@@ -11,10 +11,12 @@
 #include <yaml-cpp/yaml.h>
 
 #include <charconv>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <optional>
+#include <utility>
 
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
@@ -336,6 +338,18 @@ void apply_param_sections(const YamlField& map, physics::PlatformParams& p) {
     if (tau.exists())
       tau.fail(fmt::format("motor.electrical_tau ({}) must be 0 or at least sim.timestep ({})",
                            p.motor.electrical_tau, p.sim.timestep));
+  }
+  // The 8051 holds its gains as whole numbers: int16 arithmetic refuses a fractional gain
+  // rather than rounding it (blame the gain this layer set, else the arithmetic switch).
+  if (p.velocity_loop.arithmetic == physics::LoopArithmetic::int16) {
+    const YamlField loop = map["velocity_loop"];
+    for (const auto& [key, gain] : {std::pair{"kp", p.velocity_loop.kp}, std::pair{"ki", p.velocity_loop.ki}}) {
+      if (gain == std::round(gain)) continue;
+      const YamlField blamed = loop[key].exists() ? loop[key] : loop["arithmetic"];
+      if (blamed.exists())
+        blamed.fail(fmt::format("velocity_loop.{} ({}) must be a whole number with arithmetic int16 "
+                                "(the 8051 holds its gains as integers)", key, gain));
+    }
   }
   // Rollers must fit inside the wheel envelope; blame whichever this layer set last.
   if (t.radius_or_r && !(p.rollers.radius < p.geometry.r)) {

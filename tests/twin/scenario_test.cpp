@@ -393,6 +393,22 @@ TEST(ScenarioErrors, UnknownLoopArithmeticIsRefused) {
   EXPECT_NE(std::string(a.what()).find("arithmetic"), std::string::npos) << a.what();
 }
 
+TEST(ScenarioErrors, AFractionalGainWithInt16ArithmeticIsRefusedNotRounded) {
+  // The gain and the switch in one layer: the gain is blamed.
+  const auto a = load_error(scenario("minimal.yaml"), {{"platform.velocity_loop.arithmetic", "int16"},
+                                                       {"platform.velocity_loop.ki", "0.08"}});
+  EXPECT_NE(std::string(a.what()).find("velocity_loop.ki"), std::string::npos) << a.what();
+  EXPECT_NE(std::string(a.what()).find("whole"), std::string::npos) << a.what();
+  // The message gives the value that would have been rounded.
+  const auto b = load_error(scenario("minimal.yaml"), {{"platform.velocity_loop.kp", "20.5"},
+                                                       {"platform.velocity_loop.arithmetic", "int16"}});
+  EXPECT_NE(std::string(b.what()).find("velocity_loop.kp (20.5)"), std::string::npos) << b.what();
+  // Whole gains are fine, and real arithmetic keeps fractional ones.
+  EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"platform.velocity_loop.arithmetic", "int16"},
+                                                           {"platform.velocity_loop.kp", "7"}}));
+  EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"platform.velocity_loop.ki", "0.08"}}));
+}
+
 TEST(Scenario, ToStringNamesMatchFileSpelling) {
   EXPECT_STREQ(to_string(BusKind::direct), "direct");
   EXPECT_STREQ(to_string(BusKind::canopen), "canopen");
