@@ -46,7 +46,8 @@ constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
 constexpr auto kConnectTimeout = std::chrono::seconds(10);
 constexpr auto kGrantTimeout = std::chrono::seconds(60);
 constexpr std::int64_t kDrainLimitNs = 5'000'000'000;
-// The end of a wall-clock run: this long for the drives to stop and the slaves to reach INIT.
+// The end of a run (wall clock, or a signal in lockstep): this long for the drives to stop and
+// the slaves to reach INIT.
 constexpr std::int64_t kShutdownNs = 100'000'000;
 constexpr int kRtPriority = 40;
 
@@ -369,18 +370,54 @@ struct Botnana {
   }
 };
 
+// One cycle of the end of a run at t, `elapsed` [ns] after it began with Runner::stop_drives():
+// once no drive is enabled (or after half of kShutdownNs) the master's shutdown (AL SAFE-OP,
+// then INIT). False, without a cycle, when every slave answered INIT or kShutdownNs is over.
+bool shutdown_cycle(Runner& r, SimTime t, std::int64_t elapsed) {
+  EcMaster& m = r.master();
+  if (!m.shutting_down() && (!r.drives().any_enabled() || elapsed >= kShutdownNs / 2)) m.shutdown();
+  if (m.shutdown_done() || elapsed >= kShutdownNs) return false;
+  r.cycle(t, nullptr);
+  return true;
+}
+
+void log_shutdown(const EcMaster& m) {
+  if (m.shutdown_done()) spdlog::info("shutdown: drives stopped, slaves in INIT");
+  else spdlog::warn("shutdown: not every slave confirmed INIT within {} ms", kShutdownNs / 1'000'000);
+}
+
+// Lockstep until the twin ends the run (End), the script ends, or a failure (throws). SIGINT/
+// SIGTERM ends it as the end of a wall-clock run does, in the ticks the twin still grants
+// (kShutdownNs of simulated time at most): the drives stopped, the slaves taken to INIT; an End
+// or the twin gone meanwhile ends it at once (no simulated time is left to send in), as does
+// a second signal.
 int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
   simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
   if (client.stopped()) return kExitOk;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  bool stopping = false;
+  SimTime stop_from = -1;  // the first tick of the shutdown
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
     pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
     const int pr = ::poll(fds, 2, static_cast<int>(std::chrono::milliseconds(kGrantTimeout).count()));
     if (pr == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
-    if (pr > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return kExitOk;
+    if (pr > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) {
+      if (stopping) {
+        spdlog::warn("shutdown: a second signal: ending without it");
+        return kExitOk;
+      }
+      stopping = true;
+      r.stop_drives();
+      spdlog::info("signal: stopping the drives and taking the slaves to INIT in the ticks the twin grants");
+      continue;
+    }
     const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && stopping) {
+      spdlog::warn("shutdown: the twin ended the run before the slaves confirmed INIT");
+      return kExitOk;
+    }
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
@@ -388,10 +425,17 @@ int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
       throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick,
                                        r.frames_rx, g.frames[0])};
     }
-    r.cycle(g.t_ns, bn.interp.get());
-    const bool go_on = bn.after_cycle(r);
+    bool go_on = true;
+    if (stopping) {
+      if (stop_from < 0) stop_from = g.t_ns;
+      go_on = shutdown_cycle(r, g.t_ns, g.t_ns - stop_from);
+    } else {
+      r.cycle(g.t_ns, bn.interp.get());
+      go_on = bn.after_cycle(r);
+    }
     const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+    if (stopping && !go_on) log_shutdown(r.master());
     if (!go_on) return bn.error ? kExitRuntime : kExitOk;
   }
 }
@@ -407,19 +451,15 @@ void sleep_until(std::int64_t at) {
 // quick stop (until none is enabled, at most half of it), then the master's shutdown (AL
 // SAFE-OP, then INIT) until every slave answers in INIT. Logs how it ended.
 void shutdown_wall(Runner& r, std::int64_t start, std::int64_t period_ns) {
-  EcMaster& m = r.master();
   r.stop_drives();
   const std::int64_t t0 = monotonic_ns();
   for (std::int64_t at = t0;; at += period_ns) {
     sleep_until(at);
     const SimTime t = at - start;
     r.receive(t, std::chrono::nanoseconds(period_ns / 4));
-    if (!m.shutting_down() && (!r.drives().any_enabled() || at - t0 >= kShutdownNs / 2)) m.shutdown();
-    if (m.shutdown_done() || at - t0 >= kShutdownNs) break;
-    r.cycle(t, nullptr);
+    if (!shutdown_cycle(r, t, at - t0)) break;
   }
-  if (m.shutdown_done()) spdlog::info("shutdown: drives stopped, slaves in INIT");
-  else spdlog::warn("shutdown: not every slave confirmed INIT within {} ms", kShutdownNs / 1'000'000);
+  log_shutdown(r.master());
 }
 
 int run_wall(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn, std::int64_t period_ns) {

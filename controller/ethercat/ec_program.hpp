@@ -8,10 +8,12 @@
 //  * --clock sim: lockstep with the twin's sim clock exactly as the CAN path: each Grant
 //    carries the twin's cumulative frames on bus 0; the replies are drained until that many
 //    arrived, the cycle runs at the grant's time, Done carries our cumulative frames sent and
-//    the MasterReport (state, odometry, reference).
+//    the MasterReport (state, odometry, reference). SIGINT/SIGTERM ends it as the end of a
+//    wall-clock run does, in the ticks the twin still grants; End ends it at once.
 //  * --clock wall: CLOCK_MONOTONIC absolute deadlines (clock_nanosleep TIMER_ABSTIME),
 //    SCHED_FIFO and mlockall when permitted; at the start of each cycle the previous cycle's
-//    frame is received.
+//    frame is received. Its end (SIGINT/SIGTERM, --duration, the script's): drives stopped,
+//    slaves to INIT, within 100 ms.
 // Each cycle: the drive layer reads the image, the platform loop (when `wheels` are
 // configured, once every drive is in OP and operation enabled) turns wheel speeds into target
 // velocities (CSV, counts/s) or positions (CSP) and reads odometry from position actual, the

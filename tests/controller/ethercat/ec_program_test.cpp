@@ -4,7 +4,8 @@
 // slaves' states after it returned. The end of --duration takes the drives out of operation
 // and the slaves to INIT; a wheel's drive lost mid-path stops the platform naming its slave; a
 // bus where no slave answers fails after startup_timeout, and a run ending before OP is exit 3;
-// a segment that lost a slave after OP reads "degraded", not "starting".
+// a segment that lost a slave after OP reads "degraded", not "starting". In lockstep (a
+// sim-clock server in a thread stands in for the twin), SIGINT does the same end as --duration.
 #include <gtest/gtest.h>
 #include <pthread.h>
 #include <signal.h>
@@ -21,6 +22,7 @@
 
 #include "bus_emulators/ethercat/transport/ec_transport.hpp"
 #include "controller/ethercat/ec_program.hpp"
+#include "controller/sim_clock.hpp"
 #include "tests/controller/ethercat/ec_bench.hpp"
 
 namespace omnitwin::controller::ethercat {
@@ -101,6 +103,100 @@ class Segment {
   std::thread thread_;
 };
 
+// The twin's side in lockstep: the four drives of Segment, stepped in simulated time, behind a
+// sim-clock server. Each tick the master's frames of the last tick go through the chain, then
+// the grant counts the replies and the master's frames are taken as its Done counts them. Once
+// the master reports its platform loop running for `signal_after` ticks, SIGINT goes to the
+// process (the program reads it from its signalfd; every thread blocks it); the twin grants on
+// until the master closes the channel or `max_ticks`.
+class LockstepSegment {
+ public:
+  LockstepSegment(const std::string& iface, const std::string& clock, int signal_after, int max_ticks)
+      : tr_(omnitwin::ethercat::open_transport(iface, omnitwin::ethercat::Role::slaves)),
+        server_(clock),
+        signal_after_(signal_after),
+        max_ticks_(max_ticks) {
+    for (int i = 0; i < 4; ++i) {
+      omnitwin::ethercat::DriveSlaveConfig sc;
+      sc.serial = static_cast<std::uint32_t>(100 + i);
+      slaves_.push_back(std::make_unique<omnitwin::ethercat::DriveSlave>(devices_[0], sc));
+      models_.emplace_back();
+    }
+    for (auto& s : slaves_) chain_.add(&s->esc());
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~LockstepSegment() { join(); }
+  void join() {
+    if (thread_.joinable()) thread_.join();
+  }
+  omnitwin::ethercat::AlState al_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->esc().al_state(); }
+  omnitwin::drive::State drive_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->axis(0).state(); }
+  std::int64_t signalled_tick = -1;  // the tick after whose Done SIGINT was sent (-1: never)
+  std::int64_t last_tick = -1;       // the last tick the master answered
+  bool closed = false;               // the master closed the channel (else max_ticks ended it)
+
+ private:
+  void serve() {
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set, nullptr);
+    if (server_.accept(10s) != simclock::WaitStatus::ok) return;
+    std::vector<std::vector<std::uint8_t>> held;
+    std::vector<std::uint8_t> buf(2048);
+    std::uint64_t sent = 0, taken = 0;
+    std::int64_t next = 0, running = 0;
+    for (std::int64_t k = 0; k < max_ticks_; ++k) {
+      const std::int64_t t = k * kCycle;
+      for (; next <= t; next += kStep) firmware(next);
+      chain_.advance(t);
+      for (auto& f : held) {
+        if (chain_.process(std::span<std::uint8_t>(f), t) && tr_->send(f)) ++sent;
+      }
+      held.clear();
+      simclock::Grant g;
+      g.tick = static_cast<std::uint64_t>(k);
+      g.t_ns = t;
+      g.frames[0] = sent;
+      simclock::Done d;
+      if (server_.grant(g, d, 10s) != simclock::WaitStatus::ok) {
+        closed = true;
+        return;
+      }
+      last_tick = k;
+      for (const auto give_up = std::chrono::steady_clock::now() + 5s;
+           taken < d.frames[0] && std::chrono::steady_clock::now() < give_up;) {
+        const int n = tr_->receive(buf, 10ms);
+        if (n > 0) held.emplace_back(buf.begin(), buf.begin() + n), ++taken;
+      }
+      running = d.report.state == simclock::MasterState::running ? running + 1 : 0;
+      if (signalled_tick < 0 && running >= signal_after_) {
+        signalled_tick = k;
+        ::kill(::getpid(), SIGINT);
+      }
+    }
+    server_.end(max_ticks_ * kCycle);
+  }
+  void firmware(std::int64_t t) {
+    for (std::size_t i = 0; i < slaves_.size(); ++i) {
+      const auto cmd = slaves_[i]->axis(0).step(t, models_[i].feedback());
+      models_[i].step(cmd, static_cast<double>(kStep) * 1e-9);
+      slaves_[i]->cycle(t);
+    }
+  }
+
+  static constexpr std::int64_t kCycle = 2'000'000, kStep = 1'000'000;
+  std::unique_ptr<omnitwin::ethercat::EcTransport> tr_;
+  simclock::Server server_;
+  std::vector<omnitwin::ethercat::DeviceDescription> devices_ = ecbench::drive_esi();
+  std::vector<std::unique_ptr<omnitwin::ethercat::DriveSlave>> slaves_;
+  std::vector<omnitwin::drive::AxisModel> models_;
+  omnitwin::ethercat::EscChain chain_;
+  int signal_after_, max_ticks_;
+  std::thread thread_;
+};
+
 constexpr const char* kWheels = R"(cycle: 0.002
 expected_slaves: 4
 startup:
@@ -161,6 +257,32 @@ TEST_F(EcProgram, TheEndOfTheDurationTakesTheDrivesOutOfOperationAndTheSlavesToI
   seg.stop();
   const nlohmann::json s = stats();
   EXPECT_EQ(s.at("state"), "running") << s.dump(2);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(seg.al_state(i), omnitwin::ethercat::AlState::init) << "slave " << i + 1;
+    EXPECT_NE(seg.drive_state(i), omnitwin::drive::State::operation_enabled) << "slave " << i + 1;
+  }
+}
+
+// SIGINT to a lockstep master mid-path (what `kill -INT` of omni-master does while the twin
+// still grants ticks): it stops its drives and takes the slaves to INIT in the ticks it is
+// granted, as at the end of a wall-clock run, then ends with exit 0 and closes the channel.
+// It used to return at the signal, leaving every drive enabled and every slave in OP.
+TEST_F(EcProgram, SigintInLockstepStopsTheDrivesAndTakesTheSlavesToInitBeforeItEnds) {
+  const std::string clock = "unix:@ec_program_test_sigint_" + std::to_string(::getpid());
+  LockstepSegment seg("mem:ec_program_sigint", clock, 50, 5000);
+  ProgramOptions o;
+  o.iface = "mem:ec_program_sigint";
+  o.config = config(kWheels);
+  o.clock = "sim";
+  o.sim_clock = clock;
+  o.stats = (dir_ / "stats.json").string();
+  EXPECT_EQ(run_ethercat_program(o), 0);
+  seg.join();
+  ASSERT_GE(seg.signalled_tick, 0) << "the platform loop never ran";
+  EXPECT_TRUE(seg.closed) << "the master did not end after SIGINT";
+  // Within kShutdownNs (100 ms, 50 ticks of 2 ms) of simulated time, and not at once.
+  EXPECT_GT(seg.last_tick, seg.signalled_tick + 2);
+  EXPECT_LE(seg.last_tick, seg.signalled_tick + 52);
   for (int i = 0; i < 4; ++i) {
     EXPECT_EQ(seg.al_state(i), omnitwin::ethercat::AlState::init) << "slave " << i + 1;
     EXPECT_NE(seg.drive_state(i), omnitwin::drive::State::operation_enabled) << "slave " << i + 1;
