@@ -8,7 +8,9 @@
 // cycle) or as a queued SDO transfer. The power drive system is driven by goal (set_goal): the
 // master writes the controlword state machine itself, the words only say where to go.
 // Values are carried as std::int64_t whatever the object's OD type (INTEGER8..UNSIGNED32 all
-// fit); the implementation converts to and from the object's width.
+// fit); the implementation converts to and from the object's width, and refuses a write
+// whose value does not fit the object's type (last_error() names the value and the range;
+// nothing is sent), never truncating it.
 // Real-time safety: the interpreter calls these from the master's cycle (background tasks are
 // stepped there), so implementations must not block; SDO transfers are queued, not awaited.
 #pragma once
@@ -60,7 +62,8 @@ class DriveAccess {  // implemented by the EtherCAT master's drive layer (E)
   virtual std::optional<std::int64_t> read(int slave, int ch, std::uint16_t index,
                                            std::uint8_t sub) = 0;
   // Writes index:sub: into the process image for the next cycle when PDO-mapped, else a
-  // queued SDO download. False when refused (unknown drive or object). Never blocks.
+  // queued SDO download. False when refused (unknown drive or object, or a value outside the
+  // object's type); nothing is sent then. Never blocks.
   virtual bool write(int slave, int ch, std::uint16_t index, std::uint8_t sub,
                      std::int64_t value) = 0;
   // From now on the master drives the controlword of (slave, ch) towards `goal`.

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <limits>
 
 namespace omnitwin::controller::ethercat {
 
@@ -46,6 +47,18 @@ const omnitwin::ethercat::EsiObjectEntry* esi_entry(const SlaveStatus& s, std::u
   for (const auto& e : o->entries)
     if (e.subindex == sub) return &e;
   return nullptr;
+}
+// "" when `value` fits an object of `bits` bits (signed or not); else why not, naming the
+// value, the object and its type's range.
+std::string range_error(std::int64_t value, unsigned bits, bool is_signed, std::uint16_t index, std::uint8_t sub) {
+  if (bits == 0 || bits > 64 || (is_signed && bits == 64)) return "";
+  const std::int64_t lo = is_signed ? -(std::int64_t{1} << (bits - 1)) : 0;
+  const std::int64_t hi = is_signed    ? (std::int64_t{1} << (bits - 1)) - 1
+                          : bits == 64 ? std::numeric_limits<std::int64_t>::max()
+                                       : static_cast<std::int64_t>((std::uint64_t{1} << bits) - 1);
+  if (value >= lo && value <= hi) return "";
+  return fmt::format("{} does not fit 0x{:04X}:{:02X} ({}{}: {}..{})", value, index, sub, is_signed ? "INTEGER" : "UNSIGNED",
+                     bits, lo, hi);
 }
 }  // namespace
 
@@ -276,6 +289,7 @@ bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, s
   }
   const std::uint16_t idx = object(ch, index);
   if (index == kControlword && sub == 0) {
+    if (!fits(value, 16, false, idx, sub)) return false;
     a->cw_user = static_cast<std::uint16_t>(value);
     if (!(a->cw_user & 0x0010)) a->go_cycles = 0;
     if (!a->cw_at) m_.sdo_download(slave - 1, idx, 0, value_bytes(value, 2));
@@ -286,6 +300,7 @@ bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, s
       error_ = fmt::format("0x{:04X}:{} of slave {} is an input (TxPDO) object", idx, sub, slave);
       return false;
     }
+    if (!fits(value, at->bits, object_signed(slave, idx, sub), idx, sub)) return false;
     m_.write_entry(*at, value);
     return true;
   }
@@ -294,6 +309,7 @@ bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, s
     error_ = fmt::format("0x{:04X}:{} of slave {}: unknown object size", idx, sub, slave);
     return false;
   }
+  if (!fits(value, bytes * 8, object_signed(slave, idx, sub), idx, sub)) return false;
   const auto key = std::make_tuple(slave, idx, sub);
   const std::uint64_t id = m_.sdo_download(slave - 1, idx, sub, value_bytes(value, bytes), [this, key, value](const SdoResult& r) {
     if (r.status == SdoStatus::done) {
@@ -308,6 +324,13 @@ bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, s
     return false;
   }
   return true;
+}
+
+bool EcDrives::fits(std::int64_t value, unsigned bits, bool is_signed, std::uint16_t index, std::uint8_t sub) {
+  std::string why = range_error(value, bits, is_signed, index, sub);
+  if (why.empty()) return true;
+  error_ = std::move(why);
+  return false;
 }
 
 void EcDrives::set_goal(int slave, int ch, PdsGoal goal) {

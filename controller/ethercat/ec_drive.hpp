@@ -10,7 +10,8 @@
 // through the master's SDO queue (reads answer the last uploaded value and refresh it).
 // Axes are (slave, channel), both 1-based as in the Botnana word set; channel n > 1 of a
 // multi-axis slave uses the CiA 402 objects offset by 0x800 × (n − 1). Signedness and sizes
-// come from the slave's ESI object dictionary. A homed record per axis is kept (set when the
+// come from the slave's ESI object dictionary; write() refuses a value outside the object's
+// type (its range in last_error(), nothing sent) rather than truncating it. A homed record per axis is kept (set when the
 // drive reports homing attained in HM mode). When the master reports a lost segment
 // (EcMaster::segment_lost, counted in its stats), update() stops every axis: goal quick stop,
 // velocity/torque set-points 0, position set-point = position actual; stopped() holds until
@@ -98,6 +99,8 @@ class EcDrives : public botnana::DriveAccess {
   static std::uint16_t object(int ch, std::uint16_t index);
   bool object_signed(int slave, std::uint16_t index, std::uint8_t sub) const;
   unsigned object_bytes(int slave, std::uint16_t index, std::uint8_t sub) const;
+  // Whether `value` fits an object of `bits` bits; if not, error_ says why (value and range).
+  bool fits(std::int64_t value, unsigned bits, bool is_signed, std::uint16_t index, std::uint8_t sub);
 
   EcMaster& m_;
   std::vector<Axis> axes_;

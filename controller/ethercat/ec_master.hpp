@@ -249,7 +249,9 @@ class EcMaster {
   std::optional<EntryLocation> find_entry(int position, std::uint16_t index, std::uint8_t sub) const;
   // An entry's value as an integer: its low 64 bits where it is wider (a mapping can say up to
   // 255 bits), sign-extended when is_signed. write_entry() writes value into the low 64 bits
-  // and zeros above them. Bits past the image's end are read as 0 and not written. Real-time safe.
+  // and zeros above them (a value wider than the entry is cut to its bits: the caller checks
+  // the range, as EcDrives::write does). Bits past the image's end are read as 0 and not
+  // written. Real-time safe.
   std::int64_t read_entry(const EntryLocation& at, bool is_signed) const;
   void write_entry(const EntryLocation& at, std::int64_t value);
 

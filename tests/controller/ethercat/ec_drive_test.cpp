@@ -184,3 +184,41 @@ TEST(EcDrive, TheLastEmergencyOfADriveIsWhatDriveEmcyFetches) {
   EXPECT_EQ(out, "34321 -1 -1 ");  // 0x8611 on slave 3; slave 2 sent nothing; fault flag true
   EXPECT_FALSE(in.evaluate("1 9 drive-emcy@").ok);
 }
+
+namespace {
+// Steps the bench with the interpreter's tasks until none runs (or max steps); whether none does.
+bool run_tasks(Bench& b, omnitwin::botnana::Interpreter& in, int max_steps) {
+  return b.run_until([&] { return in.step_tasks() == 0; }, max_steps);
+}
+}  // namespace
+
+// Found in review: -1 went out to 0x6081 (UNSIGNED32) as 4294967295, 257 to 0x6060 (INTEGER8)
+// as mode 1, 2^32 + 1000 to 0x607A as 1000. A value that does not fit the object's type is
+// refused, naming the value and the range, and nothing goes out (neither SDO nor image).
+TEST(EcDrive, AValueThatDoesNotFitTheObjectsTypeIsRefusedAndNothingGoesOut) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  EXPECT_FALSE(d.write(1, 1, 0x6081, 0, -1));  // UNSIGNED32, SDO
+  EXPECT_NE(d.last_error().find("-1"), std::string::npos) << d.last_error();
+  EXPECT_NE(d.last_error().find("0..4294967295"), std::string::npos) << d.last_error();
+  EXPECT_FALSE(d.requests_pending(1)) << "nothing queued";
+  ASSERT_TRUE(d.write(1, 1, 0x6060, 0, 3));    // INTEGER8 in the image
+  EXPECT_FALSE(d.write(1, 1, 0x6060, 0, 257));
+  EXPECT_NE(d.last_error().find("-128..127"), std::string::npos) << d.last_error();
+  EXPECT_EQ(d.read(1, 1, 0x6060, 0), 3) << "the image keeps the last good value";
+  EXPECT_FALSE(d.write(1, 1, 0x607A, 0, 4294968296LL));  // INTEGER32 in the image
+  EXPECT_FALSE(d.write(1, 1, 0x607A, 0, 2147483648LL));
+  EXPECT_TRUE(d.write(1, 1, 0x607A, 0, -2147483648LL));
+  EXPECT_FALSE(d.write(1, 1, 0x6040, 0, 65536));       // the controlword: UNSIGNED16
+  EXPECT_TRUE(d.write(1, 1, 0x6081, 0, 4294967295LL));
+  std::string out;
+  omnitwin::botnana::Interpreter in(d, [&](std::string_view s) { out += s; });
+  const auto s = in.evaluate("257 1 2 op-mode!");
+  ASSERT_FALSE(s.ok);
+  EXPECT_EQ(s.word, "op-mode!");
+  EXPECT_NE(s.message.find("257"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("-128..127"), std::string::npos) << s.message;
+}
+
