@@ -7,7 +7,8 @@
 // slave so that until-no-requests knows whose SDO queue to wait for. The seed's own Forth
 // definitions (until-drive-on, until-no-fault, until-target-reached) are compiled from source
 // in botnana_interpreter.cpp; until-no-requests, which the seed only uses, is a primitive
-// that waits (retries at the next cycle) while any of those slaves has requests pending.
+// that waits (retries at the next cycle) while any of those slaves has requests pending, then
+// fails when one of those requests failed (DriveAccess::take_request_failures).
 #include <algorithm>
 
 #include <fmt/format.h>
@@ -211,15 +212,26 @@ struct DriveWords {
     if (!read(in, t, slave, ch, ref->index, ref->sub, v)) return R::error;
     return push(t, v);
   }
-  // ( -- ): waits while a slave written to (or 1..slaves()) still has SDO requests queued.
-  static R until_no_requests(In& in, T&, std::int64_t) {
+  // ( -- ): waits while a slave written to (or 1..slaves()) still has SDO requests queued;
+  // then fails when the master reports that one of them failed (seed 004: it waits until the
+  // command is actually set in the drive, and an aborted one never is).
+  static R until_no_requests(In& in, T& t, std::int64_t) {
     for (int s : in.request_slaves_) {
       if (in.drives_.requests_pending(s)) return R::retry;
     }
     for (int s = 1; s <= in.drives_.slaves(); ++s) {
       if (in.drives_.requests_pending(s)) return R::retry;
     }
-    return R::ok;
+    std::string failures;
+    const auto take = [&](int s) {
+      const std::string f = in.drives_.take_request_failures(s);
+      if (!f.empty()) failures += (failures.empty() ? "" : "; ") + f;
+    };
+    for (int s : in.request_slaves_) take(s);
+    for (int s = 1; s <= in.drives_.slaves(); ++s) take(s);
+    if (failures.empty()) return R::ok;
+    t.error = "not set in the drive: " + failures;
+    return R::error;
   }
   static R constant_value(In&, T& t, std::int64_t aux) { return push(t, aux); }
 

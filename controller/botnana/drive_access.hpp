@@ -77,6 +77,10 @@ class DriveAccess {  // implemented by the EtherCAT master's drive layer (E)
   // The highest slave number the master knows (until-no-requests asks slaves 1..slaves()
   // besides those the interpreter itself sent requests to); 0 when unknown.
   virtual int slaves() const { return 0; }
+  // The failures (abort, timeout) of the SDO downloads write() queued for `slave` since the
+  // last call, as one sentence naming each object and its abort code; "" when none. Taking
+  // them clears them: until-no-requests fails with them once the slave's queue is empty.
+  virtual std::string take_request_failures(int /*slave*/) { return ""; }
   // The error code of the last emergency the drive sent for this channel (0x0000 after its
   // reset); nullopt: none received, or the master does not receive emergencies.
   virtual std::optional<std::uint16_t> last_emergency(int /*slave*/, int /*ch*/) const { return std::nullopt; }

@@ -311,13 +311,18 @@ bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, s
   }
   if (!fits(value, bytes * 8, object_signed(slave, idx, sub), idx, sub)) return false;
   const auto key = std::make_tuple(slave, idx, sub);
-  const std::uint64_t id = m_.sdo_download(slave - 1, idx, sub, value_bytes(value, bytes), [this, key, value](const SdoResult& r) {
+  const std::uint64_t id = m_.sdo_download(slave - 1, idx, sub, value_bytes(value, bytes), [this, key, value, slave](const SdoResult& r) {
     if (r.status == SdoStatus::done) {
       sdo_values_[key] = value;
-    } else {
-      error_ = fmt::format("SDO download 0x{:04X}:{} of slave {}: {} 0x{:08X}", r.request.index, r.request.sub,
-                           r.position + 1, to_string(r.status), r.abort_code);
+      return;
     }
+    error_ = fmt::format("SDO download 0x{:04X}:{:02X} = {} to slave {} {}{}", r.request.index, r.request.sub, value,
+                         slave, to_string(r.status),
+                         r.status == SdoStatus::aborted
+                             ? fmt::format(" by the drive: 0x{:08X} ({})", r.abort_code, sdo_abort_text(r.abort_code))
+                             : "");
+    std::string& failures = request_failures_[slave];
+    if (failures.size() < 1024) failures += failures.empty() ? error_ : "; " + error_;  // bounded until taken
   });
   if (id == 0) {
     error_ = fmt::format("slave {} has no SDO mailbox", slave);
@@ -352,6 +357,14 @@ std::optional<botnana::ObjectRef> EcDrives::user_pdo(int slave, int ch, botnana:
 
 void EcDrives::set_user_pdo(botnana::UserPdo which, botnana::ObjectRef object) {
   user_pdos_[static_cast<std::size_t>(which)] = object;
+}
+
+std::string EcDrives::take_request_failures(int slave) {
+  const auto it = request_failures_.find(slave);
+  if (it == request_failures_.end()) return "";
+  std::string failures = std::move(it->second);
+  request_failures_.erase(it);
+  return failures;
 }
 
 bool EcDrives::requests_pending(int slave) const { return m_.sdo_pending(slave - 1) > 0; }

@@ -7,7 +7,9 @@
 // a goal is set on a faulted axis), clears the `go` bit (controlword bit 4) once the drive
 // acknowledges (statusword bit 12) and writes the controlword into the process image.
 // Objects mapped into the PDOs are read and written in the image; any other object goes
-// through the master's SDO queue (reads answer the last uploaded value and refresh it).
+// through the master's SDO queue (reads answer the last uploaded value and refresh it); a
+// download the drive aborts (or that times out) is kept per slave for
+// take_request_failures(), which until-no-requests turns into the script's error.
 // Axes are (slave, channel), both 1-based as in the Botnana word set; channel n > 1 of a
 // multi-axis slave uses the CiA 402 objects offset by 0x800 × (n − 1). Signedness and sizes
 // come from the slave's ESI object dictionary; write() refuses a value outside the object's
@@ -70,6 +72,7 @@ class EcDrives : public botnana::DriveAccess {
   void set_goal(int slave, int ch, botnana::PdsGoal goal) override;
   bool requests_pending(int slave) const override;
   std::string last_error() const override { return error_; }
+  std::string take_request_failures(int slave) override;
   int slaves() const override { return m_.slave_count(); }
   std::optional<std::uint16_t> last_emergency(int slave, int ch) const override;
   std::optional<botnana::ObjectRef> user_pdo(int slave, int ch, botnana::UserPdo which) const override;
@@ -109,6 +112,7 @@ class EcDrives : public botnana::DriveAccess {
   bool stopped_ = false;
   std::map<std::tuple<int, std::uint16_t, std::uint8_t>, std::int64_t> sdo_values_;
   std::map<std::tuple<int, std::uint16_t, std::uint8_t>, bool> sdo_reading_;
+  std::map<int, std::string> request_failures_;  // slave → failed downloads not taken yet
   std::array<std::optional<botnana::ObjectRef>, 4> user_pdos_{};
   std::string error_;
 };

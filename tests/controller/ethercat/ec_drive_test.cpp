@@ -222,3 +222,28 @@ TEST(EcDrive, AValueThatDoesNotFitTheObjectsTypeIsRefusedAndNothingGoesOut) {
   EXPECT_NE(s.message.find("-128..127"), std::string::npos) << s.message;
 }
 
+// Found in review: homing method 99 was aborted by the drive, and until-no-requests returned as
+// if it had been set. The seed: until-no-requests waits until the command is actually set in
+// the drive; an abort fails the task, naming the object and the abort code.
+TEST(EcDrive, AnSdoDownloadTheDriveAbortsFailsUntilNoRequestsNamingTheObjectAndTheCode) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  std::string out;
+  omnitwin::botnana::Interpreter in(*b.drives, [&](std::string_view s) { out += s; });
+  ASSERT_TRUE(in.evaluate("deploy 99 1 1 homing-method! until-no-requests .\" carried on\" ;deploy").ok);
+  ASSERT_TRUE(run_tasks(b, in, 500));
+  EXPECT_EQ(out.find("carried on"), std::string::npos) << out;
+  const auto& e = in.last_task_error();
+  ASSERT_FALSE(e.ok);
+  EXPECT_EQ(e.word, "until-no-requests");
+  EXPECT_NE(e.message.find("0x6098"), std::string::npos) << e.message;
+  EXPECT_NE(e.message.find("0x06090030"), std::string::npos) << e.message;
+  // The failure was reported once: a later good request waits and succeeds.
+  out.clear();
+  ASSERT_TRUE(in.evaluate("deploy 37 1 1 homing-method! until-no-requests .\" set\" ;deploy").ok);
+  ASSERT_TRUE(run_tasks(b, in, 500));
+  EXPECT_EQ(out, "set");
+  EXPECT_EQ(b.slaves[0]->axis(0).objects().homing_method, 37);
+}
+

@@ -11,7 +11,10 @@
 #include <signal.h>
 
 #include <nlohmann/json.hpp>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -227,7 +230,11 @@ class EcProgram : public ::testing::Test {
                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::create_directories(dir_);
   }
-  void TearDown() override { fs::remove_all(dir_); }
+  void TearDown() override {
+    auto& sinks = spdlog::default_logger()->sinks();
+    sinks.erase(std::remove(sinks.begin(), sinks.end(), log_sink_), sinks.end());
+    fs::remove_all(dir_);
+  }
   // A configuration file: the drives' ESI, then `body`.
   std::string config(const std::string& body) {
     const fs::path p = dir_ / "ec.yaml";
@@ -242,6 +249,22 @@ class EcProgram : public ::testing::Test {
     o.stats = (dir_ / "stats.json").string();
     return run_ethercat_program(o);
   }
+  // Runs a --script with the drives-only configuration; its log lines land in log().
+  int run_script(const std::string& iface, const std::string& script_text, double duration = 5.0) {
+    const fs::path p = dir_ / "test.fs";
+    std::ofstream(p) << script_text;
+    script_ = p.string();
+    ProgramOptions o;
+    o.iface = iface;
+    o.config = config(kDrivesOnly);
+    o.duration = duration;
+    o.script = script_;
+    log_.str("");
+    auto& sinks = spdlog::default_logger()->sinks();
+    if (std::find(sinks.begin(), sinks.end(), log_sink_) == sinks.end()) sinks.push_back(log_sink_);
+    return run_ethercat_program(o);
+  }
+  std::string log() const { return log_.str(); }
   nlohmann::json stats() {
     std::ifstream in(dir_ / "stats.json");
     std::stringstream ss;
@@ -249,6 +272,9 @@ class EcProgram : public ::testing::Test {
     return nlohmann::json::parse(ss.str());
   }
   fs::path dir_;
+  std::string script_;  // the last run_script's file
+  std::ostringstream log_;
+  std::shared_ptr<spdlog::sinks::ostream_sink_mt> log_sink_ = std::make_shared<spdlog::sinks::ostream_sink_mt>(log_);
 };
 
 TEST_F(EcProgram, TheEndOfTheDurationTakesTheDrivesOutOfOperationAndTheSlavesToInit) {
@@ -344,6 +370,16 @@ TEST_F(EcProgram, AStartupSdoOrAWheelNamingASlaveBeyondTheCountFailsNamingTheEnt
   wheels.replace(wheels.find("{slave: 4}"), 10, "{slave: 6}");
   EXPECT_EQ(run("mem:ec_program_beyond", config(wheels), 1.0), 3);
   EXPECT_EQ(stats().at("state"), "failed");
+}
+
+// Found in review: an SDO download the drive aborted (homing method 99) never reached the
+// script, which ended with exit 0.
+TEST_F(EcProgram, AnSdoAbortEndsTheScriptAsARuntimeFailure) {
+  Segment seg("mem:ec_program_sdo_abort");
+  EXPECT_EQ(run_script("mem:ec_program_sdo_abort", "deploy 99 1 1 homing-method! until-no-requests ;deploy\n"), 3)
+      << log();
+  EXPECT_NE(log().find("0x6098"), std::string::npos) << log();
+  EXPECT_NE(log().find("0x06090030"), std::string::npos) << log();
 }
 
 }  // namespace
