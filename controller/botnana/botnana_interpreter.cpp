@@ -90,11 +90,51 @@ constexpr std::string_view kPrelude = R"(
 ;
 )";
 
+// The drives of check_script(): none (nothing runs there).
+class NoDrives : public DriveAccess {
+ public:
+  bool has_drive(int, int) const override { return false; }
+  std::optional<std::int64_t> read(int, int, std::uint16_t, std::uint8_t) override { return std::nullopt; }
+  bool write(int, int, std::uint16_t, std::uint8_t, std::int64_t) override { return false; }
+  void set_goal(int, int, PdsGoal) override {}
+  bool requests_pending(int) const override { return false; }
+  std::string last_error() const override { return "a script check runs nothing"; }
+};
+
 }  // namespace
 
 std::string Status::to_string() const {
   if (ok) return "ok";
   return fmt::format("error: `{}` at position {}: {}", word, position, message);
+}
+
+std::string Status::located(std::string_view file) const {
+  if (ok) return fmt::format("{}: ok", file);
+  if (line == 0) return fmt::format("{}: {}", file, to_string());
+  return fmt::format("{}:{}:{}: error: `{}`: {}", file, line, position + 1, word, message);
+}
+
+Status Interpreter::check_script(std::span<const std::string> lines) {
+  NoDrives none;
+  Interpreter in(none);
+  in.checking_ = true;
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    Status s = in.evaluate(lines[i], i + 1);
+    if (!s) return s;
+  }
+  if (!in.compiling()) return Status{};
+  Status s;
+  s.ok = false;
+  s.line = in.def_line_;
+  s.position = in.def_position_;
+  if (in.mode_ == Mode::colon) {
+    s.word = ":";
+    s.message = fmt::format("definition `{}` is not closed: `;` is missing before the end of the script", in.def_name_);
+  } else {
+    s.word = "deploy";
+    s.message = "this deploy body is not closed: `;deploy` is missing before the end of the script";
+  }
+  return s;
 }
 
 // The core words: stack, arithmetic, comparison, memory, output, tasks.
@@ -419,6 +459,7 @@ Status Interpreter::fail(const Token& tok, std::string message) {
   Status s;
   s.ok = false;
   s.word = std::string(tok.text);
+  s.line = line_no_;
   s.position = tok.position;
   s.message = std::move(message);
   reset_after_error();
@@ -437,7 +478,8 @@ void Interpreter::reset_after_error() {
   cs_.clear();
 }
 
-Status Interpreter::evaluate(std::string_view line) {
+Status Interpreter::evaluate(std::string_view line, std::size_t line_no) {
+  line_no_ = line_no;
   Lexer lex(line);
   while (const auto tok = lex.next()) {
     Status s = interpret_token(lex, *tok);
@@ -514,7 +556,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (comp) {
       strings_.emplace_back(text->text);
       emit({Op::dot_str, static_cast<std::int64_t>(strings_.size() - 1), pos});
-    } else {
+    } else if (!checking_) {
       print(text->text);
     }
     return Status{};
@@ -528,6 +570,8 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     mode_ = Mode::colon;
     def_name_ = std::string(name->text);
     def_start_ = code_.size();
+    def_line_ = line_no_;
+    def_position_ = tok.position;
     cs_.clear();
     return Status{};
   }
@@ -548,6 +592,8 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (comp) return fail(tok, "`deploy` inside a definition");
     mode_ = Mode::deploy;
     def_start_ = code_.size();
+    def_line_ = line_no_;
+    def_position_ = tok.position;
     cs_.clear();
     return Status{};
   }
@@ -555,6 +601,8 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (mode_ != Mode::deploy) return fail(tok, "`;deploy` without `deploy`");
     if (!cs_.empty()) return fail(tok, "unbalanced control structure (missing then/until/repeat/loop)");
     emit({Op::exit, 0, pos});
+    mode_ = Mode::interpret;
+    if (checking_) return Status{};  // compiled, never run
     auto task = std::make_unique<Task>();
     task->ds.reserve(kMaxDataStack);
     task->rs.reserve(kMaxReturnStack);
@@ -564,7 +612,6 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     task->rs.push_back({kNoReturn, -1, 0});
     task->name = fmt::format("task{}", ++deployed_);
     tasks_.push_back(std::move(task));
-    mode_ = Mode::interpret;
     return Status{};
   }
   if (w == "variable" || w == "constant") {
@@ -577,6 +624,9 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
       cells_.push_back(0);
       word.kind = Kind::variable;
       word.value = static_cast<std::int64_t>(cells_.size() - 1);
+    } else if (checking_) {
+      word.kind = Kind::constant;  // its value is known only when it runs
+      word.value = 0;
     } else {
       if (fg_.ds.empty()) return fail(tok, "stack underflow");
       word.kind = Kind::constant;
@@ -616,7 +666,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
   if (const auto n = parse_number(tok.text)) {
     if (comp) {
       emit({Op::lit, *n, pos});
-    } else {
+    } else if (!checking_) {
       if (fg_.ds.size() >= kMaxDataStack) return fail(tok, "stack overflow");
       fg_.ds.push_back(*n);
     }
@@ -631,6 +681,7 @@ Status Interpreter::execute_word(int id, const Token& tok) {
   if (word.background_only) {
     return fail(tok, "waits for master cycles (pause): only in a background task (deploy … ;deploy)");
   }
+  if (checking_) return Status{};
   switch (word.kind) {
     case Kind::constant:
     case Kind::variable:

@@ -12,10 +12,12 @@
 // Drives are reached only through DriveAccess (drive_access.hpp); every drive word of seed
 // 004 maps onto one of its calls with the CiA 402 object the seed names
 // (botnana_drive_words.cpp).
-// Errors are statuses, never exceptions: an error in the foreground names the word and its
-// byte offset in the line, empties the data stack and drops a definition being compiled,
+// Errors are statuses, never exceptions: an error in the foreground names the word, its
+// byte offset in the line (and the line's number, when evaluate() was given one), empties the data stack and drops a definition being compiled,
 // after which the interpreter is usable again; an error in a background task ends that task
-// and is kept in last_task_error(). Allocation happens while compiling and deploying; running
+// and is kept in last_task_error(). check_script() finds a script's bad input (unknown words,
+// unbalanced control structures, a definition left open at its end, …) before any of it
+// runs, on a dictionary of its own. Allocation happens while compiling and deploying; running
 // compiled code allocates only when stacks first grow (reserved at construction).
 #pragma once
 
@@ -38,11 +40,15 @@ namespace omnitwin::botnana {
 struct Status {
   bool ok = true;
   std::string word;          // the word that failed ("" when ok)
+  std::size_t line = 0;      // the 1-based number of its line, as given to evaluate() (0: not known)
   std::size_t position = 0;  // its byte offset in the line (or in the line it was compiled from)
   std::string message;       // what went wrong, e.g. "stack underflow"
   explicit operator bool() const noexcept { return ok; }
   // "ok", or "error: `word` at position P: message".
   std::string to_string() const;
+  // "FILE:LINE:COLUMN: error: `word`: message" (column = position + 1); without a line
+  // number "FILE: error: `word` at position P: message".
+  std::string located(std::string_view file) const;
 };
 
 class Interpreter {
@@ -62,10 +68,17 @@ class Interpreter {
   Interpreter(const Interpreter&) = delete;
   Interpreter& operator=(const Interpreter&) = delete;
 
-  // Interprets one line of source. A definition or deploy body may span several lines: the
+  // Interprets one line of source; `line_no` (1-based, 0 = none) is the line's number in its
+  // file, which statuses report. A definition or deploy body may span several lines: the
   // compiler state carries over to the next call. Never throws; see the header comment for
   // what an error leaves behind.
-  Status evaluate(std::string_view line);
+  Status evaluate(std::string_view line, std::size_t line_no = 0);
+  // Checks a script (line 1 first) without running any of it, on a fresh dictionary: every
+  // word is known (built in, or defined earlier in the script by `:`, `variable`,
+  // `constant`), control structures balance, compile-only words and waits stand where they
+  // may, strings are closed, and no `: …` or `deploy …` is left open at the end (reported at
+  // its `:` or `deploy`). The first problem found, with its line; ok otherwise.
+  static Status check_script(std::span<const std::string> lines);
   // Runs every deployed background task until its next `pause` (or its end, or an error),
   // in the order they were deployed; finished tasks are removed. Call once per master
   // cycle. Returns the number of tasks still running.
@@ -179,8 +192,11 @@ class Interpreter {
   std::size_t deployed_ = 0;
   // compiler state
   Mode mode_ = Mode::interpret;
+  bool checking_ = false;       // check_script(): compile, look words up, run nothing
+  std::size_t line_no_ = 0;     // the line evaluate() is reading
   std::string def_name_;
   std::size_t def_start_ = 0;
+  std::size_t def_line_ = 0, def_position_ = 0;  // where the open `:` or `deploy` stands
   std::vector<Control> cs_;
   // drive-side records
   std::vector<std::int64_t> homed_;     // (slave << 16 | ch) of axes marked homed

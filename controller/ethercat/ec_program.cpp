@@ -336,6 +336,7 @@ class Runner {
 struct Botnana {
   std::unique_ptr<botnana::Interpreter> interp;
   std::vector<std::string> script;  // lines still to evaluate once the bus is up
+  std::string script_file;          // their file, which errors name (FILE:LINE:COLUMN)
   bool script_mode = false, script_loaded = false;
   LineQueue* lines = nullptr;
   std::optional<std::string> error;
@@ -347,17 +348,17 @@ struct Botnana {
     if (script_mode) {
       if (!script_loaded) {
         if (!r.master().operational()) return true;
-        for (const auto& line : script) {
-          const botnana::Status s = interp->evaluate(line);
+        for (std::size_t i = 0; i < script.size(); ++i) {
+          const botnana::Status s = interp->evaluate(script[i], i + 1);
           if (!s) {
-            error = s.to_string();
+            error = s.located(script_file);
             return false;
           }
         }
         script_loaded = true;
       }
       if (!interp->last_task_error().ok) {
-        error = interp->last_task_error().to_string();
+        error = interp->last_task_error().located(script_file);
         return false;
       }
       return interp->tasks_running() > 0;
@@ -525,6 +526,12 @@ int run_ethercat_program(const ProgramOptions& o) {
       return kExitUsage;
     }
     for (std::string line; std::getline(in, line);) script.push_back(line);
+    // Bad input (an unknown word, a definition left open at the end, …) is found before the
+    // bus is brought up: exit 2, naming the file and line.
+    if (const botnana::Status s = botnana::Interpreter::check_script(script); !s) {
+      spdlog::error("{}", s.located(o.script));
+      return kExitUsage;
+    }
   }
   std::unique_ptr<omnitwin::ethercat::EcTransport> tr;
   try {
@@ -546,6 +553,7 @@ int run_ethercat_program(const ProgramOptions& o) {
     bn.interp = std::make_unique<botnana::Interpreter>(runner.drives(), [](std::string_view s) { std::cout << s << std::flush; });
     bn.interp->set_cycle_period_ns(period_ns);
     bn.script = std::move(script);
+    bn.script_file = o.script;
     bn.script_mode = !o.shell;
     bn.lines = lines.get();
   }

@@ -384,6 +384,45 @@ TEST_F(BotnanaLanguage, RunawayTaskIsEnded) {
   EXPECT_NE(in.last_task_error().message.find("runaway"), std::string::npos);
 }
 
+// A script is checked before it runs (DESIGN: bad input is found and named, file and line):
+// unknown words, compile-only words or waits outside a definition or task, unbalanced
+// control structures, and a definition or deploy body left open at the end. Words the script
+// defines (`:`, `variable`, `constant`) are known after their definition. Nothing runs.
+TEST(BotnanaScriptCheck, FindsBadInputWithItsLineWithoutRunningAnything) {
+  using L = std::vector<std::string>;
+  EXPECT_TRUE(Interpreter::check_script(L{"\\ comment", ": t1 1 1 drive-on ;", "variable v 5 constant k",
+                                          "1 1 t1 k v ! .\" hi\"", "deploy t1 1 1 until-drive-on ;deploy"})
+                  .ok);
+  Status s = Interpreter::check_script(L{"\\ line 1", ": t1 1 1 drive-on ;", "1 1 drvie-on"});
+  EXPECT_FALSE(s.ok);
+  EXPECT_EQ(s.word, "drvie-on");
+  EXPECT_EQ(s.line, 3u);
+  EXPECT_EQ(s.position, 4u);
+  EXPECT_EQ(s.message, "unknown word");
+  EXPECT_EQ(s.located("x.fs"), "x.fs:3:5: error: `drvie-on`: unknown word");
+  s = Interpreter::check_script(L{"", ": move1", "  1 1 drive-on", "  1000 1 1 target-p!"});
+  EXPECT_FALSE(s.ok);
+  EXPECT_EQ(s.line, 2u);
+  EXPECT_EQ(s.position, 0u);
+  EXPECT_NE(s.message.find("`move1`"), std::string::npos) << s.message;
+  EXPECT_NE(s.message.find("`;`"), std::string::npos) << s.message;
+  s = Interpreter::check_script(L{"1 2 +", "  deploy", "  1 1 drive-on"});
+  EXPECT_EQ(s.line, 2u);
+  EXPECT_EQ(s.position, 2u);
+  EXPECT_NE(s.message.find("`;deploy`"), std::string::npos) << s.message;
+  s = Interpreter::check_script(L{": a begin 1 ;"});
+  EXPECT_EQ(s.word, ";");
+  s = Interpreter::check_script(L{"1 1 until-drive-on"});
+  EXPECT_EQ(s.word, "until-drive-on");
+  s = Interpreter::check_script(L{"1 if"});
+  EXPECT_EQ(s.word, "if");
+  s = Interpreter::check_script(L{"  .\" open"});
+  EXPECT_EQ(s.line, 1u);
+  EXPECT_EQ(s.word, ".\"");
+  // Numbers at the top level are not pushed: a long script does not overflow the stack.
+  EXPECT_TRUE(Interpreter::check_script(L(2000, "1 2 3")).ok);
+}
+
 TEST_F(BotnanaLanguage, KillTasks) {
   ok("deploy begin pause 0 until ;deploy deploy begin pause 0 until ;deploy");
   in.step_tasks();

@@ -372,6 +372,28 @@ TEST_F(EcProgram, AStartupSdoOrAWheelNamingASlaveBeyondTheCountFailsNamingTheEnt
   EXPECT_EQ(stats().at("state"), "failed");
 }
 
+// Found in review: a definition or deploy body left open at the end of a --script file was
+// dropped in silence (exit 0). It is bad input: exit 2, naming the file and where it began.
+TEST_F(EcProgram, ADefinitionLeftOpenAtTheEndOfAScriptIsBadInputNamingTheFile) {
+  Segment seg("mem:ec_program_open_def");
+  EXPECT_EQ(run_script("mem:ec_program_open_def", ": move1\n    1 1 drive-on\n    1000 1 1 target-p!\n"), 2) << log();
+  EXPECT_NE(log().find(script_ + ":1:1:"), std::string::npos) << log();
+  EXPECT_NE(log().find("move1"), std::string::npos) << log();
+  EXPECT_EQ(run_script("mem:ec_program_open_def", "deploy\n    1 1 drive-on\n    1 1 until-drive-on\n"), 2) << log();
+  EXPECT_NE(log().find(script_ + ":1:1:"), std::string::npos) << log();
+  EXPECT_NE(log().find(";deploy"), std::string::npos) << log();
+}
+
+// Found in review: an unknown word was exit 3 once the bus was in OP, naming neither the file
+// nor the line. It is found when the script is loaded: exit 2, FILE:LINE:COLUMN and the word;
+// words the script defines itself are known.
+TEST_F(EcProgram, AnUnknownWordInAScriptIsBadInputNamingFileLineAndWord) {
+  Segment seg("mem:ec_program_unknown");
+  const std::string text = "\\ line 1 comment\n: t1 1 1 drive-on ;\nvariable v  1 1 t1 1 v !\n1 1 drvie-on\n";
+  EXPECT_EQ(run_script("mem:ec_program_unknown", text), 2) << log();
+  EXPECT_NE(log().find(script_ + ":4:5: error: `drvie-on`: unknown word"), std::string::npos) << log();
+}
+
 // Found in review: an SDO download the drive aborted (homing method 99) never reached the
 // script, which ended with exit 0.
 TEST_F(EcProgram, AnSdoAbortEndsTheScriptAsARuntimeFailure) {
