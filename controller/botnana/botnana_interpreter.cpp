@@ -473,6 +473,7 @@ void Interpreter::reset_after_error() {
   fg_.error.clear();
   if (mode_ != Mode::interpret) {
     code_.resize(def_start_);
+    code_words_.resize(def_start_);
     mode_ = Mode::interpret;
   }
   cs_.clear();
@@ -501,11 +502,11 @@ Status Interpreter::compile_control(std::string_view w, const Token& tok) {
   Control c{};
   if (w == "if") {
     cs_.push_back({Ctl::if_, here()});
-    emit({Op::branch0, 0, pos});
+    emit({Op::branch0, 0, pos}, tok.text);
   } else if (w == "else") {
     if (!pop_kind({Ctl::if_}, c)) return fail(tok, "`else` without `if`");
     cs_.push_back({Ctl::else_, here()});
-    emit({Op::branch, 0, pos});
+    emit({Op::branch, 0, pos}, tok.text);
     code_[c.at].arg = static_cast<std::int64_t>(here());
   } else if (w == "then") {
     if (!pop_kind({Ctl::if_, Ctl::else_}, c)) return fail(tok, "`then` without `if`");
@@ -514,24 +515,24 @@ Status Interpreter::compile_control(std::string_view w, const Token& tok) {
     cs_.push_back({Ctl::begin, here()});
   } else if (w == "until" || w == "again") {
     if (!pop_kind({Ctl::begin}, c)) return fail(tok, fmt::format("`{}` without `begin`", w));
-    emit({w == "until" ? Op::branch0 : Op::branch, static_cast<std::int64_t>(c.at), pos});
+    emit({w == "until" ? Op::branch0 : Op::branch, static_cast<std::int64_t>(c.at), pos}, tok.text);
   } else if (w == "while") {
     if (cs_.empty() || cs_.back().kind != Ctl::begin) return fail(tok, "`while` without `begin`");
     cs_.push_back({Ctl::while_, here()});
-    emit({Op::branch0, 0, pos});
+    emit({Op::branch0, 0, pos}, tok.text);
   } else if (w == "repeat") {
     Control b{};
     if (!pop_kind({Ctl::while_}, c) || !pop_kind({Ctl::begin}, b)) {
       return fail(tok, "`repeat` without `begin … while`");
     }
-    emit({Op::branch, static_cast<std::int64_t>(b.at), pos});
+    emit({Op::branch, static_cast<std::int64_t>(b.at), pos}, tok.text);
     code_[c.at].arg = static_cast<std::int64_t>(here());
   } else if (w == "do") {
-    emit({Op::do_init, 0, pos});
+    emit({Op::do_init, 0, pos}, tok.text);
     cs_.push_back({Ctl::do_, here()});
   } else {  // loop, +loop
     if (!pop_kind({Ctl::do_}, c)) return fail(tok, fmt::format("`{}` without `do`", w));
-    emit({w == "loop" ? Op::loop : Op::plus_loop, static_cast<std::int64_t>(c.at), pos});
+    emit({w == "loop" ? Op::loop : Op::plus_loop, static_cast<std::int64_t>(c.at), pos}, tok.text);
   }
   return Status{};
 }
@@ -555,7 +556,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (!text) return fail(tok, "missing closing \" of the string");
     if (comp) {
       strings_.emplace_back(text->text);
-      emit({Op::dot_str, static_cast<std::int64_t>(strings_.size() - 1), pos});
+      emit({Op::dot_str, static_cast<std::int64_t>(strings_.size() - 1), pos}, tok.text);
     } else if (!checking_) {
       print(text->text);
     }
@@ -579,7 +580,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (mode_ == Mode::interpret) return fail(tok, "compile-only word outside a definition");
     if (mode_ == Mode::deploy) return fail(tok, "`;` inside `deploy … ;deploy`");
     if (!cs_.empty()) return fail(tok, "unbalanced control structure (missing then/until/repeat/loop)");
-    emit({Op::exit, 0, pos});
+    emit({Op::exit, 0, pos}, tok.text);
     Word word;
     word.name = def_name_;
     word.kind = Kind::colon;
@@ -600,7 +601,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
   if (w == ";deploy") {
     if (mode_ != Mode::deploy) return fail(tok, "`;deploy` without `deploy`");
     if (!cs_.empty()) return fail(tok, "unbalanced control structure (missing then/until/repeat/loop)");
-    emit({Op::exit, 0, pos});
+    emit({Op::exit, 0, pos}, tok.text);
     mode_ = Mode::interpret;
     if (checking_) return Status{};  // compiled, never run
     auto task = std::make_unique<Task>();
@@ -646,7 +647,7 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
   }
   if (w == "exit") {
     if (!comp) return fail(tok, "compile-only word outside a definition");
-    emit({Op::exit, 0, pos});
+    emit({Op::exit, 0, pos}, tok.text);
     return Status{};
   }
 
@@ -657,15 +658,15 @@ Status Interpreter::interpret_token(Lexer& lex, const Token& tok) {
     if (!comp) return execute_word(id, tok);
     switch (word.kind) {
       case Kind::constant:
-      case Kind::variable: emit({Op::lit, word.value, pos}); break;
-      case Kind::prim: emit({Op::prim, id, pos}); break;
-      case Kind::colon: emit({Op::call, id, pos}); break;
+      case Kind::variable: emit({Op::lit, word.value, pos}, tok.text); break;
+      case Kind::prim: emit({Op::prim, id, pos}, tok.text); break;
+      case Kind::colon: emit({Op::call, id, pos}, tok.text); break;
     }
     return Status{};
   }
   if (const auto n = parse_number(tok.text)) {
     if (comp) {
-      emit({Op::lit, *n, pos});
+      emit({Op::lit, *n, pos}, tok.text);
     } else if (!checking_) {
       if (fg_.ds.size() >= kMaxDataStack) return fail(tok, "stack overflow");
       fg_.ds.push_back(*n);
@@ -861,7 +862,8 @@ std::size_t Interpreter::step_tasks() {
       const Instr& in = code_[at];
       Status s;
       s.ok = false;
-      if (in.op == Op::prim || in.op == Op::call) s.word = words_[static_cast<std::size_t>(in.arg)].name;
+      s.word = in.op == Op::prim || in.op == Op::call ? words_[static_cast<std::size_t>(in.arg)].name : code_words_[at];
+      s.line = in.line;
       s.position = in.position;
       s.message = t.error;
       if (t.word >= 0) s.message += fmt::format(" (in `{}`)", words_[static_cast<std::size_t>(t.word)].name);

@@ -15,7 +15,8 @@
 // Errors are statuses, never exceptions: an error in the foreground names the word, its
 // byte offset in the line (and the line's number, when evaluate() was given one), empties the data stack and drops a definition being compiled,
 // after which the interpreter is usable again; an error in a background task ends that task
-// and is kept in last_task_error(). check_script() finds a script's bad input (unknown words,
+// and is kept in last_task_error(), naming the word it stopped at (every instruction keeps
+// its source word, line and position). check_script() finds a script's bad input (unknown words,
 // unbalanced control structures, a definition left open at its end, …) before any of it
 // runs, on a dictionary of its own. Allocation happens while compiling and deploying; running
 // compiled code allocates only when stacks first grow (reserved at construction).
@@ -115,6 +116,7 @@ class Interpreter {
     Op op;
     std::int64_t arg;
     std::uint32_t position;  // byte offset of the source word (error reports)
+    std::uint32_t line = 0;  // and its line's number as given to evaluate() (0: none)
   };
   struct Frame {
     std::size_t return_ip;  // kNoReturn for the outermost call
@@ -171,7 +173,12 @@ class Interpreter {
   RunResult run(Task& t, std::uint64_t budget, std::size_t& failed_at);
   Status fail(const Token& tok, std::string message);
   void reset_after_error();
-  void emit(Instr in) { code_.push_back(in); }
+  // Appends an instruction compiled from source word `word` of the line being read.
+  void emit(Instr in, std::string_view word) {
+    in.line = static_cast<std::uint32_t>(line_no_);
+    code_.push_back(in);
+    code_words_.emplace_back(word);
+  }
   void print(std::string_view s) {
     if (output_) output_(s);
   }
@@ -184,6 +191,7 @@ class Interpreter {
   std::unordered_map<std::string, int> index_;
   std::vector<Prim> prims_;
   std::vector<Instr> code_;
+  std::vector<std::string> code_words_;  // the source word of each instruction (error reports)
   std::vector<std::string> strings_;
   std::vector<std::int64_t> cells_;
   Task fg_;

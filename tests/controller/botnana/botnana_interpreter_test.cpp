@@ -384,6 +384,28 @@ TEST_F(BotnanaLanguage, RunawayTaskIsEnded) {
   EXPECT_NE(in.last_task_error().message.find("runaway"), std::string::npos);
 }
 
+// Found in review: a runaway stopped at a branch was reported as "error: `` at position 49".
+// The status names the control word it stopped at, and the line it was compiled from.
+TEST_F(BotnanaLanguage, ATaskStoppedAtAControlWordNamesIt) {
+  in.set_step_budget(1000);
+  ok("deploy 200 begin again ;deploy");
+  EXPECT_EQ(in.step_tasks(), 0u);
+  EXPECT_EQ(in.last_task_error().word, "again");
+  EXPECT_EQ(in.last_task_error().position, 17u);
+}
+
+// evaluate() with a line number: a task's error says on which line its word was compiled.
+TEST_F(BotnanaLanguage, ATaskErrorSaysTheLineItsWordCameFrom) {
+  ASSERT_TRUE(in.evaluate("deploy", 6).ok);
+  ASSERT_TRUE(in.evaluate("  1 drop drop ;deploy", 7).ok);
+  EXPECT_EQ(in.step_tasks(), 0u);
+  EXPECT_EQ(in.last_task_error().word, "drop");
+  EXPECT_EQ(in.last_task_error().line, 7u);
+  EXPECT_EQ(in.last_task_error().position, 9u);
+  EXPECT_EQ(in.last_task_error().located("a.fs").rfind("a.fs:7:10: error: `drop`: stack underflow", 0), 0u)
+      << in.last_task_error().located("a.fs");
+}
+
 // A script is checked before it runs (DESIGN: bad input is found and named, file and line):
 // unknown words, compile-only words or waits outside a definition or task, unbalanced
 // control structures, and a definition or deploy body left open at the end. Words the script

@@ -394,6 +394,14 @@ TEST_F(EcProgram, AnUnknownWordInAScriptIsBadInputNamingFileLineAndWord) {
   EXPECT_NE(log().find(script_ + ":4:5: error: `drvie-on`: unknown word"), std::string::npos) << log();
 }
 
+// A task's runtime error (here stack underflow) stays a runtime failure (exit 3) and names the
+// word and where it stands in the file.
+TEST_F(EcProgram, ARuntimeErrorInAScriptTaskNamesTheWordAndItsPlaceInTheFile) {
+  Segment seg("mem:ec_program_task_error");
+  EXPECT_EQ(run_script("mem:ec_program_task_error", "deploy\n    1 drop drop\n;deploy\n"), 3) << log();
+  EXPECT_NE(log().find(script_ + ":2:12: error: `drop`: stack underflow"), std::string::npos) << log();
+}
+
 // Found in review: an SDO download the drive aborted (homing method 99) never reached the
 // script, which ended with exit 0.
 TEST_F(EcProgram, AnSdoAbortEndsTheScriptAsARuntimeFailure) {
