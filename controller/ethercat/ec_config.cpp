@@ -168,6 +168,7 @@ EcMasterConfig make_master_config(const EcConfig& c) {
   m.dc = c.dc;
   m.sync0_shift_ns = std::llround(c.sync0_shift_us * 1e3);
   m.startup = c.startup;
+  m.read_back = {{0x607D, 1}, {0x607D, 2}};  // seed 004: drive-nsl@ / drive-psl@ answer what was read at boot
   m.expected_slaves = c.expected_slaves;
   m.segment_loss_cycles = c.segment_loss_cycles;
   m.segment_loss_ns = static_cast<SimTime>(c.segment_loss_ms) * 1'000'000;

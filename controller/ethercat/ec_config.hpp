@@ -67,7 +67,8 @@ struct EcConfig {
 EcConfig load_ec_config(const std::string& path);
 // `base_dir` resolves relative file names ("" = as given).
 EcConfig parse_ec_config(std::string_view yaml, const std::string& file = "<config>", const std::string& base_dir = "");
-// Loads the ESI files and fills the core's configuration. Throws EcConfigError naming the
+// Loads the ESI files and fills the core's configuration, with the software limits 0x607D:1/2
+// read back at start-up (seed 004's drive-nsl@ / drive-psl@). Throws EcConfigError naming the
 // ESI file on a parse error.
 EcMasterConfig make_master_config(const EcConfig& c);
 

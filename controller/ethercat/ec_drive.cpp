@@ -263,6 +263,7 @@ std::optional<std::int64_t> EcDrives::read(int slave, int ch, std::uint16_t inde
   if (index == kStatusword && sub == 0 && a->sw_at) return a->sw;
   if (const auto at = m_.find_entry(slave - 1, idx, sub)) return m_.read_entry(*at, object_signed(slave, idx, sub));
   const auto key = std::make_tuple(slave, idx, sub);
+  if (const ReadBack* rb = read_back(slave, idx, sub)) return read_back_value(*rb, key);
   if (!sdo_reading_[key]) {
     const bool is_signed = object_signed(slave, idx, sub);
     const std::uint64_t id = m_.sdo_upload(slave - 1, idx, sub, [this, key, is_signed](const SdoResult& r) {
@@ -279,6 +280,26 @@ std::optional<std::int64_t> EcDrives::read(int slave, int ch, std::uint16_t inde
   const auto it = sdo_values_.find(key);
   if (it == sdo_values_.end()) return std::nullopt;
   return it->second;
+}
+
+const ReadBack* EcDrives::read_back(int slave, std::uint16_t index, std::uint8_t sub) const {
+  for (const auto& rb : m_.slave(slave - 1).read_back)
+    if (rb.index == index && rb.sub == sub) return &rb;
+  return nullptr;
+}
+
+// The master's copy of an object read back at start-up: the value written since (drive-nsl!),
+// else the start-up answer; no upload. A drive that aborted it lacks the object.
+std::optional<std::int64_t> EcDrives::read_back_value(const ReadBack& rb, const std::tuple<int, std::uint16_t, std::uint8_t>& key) {
+  if (const auto it = sdo_values_.find(key); it != sdo_values_.end()) return it->second;
+  const int slave = std::get<0>(key);
+  if (rb.status == SdoStatus::done) return bytes_value(rb.data, object_signed(slave, rb.index, rb.sub));
+  error_ = fmt::format("slave {} has no object 0x{:04X}:{:02X}: its start-up upload {}{}", slave, rb.index, rb.sub,
+                       rb.status == SdoStatus::aborted ? "was aborted" : std::string("ended ") + to_string(rb.status),
+                       rb.status == SdoStatus::aborted
+                           ? fmt::format(" with 0x{:08X} ({})", rb.abort_code, sdo_abort_text(rb.abort_code))
+                           : "");
+  return std::nullopt;
 }
 
 bool EcDrives::write(int slave, int ch, std::uint16_t index, std::uint8_t sub, std::int64_t value) {

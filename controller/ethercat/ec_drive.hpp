@@ -9,7 +9,10 @@
 // Objects mapped into the PDOs are read and written in the image; any other object goes
 // through the master's SDO queue (reads answer the last uploaded value and refresh it); a
 // download the drive aborts (or that times out) is kept per slave for
-// take_request_failures(), which until-no-requests turns into the script's error.
+// take_request_failures(), which until-no-requests turns into the script's error. Objects
+// the master read back at start-up (EcMasterConfig::read_back: the software limits 0x607D:1/2
+// of drive-nsl@/drive-psl@) are answered from that copy, or from the value written since,
+// without an upload; a drive that aborted the read-back has no such object, and read() says so.
 // Axes are (slave, channel), both 1-based as in the Botnana word set; channel n > 1 of a
 // multi-axis slave uses the CiA 402 objects offset by 0x800 × (n − 1). Signedness and sizes
 // come from the slave's ESI object dictionary; write() refuses a value outside the object's
@@ -104,6 +107,8 @@ class EcDrives : public botnana::DriveAccess {
   unsigned object_bytes(int slave, std::uint16_t index, std::uint8_t sub) const;
   // Whether `value` fits an object of `bits` bits; if not, error_ says why (value and range).
   bool fits(std::int64_t value, unsigned bits, bool is_signed, std::uint16_t index, std::uint8_t sub);
+  const ReadBack* read_back(int slave, std::uint16_t index, std::uint8_t sub) const;
+  std::optional<std::int64_t> read_back_value(const ReadBack& rb, const std::tuple<int, std::uint16_t, std::uint8_t>& key);
 
   EcMaster& m_;
   std::vector<Axis> axes_;

@@ -115,6 +115,7 @@ void EcMaster::enter(Slave& s, SlaveStep step, SimTime t) {
       }
       queue_internal(s, SdoRequest{false, st.index, st.sub, st.data}, {});
     }
+    queue_read_back(s);
   } else if (step == SlaveStep::pdo_read) {
     start_pdo_read(s);
   }
@@ -1209,6 +1210,27 @@ void EcMaster::slave_reply(Slave& s, const ec::Datagram& d, int sub, SimTime t) 
 
 // ---------------------------------------------------------------------------------------
 // mailbox
+
+// EcMasterConfig::read_back for every axis of a CiA 402 slave; each answer (or abort) lands
+// in s.read_back, and none fails the step (the callback keeps it out of internal_failed).
+void EcMaster::queue_read_back(Slave& s) {
+  s.read_back.clear();
+  if (!s.esi || s.esi->profile != 402 || !s.sii.has_coe()) return;
+  for (int axis = 0; axis < std::max(1, s.esi->axes); ++axis) {
+    for (const auto& o : config_.read_back) {
+      const bool per_axis = o.index >= 0x6000 && o.index < 0x6800;
+      const auto index = static_cast<std::uint16_t>(o.index + (per_axis ? 0x800 * axis : 0));
+      s.read_back.push_back(ReadBack{index, o.sub, SdoStatus::pending, 0, {}});
+      const std::size_t k = s.read_back.size() - 1;
+      queue_internal(s, SdoRequest{true, index, o.sub, {}}, [&s, k](const SdoResult& r) {
+        if (k >= s.read_back.size()) return;
+        s.read_back[k].status = r.status;
+        s.read_back[k].abort_code = r.abort_code;
+        s.read_back[k].data = r.data;
+      });
+    }
+  }
+}
 
 void EcMaster::queue_internal(Slave& s, SdoRequest req, SdoCallback cb) {
   s.internal_jobs.push_back(MbxJob{0, std::move(req), std::move(cb), true});

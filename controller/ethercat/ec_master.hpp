@@ -116,6 +116,21 @@ struct StartupSdo {
   std::string origin{};             // where it was configured ("FILE:LINE"), for errors
 };
 
+// An object of a slave's dictionary.
+struct ObjectAddress {
+  std::uint16_t index = 0;
+  std::uint8_t sub = 0;
+};
+
+// One object read back from a slave during start-up (EcMasterConfig::read_back).
+struct ReadBack {
+  std::uint16_t index = 0;
+  std::uint8_t sub = 0;
+  SdoStatus status = SdoStatus::pending;
+  std::uint32_t abort_code = 0;        // aborted: why (e.g. 0x06020000, no such object)
+  std::vector<std::uint8_t> data;      // done: the value, little endian
+};
+
 enum class ImageLayout : std::uint8_t { automatic, separate, overlapped };
 
 struct EcMasterConfig {
@@ -124,6 +139,11 @@ struct EcMasterConfig {
   bool dc = false;                         // distributed clocks (delays, offsets, SYNC0)
   SimTime sync0_shift_ns = 0;              // SYNC0 shift added to the start time [ns]
   std::vector<StartupSdo> startup;
+  // Objects uploaded from every CiA 402 slave (ESI profile 402) in PRE-OP, after its
+  // start-up SDOs, for each of its axes (axis n's at index + 0x800 × (n − 1) for 0x6000–
+  // 0x67FF), into SlaveStatus::read_back. An upload the slave aborts (it lacks the object)
+  // is recorded there and does not hold the slave back.
+  std::vector<ObjectAddress> read_back;
   int expected_slaves = -1;                // > 0: the bus must have exactly this many
   // The count phase fails ("no slave answered within … s") when no slave has answered its BRD
   // this long after the first tick [ns] (0 = wait for ever).
@@ -181,6 +201,8 @@ struct SlaveStatus {
   // Per axis (the emergency's first data byte, 1-based, as our drives send it; 1 otherwise):
   // the last code, index 0 = axis 1. Grows on the first emergency of a higher axis.
   std::vector<std::uint16_t> axis_emergency;
+  // EcMasterConfig::read_back's answers from the last start-up, every axis's in turn.
+  std::vector<ReadBack> read_back;
 };
 
 struct EcMasterStats {
@@ -354,6 +376,7 @@ class EcMaster {
   void fill_slaves(omnitwin::ethercat::PduBuilder& b, SimTime t);
   void finish_job(Slave& s, SdoStatus status);
   void queue_internal(Slave& s, SdoRequest req, SdoCallback cb);
+  void queue_read_back(Slave& s);
   void start_pdo_read(Slave& s);
   void finish_pdo_read(Slave& s);
   bool mbx_ready(const Slave& s) const;

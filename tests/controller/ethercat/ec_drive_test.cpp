@@ -247,3 +247,36 @@ TEST(EcDrive, AnSdoDownloadTheDriveAbortsFailsUntilNoRequestsNamingTheObjectAndT
   EXPECT_EQ(b.slaves[0]->axis(0).objects().homing_method, 37);
 }
 
+// Seed 004: drive-nsl@ / drive-psl@ give the limits the master read back from the drive at
+// boot. Found in review: the first use failed ("not available"), the upload only queued then.
+TEST(EcDrive, TheSoftwareLimitsAreReadBackAtStartUpSoTheWordsAnswerAtOnce) {
+  EcMasterConfig cfg;
+  cfg.read_back = {{0x607D, 1}, {0x607D, 2}};
+  Bench b(2, cfg);
+  b.slaves[1]->axis(0).objects().sw_limit_min = -50000;
+  b.slaves[1]->axis(0).objects().sw_limit_max = 70000;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  std::string out;
+  omnitwin::botnana::Interpreter in(*b.drives, [&](std::string_view s) { out += s; });
+  const auto s = in.evaluate("1 2 drive-nsl@ . 1 2 drive-psl@ .");
+  ASSERT_TRUE(s.ok) << s.to_string();
+  EXPECT_EQ(out, "-50000 70000 ");
+  EXPECT_FALSE(b.drives->requests_pending(2)) << "answered from the start-up read-back";
+}
+
+// A drive without 0x607D: the start-up upload is aborted (the slave still reaches OP) and the
+// word says that the drive has no such object.
+TEST(EcDrive, ADriveWithoutSoftwareLimitsReachesOpAndTheWordSaysSo) {
+  EcMasterConfig cfg;
+  cfg.read_back = {{0x607D, 1}, {0x607D, 7}};  // sub 7 does not exist
+  Bench b(1, cfg);
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  omnitwin::botnana::Interpreter in(*b.drives);
+  ASSERT_TRUE(in.evaluate("1 1 drive-nsl@ drop").ok);
+  EXPECT_FALSE(b.drives->read(1, 1, 0x607D, 7).has_value());
+  EXPECT_NE(b.drives->last_error().find("has no object 0x607D:07"), std::string::npos) << b.drives->last_error();
+  EXPECT_FALSE(b.drives->requests_pending(1)) << "no second upload of an object the drive lacks";
+}
+

@@ -412,5 +412,13 @@ TEST_F(EcProgram, AnSdoAbortEndsTheScriptAsARuntimeFailure) {
   EXPECT_NE(log().find("0x06090030"), std::string::npos) << log();
 }
 
+// Seed 004: the software limits are read back from the drive at boot, so drive-nsl@ and
+// drive-psl@ answer at their first use. Found in review: "not available", exit 3.
+TEST_F(EcProgram, TheSoftwareLimitWordsAnswerAtTheirFirstUse) {
+  Segment seg("mem:ec_program_limits");
+  EXPECT_EQ(run_script("mem:ec_program_limits", "deploy 1 1 drive-nsl@ drop 1 2 drive-psl@ drop ;deploy\n"), 0)
+      << log();
+}
+
 }  // namespace
 }  // namespace omnitwin::controller::ethercat
