@@ -183,9 +183,15 @@ struct DriveWords {
     return R::ok;
   }
   // ( ch n -- ) aux 1: +drive-homed, 0: -drive-homed; aux 2: drive-homed? ( ch n -- flag ).
+  // The master's record (DriveAccess::homed), or the interpreter's own when it keeps none.
   static R homed(In& in, T& t, std::int64_t aux) {
     int slave = 0, ch = 0;
     if (!axis(in, t, 2, slave, ch)) return R::error;
+    if (aux == 2) {
+      if (const auto h = in.drives_.homed(slave, ch)) return push(t, flag(*h));
+    } else if (in.drives_.set_homed(slave, ch, aux == 1)) {
+      return R::ok;
+    }
     const std::int64_t key = (static_cast<std::int64_t>(slave) << 16) | ch;
     auto it = std::find(in.homed_.begin(), in.homed_.end(), key);
     if (aux == 2) return push(t, flag(it != in.homed_.end()));

@@ -103,8 +103,8 @@ class Interpreter {
   bool compiling() const noexcept { return mode_ != Mode::interpret; }
   // True when `name` is a word of the dictionary (case-insensitive).
   bool defined(std::string_view name) const;
-  // The homing record of +drive-homed/-drive-homed (kept here: seed 004 calls it a record
-  // the master keeps, not a drive object).
+  // The homing record of +drive-homed/-drive-homed kept here when the master keeps none
+  // (DriveAccess::homed; seed 004 calls it a record the master provides, not a drive object).
   bool homed(int slave, int ch) const;
 
  private:

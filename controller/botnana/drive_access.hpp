@@ -81,6 +81,13 @@ class DriveAccess {  // implemented by the EtherCAT master's drive layer (E)
   // last call, as one sentence naming each object and its abort code; "" when none. Taking
   // them clears them: until-no-requests fails with them once the slave's queue is empty.
   virtual std::string take_request_failures(int /*slave*/) { return ""; }
+  // The master's homed record of (slave, ch), which +drive-homed / -drive-homed set and
+  // drive-homed? reads (seed 004: a record the master provides; ours also sets it when the
+  // drive reports homing attained); nullopt when the master keeps none (the interpreter then
+  // keeps its own).
+  virtual std::optional<bool> homed(int /*slave*/, int /*ch*/) const { return std::nullopt; }
+  // Sets that record; false when the master keeps none.
+  virtual bool set_homed(int /*slave*/, int /*ch*/, bool /*homed*/) { return false; }
   // The error code of the last emergency the drive sent for this channel (0x0000 after its
   // reset); nullopt: none received, or the master does not receive emergencies.
   virtual std::optional<std::uint16_t> last_emergency(int /*slave*/, int /*ch*/) const { return std::nullopt; }

@@ -246,8 +246,10 @@ std::optional<bool> EcDrives::homed(int slave, int ch) const {
   return a->homed;
 }
 
-void EcDrives::set_homed(int slave, int ch, bool homed) {
-  if (Axis* a = find(slave, ch)) a->homed = homed;
+bool EcDrives::set_homed(int slave, int ch, bool homed) {
+  Axis* a = find(slave, ch);
+  if (a) a->homed = homed;
+  return a != nullptr;
 }
 
 bool EcDrives::has_drive(int slave, int ch) const { return find(slave, ch) != nullptr; }

@@ -63,10 +63,11 @@ class EcDrives : public botnana::DriveAccess {
   bool any_enabled() const;  // some axis in operation enabled
   // Every axis was stopped because the segment was lost (until a new goal is set).
   bool stopped() const { return stopped_; }
-  // Homed record per axis: set when the drive reports homing attained (mode display HM,
-  // statusword bits 12 and 10 set, 13 clear), or by set_homed(); nullopt for no such axis.
-  std::optional<bool> homed(int slave, int ch) const;
-  void set_homed(int slave, int ch, bool homed);
+  // Homed record per axis (the Botnana words' +drive-homed, -drive-homed, drive-homed?): set
+  // when the drive reports homing attained (mode display HM, statusword bits 12 and 10 set,
+  // 13 clear), or by set_homed(); nullopt (set_homed: false) for no such axis.
+  std::optional<bool> homed(int slave, int ch) const override;
+  bool set_homed(int slave, int ch, bool homed) override;
 
   // botnana::DriveAccess
   bool has_drive(int slave, int ch) const override;

@@ -280,3 +280,25 @@ TEST(EcDrive, ADriveWithoutSoftwareLimitsReachesOpAndTheWordSaysSo) {
   EXPECT_FALSE(b.drives->requests_pending(1)) << "no second upload of an object the drive lacks";
 }
 
+// Seed 004: +drive-homed / -drive-homed / drive-homed? are "a record the master provides".
+// Found in review: drive-homed? read only the interpreter's list, not the master's record
+// (which homing attained sets).
+TEST(EcDrive, DriveHomedAsksTheMastersHomedRecord) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  std::string out;
+  omnitwin::botnana::Interpreter in(d, [&](std::string_view s) { out += s; });
+  ASSERT_TRUE(in.evaluate("deploy hm 1 1 op-mode! 37 1 1 homing-method! until-no-requests "
+                          "1 1 drive-on 1 1 until-drive-on 1 1 go 1 1 until-target-reached ;deploy").ok);
+  ASSERT_TRUE(run_tasks(b, in, 5000));
+  ASSERT_TRUE(in.last_task_error().ok) << in.last_task_error().to_string();
+  ASSERT_EQ(d.homed(1, 1), true);
+  ASSERT_TRUE(in.evaluate("1 1 drive-homed? . 1 2 drive-homed? .").ok);
+  EXPECT_EQ(out, "-1 0 ");
+  ASSERT_TRUE(in.evaluate("1 1 -drive-homed 1 2 +drive-homed").ok);
+  EXPECT_EQ(d.homed(1, 1), false);
+  EXPECT_EQ(d.homed(2, 1), true);
+}
+
