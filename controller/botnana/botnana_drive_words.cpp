@@ -161,6 +161,15 @@ struct DriveWords {
     in.drives_.set_goal(slave, ch, static_cast<PdsGoal>(aux));
     return R::ok;
   }
+  // ( cw ch n -- ): drive-cw! sets the whole controlword (seed 004: directly), so the
+  // master's goal lets go of it: the state bits go out as written until the next goal word.
+  static R cw_store(In& in, T& t, std::int64_t) {
+    int slave = 0, ch = 0;
+    if (!axis(in, t, 3, slave, ch)) return R::error;
+    if (!write(in, t, slave, ch, kControlword, 0, pop(t))) return R::error;
+    in.drives_.release_goal(slave, ch);
+    return R::ok;
+  }
   // ( goal ch n -- )
   static R pds_goal(In& in, T& t, std::int64_t) {
     int slave = 0, ch = 0;
@@ -262,7 +271,7 @@ struct DriveWords {
 
     const std::pair<const char*, std::int64_t> stores[] = {
         {"op-mode!", obj(0x6060)},          {"target-p!", obj(0x607A)},
-        {"target-v!", obj(0x60FF)},         {"drive-cw!", obj(kControlword)},
+        {"target-v!", obj(0x60FF)},
         {"v-ofs!", obj(0x60B1)},            {"drive-douts!", obj(0x60FE, 1)},
         {"drive-douts-mask!", obj(0x60FE, 2)}, {"drive-nsl!", obj(0x607D, 1)},
         {"drive-psl!", obj(0x607D, 2)},     {"drive-polarity!", obj(0x607E)},
@@ -272,6 +281,7 @@ struct DriveWords {
         {"homing-v1!", obj(0x6099, 1)},     {"homing-v2!", obj(0x6099, 2)},
         {"homing-a!", obj(0x609A)}};
     for (const auto& [name, o] : stores) in.add_prim(name, obj_store, o);
+    in.add_prim("drive-cw!", cw_store);
 
     const std::pair<const char*, std::int64_t> fetches[] = {
         {"target-p@", obj(0x607A)},  {"drive-sw@", obj(kStatusword)}, {"real-p@", obj(0x6064)},

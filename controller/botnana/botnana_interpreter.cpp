@@ -97,6 +97,7 @@ class NoDrives : public DriveAccess {
   std::optional<std::int64_t> read(int, int, std::uint16_t, std::uint8_t) override { return std::nullopt; }
   bool write(int, int, std::uint16_t, std::uint8_t, std::int64_t) override { return false; }
   void set_goal(int, int, PdsGoal) override {}
+  void release_goal(int, int) override {}
   bool requests_pending(int) const override { return false; }
   std::string last_error() const override { return "a script check runs nothing"; }
 };

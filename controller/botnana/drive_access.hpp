@@ -45,7 +45,9 @@ struct ObjectRef {
 //  * 0x6040 (controlword): write() stores the word set's controlword (drive-cw!, go, the
 //    +/- bit words do read-modify-write through read()/write()). While a goal is set the
 //    master owns bits 0–3 and 7 and overlays them from its goal logic each cycle; the other
-//    bits (4–6 mode specific, 8 halt, 9) go out as written. The master clears bit 4 (`go`)
+//    bits (4–6 mode specific, 8 halt, 9) go out as written. release_goal() (drive-cw!, which
+//    seed 004 says sets the controlword directly) ends the goal: the whole word goes out as
+//    written until the next set_goal(). The master clears bit 4 (`go`)
 //    itself once the drive acknowledges the set-point (statusword bit 12) so the next `go`
 //    is a new rising edge.
 //  * set_goal() is a new request each time it is called: an axis in Fault is first given a
@@ -68,6 +70,9 @@ class DriveAccess {  // implemented by the EtherCAT master's drive layer (E)
                      std::int64_t value) = 0;
   // From now on the master drives the controlword of (slave, ch) towards `goal`.
   virtual void set_goal(int slave, int ch, PdsGoal goal) = 0;
+  // From now on the master no longer drives the controlword of (slave, ch): it goes out as
+  // written, bits 0–3 and 7 included, until the next set_goal().
+  virtual void release_goal(int slave, int ch) = 0;
   // True while SDO requests queued for `slave` are not done yet.
   virtual bool requests_pending(int slave) const = 0;
   // A human-readable description of the last refused call ("" when none).

@@ -373,6 +373,13 @@ void EcDrives::set_goal(int slave, int ch, PdsGoal goal) {
   stopped_ = false;  // a new goal from the user lifts the segment-loss stop
 }
 
+void EcDrives::release_goal(int slave, int ch) {
+  if (Axis* a = find(slave, ch)) {
+    a->goal.reset();
+    a->reset_pending = false;
+  }
+}
+
 std::optional<botnana::ObjectRef> EcDrives::user_pdo(int slave, int ch, botnana::UserPdo which) const {
   if (!find(slave, ch)) return std::nullopt;
   return user_pdos_[static_cast<std::size_t>(which)];

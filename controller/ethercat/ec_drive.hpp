@@ -2,7 +2,8 @@
 // EtherCAT master core (facts/cia402.md; controller/botnana/drive_access.hpp).
 //
 // Each cycle (update(), after the cyclic frame came back and before the next tick) it reads
-// the statusword, drives the controlword towards the axis's goal (shutdown / switch on /
+// the statusword, drives the controlword towards the axis's goal (if it has one: a released
+// goal leaves the word set's controlword as written) (shutdown / switch on /
 // enable operation / quick stop / disable voltage, with a fault-reset rising edge first when
 // a goal is set on a faulted axis), clears the `go` bit (controlword bit 4) once the drive
 // acknowledges (statusword bit 12) and writes the controlword into the process image.
@@ -74,6 +75,7 @@ class EcDrives : public botnana::DriveAccess {
   std::optional<std::int64_t> read(int slave, int ch, std::uint16_t index, std::uint8_t sub) override;
   bool write(int slave, int ch, std::uint16_t index, std::uint8_t sub, std::int64_t value) override;
   void set_goal(int slave, int ch, botnana::PdsGoal goal) override;
+  void release_goal(int slave, int ch) override;
   bool requests_pending(int slave) const override;
   std::string last_error() const override { return error_; }
   std::string take_request_failures(int slave) override;

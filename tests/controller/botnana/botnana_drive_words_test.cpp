@@ -196,6 +196,19 @@ TEST_F(BotnanaDrive, StoreWordsReachTheirObjects) {
   EXPECT_EQ(h.drive(1, 2).state(), State::ready_to_switch_on);
 }
 
+// Seed 004: drive-cw! sets the controlword directly. Found in review: after drive-on the goal
+// kept bits 0-3 and 7, so 6 drive-cw! (shutdown) was silently ignored. It ends the goal.
+TEST_F(BotnanaDrive, DriveCwAfterAGoalWordSetsTheStateBitsToo) {
+  enable();
+  ASSERT_EQ(h.drive(1, 1).state(), State::operation_enabled);
+  ok("6 1 1 drive-cw!");
+  EXPECT_FALSE(h.goal(1, 1).has_value());
+  cycle(2);
+  EXPECT_EQ(h.drive(1, 1).state(), State::ready_to_switch_on);
+  enable();  // a goal word takes the controlword back
+  EXPECT_EQ(h.drive(1, 1).state(), State::operation_enabled);
+}
+
 TEST_F(BotnanaDrive, PdoOutputsNeedNoRequest) {
   ok("4321 1 1 target-p!");
   EXPECT_FALSE(h.requests_pending(1));

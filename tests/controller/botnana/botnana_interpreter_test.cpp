@@ -40,6 +40,7 @@ class StoreAccess : public DriveAccess {
     return true;
   }
   void set_goal(int, int, PdsGoal g) override { goals.push_back(g); }
+  void release_goal(int, int) override {}
   bool requests_pending(int slave) const override { return slave == 1 && pending > 0; }
   std::string last_error() const override { return ""; }
 

@@ -159,6 +159,9 @@ class DriveHarness : public DriveAccess {
       a->reset_phase = 0;
     }
   }
+  void release_goal(int slave, int ch) override {
+    if (Axis* a = find(slave, ch)) a->goal.reset();
+  }
   bool requests_pending(int slave) const override {
     const auto it = sdo_.find(slave);
     return it != sdo_.end() && !it->second.empty();

@@ -302,3 +302,24 @@ TEST(EcDrive, DriveHomedAsksTheMastersHomedRecord) {
   EXPECT_EQ(d.homed(2, 1), true);
 }
 
+// Seed 004: drive-cw! sets the controlword directly. Found in review: after drive-on the
+// master's goal overlaid bits 0-3 and 7, so 6 drive-cw! (shutdown) was silently ignored.
+// drive-cw! takes the controlword back from the goal until the next goal word.
+TEST(EcDrive, DriveCwTakesTheControlwordBackFromTheGoal) {
+  Bench b;
+  ASSERT_TRUE(b.to_op()) << b.master->error();
+  b.step();
+  EcDrives& d = *b.drives;
+  omnitwin::botnana::Interpreter in(d);
+  ASSERT_TRUE(in.evaluate("1 1 drive-on").ok);
+  ASSERT_TRUE(b.run_until([&] { return d.state(1, 1) == PdsState::operation_enabled; }, 2000));
+  ASSERT_TRUE(in.evaluate("6 1 1 drive-cw!").ok);
+  ASSERT_TRUE(b.run_until([&] { return d.state(1, 1) == PdsState::ready_to_switch_on; }, 200))
+      << to_string(*d.state(1, 1));
+  EXPECT_EQ(b.slaves[0]->axis(0).objects().controlword, 0x0006);
+  ASSERT_TRUE(in.evaluate("1 1 go").ok);  // a bit word keeps the written word
+  for (int k = 0; k < 20; ++k) b.step();
+  EXPECT_EQ(d.state(1, 1), PdsState::ready_to_switch_on);
+  ASSERT_TRUE(in.evaluate("1 1 drive-on").ok);  // a goal word takes it over again
+  ASSERT_TRUE(b.run_until([&] { return d.state(1, 1) == PdsState::operation_enabled; }, 2000));
+}
