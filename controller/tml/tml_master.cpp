@@ -76,7 +76,7 @@ simclock::MasterState TmlMaster::report_state() const {
 }
 
 // ---------------------------------------------------------------------------------------
-// Receiving: TakeData2 answers of SRL and APOS.
+// Receiving: TakeData2 answers of SRL (or SR32: SRL, SRH) and APOS.
 
 void TmlMaster::on_frame(const can::Frame& f, SimTime) {
   ++stats_.frames_rx;
@@ -97,6 +97,7 @@ void TmlMaster::on_frame(const can::Frame& f, SimTime) {
   a.found = true;
   a.last_answer_tick = stats_.ticks;
   if (c.address == t::reg::srl) a.srl = static_cast<std::uint16_t>(c.value);
+  if (c.address == t::reg::srl && c.wide) a.srh = static_cast<std::uint16_t>(c.value >> 16);
   if (c.address == t::reg::apos) a.apos = static_cast<std::int32_t>(c.value);
 }
 
@@ -140,6 +141,21 @@ void TmlMaster::check_answers(SimTime t) {
   }
 }
 
+// An axis whose last SR32 says off (SRL.15 = 0) or in fault (SRH.15) no longer follows its CSPD:
+// the platform stops as for a lost axis.
+void TmlMaster::check_status(SimTime t) {
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Axis& a = axes_[i];
+    const bool off = !(a.srl & t::bits::srl_axis_on), fault = (a.srh & t::bits::srh_fault) != 0;
+    if (!off && !fault) continue;
+    ++stats_.axes_lost;
+    stop(simclock::StopReason::drive_fault, cfg_.axes[i], t,
+         fmt::format("axis {} is {} (SRL {:04X}, SRH {:04X}): platform stopped (CSPD 0 to every axis)", cfg_.axes[i],
+                     fault ? "in fault" : "off", a.srl, a.srh));
+    return;
+  }
+}
+
 void TmlMaster::on_tick(SimTime t) {
   ++stats_.ticks;
   if (start_ < 0) start_ = t;
@@ -174,9 +190,11 @@ void TmlMaster::on_tick(SimTime t) {
     }
     case TmlPhase::running:
       check_answers(t);
+      if (phase_ == TmlPhase::running) check_status(t);
       if (phase_ != TmlPhase::running) return;
       speeds(t, false);
       query(t::reg::apos, true, t);
+      if (stats_.ticks % kStatusTicks == 0) query(t::reg::srl, true, t);  // SR32: SRL and SRH
       return;
     default:
       return;

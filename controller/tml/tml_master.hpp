@@ -3,7 +3,10 @@
 // them in speed mode with their acceleration (MODE SP, CACC, CSPD = 0, UPD), switches the axes
 // on (AXISON) and waits for SRL.15; then every tick it sends each axis its command speed
 // (CSPD, 32-bit 16.16 counts per sampling period), one UPD to the group and one group
-// GiveMeData2 of APOS, whose TakeData2 answers feed the platform loop's odometry.
+// GiveMeData2 of APOS, whose TakeData2 answers feed the platform loop's odometry; every
+// kStatusTicks ticks also a group GiveMeData2 of SR32 (SRL and SRH), so that an axis that went
+// off or into fault (a power blip shorter than the answer timeout brings a drive back off)
+// stops the platform as a lost axis does.
 //
 // Frames and time [ns] in (on_frame, on_tick), frames out through a callback; no sockets, no
 // clock. Messages are built and read only through the TML codec (tml_message, tml_can). The
@@ -25,13 +28,18 @@ namespace omnitwin::controller::tml {
 
 using SimTime = std::int64_t;  // [ns]
 
+// While running, the axis status (SR32) is read every this many ticks (10 ms at 2 ms).
+inline constexpr std::uint64_t kStatusTicks = 5;
+
 // Phases (MasterReport: detecting, starting = detecting). Legal in each:
 //  detecting — each tick a group GiveMeData2 of SRL; every axis answering → starting (its
 //              speed-mode set-up and AXISON sent). Legal: all_found, startup_timeout.
 //  starting  — each tick the SRL query; every axis with SRL.15 (axis on) → running.
 //              Legal: all_on, startup_timeout, axis_lost.
-//  running   — each tick CSPD per axis, UPD, the APOS query. Legal: axis_lost, finish, shutdown.
-//  stopped   — an axis stopped answering: every axis gets CSPD 0 and UPD, then holds.
+//  running   — each tick CSPD per axis, UPD, the APOS query; every kStatusTicks ticks the SR32
+//              query. Legal: axis_lost, axis_off (SRL.15 0 or SRH.15 fault), finish, shutdown.
+//  stopped   — an axis stopped answering, or went off or into fault: every axis gets CSPD 0
+//              and UPD, then holds.
 //  finished  — the application ended: CSPD 0 and UPD; shutdown sends AXISOFF.
 //  failed    — start-up did not complete.
 enum class TmlPhase : std::uint8_t { detecting, starting, running, stopped, finished, failed };
@@ -75,7 +83,7 @@ class TmlMaster {
  private:
   struct Axis {
     std::int32_t apos = 0;
-    std::uint16_t srl = 0;
+    std::uint16_t srl = 0, srh = 0;
     bool found = false;
     std::uint64_t last_answer_tick = 0;
   };
@@ -87,6 +95,7 @@ class TmlMaster {
   void set_up(SimTime t);
   void speeds(SimTime t, bool zero);
   void check_answers(SimTime t);
+  void check_status(SimTime t);
   std::uint16_t group() const;
   int wheel_of(std::uint8_t axis) const;
 

@@ -1,16 +1,19 @@
 // Tests controller/tml/tml_master: our TML master against four emulated IDM drives
 // (bus_emulators/tml/tml_can_node) on the simulated CAN wire, in process, over TMLCAN and
 // TechCAN: detection by a group GiveMeData2, speed mode and AXISON, CSPD reaching the drive
-// core as a velocity set-point, APOS coming back, a drive losing power stopping the platform,
+// core as a velocity set-point, APOS coming back, a drive losing power stopping the platform (and one
+// that comes back switched off within the answer timeout),
 // and a start-up that times out when nobody answers.
 #include "controller/tml/tml_master.hpp"
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <memory>
 #include <vector>
 
 #include "bus_emulators/can/can_bus.hpp"
+#include "bus_emulators/tml/tml_can.hpp"
 #include "bus_emulators/tml/tml_can_node.hpp"
 
 namespace omnitwin::controller::tml {
@@ -25,6 +28,8 @@ struct Network {
   std::unique_ptr<TmlMaster> master;
   std::vector<std::unique_ptr<t::TmlCanNode>> drives;
   std::vector<bool> powered = {true, true, true, true};
+  // Frames to drive i (0-3) this returns true for are lost on the way (a frame_loss fault).
+  std::function<bool(std::size_t, const can::Frame&)> lose;
   std::vector<std::string> events;
   SimTime now = 0;
 
@@ -50,7 +55,8 @@ struct Network {
     }
     bus.on_deliver([this](can::BusNode r, const can::Frame& f, const can::FrameTiming& tm) {
       if (r == 0) master->on_frame(f, tm.end_ns);
-      else if (powered[static_cast<std::size_t>(r - 1)]) drives[static_cast<std::size_t>(r - 1)]->on_frame(f, tm.end_ns);
+      else if (powered[static_cast<std::size_t>(r - 1)] && !(lose && lose(static_cast<std::size_t>(r - 1), f)))
+        drives[static_cast<std::size_t>(r - 1)]->on_frame(f, tm.end_ns);
     });
   }
   // The master every 2 ms, the drives every 1 ms.
@@ -63,6 +69,14 @@ struct Network {
         if (powered[i]) drives[i]->step(now + kMs / 2, drive::Feedback{});
       now += kMs;
     }
+  }
+  // The TML message in a frame from the master (false: not one).
+  bool message_of(const can::Frame& f, t::Message& m) const {
+    if (!cfg.techcan) return t::decode_tmlcan(f, m) == t::CanStatus::ok;
+    t::TechCanMessage tm;
+    if (t::decode_techcan(f, tm) != t::CanStatus::ok) return false;
+    m = tm.message;
+    return true;
   }
 };
 
@@ -99,6 +113,28 @@ TEST_P(TmlMasterTest, ADriveLosingPowerStopsThePlatform) {
   EXPECT_EQ(n.master->reason(), simclock::StopReason::node_missing);
   EXPECT_EQ(n.master->reason_node(), 3);
   n.run(4);
+  EXPECT_EQ(n.drives[0]->drive().core().objects().target_velocity, 0);  // CSPD 0 and UPD to everyone
+}
+
+// Found in review: a power loss shorter than lost_ticks ticks (12 ms < 20 ms) brought drive 3
+// back switched off (power-on state); its APOS answers kept coming, so the master never noticed
+// and the other wheels drove on without wheel 3.
+TEST_P(TmlMasterTest, ADriveThatCameBackSwitchedOffStopsThePlatform) {
+  Network n(GetParam());
+  n.run(40);
+  ASSERT_EQ(n.master->phase(), TmlPhase::running);
+  for (int i = 0; i < 4; ++i) n.master->set_speed(i, 5000);
+  n.run(10);
+  n.powered[2] = false;
+  n.drives[2]->power_off();
+  n.run(12);
+  n.drives[2]->power_on(n.now);
+  n.powered[2] = true;
+  n.run(40);
+  EXPECT_EQ(n.master->phase(), TmlPhase::stopped);
+  EXPECT_EQ(n.master->reason(), simclock::StopReason::drive_fault);
+  EXPECT_EQ(n.master->reason_node(), 3);
+  EXPECT_EQ(n.master->stats().axes_lost, 1u);
   EXPECT_EQ(n.drives[0]->drive().core().objects().target_velocity, 0);  // CSPD 0 and UPD to everyone
 }
 
