@@ -76,7 +76,7 @@ simclock::MasterState TmlMaster::report_state() const {
 }
 
 // ---------------------------------------------------------------------------------------
-// Receiving: TakeData2 answers of SRL (or SR32: SRL, SRH) and APOS.
+// Receiving: TakeData2 answers of SRL (or SR32: SRL, SRH), CACC and APOS.
 
 void TmlMaster::on_frame(const can::Frame& f, SimTime) {
   ++stats_.frames_rx;
@@ -98,6 +98,7 @@ void TmlMaster::on_frame(const can::Frame& f, SimTime) {
   a.last_answer_tick = stats_.ticks;
   if (c.address == t::reg::srl) a.srl = static_cast<std::uint16_t>(c.value);
   if (c.address == t::reg::srl && c.wide) a.srh = static_cast<std::uint16_t>(c.value >> 16);
+  if (c.address == t::reg::cacc) a.cacc = c.value;
   if (c.address == t::reg::apos) a.apos = static_cast<std::int32_t>(c.value);
 }
 
@@ -108,17 +109,45 @@ void TmlMaster::query(std::uint16_t address, bool wide, SimTime t) {
   send(t::give_me_data2(group(), t::axis_id_code(cfg_.host_axis), address, wide), t);
 }
 
-// Speed mode with the acceleration, command speed 0, applied; then the power stage on.
-void TmlMaster::set_up(SimTime t) {
-  const auto acc = static_cast<std::uint32_t>(std::llround(cfg_.acceleration * cfg_.sample_period * cfg_.sample_period * 65536.0));
-  for (std::uint8_t ax : cfg_.axes) {
-    const std::uint16_t dest = t::axis_id_code(ax);
-    send(t::bitset_instruction(dest, t::bitset_data::mode_sp), t);
-    send(*t::assign32(dest, t::reg::cacc, acc), t);
-    send(*t::assign32(dest, t::reg::cspd, 0), t);
-    send(t::instruction(dest, t::instr::upd), t);
-    send(t::instruction(dest, t::instr::axison), t);
+std::uint32_t TmlMaster::cacc_iu() const {
+  return static_cast<std::uint32_t>(std::llround(cfg_.acceleration * cfg_.sample_period * cfg_.sample_period * 65536.0));
+}
+
+// Axis i: speed mode with the acceleration, command speed 0, applied; then the power stage on.
+void TmlMaster::set_up(std::size_t i, SimTime t) {
+  const std::uint16_t dest = t::axis_id_code(cfg_.axes[i]);
+  send(t::bitset_instruction(dest, t::bitset_data::mode_sp), t);
+  send(*t::assign32(dest, t::reg::cacc, cacc_iu()), t);
+  send(*t::assign32(dest, t::reg::cspd, 0), t);
+  send(t::instruction(dest, t::instr::upd), t);
+  send(t::instruction(dest, t::instr::axison), t);
+  axes_[i].setup_tick = stats_.ticks;
+  ++axes_[i].setup_sends;
+}
+
+// What start-up can read back: on, no fault, CACC as sent. (MODE SP has no readable trace: the
+// facts define no mode bit; CSPD 0 is also the power-on value.)
+bool TmlMaster::confirmed(const Axis& a) const {
+  return (a.srl & t::bits::srl_axis_on) && !(a.srh & t::bits::srh_fault) && a.cacc == cacc_iu();
+}
+
+// An axis not confirmed within kConfirmTicks of its set-up gets it again; after kSetupSends
+// sends the start-up fails (false).
+bool TmlMaster::confirm_set_up(SimTime t) {
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Axis& a = axes_[i];
+    if (confirmed(a) || stats_.ticks - a.setup_tick <= kConfirmTicks) continue;
+    const std::string seen = fmt::format("SRL {:04X}, SRH {:04X}, CACC {:08X} (sent {:08X})", a.srl, a.srh, a.cacc, cacc_iu());
+    if (a.setup_sends >= kSetupSends) {
+      stop(simclock::StopReason::config_failed, cfg_.axes[i], t,
+           fmt::format("axis {}: set-up not confirmed after {} sends ({}): start-up failed", cfg_.axes[i], a.setup_sends, seen));
+      return false;
+    }
+    event(t, fmt::format("axis {}: set-up not confirmed ({}): sent again", cfg_.axes[i], seen), true);
+    ++stats_.setup_resends;
+    set_up(i, t);
   }
+  return true;
 }
 
 void TmlMaster::speeds(SimTime t, bool zero) {
@@ -166,7 +195,7 @@ void TmlMaster::on_tick(SimTime t) {
       for (const Axis& a : axes_) all = all && a.found;
       if (all) {
         event(t, "all four axes answered: speed mode, AXISON");
-        set_up(t);
+        for (std::size_t i = 0; i < 4; ++i) set_up(i, t);
         enter(TmlPhase::starting, t);
       } else if (late) {
         stop(simclock::StopReason::startup_timeout, 0, t, "not every axis answered in time");
@@ -176,8 +205,9 @@ void TmlMaster::on_tick(SimTime t) {
       return;
     }
     case TmlPhase::starting: {
+      if (!confirm_set_up(t)) return;
       bool all = true;
-      for (const Axis& a : axes_) all = all && (a.srl & t::bits::srl_axis_on);
+      for (const Axis& a : axes_) all = all && confirmed(a);
       if (all) {
         enter(TmlPhase::running, t);
         for (Axis& a : axes_) a.last_answer_tick = stats_.ticks;
@@ -185,7 +215,8 @@ void TmlMaster::on_tick(SimTime t) {
         stop(simclock::StopReason::startup_timeout, 0, t, "not every axis switched on in time");
         return;
       }
-      query(all ? t::reg::apos : t::reg::srl, all, t);
+      // Until every axis is confirmed, SR32 and CACC are read back in turn.
+      query(all ? t::reg::apos : stats_.ticks % 2 ? t::reg::srl : t::reg::cacc, true, t);
       return;
     }
     case TmlPhase::running:

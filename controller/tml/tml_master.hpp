@@ -1,7 +1,9 @@
 // controller/tml — our TML master (seed 003) as a protocol core, on TMLCAN (29-bit) or TechCAN
 // (11-bit): it finds the four wheel drives (a group GiveMeData2 of SRL answered by each), puts
 // them in speed mode with their acceleration (MODE SP, CACC, CSPD = 0, UPD), switches the axes
-// on (AXISON) and waits for SRL.15; then every tick it sends each axis its command speed
+// on (AXISON) and reads back each axis's SR32 and CACC until SRL.15 is on, SRH.15 clear and CACC
+// the value sent (an axis not confirmed within kConfirmTicks gets its set-up again, at most
+// kSetupSends times in all); then every tick it sends each axis its command speed
 // (CSPD, 32-bit 16.16 counts per sampling period), one UPD to the group and one group
 // GiveMeData2 of APOS, whose TakeData2 answers feed the platform loop's odometry; every
 // kStatusTicks ticks also a group GiveMeData2 of SR32 (SRL and SRH), so that an axis that went
@@ -30,12 +32,17 @@ using SimTime = std::int64_t;  // [ns]
 
 // While running, the axis status (SR32) is read every this many ticks (10 ms at 2 ms).
 inline constexpr std::uint64_t kStatusTicks = 5;
+// Start-up: ticks an axis's set-up has to be confirmed in, and how often it is sent at most.
+inline constexpr std::uint64_t kConfirmTicks = 10;
+inline constexpr int kSetupSends = 4;
 
 // Phases (MasterReport: detecting, starting = detecting). Legal in each:
 //  detecting — each tick a group GiveMeData2 of SRL; every axis answering → starting (its
 //              speed-mode set-up and AXISON sent). Legal: all_found, startup_timeout.
-//  starting  — each tick the SRL query; every axis with SRL.15 (axis on) → running.
-//              Legal: all_on, startup_timeout, axis_lost.
+//  starting  — each tick the SR32 or the CACC query (in turn); every axis confirmed (SRL.15 on,
+//              SRH.15 clear, CACC as sent) → running; an axis not confirmed within kConfirmTicks
+//              of its set-up gets it again. Legal: all_confirmed, setup_resent, startup_timeout,
+//              config_failed (kSetupSends sends unconfirmed).
 //  running   — each tick CSPD per axis, UPD, the APOS query; every kStatusTicks ticks the SR32
 //              query. Legal: axis_lost, axis_off (SRL.15 0 or SRH.15 fault), finish, shutdown.
 //  stopped   — an axis stopped answering, or went off or into fault: every axis gets CSPD 0
@@ -47,7 +54,7 @@ const char* to_string(TmlPhase p);
 
 struct TmlMasterStats {
   std::uint64_t ticks = 0, frames_rx = 0, frames_tx = 0, tx_refused = 0, answers = 0, not_tml = 0,
-                axes_lost = 0;
+                axes_lost = 0, setup_resends = 0;
 };
 
 class TmlMaster {
@@ -86,13 +93,19 @@ class TmlMaster {
     std::uint16_t srl = 0, srh = 0;
     bool found = false;
     std::uint64_t last_answer_tick = 0;
+    std::uint32_t cacc = 0;            // as read back at start-up
+    std::uint64_t setup_tick = 0;      // when its set-up was last sent
+    int setup_sends = 0;
   };
   bool send(const omnitwin::tml::Message& m, SimTime t);
   void event(SimTime t, const std::string& text, bool warning = false);
   void enter(TmlPhase p, SimTime t);
   void stop(simclock::StopReason r, std::uint8_t axis, SimTime t, const std::string& why);
   void query(std::uint16_t address, bool wide, SimTime t);
-  void set_up(SimTime t);
+  void set_up(std::size_t i, SimTime t);
+  std::uint32_t cacc_iu() const;
+  bool confirmed(const Axis& a) const;
+  bool confirm_set_up(SimTime t);
   void speeds(SimTime t, bool zero);
   void check_answers(SimTime t);
   void check_status(SimTime t);

@@ -46,7 +46,7 @@ class Runner : public CanRunner<Runner, TmlMaster> {
     for (int i = 0; i < 4; ++i) axes.push_back({{"axis", pc_.axes[static_cast<std::size_t>(i)]}, {"srl", m.srl(i)},
                                                 {"apos", m.position(i)}});
     return {{"phase", to_string(m.phase())}, {"cycles", s.ticks}, {"answers", s.answers},
-            {"axes_lost", s.axes_lost}, {"not_tml", s.not_tml}, {"send_failures", s.tx_refused},
+            {"axes_lost", s.axes_lost}, {"setup_resends", s.setup_resends}, {"not_tml", s.not_tml}, {"send_failures", s.tx_refused},
             {"frames_tx", frames_tx()}, {"frames_rx", frames_rx}, {"axes", axes}};
   }
 
