@@ -7,8 +7,9 @@
 //  * the wall clock: CLOCK_MONOTONIC absolute deadlines, one tick per period, frames handled
 //    as they arrive, SCHED_FIFO where permitted.
 // A Runner provides: on_frame(frame, t), tick(t), flush(), report(), frames_rx, frames_tx(), and
-// shutdown(t) for the end of a wall-clock run; CanOutbox is what its master core sends through,
-// CanRunner the Runner both programs build on, run_can_master() the clock and its failures.
+// shutdown(t) for the end of a wall-clock run or of a signalled lockstep run; CanOutbox is what
+// its master core sends through, CanRunner the Runner both programs build on, run_can_master()
+// the clock and its failures.
 // Header-only (templates).
 #pragma once
 
@@ -117,29 +118,41 @@ bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64
 }
 
 // Lockstep with the twin until it ends the run (End), a signal, or a failure (throws
-// LoopFailure / simclock::ChannelError). Returns 0.
+// LoopFailure / simclock::ChannelError). After a signal the next tick the twin grants runs
+// r.shutdown() instead of r.tick() (the end sequence the wall clock's end sends, counted in that
+// tick's Done so the twin delivers it); without such a grant (End, the twin gone, nothing in
+// 1 s) the end sequence cannot reach the simulated bus and is not sent. Returns 0.
 template <class Runner>
 int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd) {
   simclock::Client client(sim_clock, std::chrono::seconds(10), sigfd);
   if (client.stopped()) return 0;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  bool stopping = false;
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
-    pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-    const int p = ::poll(fds, 2, 60'000);
-    if (p == 0) throw LoopFailure{"sim clock: no grant within 60 s"};
-    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return 0;
+    if (!stopping) {
+      pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+      const int p = ::poll(fds, 2, 60'000);
+      if (p == 0) throw LoopFailure{"sim clock: no grant within 60 s"};
+      stopping = p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd);
+    }
     const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (stopping && w != simclock::WaitStatus::ok) {
+      spdlog::warn("signal: the twin granted no further tick ({}): no end sequence sent", simclock::to_string(w));
+      return 0;
+    }
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return 0;
     if (w == simclock::WaitStatus::closed) throw LoopFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw LoopFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     if (!drain_until(tr, r, g.frames[0], g.t_ns))
       throw LoopFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
-    r.tick(g.t_ns);
+    if (stopping) r.shutdown(g.t_ns);
+    else r.tick(g.t_ns);
     r.flush();
     const simclock::Done done{g.tick, {r.frames_tx(), 0, 0, 0}, r.report()};
     if (!client.done(done)) throw LoopFailure{"sim clock: the twin is gone"};
+    if (stopping) return 0;
   }
 }
 
