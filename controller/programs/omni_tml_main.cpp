@@ -14,7 +14,8 @@
 //   omni-tml send --protocol rs232|rs485 --port PATH [--baud B] | --protocol tmlcan|techcan
 //                 --iface SPEC, then the instruction as for encode
 //     sends it to a drive and prints what came back: 'O' and the answer on a serial line (with
-//     the seed's SYNC-byte recovery when the 'O' is lost), the answering frames on CAN.
+//     the seed's SYNC-byte recovery when the 'O' is lost), on CAN the frames that answer its
+//     query (other traffic on the bus, e.g. a running master's answers, is only counted).
 //   omni-tml drive --protocol rs232|rs485 [--axis N] [--host N] [--baud B] [--duration S]
 //                  [--drop AXIS ...] [--relay SPEC [--relay-protocol tmlcan|techcan]]
 //     runs one emulated IDM drive (bus_emulators/tml, on the shared drive core with a model
@@ -344,7 +345,8 @@ int open_serial(const std::string& path, std::uint32_t baud) {
 int send_serial(const Options& o, const Message& m) {
   const int fd = open_serial(o.port, o.baud);
   HostLinkConfig cfg;
-  cfg.link = o.protocol == "rs485" ? Link::rs485 : Link::rs232;
+  const bool rs485 = o.protocol == "rs485";
+  cfg.link = rs485 ? Link::rs485 : Link::rs232;
   cfg.baud = o.baud;
   // Across processes and a pseudo-terminal the 'O' takes longer than on a wire: OUR CHOICE.
   cfg.ack_timeout_ns = cfg.sync_timeout_ns = 20'000'000;
@@ -357,8 +359,9 @@ int send_serial(const Options& o, const Message& m) {
       case HostEventKind::sent_unacknowledged: fmt::print("sent (no acknowledgement on RS-485 for a group or axis 0)\n"), done = true; break;
       case HostEventKind::answer: fmt::print("received:  4F ('O') and {}\n           {}\n", hex_bytes(encode_packet(e.message).view()), describe(e.message)), done = true; break;
       case HostEventKind::answer_timeout: fmt::print("received:  4F ('O'), then no answer\n"), done = true, code = kExitNoAnswer; break;
-      case HostEventKind::resent: fmt::print("no 'O': SYNC bytes echoed, command sent again\n"); break;
-      case HostEventKind::link_broken: fmt::print("link broken: no 'O' and no SYNC echo\n"), done = true, code = kExitNoAnswer; break;
+      // RS-232: a SYNC byte came back; RS-485 drives echo nothing: 15 SYNC bytes, then the resend.
+      case HostEventKind::resent: fmt::print("no 'O': {}, command sent again\n", rs485 ? "15 SYNC bytes sent" : "SYNC bytes echoed"); break;
+      case HostEventKind::link_broken: fmt::print("link broken: {}\n", rs485 ? "no 'O', nor after 15 SYNC bytes and a resend" : "no 'O' and no SYNC echo"), done = true, code = kExitNoAnswer; break;
       case HostEventKind::unsolicited: fmt::print("unsolicited: {}\n", describe(e.message)); break;
     }
   });
@@ -379,6 +382,19 @@ int send_serial(const Options& o, const Message& m) {
   return code;
 }
 
+// Whether `a` answers the data request `q`: the TakeData of a GiveMeData or the TakeData2 of a
+// GiveMeData2, of the same width and address, from the queried axis (any sender for a group or
+// axis 0) and, where the frame carries it, to the requester's ID code (q's data 1).
+bool answers_query(const Message& q, const Message& a, bool destination_known) {
+  const Classified cq = classify(q), ca = classify(a);
+  const Kind want = cq.kind == Kind::give_me_data ? Kind::take_data : Kind::take_data2;
+  if (ca.kind != want || !ca.complete || ca.wide != cq.wide || ca.address != cq.address) return false;
+  // TakeData: data 1 is the sender's ID code; TakeData2: the opcode's low byte is its axis.
+  const std::uint8_t sender = want == Kind::take_data ? id_of(ca.sender) : static_cast<std::uint8_t>(ca.sender);
+  if (!to_many(q.id_code) && sender != id_of(q.id_code)) return false;
+  return !destination_known || a.id_code == cq.sender;
+}
+
 int send_can(const Options& o, const Message& m) {
   std::unique_ptr<can::Transport> tr;
   try {
@@ -392,7 +408,7 @@ int send_can(const Options& o, const Message& m) {
   fmt::print("send:      {}\n", cansend(f));
   if (!tr->send(f, 0)) return fmt::print("the transport refused the frame\n"), kExitNoAnswer;
   const bool query = classify(m).kind == Kind::give_me_data || classify(m).kind == Kind::give_me_data2;
-  int answers = 0;
+  int answers = 0, others = 0;
   const auto end = std::chrono::steady_clock::now() + std::chrono::microseconds(static_cast<std::int64_t>(o.timeout_ms * 1e3));
   while (std::chrono::steady_clock::now() < end) {
     auto r = tr->receive();
@@ -404,11 +420,15 @@ int send_can(const Options& o, const Message& m) {
     TechCanMessage t;
     const bool ok = o.protocol == "tmlcan" ? decode_tmlcan(r->frame, a) == CanStatus::ok
                                            : (decode_techcan(r->frame, t) == CanStatus::ok && (a = t.message, true));
-    const Kind k = ok ? classify(a).kind : Kind::generic;
-    if (!ok || (k != Kind::take_data && k != Kind::take_data2)) continue;  // other traffic on the bus
+    // TMLCAN carries the answer's destination; TechCAN's TakeData/TakeData2 do not.
+    if (!ok || !query || !answers_query(m, a, o.protocol == "tmlcan" || t.destination_known)) {
+      ++others;  // other traffic on the bus (a running master's answers, other hosts')
+      continue;
+    }
     fmt::print("received:  {}\n           {}\n", cansend(r->frame), describe(a, o.protocol == "tmlcan"));
     ++answers;
   }
+  if (others > 0) fmt::print("({} other frames on the bus meanwhile, not answers to this query)\n", others);
   if (query && answers == 0) return fmt::print("no answer within {} ms\n", o.timeout_ms), kExitNoAnswer;
   return kExitOk;
 }

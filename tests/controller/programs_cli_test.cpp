@@ -6,11 +6,16 @@
 // while waiting for the twin's sim-clock socket; a --stats file that cannot be written; and
 // --script with another bus or a directory. Each is exit 2 with a short message (3 for
 // --stats; 0 for the signal, as for any signal), within a second or two; --sim-clock with the wall clock
-// on every bus, and --stats on bus can. UDP ports 48310-48319.
+// on every bus, and --stats on bus can. omni-tml send on CAN prints only the answer to its
+// query (not a running master's traffic), and names the recovery of its link. UDP ports
+// 48310-48319.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
 #include <signal.h>
+#include <stdlib.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "bus_emulators/can/transport.hpp"
 #include "tests/twin/cli_support.hpp"
 
 namespace omnitwin::controller {
@@ -208,6 +214,69 @@ TEST_F(ProgramsCli, ScriptNeedsTheEthercatBusAndAFile) {
   expect_usage(run("omni-master", {"--bus", "ethercat", "--config", data("ethercat/drives_only.yaml"), "--iface",
                                    "udp:127.0.0.1:48316", "--script", dir_.path().string(), "--duration", "0.5"}),
                "a directory");
+}
+
+// A TMLCAN frame written by hand (seed ch. 4: opcode[15:9] in 28-22, the ID code's GROUP, ID and
+// HOST bits in 21-9, opcode[8:0] in 8-0; words low byte first).
+can::Frame tmlcan_frame(std::uint16_t opcode, std::uint16_t id_code, std::initializer_list<std::uint16_t> words) {
+  can::Frame f;
+  f.extended = true;
+  f.id = static_cast<std::uint32_t>(opcode >> 9) << 22 | static_cast<std::uint32_t>(id_code & 0x1FF1) << 9 | (opcode & 0x1FFu);
+  for (const std::uint16_t w : words) {
+    f.data[f.dlc++] = static_cast<std::uint8_t>(w);
+    f.data[f.dlc++] = static_cast<std::uint8_t>(w >> 8);
+  }
+  return f;
+}
+
+// Found in review: on CAN, `send` took any TakeData/TakeData2 on the bus for its answer: beside
+// a running master, `?KPP` to an axis that does not exist printed the master's APOS answers as
+// "received" and exited 0. Only the TakeData of KPP from axis 9 to host 100 answers it.
+TEST_F(ProgramsCli, TmlSendOnCanTakesOnlyTheAnswerToItsQuery) {
+  const std::string iface = "udp:239.74.163.9:48318";
+  const std::unique_ptr<can::Transport> bus = can::open_transport(iface);
+  std::atomic<bool> stop{false}, answer{false};
+  std::thread traffic([&] {
+    const std::uint16_t host = 100 << 4, master = 120 << 4, axis1 = 1 << 4, axis9 = 9 << 4;
+    while (!stop) {
+      bus->send(tmlcan_frame(0xD501, master, {0x0228, 0x1234, 0x0000}), 0);       // axis 1's APOS to a master
+      bus->send(tmlcan_frame(0xB404, host, {axis1, 0x025E, 0x0120}), 0);          // KPP, but from axis 1
+      bus->send(tmlcan_frame(0xB404, host, {axis9, 0x022A, 0x0002}), 0);          // axis 9, but POSERR
+      bus->send(tmlcan_frame(0xB405, host, {axis9, 0x025E, 0x0120, 0x0000}), 0);  // axis 9, KPP, but 32-bit
+      bus->send(tmlcan_frame(0xB404, master, {axis9, 0x025E, 0x0120}), 0);        // axis 9, KPP, to another host
+      if (answer) bus->send(tmlcan_frame(0xB404, host, {axis9, 0x025E, 0x0120}), 0);  // the answer
+      std::this_thread::sleep_for(2ms);
+    }
+  });
+  const std::vector<std::string> args{"send", "-p", "tmlcan", "--iface", iface, "--axis", "9", "--host", "100",
+                                      "--timeout-ms", "150", "?KPP"};
+  const Result none = run("omni-tml", args);
+  answer = true;
+  const Result one = run("omni-tml", args);
+  stop = true;
+  traffic.join();
+  EXPECT_EQ(none.code, 3) << none.out;
+  EXPECT_FALSE(contains(none.out, "received:")) << none.out;
+  EXPECT_TRUE(contains(none.out, "no answer")) << none.out;
+  EXPECT_EQ(one.code, 0) << one.out;
+  EXPECT_TRUE(contains(one.out, "received:  168C8004#90005E022001")) << one.out;
+  EXPECT_FALSE(contains(one.out, "POSERR")) << one.out;
+}
+
+// Found in review: on RS-485 a lost 'O' was reported as "SYNC bytes echoed", but no RS-485 drive
+// echoes SYNC (the host sends 15 and resends). A pseudo-terminal where nobody answers.
+TEST_F(ProgramsCli, TmlSendNamesTheSyncRecoveryOfItsLink) {
+  const int line = ::posix_openpt(O_RDWR | O_NOCTTY);
+  ASSERT_GE(line, 0);
+  ASSERT_EQ(::grantpt(line), 0);
+  ASSERT_EQ(::unlockpt(line), 0);
+  const std::string port = ::ptsname(line);
+  const Result r = run("omni-tml", {"send", "-p", "rs485", "--port", port, "--axis", "1", "--host", "15",
+                                    "--timeout-ms", "50", "KPP=5"});
+  ::close(line);
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_TRUE(contains(r.out, "15 SYNC bytes sent, command sent again")) << r.out;
+  EXPECT_FALSE(contains(r.out, "echo")) << r.out;
 }
 
 }  // namespace
