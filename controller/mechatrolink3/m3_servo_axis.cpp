@@ -115,8 +115,9 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
   write(cmd);
 }
 
-// While running: a slave back in phase 1 is connected again; a servo that went off is
-// cleared and switched on again. True when a recovery began (the response is not used).
+// A slave back in phase 1 is connected again; a servo that went off while running, or a
+// communication alarm during start-up (SV_ON is refused until ALM_CLR), is cleared and
+// switched on again. True when a recovery began (the response is not used).
 bool ServoAxis::recover(std::span<const std::uint8_t> rsp, SimTime t) {
   const bool started = step_ >= AxisStep::sync_set && step_ <= AxisStep::running;
   if (!started || stopping_) return false;
@@ -125,6 +126,9 @@ bool ServoAxis::recover(std::span<const std::uint8_t> rsp, SimTime t) {
                        to_string(static_cast<Command>(rsp[0])));
   } else if (step_ == AxisStep::running && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) == 0) {
     why_ = fmt::format("the servo went off (COMM_ALM {:X}h, D_ALM {})", static_cast<int>(stat_.comm_alm), stat_.d_alm);
+  } else if (is_alarm(stat_.comm_alm)) {
+    // During start-up: the slave refuses SV_ON until the alarm is cleared.
+    why_ = fmt::format("a communication alarm (COMM_ALM {:X}h) during start-up", static_cast<int>(stat_.comm_alm));
   } else {
     return false;
   }

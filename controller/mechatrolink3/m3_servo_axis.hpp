@@ -15,11 +15,13 @@
 //   sv_off      SV_OFF (shutdown() asked for it)                               → release
 //   release     DISCONNECT                                                     → released
 //   failed      a command answered with a CMD_ALM alarm during start-up: why() says
-//   alm_clr     ALM_CLR (and CMD_CTRL.ALM_CLR) after the servo went off while running → sync_set
+//   alm_clr     ALM_CLR (and CMD_CTRL.ALM_CLR) after the servo went off while running, or after
+//               a communication alarm during start-up                       → sync_set
 // Recovery after start-up began: a CMD_ALM phase error (the slave lost power, its connection
 // or phase 3) goes back to disconnect (it works in every phase); a servo that went off (a communication or device
-// alarm: SVCMD_STAT.SV_ON clear) goes to alm_clr; both then skip ID_RD and the parameters
-// and count in recoveries().
+// alarm: SVCMD_STAT.SV_ON clear), or a COMM_ALM alarm before it runs (the slave refuses SV_ON
+// until ALM_CLR), goes to alm_clr; both then skip ID_RD and the parameters and count in
+// recoveries().
 // A step moves on when the response echoes its command with CMD_ALM normal (and, for SV_ON,
 // CMDRDY and SVCMD_STAT.SV_ON); a response that is not fresh leaves the step where it is.
 // Real-time safe after construction, except the log callback it is given.

@@ -98,6 +98,31 @@ TEST(M3ServoAxis, ConnectRefusedAsAlreadyConnectedDisconnectsFirst) {
   EXPECT_EQ(static_cast<Command>(cmd[0]), Command::sync_set);
 }
 
+// A communication alarm during start-up (a WDT error while the axis reads the ID): the slave
+// refuses SV_ON until the alarm is cleared, so the axis clears it first (ALM_CLR with
+// CMD_CTRL.ALM_CLR), sets phase 3 again and goes on, rather than sending SV_ON and failing.
+TEST(M3ServoAxis, ACommunicationAlarmDuringStartUpIsClearedBeforeSvOn) {
+  ServoAxis axis("axis 4", ServoAxisConfig{});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  auto next = [&](CmdStat st = {}, std::uint32_t svstat = 0) {
+    rsp = answer(cmd, st, svstat);
+    axis.on_interrupt(rsp, true, cmd, 0);
+    return static_cast<Command>(cmd[0]);
+  };
+  ASSERT_EQ(next(), Command::connect);
+  ASSERT_EQ(next(), Command::sync_set);
+  ASSERT_EQ(next(), Command::id_rd);
+  EXPECT_EQ(next(CmdStat{.comm_alm = CommAlarm::wdt}), Command::alm_clr) << "SV_ON would be refused";
+  EXPECT_TRUE(unpack_ctrl(get_u16(cmd, 2)).alm_clr);
+  EXPECT_EQ(next(), Command::sync_set);
+  EXPECT_EQ(next(), Command::sens_on);
+  EXPECT_EQ(next(), Command::sv_on);
+  next(CmdStat{}, 1u << 13);
+  EXPECT_EQ(axis.step(), AxisStep::running) << axis.why();
+  EXPECT_EQ(axis.recoveries(), 1);
+}
+
 TEST(M3ServoAxis, PositionModeSendsInterpolate) {
   ServoAxis axis("axis 1", ServoAxisConfig{.com_tim = 1, .position_mode = true, .params = {}});
   std::array<std::uint8_t, 32> cmd{}, rsp{};
