@@ -142,6 +142,7 @@ CmdAlarm SlaveLink::run_link_command(Command c, std::span<const std::uint8_t> cm
   if (!is_known(c)) return CmdAlarm::unsupported;
   if (!allowed_in(c, s_.phase)) return CmdAlarm::phase_error;
   if (s_.phase != Phase::p3 && profile_.synchronous_only(c)) return CmdAlarm::phase_error;
+  if (is_alarm(s_.comm_alm) && profile_.needs_alarm_cleared(c)) return CmdAlarm::condition_error;
   switch (c) {
     case Command::nop: return CmdAlarm::normal;
     case Command::connect: return connect(cmd, rsp, t);

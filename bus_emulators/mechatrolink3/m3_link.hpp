@@ -7,7 +7,9 @@
 // missing commands and missing sync frames into COMM_ALM as the profile does (from phase 2
 // on; in phase 1 FCS errors are only counted in the stats): a warning the first time, an
 // alarm the second time in a row, a WDT error at once; an alarm drops phase 3 to phase 2 and
-// tells the application to stop (servo off). ALM_CLR clears COMM_ALM in phases 2 and 3 only.
+// tells the application to stop (servo off), and until ALM_CLR clears it the commands the
+// profile names (Profile::needs_alarm_cleared: a servo's SV_ON) are refused with CMD_ALM Ah.
+// ALM_CLR clears COMM_ALM in phases 2 and 3 only.
 //
 // A powered slave answers every command frame addressed to it: CYC_NOTIFY and COMM_START are
 // taken note of, and a slave that comes back after them (power returned) learns the
@@ -65,6 +67,9 @@ class Profile {
   virtual bool accepts_length(std::size_t data_bytes) const = 0;  // e.g. 32 and 48 for a servo
   // A profile command that is synchronous (phase 3 only, as INTERPOLATE): e.g. I/O DATA_RWS.
   virtual bool synchronous_only(Command) const { return false; }
+  // A command refused (CMD_ALM Ah) while COMM_ALM holds an alarm, until ALM_CLR clears it: a
+  // communication alarm is the device's alarm too (e.g. a servo's SV_ON).
+  virtual bool needs_alarm_cleared(Command) const { return false; }
   // Executes a command allowed in the current phase (not NOP, CONNECT, DISCONNECT, SYNC_SET,
   // which the link handles). cmd is the whole information field; rsp (same length) arrives
   // with its header written and the rest zero; `t` is when the command arrived [ns].

@@ -26,7 +26,8 @@
 // Rules: SV_ON needs SENS_ON first and CMDRDY stays 0 until the drive is enabled (one FSA
 // step per drive period); motion commands need the servo on, BRK_ON/BRK_OFF and SENS_OFF
 // need it off (else CMD_ALM condition error); a drive fault is D_ALM and servo off until
-// ALM_CLR; a communication alarm (stop()) is servo off at once; DISCONNECT (disconnect())
+// ALM_CLR; a communication alarm (stop()) is servo off at once, and SV_ON is refused (condition
+// error, by the link: needs_alarm_cleared()) until ALM_CLR clears COMM_ALM; DISCONNECT (disconnect())
 // is servo off and SENS_ON, POS_SET, the latch and the home forgotten. Subcommands (48-byte mode, region
 // bytes 32-47: 0 SUB_CMD, 1-3 SUB_CTRL with SEL_MON4/5/6 in bits 12-15/16-19/20-23): SMON →
 // monitors at 4/8/12; SVPRM_RD/WR → NO 4, SIZE 6, MODE 7, PARAMETER 8; ALM_RD → MOD 4, four
@@ -72,6 +73,8 @@ class ServoProfile final : public Profile {
 
   std::uint8_t profile_type() const override { return 0x10; }
   bool accepts_length(std::size_t n) const override { return n == 32 || n == 48; }
+  // SV_ON: a communication alarm is a servo alarm (profile), cleared by ALM_CLR before it.
+  bool needs_alarm_cleared(Command c) const override { return c == Command::sv_on; }
   CmdAlarm execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t) override;
   CmdAlarm execute_sub(Command c, std::span<const std::uint8_t> sub, std::span<std::uint8_t> rsp) override;
   void stop(SimTime t) override;

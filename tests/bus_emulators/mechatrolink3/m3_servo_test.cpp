@@ -454,5 +454,72 @@ TEST(M3ServoOverTheLink, DisconnectForgetsTheEncoderAndThePositionSoSvOnNeedsSen
   EXPECT_EQ(exchange(cmd(Command::sv_on)), CmdAlarm::normal);
 }
 
+// A communication alarm (here a WDT error: the master's count did not advance) turns the servo
+// off and holds COMM_ALM until the master clears it (profile: a communication alarm is a servo
+// alarm, cleared by ALM_CLR or CMD_CTRL.ALM_CLR). Until then SV_ON is refused with CMD_ALM Ah
+// and the servo stays off; after ALM_CLR and SYNC_SET it switches on again.
+TEST(M3ServoOverTheLink, AfterAWatchdogAlarmSvOnIsRefusedUntilAlmClr) {
+  ServoProfile servo(config());
+  drive::AxisModel axis;
+  std::vector<std::vector<std::uint8_t>> sent;
+  SlaveLink link(LinkConfig{.address = 0x03}, servo,
+                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
+  SimTime t = 0;
+  std::uint8_t wdt = 0;
+  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
+    std::vector<std::uint8_t> b(kMaxFrame);
+    b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
+    link.on_frame(b, t);
+  };
+  // One communication cycle; `advance`: false repeats the last WDT count (a WDT error in phase 3).
+  auto exchange = [&](std::vector<std::uint8_t> c, bool advance = true) {
+    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
+    if (advance) wdt = static_cast<std::uint8_t>(wdt + 0x10);
+    c[1] = wdt;
+    frame(FrameType::cyclic_command, c, 0x03);
+    axis.step(servo.step(t, axis.feedback()), 1e-3);
+    t += 1'000'000;
+    link.advance(t);
+    FrameView v;
+    EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
+    return unpack_stat(get_u16(v.data, 2));
+  };
+  link.power_on(0);
+  std::vector<std::uint8_t> notify(16, 0);
+  put_i32(notify, 0, 1'000'000);
+  frame(FrameType::cycle_notify, notify, kBroadcast);
+  auto con = cmd(Command::connect);
+  put_u32(con, 4, 0);
+  con[4] = kServoProfileVersion;
+  con[5] = kComModSync;
+  con[6] = 1;
+  con[7] = 0x10;
+  ASSERT_EQ(exchange(con).cmd_alm, CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::sync_set)).cmd_alm, CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::sens_on)).cmd_alm, CmdAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::sv_on)).cmd_alm, CmdAlarm::normal);
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  ASSERT_TRUE(servo.servo_on());
+  // The WDT error: servo off, phase 2, COMM_ALM Ch held.
+  EXPECT_EQ(exchange(cmd(Command::nop), false).comm_alm, CommAlarm::wdt);
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  ASSERT_FALSE(servo.servo_on());
+  ASSERT_EQ(link.phase(), Phase::p2);
+  // SV_ON without ALM_CLR: refused, the servo stays off, the alarm stays.
+  const CmdStat refused = exchange(cmd(Command::sv_on));
+  EXPECT_EQ(refused.cmd_alm, CmdAlarm::condition_error);
+  EXPECT_EQ(refused.comm_alm, CommAlarm::wdt);
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  EXPECT_FALSE(servo.servo_on()) << "SV_ON turned the servo on with a communication alarm standing";
+  // ALM_CLR, SYNC_SET, SV_ON: on again.
+  const CmdStat cleared = exchange(cmd(Command::alm_clr));
+  EXPECT_EQ(cleared.cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(cleared.comm_alm, CommAlarm::normal);
+  ASSERT_EQ(exchange(cmd(Command::sync_set)).cmd_alm, CmdAlarm::normal);
+  EXPECT_EQ(exchange(cmd(Command::sv_on)).cmd_alm, CmdAlarm::normal);
+  for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
+  EXPECT_TRUE(servo.servo_on());
+}
+
 }  // namespace
 }  // namespace omnitwin::m3
