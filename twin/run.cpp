@@ -179,6 +179,7 @@ class PlatformRun {
     sched_.stop();
   }
   nlohmann::json metrics_json(double wall_s, bool interrupted) const;
+  void last_row_totals(nlohmann::json& bus) const;
   RunResult finish(double wall_s, const RealtimePacer* realtime);
   // SIGINT/SIGTERM has asked the run to end. Real-time safe.
   bool signalled() const { return o_.interrupt && o_.interrupt->load(); }
@@ -762,6 +763,17 @@ void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
        *events_);
 }
 
+// bus.* totals as bus.csv's last row has them. A run stopped between two control samples (a
+// signal ends it at the next instant) has run the bus cycles since, when they are shorter than
+// the control period (M-III, CANopen): their frames are in the slaves' and master's counters.
+void PlatformRun::last_row_totals(nlohmann::json& bus) const {
+  if (records_ == 0) return;  // no row yet: the network's own totals
+  bus["frames_tx"] = state_.bus.frames_tx;
+  bus["frames_rx"] = state_.bus.frames_rx;
+  bus["dropouts"] = state_.bus.dropouts;
+  bus["errors"] = state_.bus.errors;
+}
+
 nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const {
   const double sim_s = ns_to_seconds(sched_.now());
   nlohmann::json m;
@@ -769,6 +781,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   m["scenario_file"] = s_.file;
   if (on_bus()) {
     m["bus"] = net_->bus_metrics(sched_.now());
+    last_row_totals(m["bus"]);
     m["slaves"] = net_->slave_metrics();
     // Only a lockstep master reports (on the sim clock); one on its own wall clock does not.
     const bool reports = clock_server_ != nullptr;

@@ -13,6 +13,7 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -525,6 +526,43 @@ TEST_F(RunShort, RealtimePacesWithoutChangingResults) {
   EXPECT_TRUE(a == b) << "realtime pacing changed trajectory.csv";
   EXPECT_FALSE(read_json(dir_ / "ls/metrics.json").contains("realtime"));
   EXPECT_TRUE(rt.passed);
+}
+
+// An observer that interrupts the run (as SIGINT does) at the first fault event.
+class InterruptAtFault : public RunObserver {
+ public:
+  std::atomic<bool> stop{false};
+  void on_start(const RunInfo&) override {}
+  void on_state(const StateSample&) override {}
+  void on_event(const RunEvent& e) override {
+    if (e.source == "fault") stop = true;
+  }
+  void on_end(const nlohmann::json&) override {}
+};
+
+// A run interrupted between two control samples while its bus goes on (M-III: a 1 ms
+// transmission cycle under a 5 ms control period) ends with metrics.json's bus totals equal
+// to bus.csv's last row, as every bus's do; they were the frames of the cycles run since.
+TEST_F(RunShort, AnM3RunInterruptedBetweenSamplesHasTheBusTotalsOfItsLastRow) {
+  InterruptAtFault observer;
+  RunOptions o;
+  o.out_dir = (dir_ / "out").string();
+  o.interrupt = &observer.stop;
+  o.observer = &observer;
+  const RunResult r = run_scenario(load_scenario(test_scenario("m3_interrupt_mid_period.yaml")), o);
+  ASSERT_TRUE(r.interrupted) << r.error;
+  const Csv bus = read_csv(dir_ / "out/bus.csv");
+  ASSERT_FALSE(bus.rows.empty());
+  const std::vector<double>& last = bus.rows.back();
+  const nlohmann::json m = read_json(dir_ / "out/metrics.json");
+  // The run went on past the last row: the fault's cycle (1.002 s) came after the 1.000 s sample.
+  EXPECT_DOUBLE_EQ(last[0], 1.0);
+  EXPECT_NEAR(m.at("sim_time_s").get<double>(), 1.002, 1e-9);
+  ASSERT_GT(last[2], 0.0) << "the master's frames";
+  EXPECT_EQ(m.at("bus").at("frames_tx").get<double>(), last[bus.col("frames_tx")]);
+  EXPECT_EQ(m.at("bus").at("frames_rx").get<double>(), last[bus.col("frames_rx")]);
+  EXPECT_EQ(m.at("bus").at("dropouts").get<double>(), last[bus.col("dropouts")]);
+  EXPECT_EQ(m.at("bus").at("errors").get<double>(), last[bus.col("errors")]);
 }
 
 // A bus whose device description (the CANopen EDS) is malformed is refused before anything
