@@ -296,7 +296,9 @@ std::array<std::uint8_t, 3> selected_monitors(std::uint32_t ctrl) {
 
 }  // namespace
 
-// SVCMD_STAT (bytes 4-7) and SVCMD_IO (8-11), in every servo response.
+// SVCMD_STAT (bytes 4-7) and SVCMD_IO (8-11), in the response to every command the servo
+// executes (not NOP, SYNC_SET, CONNECT, DISCONNECT: common commands the link answers, whose
+// response data the profile leaves reserved; their status is CMD_STAT's).
 void ServoProfile::fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const {
   const std::uint32_t ctrl = get_u32(cmd, 4);
   const std::array<std::uint8_t, 3> sel = selected_monitors(ctrl);
