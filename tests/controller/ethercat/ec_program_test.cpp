@@ -40,13 +40,16 @@ std::int64_t now_ns() {
 
 // The slaves' side of `mem:NAME`: four drives, their firmware stepped every millisecond of wall
 // time, each frame through the chain and back. Slave `power_off` (0-based, -1 = none) loses
-// power `power_off_at` [s] after the start.
+// power `power_off_at` [s] after every slave first reached OP (counted from OP, not from the
+// start, so a start-up slowed by a loaded machine cannot move the loss before OP), and gets it
+// back `power_back_after` [s] later (0: never).
 class Segment {
  public:
-  Segment(const std::string& iface, int power_off = -1, double power_off_at = 0)
+  Segment(const std::string& iface, int power_off = -1, double power_off_at = 0, double power_back_after = 0)
       : tr_(omnitwin::ethercat::open_transport(iface, omnitwin::ethercat::Role::slaves)),
         power_off_(power_off),
-        power_off_at_ns_(static_cast<std::int64_t>(power_off_at * 1e9)) {
+        power_off_at_ns_(static_cast<std::int64_t>(power_off_at * 1e9)),
+        power_back_after_ns_(static_cast<std::int64_t>(power_back_after * 1e9)) {
     for (int i = 0; i < 4; ++i) {
       omnitwin::ethercat::DriveSlaveConfig sc;
       sc.serial = static_cast<std::uint32_t>(100 + i);
@@ -63,6 +66,9 @@ class Segment {
   }
   omnitwin::ethercat::AlState al_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->esc().al_state(); }
   omnitwin::drive::State drive_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->axis(0).state(); }
+  // When every slave was first in OP [s since the start]; negative: never. Read after stop().
+  double op_at() const { return static_cast<double>(op_at_) * 1e-9; }
+  bool power_lost() const { return off_at_ >= 0; }
 
  private:
   void serve() {
@@ -78,12 +84,22 @@ class Segment {
       const int n = tr_->receive(buf, 2ms);
       const std::int64_t t = now_ns() - start;
       for (; next <= t; next += kCycle) firmware(next);
-      if (power_off_ >= 0 && t >= power_off_at_ns_ && chain_.powered(power_off_)) chain_.set_powered(power_off_, false, t);
+      if (op_at_ < 0 && all_in_op()) op_at_ = t;
+      if (power_off_ >= 0 && op_at_ >= 0 && off_at_ < 0 && t >= op_at_ + power_off_at_ns_) {
+        chain_.set_powered(power_off_, false, t);
+        off_at_ = t;
+      }
+      if (power_back_after_ns_ > 0 && off_at_ >= 0 && t >= off_at_ + power_back_after_ns_ && !chain_.powered(power_off_))
+        chain_.set_powered(power_off_, true, t);
       if (n <= 0) continue;
       chain_.advance(t);
       std::span<std::uint8_t> pdu(buf.data(), static_cast<std::size_t>(n));
       if (chain_.process(pdu, t)) tr_->send(pdu);
     }
+  }
+  bool all_in_op() const {
+    return std::all_of(slaves_.begin(), slaves_.end(),
+                       [](const auto& s) { return s->esc().al_state() == omnitwin::ethercat::AlState::op; });
   }
   void firmware(std::int64_t t) {
     for (std::size_t i = 0; i < slaves_.size(); ++i) {
@@ -102,6 +118,9 @@ class Segment {
   omnitwin::ethercat::EscChain chain_;
   int power_off_;
   std::int64_t power_off_at_ns_;
+  std::int64_t power_back_after_ns_;  // 0: the power stays off
+  std::int64_t op_at_ = -1;   // when every slave was first in OP [ns since the start], -1 = not yet
+  std::int64_t off_at_ = -1;  // when the power went off, -1 = not yet
   std::atomic<bool> run_{true};
   std::thread thread_;
 };
@@ -316,8 +335,8 @@ TEST_F(EcProgram, SigintInLockstepStopsTheDrivesAndTakesTheSlavesToInitBeforeItE
 }
 
 TEST_F(EcProgram, AWheelDriveLostMidPathStopsThePlatformNamingItsSlave) {
-  Segment seg("mem:ec_program_lost", 3, 1.0);
-  EXPECT_EQ(run("mem:ec_program_lost", config(std::string(kWheels) + "wheel_loss_timeout: 0.3\n"), 2.0), 0);
+  Segment seg("mem:ec_program_lost", 3, 0.5);
+  EXPECT_EQ(run("mem:ec_program_lost", config(std::string(kWheels) + "wheel_loss_timeout: 0.3\n"), 2.5), 0);
   seg.stop();
   const nlohmann::json s = stats();
   EXPECT_EQ(s.at("state"), "stopped") << s.dump(2);
@@ -331,9 +350,10 @@ TEST_F(EcProgram, AWheelDriveLostMidPathStopsThePlatformNamingItsSlave) {
 // platform: a power blip the master recovers lets the loop pull the platform back (the
 // regression scenario ethercat_power_loss; the first version of the stop broke it).
 TEST_F(EcProgram, AWheelDriveLostForLessThanTheTimeoutDoesNotStopThePlatform) {
-  Segment seg("mem:ec_program_blip", 3, 1.0);
-  EXPECT_EQ(run("mem:ec_program_blip", config(kWheels), 1.5), 0);
+  Segment seg("mem:ec_program_blip", 3, 0.3, 0.4);  // off from OP + 0.3 s for 0.4 s
+  EXPECT_EQ(run("mem:ec_program_blip", config(kWheels), 2.0), 0);
   seg.stop();
+  ASSERT_TRUE(seg.power_lost()) << "OP at " << seg.op_at() << " s: the run ended first";
   const nlohmann::json s = stats();
   EXPECT_EQ(s.at("platform_stopped"), false) << s.dump(2);
   EXPECT_EQ(s.at("lost_slave"), 0);
@@ -353,9 +373,10 @@ TEST_F(EcProgram, ADurationEndingBeforeOpIsARuntimeFailure) {
 }
 
 TEST_F(EcProgram, ASlaveLostAfterOpMakesTheSegmentDegradedNotStarting) {
-  Segment seg("mem:ec_program_degraded", 3, 0.8);
-  EXPECT_EQ(run("mem:ec_program_degraded", config(kDrivesOnly), 1.3), 0);
+  Segment seg("mem:ec_program_degraded", 3, 0.3);
+  EXPECT_EQ(run("mem:ec_program_degraded", config(kDrivesOnly), 1.5), 0);
   seg.stop();
+  ASSERT_TRUE(seg.power_lost()) << "OP at " << seg.op_at() << " s: the run ended first";
   const nlohmann::json s = stats();
   EXPECT_EQ(s.at("state"), "degraded") << s.dump(2);
   EXPECT_EQ(s.at("slaves_lost"), 1);
