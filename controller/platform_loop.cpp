@@ -28,11 +28,12 @@ PlatformLoopOutput PlatformLoop::step(double t, const WheelCounts& counts) {
   odometry_.update(counts);
   out.odom_pose = odometry_.pose();
   out.odom_twist = odometry_.twist();
-  // Reference and world pose error (heading error wrapped to ±π).
+  // Reference and world pose error. The heading error is not wrapped: the plan and the
+  // odometry are both unwrapped from the same start heading, so a turn of several
+  // revolutions (or one the yaw limit leaves behind by more than π) is made in full.
   out.reference = path_.sample(t);
   const Pose2& ref = out.reference.pose;
-  out.error = {ref.x - out.odom_pose.x, ref.y - out.odom_pose.y,
-               std::remainder(ref.phi - out.odom_pose.phi, 2.0 * std::numbers::pi)};
+  out.error = {ref.x - out.odom_pose.x, ref.y - out.odom_pose.y, ref.phi - out.odom_pose.phi};
   // PI (+ feed-forward) → limited world twist.
   control(out);
   // D_e(phi_odom): wheel commands in rad/s and counts per sample.

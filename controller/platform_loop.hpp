@@ -2,9 +2,10 @@
 //
 // Each control sample: odometry from the four counters (D_i), the planned pose from the
 // path, a PI per world axis (x, y, phi) on the pose error plus, optionally, the planned
-// velocity as feed-forward, limited in speed and yaw rate, then D_e(phi) splits the world
-// twist into four wheel commands for the slaves. Configuration is fixed in a struct; the
-// integrators and the odometry are the only state; step() does not allocate.
+// velocity as feed-forward, limited in speed and yaw rate (the heading error is unwrapped, so
+// every planned turn is made in full), then D_e(phi) splits the world twist into four wheel
+// commands for the slaves. Configuration is fixed in a struct; the integrators and the
+// odometry are the only state; step() does not allocate.
 #pragma once
 
 #include <Eigen/Core>
@@ -32,7 +33,7 @@ struct PlatformLoopOutput {
   PathSample reference;                                   // planned pose/velocity at t
   Pose2 odom_pose;                                        // odometry pose [m, m, rad]
   Eigen::Vector3d odom_twist = Eigen::Vector3d::Zero();   // odometry world twist
-  Eigen::Vector3d error = Eigen::Vector3d::Zero();        // ref − odom (phi wrapped to ±π)
+  Eigen::Vector3d error = Eigen::Vector3d::Zero();        // ref − odom (phi unwrapped)
   Eigen::Vector3d twist_command = Eigen::Vector3d::Zero();  // limited world twist command
   Eigen::Vector4d wheel_rad_s = Eigen::Vector4d::Zero();    // wheel commands [rad/s]
   std::array<double, 4> wheel_counts_per_sample{};          // ω·cpr·period/2π [counts/sample]
@@ -44,7 +45,8 @@ class PlatformLoop {
   // Keeps its own copy of the path (construction allocates; step() does not).
   PlatformLoop(const PlatformLoopConfig& config, const Path& path);
 
-  // Odometry starts at `start` with these counter readings; integrators cleared. RT-safe.
+  // Odometry starts at `start` with these counter readings; integrators cleared. `start.phi`
+  // is on the plan's unwrapped heading (the path's start pose, not one wrapped to ±π). RT-safe.
   void reset(const Pose2& start, const WheelCounts& counts);
   // One control sample at t [s] since path start with the counters read now. RT-safe.
   PlatformLoopOutput step(double t, const WheelCounts& counts);

@@ -123,6 +123,30 @@ TEST(PlatformLoop, TracksTurnsAndRotationWhileTranslating) {
   EXPECT_LT(r.max_error, 5e-3);
 }
 
+// Found in review: a 720° turn in 3 s asks 4.2 rad/s of a 2 rad/s yaw limit; the heading
+// error grew past 180°, was wrapped to its short way round and the platform stopped a whole
+// turn short. The plan, the odometry and the error are unwrapped: every planned turn is made.
+TEST(PlatformLoop, ARotateFasterThanTheYawLimitCompletesEveryPlannedTurn) {
+  Path path;
+  path.add_rotate(2.0 * kTwoPi, 3.0);
+  const RunResult r = run(thesis_config(false), path, 10.0, path.start_pose());  // 3 s behind: settles slowly
+  EXPECT_NEAR(r.true_end.phi, 2.0 * kTwoPi, 1e-3);
+  EXPECT_NEAR(r.odom_end.phi, 2.0 * kTwoPi, 1e-3);
+  EXPECT_LE(r.max_yaw, 2.0 + 1e-12);
+}
+
+// A start heading past a turn (400°) is the plan's own start, not 40°: the platform turns by
+// the planned −30° from there, not by a wrapped difference.
+TEST(PlatformLoop, AStartHeadingPastOneTurnIsTrackedAsPlanned) {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  Path path({0.0, 0.0, 400.0 * kDeg});
+  path.add_line(1.0, 0.5, -30.0 * kDeg, 10.0);
+  const RunResult r = run(thesis_config(false), path, 2.0, path.start_pose());
+  EXPECT_NEAR(r.true_end.x, 1.0, 1e-3);
+  EXPECT_NEAR(r.true_end.y, 0.5, 1e-3);
+  EXPECT_NEAR(r.true_end.phi, 370.0 * kDeg, 1e-3);
+}
+
 TEST(PlatformLoop, LimitsHoldAndIntegratorsDoNotWindUp) {
   // The platform starts 1 m off and 1 rad off its (standing) reference with tight limits.
   PlatformLoopConfig cfg = thesis_config(true);
