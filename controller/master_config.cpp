@@ -5,6 +5,7 @@
 // so the first problem names its file, line and dotted key. Dumping writes the same keys
 // back with round-trip number formatting.
 #include "controller/master_config.hpp"
+#include "controller/master_bounds.hpp"
 #include "controller/yaml_document.hpp"
 
 #include <fmt/format.h>
@@ -25,7 +26,6 @@ namespace omnitwin::controller {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr double kMinPeriod = 1e-4, kMaxPeriod = 1.0;  // [s] the loop period's bounds
 constexpr const char* kCodeFile = "<config>";  // "file" of configurations built in code
 
 std::string format_error(const std::string& file, int line, const std::string& key,
@@ -251,7 +251,7 @@ void read_geometry(const Reader& r, const Item& g, PlatformLoopConfig& loop) {
   for (const Item& m : r.members(g, {"L", "r", "counts_per_rev"})) {
     if (m.name == "L") loop.L = r.number(m, 0.0, true);
     if (m.name == "r") loop.r = r.number(m, 0.0, true);
-    if (m.name == "counts_per_rev") loop.counts_per_rev = static_cast<int>(r.integer(m, 1, 1L << 24));
+    if (m.name == "counts_per_rev") loop.counts_per_rev = static_cast<int>(r.integer(m, 1, kMaxCountsPerRev));
   }
 }
 
@@ -260,7 +260,7 @@ bool read_loop_key(const Reader& r, const Item& m, PlatformLoopConfig& loop) {
   const std::string& n = m.name;
   // Bounded as CANopen's cycle: 0 ns would divide by zero in the wall loop, and a huge one
   // overflows its nanosecond arithmetic (found in review).
-  if (n == "period") loop.period = r.bounded(m, kMinPeriod, kMaxPeriod);
+  if (n == "period") loop.period = r.bounded(m, kMinLoopPeriod, kMaxLoopPeriod);
   else if (n == "kp") loop.kp = r.gains(m);
   else if (n == "ki") loop.ki = r.gains(m);
   else if (n == "feedforward") loop.feedforward = r.boolean(m);

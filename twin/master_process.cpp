@@ -1,5 +1,6 @@
 // twin layer — the master program as a child process; see master_process.hpp.
 #include "twin/master_process.hpp"
+#include "controller/master_bounds.hpp"
 
 #include "twin/canopen_network.hpp"
 #include "twin/ethercat_network.hpp"
@@ -10,9 +11,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <thread>
 
@@ -104,6 +108,29 @@ std::string MasterProcess::describe_exit() const {
   if (exit_code_ < 0) return "running";
   if (exit_code_ >= 128) return fmt::format("killed by signal {}", exit_code_ - 128);
   return fmt::format("exit {}", exit_code_);
+}
+
+std::string log_tail(const std::string& path, int max_lines) {
+  constexpr std::streamoff kTail = 4096;
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return "";
+  const std::streamoff size = in.tellg();
+  in.seekg(std::max<std::streamoff>(0, size - kTail));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Walk back over the lines, keeping the non-empty ones (a partial first line included).
+  std::vector<std::string> lines;
+  std::size_t end = text.size();
+  while (end > 0 && static_cast<int>(lines.size()) < max_lines) {
+    const std::size_t nl = text.rfind('\n', end - 1);
+    const std::size_t begin = nl == std::string::npos ? 0 : nl + 1;
+    std::string line = text.substr(begin, end - begin);
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    if (!line.empty()) lines.insert(lines.begin(), std::move(line));
+    end = nl == std::string::npos ? 0 : nl;
+  }
+  std::string out;
+  for (const std::string& l : lines) out += (out.empty() ? "" : " | ") + l;
+  return out;
 }
 
 std::string find_master_program(const std::string& configured) {
@@ -241,7 +268,7 @@ std::string m3_master_config_yaml(const Scenario& s, const std::string& platform
   // transport's round trip, not the wire's microseconds, sets how long an answer takes.
   if (realtime) out += "detect_timeout_ms: 5\n";
   // The servos must be on before the path starts (and a realtime master may start before the twin).
-  out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (realtime ? 3.0 : 0.0)));
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, m.startup + (realtime ? controller::kRealtimeStartupGrace : 0.0)));
   out += fmt::format("wheel_command: {}\nwheel_counts_per_rev: {}\n", m.mode, m.counts_per_rev);
   out += fmt::format("platform: {}\n", platform_file);
   return out;
@@ -266,7 +293,7 @@ std::string canopen_master_config_yaml(const Scenario& s, const std::string& pla
                      c.heartbeat_ms, 3 * c.heartbeat_ms);
   out += fmt::format("wheel_mode: {}\nwheel_counts_per_rev: {}\n", c.mode, c.counts_per_rev);
   // A realtime master may start before the twin's nodes are up.
-  out += fmt::format("startup_timeout: {}\n", std::max(1.0, c.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, c.startup + (s.clock == ClockMode::realtime ? controller::kRealtimeStartupGrace : 0.0)));
   out += fmt::format("platform: {}\n", platform_file);
   return out;
 }
@@ -284,7 +311,7 @@ std::string tml_master_config_yaml(const Scenario& s, const std::string& platfor
   std::string out = fmt::format("# omni-master --bus tml configuration written by omnitwin for scenario {}\n", s.name);
   out += fmt::format("protocol: {}\ncycle: {}\naxes: [1, 2, 3, 4]\n", t.protocol, t.cycle);
   out += fmt::format("sample_period: {}\nwheel_counts_per_rev: {}\n", t.drive_period, t.counts_per_rev);
-  out += fmt::format("startup_timeout: {}\n", std::max(1.0, t.startup + (s.clock == ClockMode::realtime ? 3.0 : 0.0)));
+  out += fmt::format("startup_timeout: {}\n", std::max(1.0, t.startup + (s.clock == ClockMode::realtime ? controller::kRealtimeStartupGrace : 0.0)));
   out += fmt::format("platform: {}\n", platform_file);
   return out;
 }

@@ -48,6 +48,11 @@ class MasterProcess {
   int exit_code_ = -1;
 };
 
+// The last `max_lines` non-empty lines of a master's log file joined by " | " (a master that
+// exits at start-up says why there, e.g. "master.yaml:2: period: must be in [0.0001, 1]"); ""
+// when there are none or the file cannot be read. Reads at most the file's last 4 KiB.
+std::string log_tail(const std::string& path, int max_lines);
+
 // A file the build makes beside the running executable: the first of `beside` (relative to
 // the executable's folder, `folder` on return) and then `in_build` (this build's tree) that
 // access(path, mode) accepts, as a normal path; "" when none does. Not real-time safe.

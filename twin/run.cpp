@@ -286,6 +286,14 @@ void PlatformRun::fail(std::string why) {
   sched_.stop();
 }
 
+// What a master that exited before joining the clock last wrote to its log (usually why),
+// as ": it said: …"; "" while it runs or when it wrote nothing.
+std::string last_words(MasterProcess& master, const std::string& log) {
+  if (master.running()) return "";
+  const std::string tail = log_tail(log, 3);
+  return tail.empty() ? "" : ": it said: " + tail;
+}
+
 // The master process: its configuration and log in the run directory; lockstep meets it on
 // the sim-clock channel, realtime lets it run on its own wall clock.
 void PlatformRun::start_master() {
@@ -341,8 +349,9 @@ void PlatformRun::start_master() {
     while (st == simclock::WaitStatus::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
       st = clock_server_->accept(std::chrono::milliseconds(100));
     if (st != simclock::WaitStatus::ok)
-      throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; {}; see master.log)",
-                                           simclock::to_string(st), master_->describe_exit()));
+      throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; {}; see master.log){}",
+                                           simclock::to_string(st), master_->describe_exit(),
+                                           last_words(*master_, (dir / ".master.log.part").string())));
   }
   log_event(0, "master", fmt::format("{} started (pid {}, clock {})", master_program_, master_->pid(),
                                      lockstep ? "sim" : "wall"));
@@ -390,8 +399,9 @@ void PlatformRun::start_own_master(const std::string& dir) {
   while (st == VtimeServer::Status::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
     st = vtime_server_->accept(std::chrono::milliseconds(100), 0);
   if (st != VtimeServer::Status::ok)
-    throw std::runtime_error(fmt::format("master: {} did not join the virtual clock ({}; {}; see master.log)",
-                                         master_program_, to_string(st), master_->describe_exit()));
+    throw std::runtime_error(fmt::format("master: {} did not join the virtual clock ({}; {}; see master.log){}",
+                                         master_program_, to_string(st), master_->describe_exit(),
+                                         last_words(*master_, log)));
   log_event(0, "master", fmt::format("{} started (pid {}, clock virtual)", master_command_, master_->pid()));
 }
 

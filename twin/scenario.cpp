@@ -18,6 +18,7 @@
 #include <optional>
 #include <utility>
 
+#include "controller/master_bounds.hpp"
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
 #include "twin/yaml_schema.hpp"
@@ -291,8 +292,8 @@ void read_electronics(const YamlField& section, const std::string& name, physics
     read_number(section, "vref", p.dac.vref, Bounds::positive());
   } else if (name == "encoder") {
     section.allow_keys({"lines", "index_per_rev"});
-    // 4·lines counts per revolution must fit the int the counter works with.
-    read_integer(section, "lines", p.encoder.lines, Bounds::closed(1, 100'000'000));
+    // 4·lines counts per revolution: what the masters' platform loop counts (geometry.counts_per_rev).
+    read_integer(section, "lines", p.encoder.lines, Bounds::closed(1, controller::kMaxCountsPerRev / 4));
     read_integer(section, "index_per_rev", p.encoder.index_per_rev, Bounds::non_negative());
   } else if (name == "velocity_loop") {
     section.allow_keys({"period", "kp", "ki", "kff", "arithmetic"});
@@ -399,6 +400,10 @@ physics::PlatformParams read_platform(const YamlField& s, const std::string& sce
 
 // ---------------------------------------------------------------------------------------
 // Bus, clock, controller
+
+// bus.startup of the buses whose master file gets startup_timeout = max(1, startup), plus
+// kRealtimeStartupGrace in realtime: at most what the masters accept.
+const Bounds kStartupBounds = Bounds::closed(0, controller::kMaxStartupTimeout - controller::kRealtimeStartupGrace);
 
 // The `can` bus's settings (bus: {type: can, …}).
 // The CAN wire's settings, shared by the buses on it (can, canopen).
@@ -511,7 +516,7 @@ void read_canopen(const YamlField& f, CanopenSpec& c, const std::string& scenari
       c.drift.fill(d.number(b));
     }
   }
-  read_number(f, "startup", c.startup, Bounds::non_negative());
+  read_number(f, "startup", c.startup, kStartupBounds);
 }
 
 // The `tml` bus's own settings (bus: {type: tml, …}); the wire's are read by read_can_wire.
@@ -529,7 +534,7 @@ void read_tml(const YamlField& f, TmlSpec& t) {
       t.drift.fill(d.number(b));
     }
   }
-  read_number(f, "startup", t.startup, Bounds::non_negative());
+  read_number(f, "startup", t.startup, kStartupBounds);
 }
 
 // The `m3` bus's settings (bus: {type: m3, …}).
@@ -558,7 +563,7 @@ void read_m3(const YamlField& f, M3Spec& m) {
   read_number(f, "margin_us", m.margin_us, Bounds::closed(0, 10'000));
   read_number(f, "drive_period", m.drive_period, Bounds::closed(50e-6, 0.01));
   read_integer(f, "counts_per_rev", m.counts_per_rev, Bounds::closed(4, 1 << 24));
-  read_number(f, "startup", m.startup, Bounds::non_negative());
+  read_number(f, "startup", m.startup, kStartupBounds);
   if (f["master"].exists()) m.master = f["master"].string();
   int seed = static_cast<int>(m.seed);
   if (read_integer(f, "seed", seed, Bounds::non_negative())) m.seed = static_cast<std::uint64_t>(seed);
@@ -627,7 +632,8 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
 ControllerSpec read_controller(const YamlField& s) {
   ControllerSpec c;
   s.allow_keys({"period", "kp", "ki", "feedforward", "max_speed", "max_yaw_rate"});
-  read_number(s, "period", c.period, Bounds::open_closed(0, 1));
+  // The master programs' bounds: a period they refuse would start a run whose master exits.
+  read_number(s, "period", c.period, Bounds::closed(controller::kMinLoopPeriod, controller::kMaxLoopPeriod));
   for (const auto& [name, gains] : {std::pair{"kp", c.kp}, std::pair{"ki", c.ki}}) {
     if (!s[name].exists()) continue;
     const auto v = s[name].numbers(3, Bounds::non_negative());

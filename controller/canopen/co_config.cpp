@@ -1,5 +1,6 @@
 // controller/canopen — the CANopen master program's configuration file (see co_config.hpp).
 #include "controller/canopen/co_config.hpp"
+#include "controller/master_bounds.hpp"
 
 #include <fmt/format.h>
 
@@ -48,7 +49,7 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
     }
   }
   if (const Val* n = top.get("tick")) {
-    c.tick = bounded(file, *n, "tick", 1e-4, 1.0);
+    c.tick = bounded(file, *n, "tick", kMinLoopPeriod, kMaxLoopPeriod);
     // The master producing SYNC ticks once per cycle: a tick of its own would be ignored.
     if (c.sync_producer == 0) fail(file, *n, "tick", "only with a wheel's drive as sync_producer (the master ticks every cycle)");
   }
@@ -73,7 +74,7 @@ CoProgramConfig parse_co_config(std::string_view yaml, const std::string& file, 
   }
   if (const Val* n = top.get("wheel_counts_per_rev")) c.wheel_counts_per_rev = bounded(file, *n, "wheel_counts_per_rev", 4, 1 << 30);
   if (const Val* n = top.get("sdo_timeout_ms")) c.sdo_timeout_ms = bounded(file, *n, "sdo_timeout_ms", 1, 60'000);
-  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, 3600);
+  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, kMaxStartupTimeout);
   if (const Val* n = top.get("platform")) read_platform(file, *n, base_dir, c.platform_yaml, c.platform_file);
   if (c.node_heartbeat_ms != 0 && c.heartbeat_timeout_ms <= c.node_heartbeat_ms)
     fail(file, top.get("heartbeat_timeout_ms") ? *top.get("heartbeat_timeout_ms") : root, "heartbeat_timeout_ms",

@@ -1,5 +1,6 @@
 // controller/mechatrolink3 — the C1 master program's configuration file (see m3_config.hpp).
 #include "controller/mechatrolink3/m3_config.hpp"
+#include "controller/master_bounds.hpp"
 
 #include <fmt/format.h>
 
@@ -72,7 +73,7 @@ M3ProgramConfig parse_m3_config(std::string_view yaml, const std::string& file, 
   if (const Val* n = top.get("margin_us")) c.margin_us = bounded(file, *n, "margin_us", 0, 10'000);
   if (const Val* n = top.get("software_us")) c.software_us = bounded(file, *n, "software_us", 0, 10'000);
   if (const Val* n = top.get("detect_timeout_ms")) c.detect_timeout_ms = bounded(file, *n, "detect_timeout_ms", 0.001, 1000);
-  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, 3600);
+  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, controller::kMaxStartupTimeout);
   if (const Val* n = top.get("lost_cycles")) c.lost_cycles = static_cast<int>(bounded_int(file, *n, "lost_cycles", 1, 100000));
   if (const Val* n = top.get("wheel_command")) {
     const std::string m = n->node.IsScalar() ? n->node.Scalar() : "";

@@ -1,5 +1,6 @@
 // controller/tml — the TML master program's configuration file (see tml_config.hpp).
 #include "controller/tml/tml_config.hpp"
+#include "controller/master_bounds.hpp"
 
 #include <fmt/format.h>
 
@@ -39,7 +40,7 @@ TmlProgramConfig parse_tml_config(std::string_view yaml, const std::string& file
   if (const Val* n = top.get("wheel_counts_per_rev")) c.wheel_counts_per_rev = bounded(file, *n, "wheel_counts_per_rev", 4, 1 << 30);
   if (const Val* n = top.get("acceleration")) c.acceleration = bounded(file, *n, "acceleration", 1, 1e12);
   if (const Val* n = top.get("lost_ticks")) c.lost_ticks = static_cast<int>(bounded_int(file, *n, "lost_ticks", 1, 100000));
-  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, 3600);
+  if (const Val* n = top.get("startup_timeout")) c.startup_timeout = bounded(file, *n, "startup_timeout", 0.001, kMaxStartupTimeout);
   if (const Val* n = top.get("platform")) read_platform(file, *n, base_dir, c.platform_yaml, c.platform_file);
   return c;
 }

@@ -790,6 +790,24 @@ TEST_F(CliCan, MasterProgramProblems) {
   EXPECT_TRUE(contains(m.at("error").get<std::string>(), "did not connect")) << m.at("error");
 }
 
+// Found in review: a master that refused its configuration and exited was reported only as
+// "did not connect to the sim clock (timeout…)"; its own last words (what it wrote to
+// master.log) now come with the error, in the run's summary and in metrics.json.
+TEST_F(CliCan, AMasterThatExitsBeforeConnectingIsReportedInItsOwnWords) {
+  const fs::path script = dir_ / "refusing-master";
+  std::ofstream(script) << "#!/bin/sh\necho 'starting' >&2\necho 'master.yaml:2: period: must be in [0.0001, 1]' >&2\nexit 2\n";
+  fs::permissions(script, fs::perms::owner_all);
+  const fs::path out = dir_ / "refused";
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47640),
+                          "--set", "bus.master=" + script.string(), "--out", out.string(), "--no-progress"});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "ERROR: the master did not connect")) << f.out;
+  EXPECT_TRUE(contains(f.out, "exit 2")) << f.out;
+  EXPECT_TRUE(contains(f.out, "it said: starting | master.yaml:2: period: must be in [0.0001, 1]")) << f.out;
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_TRUE(contains(m.at("error").get<std::string>(), "period: must be in")) << m.at("error");
+}
+
 // Ctrl-C in the middle of a CAN run: records closed and complete, the master told to end
 // (it exits 0 on End), the capture readable.
 TEST_F(CliCan, InterruptEndsBothProcessesCleanly) {

@@ -344,6 +344,32 @@ TEST(ScenarioErrors, ARunLongerThanElevenDaysIsATypoNotASoak) {
   EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"duration", "3600"}}));  // an hour's soak
 }
 
+// Found in review: controller.period 0.00005 loaded, the run directory was written and the
+// master then refused its master.yaml (period in [0.0001, 1]): the loader now refuses what the
+// master programs refuse, with their bounds, before anything runs.
+TEST(ScenarioErrors, AControllerPeriodTheMasterRefusesIsRefusedAtLoad) {
+  for (const char* bus : {"direct", "can", "canopen", "tml", "ethercat", "m3"}) {
+    const auto e = load_error(scenario("minimal.yaml"), {{"bus", bus}, {"controller.period", "0.00005"}});
+    EXPECT_EQ(e.key(), "controller.period") << bus;
+    EXPECT_NE(std::string(e.what()).find("[0.0001, 1]"), std::string::npos) << e.what();
+  }
+  EXPECT_DOUBLE_EQ(load_scenario(scenario("minimal.yaml"), {{"controller.period", "0.0001"}}).controller.period, 1e-4);
+}
+
+// The same for the other values the twin writes into a master's file: the start-up time a
+// master waits (at most an hour, a realtime run adding 3 s) and the platform loop's counts
+// per revolution (4·lines, at most 2^24).
+TEST(ScenarioErrors, StartupsAndEncodersTheMastersRefuseAreRefusedAtLoad) {
+  for (const char* bus : {"canopen", "tml", "m3"}) {
+    const auto e = load_error(scenario("minimal.yaml"), {{"bus", std::string("{type: ") + bus + ", startup: 3598}"}});
+    EXPECT_EQ(e.key(), "bus.startup") << e.what();
+    EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"bus", std::string("{type: ") + bus + ", startup: 3597}"}}));
+  }
+  const auto e = load_error(scenario("minimal.yaml"), {{"bus", "can"}, {"platform.encoder.lines", "4194305"}});
+  EXPECT_EQ(e.key(), "platform.encoder.lines") << e.what();
+  EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"platform.encoder.lines", "4194304"}}));
+}
+
 TEST(ScenarioLoopback, CanOverUdpIsPutOnLoAndOtherInterfacesAreRefused) {
   Scenario s = load_scenario(scenario("minimal.yaml"), {{"bus", "can"}});
   confine_to_loopback(s);
@@ -457,7 +483,7 @@ TEST(ScenarioErrors, KpNotAThreeList) {
 TEST(ScenarioErrors, PeriodOutOfRange) {
   const auto e = load_error(scenario("bad_period.yaml"));
   expect_error(e, scenario("bad_period.yaml"), 3, "controller.period");
-  EXPECT_NE(std::string(e.what()).find("in (0, 1]"), std::string::npos) << e.what();
+  EXPECT_NE(std::string(e.what()).find("in [0.0001, 1]"), std::string::npos) << e.what();  // the masters' range
 }
 
 TEST(ScenarioErrors, MissingParamsFileNamesTheScenario) {
