@@ -271,6 +271,14 @@ bool read_loop_key(const Reader& r, const Item& m, PlatformLoopConfig& loop) {
   return true;
 }
 
+// startup_timeout: > 0 and at most kMaxStartupTimeout, as every master's (1e10 s overflowed
+// the master's nanoseconds into a negative time-out: found in review).
+double startup_timeout(const Reader& r, const Item& m) {
+  const double v = r.number(m, 0.0, true);
+  if (v > kMaxStartupTimeout) r.fail(m, fmt::format("must be at most {}", kMaxStartupTimeout));
+  return v;
+}
+
 // The master's own keys (everything but the platform loop's).
 void read_master_key(const Reader& r, const Item& m, MasterConfig& c) {
   const std::string& n = m.name;
@@ -280,7 +288,7 @@ void read_master_key(const Reader& r, const Item& m, MasterConfig& c) {
   else if (n == "detect_every") c.detect_every = static_cast<int>(r.integer(m, 0, kIntMax));
   else if (n == "detect_misses") c.detect_misses = static_cast<int>(r.integer(m, 1, kIntMax));
   else if (n == "feedback_timeout") c.feedback_timeout = static_cast<int>(r.integer(m, 0, kIntMax));
-  else if (n == "startup_timeout") c.startup_timeout = r.number(m, 0.0, true);
+  else if (n == "startup_timeout") c.startup_timeout = startup_timeout(r, m);
   else if (n == "slave_kp") c.slave_kp = static_cast<std::uint16_t>(r.integer(m, 0, 0xFFFF));
   else if (n == "path") c.path = read_path(r, m);
 }

@@ -66,7 +66,7 @@ struct MasterConfig {
   int detect_every = 1;         // node detection every N running ticks; 0 = off
   int detect_misses = 1;        // consecutive missed detection rounds → node missing, >= 1
   int feedback_timeout = 10;    // running ticks without a node's feedback → stop; 0 = off
-  double startup_timeout = 1.0; // [s] to find all four slaves after detection began, > 0
+  double startup_timeout = 1.0; // [s] to find all four slaves after detection began, (0, 3600]
   std::optional<std::uint16_t> slave_kp;  // axis controller setting sent before NMT start
 };
 

@@ -176,6 +176,15 @@ TEST(MasterConfig, WrongTypesAndRangesAreErrors) {
   EXPECT_EQ(error_of("path:\n  segments: {line: {duration: 1}}\n"), "cfg.yaml:2: path.segments: expected a list, got a mapping");
 }
 
+// Found in review: 1e10 s overflowed llround(s * 1e9) into a negative time-out, and the
+// master stopped at its first tick without a detection request. Bounded as the other masters'.
+TEST(MasterConfig, AStartupTimeoutBeyondAnHourIsRefusedNamingTheKey) {
+  const std::string p(kMinimal);
+  EXPECT_EQ(error_of("startup_timeout: 1e10\n" + p), "cfg.yaml:1: startup_timeout: must be at most 3600");
+  EXPECT_EQ(error_of("startup_timeout: 3600.5\n" + p), "cfg.yaml:1: startup_timeout: must be at most 3600");
+  EXPECT_EQ(error_of("startup_timeout: 3600\n" + p), "");
+}
+
 TEST(MasterConfig, FileLevelErrors) {
   testing::TempDir dir("omnitwin-master-config");
   EXPECT_EQ(error_of("period: 0.01\nperiod: 0.02\n" + std::string(kMinimal)), "cfg.yaml:2: period: duplicate key");
