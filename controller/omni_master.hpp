@@ -31,6 +31,11 @@ namespace omnitwin::controller {
 using MasterState = simclock::MasterState;
 using StopReason = simclock::StopReason;
 
+// Ticks from the first detecting tick to path time 0 when the four slaves answer the first
+// detection request: that tick sends the request, the next finds the answers (all_found, NMT
+// start), the one after is path time 0. path_done falls as many ticks after path + settle.
+inline constexpr int kStartupTicks = 2;
+
 // The named transitions of the master (states: simclock::MasterState). Legal in each state:
 //  waiting   — wait_for_pc only, before the PC's start. Ticks send nothing. Legal:
 //              begin_detection (NMT start to the master or to all), shutdown.

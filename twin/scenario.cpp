@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "controller/master_bounds.hpp"
+#include "controller/omni_master.hpp"
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
 #include "twin/yaml_schema.hpp"
@@ -932,6 +933,8 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
   if (s.bus.kind == BusKind::m3) s.duration += s.bus.m3.startup;
   if (s.bus.kind == BusKind::canopen) s.duration += s.bus.canopen.startup;
   if (s.bus.kind == BusKind::tml) s.duration += s.bus.tml.startup;
+  // omni-master's path starts kStartupTicks late; one tick more brings its NMT stop to the slaves.
+  if (s.bus.kind == BusKind::can) s.duration += (controller::kStartupTicks + 1) * s.controller.period;
   read_number(root, "duration", s.duration, Bounds::open_closed(0, kMaxRunSeconds));
   if (!(s.duration > 0)) root.fail("the run has no length: give a path, settle or duration > 0");
   if (s.duration > kMaxRunSeconds)

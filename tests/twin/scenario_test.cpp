@@ -71,8 +71,9 @@ TEST(Scenario, GoodScenarioFillsEveryField) {
   EXPECT_DOUBLE_EQ(s.path.y0, -0.2);
   EXPECT_DOUBLE_EQ(s.path.phi0_deg, 30);
   EXPECT_DOUBLE_EQ(s.settle, 1.5);
-  // 20 + 5 + 4 + 1 + 4·5 (square: per side) + 20 + 30 + settle 1.5
-  EXPECT_DOUBLE_EQ(s.duration, 101.5);
+  // 20 + 5 + 4 + 1 + 4·5 (square: per side) + 20 + 30 + settle 1.5, and on bus can the
+  // master's three start-up and stop ticks of 5 ms
+  EXPECT_DOUBLE_EQ(s.duration, 101.5 + 3 * 0.005);
 }
 
 TEST(Scenario, GoodScenarioSegments) {
@@ -368,6 +369,18 @@ TEST(ScenarioErrors, StartupsAndEncodersTheMastersRefuseAreRefusedAtLoad) {
   const auto e = load_error(scenario("minimal.yaml"), {{"bus", "can"}, {"platform.encoder.lines", "4194305"}});
   EXPECT_EQ(e.key(), "platform.encoder.lines") << e.what();
   EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"platform.encoder.lines", "4194304"}}));
+}
+
+// Found in review: a CAN run ended at path + settle while the master, whose path starts two
+// ticks late (a detection round, then NMT start), was still running and never sent its NMT
+// stop. The default duration now covers those two ticks and the one that stops the slaves.
+TEST(Scenario, ACanRunLastsUntilTheMasterHasStoppedItsSlaves) {
+  EXPECT_DOUBLE_EQ(load_scenario(scenario("minimal.yaml"), {{"bus", "can"}}).duration, 12.0 + 3 * 0.01);
+  EXPECT_DOUBLE_EQ(
+      load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"controller.period", "0.002"}}).duration,
+      12.0 + 3 * 0.002);
+  EXPECT_DOUBLE_EQ(load_scenario(scenario("minimal.yaml"), {{"bus", "direct"}}).duration, 12.0);
+  EXPECT_DOUBLE_EQ(load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"duration", "12"}}).duration, 12.0);
 }
 
 TEST(ScenarioLoopback, CanOverUdpIsPutOnLoAndOtherInterfacesAreRefused) {
