@@ -14,5 +14,10 @@ inline constexpr double kMaxStartupTimeout = 3600.0;  // [s] any master's startu
 // What a realtime twin adds to bus.startup in a master's startup_timeout: the master may start
 // looking for its slaves before the twin is up. [s]
 inline constexpr double kRealtimeStartupGrace = 3.0;
+// omni-master: ticks from the first detecting tick to path time 0 when the four slaves answer
+// the first detection request: that tick sends the request, the next finds the answers
+// (all_found, NMT start), the one after is path time 0. path_done falls as many ticks after
+// path + settle (the twin's default CAN run length counts them).
+inline constexpr int kStartupTicks = 2;
 
 }  // namespace omnitwin::controller

@@ -20,6 +20,7 @@
 
 #include "bus_emulators/can/can_frame.hpp"
 #include "bus_emulators/omni/omni_codec.hpp"
+#include "controller/master_bounds.hpp"
 #include "controller/master_config.hpp"
 #include "controller/odometry.hpp"
 #include "controller/path.hpp"
@@ -31,10 +32,8 @@ namespace omnitwin::controller {
 using MasterState = simclock::MasterState;
 using StopReason = simclock::StopReason;
 
-// Ticks from the first detecting tick to path time 0 when the four slaves answer the first
-// detection request: that tick sends the request, the next finds the answers (all_found, NMT
-// start), the one after is path time 0. path_done falls as many ticks after path + settle.
-inline constexpr int kStartupTicks = 2;
+// kStartupTicks (controller/master_bounds.hpp): the ticks from the first detecting tick to path
+// time 0 when the four slaves answer the first detection request.
 
 // The named transitions of the master (states: simclock::MasterState). Legal in each state:
 //  waiting   — wait_for_pc only, before the PC's start. Ticks send nothing. Legal:

@@ -19,7 +19,6 @@
 #include <utility>
 
 #include "controller/master_bounds.hpp"
-#include "controller/omni_master.hpp"
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
 #include "twin/yaml_schema.hpp"
