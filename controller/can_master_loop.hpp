@@ -1,7 +1,8 @@
 // controller layer — the two clocks a master program on a CAN transport runs under (the
 // CANopen and TML masters; the thesis's Omni master keeps its own in omni_master_main):
 //  * lockstep with the twin's sim clock (docs/protocols/sim-clock.md): each Grant carries the
-//    twin's cumulative frames; they are drained until that many arrived, the tick runs at the
+//    twin's cumulative frames; the bus is read while the grant is awaited (the frames held for
+//    the grant's instant) and drained until that many arrived, the tick runs at the
 //    grant's time, the tick's frames go out in one batch, Done carries the cumulative frames
 //    sent and the master's report;
 //  * the wall clock: CLOCK_MONOTONIC absolute deadlines, one tick per period, frames handled
@@ -43,6 +44,7 @@ struct CanProgramOptions {
   double duration = -1;       // wall: seconds, < 0 = until SIGINT/SIGTERM
   bool print_config = false;  // print what was loaded and exit
   std::string stats;          // write the counters as JSON here at exit ("" = no)
+  double frames_timeout = 5;  // sim: how long the frames a grant counts may take to arrive [s]
 };
 
 // The transport --iface names (a bare interface name means SocketCAN), or null after logging
@@ -101,10 +103,75 @@ struct LoopFailure {
   std::string message;
 };
 
-// Frames from the transport until `target` have arrived in all (lockstep); false after 5 s.
+// Lockstep: what the master hears while it waits for its grant. The twin puts a tick's frames
+// on the transport just before the grant; read only after it, a burst larger than the socket's
+// receive buffer was dropped by the kernel (a 1 ms heartbeat at a 100 ms SYNC: 435 frames a
+// tick; DESIGN §4: neither side may race the transport). They are taken off the socket as they
+// come and handed to the runner at the grant's instant, in order. Real-time safe while the
+// held frames fit the reserved capacity.
+class HeldFrames {
+ public:
+  HeldFrames() { frames_.reserve(1024); }
+  // Everything the transport holds now.
+  void take(can::Transport& tr) {
+    while (auto tf = tr.receive()) frames_.push_back(tf->frame);
+  }
+  template <class Runner>
+  void hand_to(Runner& r, std::int64_t t) {
+    for (const can::Frame& f : frames_) r.on_frame(f, t);
+    frames_.clear();
+  }
+
+ private:
+  std::vector<can::Frame> frames_;
+};
+
+// Waits until the sim-clock channel is readable (ready), the signal fd is (signal) or
+// `timeout` passes, taking the bus's frames into `held` meanwhile.
+enum class GrantWait : std::uint8_t { ready, signal, timeout };
+inline GrantWait wait_for_grant(int channel_fd, int sigfd, can::Transport& tr, HeldFrames& held,
+                                std::chrono::milliseconds timeout) {
+  const std::int64_t deadline = monotonic_ns() + timeout.count() * 1'000'000;
+  for (;;) {
+    held.take(tr);
+    const std::int64_t left = deadline - monotonic_ns();
+    if (left <= 0) return GrantWait::timeout;
+    pollfd fds[3] = {{channel_fd, POLLIN, 0}, {sigfd, POLLIN, 0}, {tr.poll_fd(), POLLIN, 0}};
+    const int p = ::poll(fds, 3, static_cast<int>((left + 999'999) / 1'000'000));
+    if (p < 0 && errno != EINTR) return GrantWait::ready;  // the channel's own receive reports the trouble
+    if (p > 0 && (fds[1].revents & POLLIN)) return GrantWait::signal;
+    if (p > 0 && fds[0].revents != 0) return GrantWait::ready;
+  }
+}
+
+// Why a drain came up short: "" when no frame was lost on the way, else the count and the
+// kernel's drop counter since `rcvbuf_errors0` (udp_receive_buffer_errors(), -1: unreadable).
+inline std::string receive_path_loss(const can::Transport& tr, std::int64_t rcvbuf_errors0) {
+  const std::int64_t now = can::udp_receive_buffer_errors();
+  const std::uint64_t queue = tr.stats().rx_dropped;
+  if (rcvbuf_errors0 >= 0 && now > rcvbuf_errors0)
+    return fmt::format("frames were lost in the receive path: the kernel dropped {} UDP datagrams since the master "
+                       "started because a receive buffer was full (RcvbufErrors in /proc/net/snmp, whole host)",
+                       now - rcvbuf_errors0);
+  if (queue > 0) return fmt::format("frames were lost in the receive path: {} dropped from a full receive queue", queue);
+  return "";
+}
+
+// The failure of a drain that came up short: how many frames are missing, and whether they
+// were lost in the receive path.
+inline std::string drain_failure(std::uint64_t tick, std::uint64_t received, std::uint64_t target,
+                                 std::chrono::milliseconds timeout, const can::Transport& tr,
+                                 std::int64_t rcvbuf_errors0) {
+  std::string s = fmt::format("tick {}: only {} of the {} frames the twin sent arrived within {} s ({} missing)", tick,
+                              received, target, static_cast<double>(timeout.count()) / 1e3, target - received);
+  if (const std::string why = receive_path_loss(tr, rcvbuf_errors0); !why.empty()) s += "; " + why;
+  return s;
+}
+
+// Frames from the transport until `target` have arrived in all (lockstep); false after `timeout`.
 template <class Runner>
-bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64_t t) {
-  const std::int64_t give_up = monotonic_ns() + 5'000'000'000;
+bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64_t t, std::chrono::milliseconds timeout) {
+  const std::int64_t give_up = monotonic_ns() + timeout.count() * 1'000'000;
   while (r.frames_rx < target) {
     if (auto tf = tr.receive()) {
       r.on_frame(tf->frame, t);
@@ -118,24 +185,28 @@ bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64
 }
 
 // Lockstep with the twin until it ends the run (End), a signal, or a failure (throws
-// LoopFailure / simclock::ChannelError). After a signal the next tick the twin grants runs
-// r.shutdown() instead of r.tick() (the end sequence the wall clock's end sends, counted in that
-// tick's Done so the twin delivers it); without such a grant (End, the twin gone, nothing in
-// 1 s) the end sequence cannot reach the simulated bus and is not sent. Returns 0.
+// LoopFailure / simclock::ChannelError). The bus is read while the grant is awaited
+// (HeldFrames); the frames a grant counts may take `frames_timeout` to arrive. After a signal
+// the next tick the twin grants runs r.shutdown() instead of r.tick() (the end sequence the wall
+// clock's end sends, counted in that tick's Done so the twin delivers it); without such a grant
+// (End, the twin gone, nothing in 1 s) the end sequence cannot reach the simulated bus and is
+// not sent. Returns 0.
 template <class Runner>
-int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd) {
+int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd,
+                 std::chrono::milliseconds frames_timeout) {
+  const std::int64_t rcvbuf_errors0 = can::udp_receive_buffer_errors();
   simclock::Client client(sim_clock, std::chrono::seconds(10), sigfd);
   if (client.stopped()) return 0;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
+  HeldFrames held;
   bool stopping = false;
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
     if (!stopping) {
-      pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-      const int p = ::poll(fds, 2, 60'000);
-      if (p == 0) throw LoopFailure{"sim clock: no grant within 60 s"};
-      stopping = p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd);
+      const GrantWait gw = wait_for_grant(client.fd(), sigfd, tr, held, std::chrono::seconds(60));
+      if (gw == GrantWait::timeout) throw LoopFailure{"sim clock: no grant within 60 s"};
+      stopping = gw == GrantWait::signal && signalled(sigfd);
     }
     const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
     if (stopping && w != simclock::WaitStatus::ok) {
@@ -145,8 +216,9 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return 0;
     if (w == simclock::WaitStatus::closed) throw LoopFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw LoopFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
-    if (!drain_until(tr, r, g.frames[0], g.t_ns))
-      throw LoopFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, r.frames_rx, g.frames[0])};
+    held.hand_to(r, g.t_ns);
+    if (!drain_until(tr, r, g.frames[0], g.t_ns, frames_timeout))
+      throw LoopFailure{drain_failure(g.tick, r.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};
     if (stopping) r.shutdown(g.t_ns);
     else r.tick(g.t_ns);
     r.flush();
@@ -283,7 +355,9 @@ int run_can_master(const CanProgramOptions& o, Runner& r, can::Transport& tr, st
   const int sigfd = open_signal_fd();
   int code = 0;
   try {
-    code = o.clock == "sim" ? run_lockstep(o.sim_clock, r, tr, sigfd) : run_wall_clock(tick_ns, o.duration, r, tr, sigfd);
+    const auto frames_timeout = std::chrono::milliseconds(std::llround(o.frames_timeout * 1e3));
+    code = o.clock == "sim" ? run_lockstep(o.sim_clock, r, tr, sigfd, frames_timeout)
+                            : run_wall_clock(tick_ns, o.duration, r, tr, sigfd);
   } catch (const LoopFailure& f) {
     spdlog::error("{}", f.message);
     code = 3;

@@ -54,7 +54,9 @@ class CanWire {
   std::string close_pcap();
   std::string pcap_error() const;
 
-  // Hands the batched frames to the transport, all at once. Real-time safe.
+  // Hands the batched frames to the transport, yielding the CPU after every kBurst frames of
+  // a tick (the master takes them off its socket while it waits for its grant; a whole tick
+  // at once overflowed its receive buffer). Real-time safe.
   void flush_transport();
   // Lockstep: receives until `count` frames have arrived in all since the start, each queued on
   // node 0 at t + T_pre. False when they did not all come within `timeout`.
@@ -113,6 +115,7 @@ class CanWire {
   std::mt19937_64 rng_;
   bool batch_;
   std::vector<can::TimedFrame> pending_;
+  std::size_t unyielded_ = 0;  // frames handed to the transport since the master last had a turn
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t master_sender_ = 0;                  // the first sender seen (0: none yet)

@@ -70,6 +70,18 @@ void share_cpu_with(pid_t pid) {
     spdlog::debug("could not pin the master and the twin to CPU {}", cpu);
 }
 
+// The master's last error line in its log ("" when none): why a master that ended before
+// answering a tick ended (frames lost in its receive path, say). Not real-time safe.
+std::string last_error_line(const fs::path& log) {
+  std::ifstream f(log);
+  std::string last;
+  for (std::string line; std::getline(f, line);) {
+    const std::size_t at = line.find("error: ");
+    if (at != std::string::npos) last = line.substr(at + 7);
+  }
+  return last;
+}
+
 std::vector<std::string> bus_header() {
   std::vector<std::string> h{"t", "frames_tx", "frames_rx", "dropouts", "errors", "load", "active_faults"};
   for (int i = 1; i <= 4; ++i) h.push_back(fmt::format("s{}_state", i));
@@ -333,6 +345,9 @@ void PlatformRun::start_master() {
     const std::string addr = fmt::format("unix:@omnitwin-{}-{}.clock", ::getpid(), serial++);
     clock_server_ = std::make_unique<simclock::Server>(addr);
     args.insert(args.end(), {"--clock", "sim", "--sim-clock", addr});
+    // A CAN master waits for the frames a grant counts as long as the twin waits for its Done.
+    if (s_.bus.kind == BusKind::can || s_.bus.kind == BusKind::canopen || s_.bus.kind == BusKind::tml)
+      args.insert(args.end(), {"--frames-timeout", fmt::format("{}", handshake_timeout_s_)});
   } else {
     args.insert(args.end(), {"--clock", "wall"});
   }
@@ -452,8 +467,11 @@ void PlatformRun::on_master_bus(SimTime t) {
     if (signalled()) return;
     // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
     // but always the run's end: in lockstep nothing else answers the ticks.
-    return master_lost(
-        t, fmt::format("the master process ended ({}) before answering tick {}", master_->describe_exit(), g.tick), true);
+    const std::string why = last_error_line(fs::path(o_.out_dir) / ".master.log.part");
+    return master_lost(t,
+                       fmt::format("the master process ended ({}) before answering tick {}{}", master_->describe_exit(),
+                                   g.tick, why.empty() ? "" : ": " + why),
+                       true);
   }
   if (st != simclock::WaitStatus::ok)
     return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),

@@ -68,7 +68,7 @@ struct TransportStats {
   std::uint64_t send_errors = 0;     // the OS refused a send (network down, buffer full for 100 ms, …)
   std::uint64_t send_waits = 0;      // UDP: sends that waited for socket-buffer room (back-pressure)
   std::uint64_t rx_errors = 0;       // the OS reported a receive error
-  std::uint64_t rx_dropped = 0;      // in-process queue overflow
+  std::uint64_t rx_dropped = 0;      // receive queue overflow: in-process (mem) or the kernel's socket buffer (UDP)
 };
 
 class Transport {
@@ -105,6 +105,12 @@ bool wait_readable(const Transport& t, std::chrono::milliseconds timeout);
 // The next frame received within `timeout` (waiting on poll_fd between attempts), or
 // nullopt. Blocks: for set-up code, tools and tests, not the cyclic path.
 std::optional<TimedFrame> receive_within(Transport& t, std::chrono::milliseconds timeout);
+
+// The host's count of UDP datagrams the kernel dropped because a receive buffer was full
+// (RcvbufErrors of Udp in /proc/net/snmp plus Udp6 in /proc/net/snmp6), or -1 when neither
+// can be read. Every socket of the host counts: a difference over a wait is an upper bound
+// of what one socket lost. Not real-time safe (reads files).
+std::int64_t udp_receive_buffer_errors();
 
 // Parsed form of a spec, exposed for tests and for `omnitwin` argument checking.
 struct TransportSpec {

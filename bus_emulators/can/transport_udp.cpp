@@ -12,9 +12,12 @@
 #include <poll.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <fmt/format.h>
 
 namespace omnitwin::can {
@@ -34,6 +37,13 @@ namespace {
 
 void set_opt(int fd, int level, int name, int value, const TransportSpec& s, const char* what) {
   if (::setsockopt(fd, level, name, &value, sizeof value) != 0) fail(s, what);
+}
+
+// A larger receive buffer: forced past net.core.rmem_max where permitted (CAP_NET_ADMIN),
+// else as large as that limit allows. Best effort: the default still works for small bursts.
+void raise_receive_buffer(int fd, int bytes) {
+  if (::setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &bytes, sizeof bytes) == 0) return;
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
 }
 
 bool same_addr(const sockaddr_storage& a, const sockaddr_storage& b) {
@@ -60,6 +70,7 @@ UdpTransport::UdpTransport(const TransportSpec& spec) : spec_(spec) {
 
   rx_fd_ = ::socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   if (rx_fd_ < 0) fail(spec_, "socket");
+  raise_receive_buffer(rx_fd_, kRxBufferBytes);
   tx_fd_ = ::socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   if (tx_fd_ < 0) {
     ::close(rx_fd_);
@@ -412,6 +423,36 @@ std::optional<TimedFrame> UdpTransport::receive() {
     }
   }
   return std::nullopt;
+}
+
+namespace {
+// RcvbufErrors from /proc/net/snmp's "Udp:" header/value line pair; -1 when absent.
+std::int64_t snmp_udp_rcvbuf_errors() {
+  std::ifstream f("/proc/net/snmp");
+  std::string names, values;
+  while (std::getline(f, names) && std::getline(f, values)) {
+    if (!names.starts_with("Udp: ")) continue;
+    std::istringstream n(names), v(values);
+    for (std::string name, value; n >> name && v >> value;)
+      if (name == "RcvbufErrors") return std::stoll(value);
+  }
+  return -1;
+}
+// Udp6RcvbufErrors from /proc/net/snmp6 ("NAME VALUE" lines); -1 when absent.
+std::int64_t snmp6_udp_rcvbuf_errors() {
+  std::ifstream f("/proc/net/snmp6");
+  std::string name;
+  std::int64_t value = 0;
+  while (f >> name >> value)
+    if (name == "Udp6RcvbufErrors") return value;
+  return -1;
+}
+}  // namespace
+
+std::int64_t udp_receive_buffer_errors() {
+  const std::int64_t v4 = snmp_udp_rcvbuf_errors(), v6 = snmp6_udp_rcvbuf_errors();
+  if (v4 < 0 && v6 < 0) return -1;
+  return std::max<std::int64_t>(v4, 0) + std::max<std::int64_t>(v6, 0);
 }
 
 }  // namespace omnitwin::can

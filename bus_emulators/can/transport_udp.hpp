@@ -20,6 +20,12 @@
 // no difference; python-can included), but the network device is kicked once per run instead
 // of once per datagram, which is most of a datagram's cost on a virtual NIC. Where the kernel
 // or the device refuses segmentation, it falls back to one send per datagram for good.
+//
+// The receive socket asks for a receive buffer of kRxBufferBytes (SO_RCVBUFFORCE where the
+// process may, else SO_RCVBUF, which the kernel caps at net.core.rmem_max): the default
+// (212992 bytes, about 275 datagrams) overflowed under a lockstep tick's burst. What the
+// kernel still drops because the buffer was full shows in the host's UDP RcvbufErrors
+// (udp_receive_buffer_errors(); the socket's own drop count also counts the own-datagram filter).
 #pragma once
 
 #include "bus_emulators/can/can_msgpack.hpp"
@@ -61,6 +67,8 @@ class UdpTransport final : public Transport {
   static constexpr int kSendWaitMs = 5;
   // Most datagrams one segmented send carries (the kernel's UDP_MAX_SEGMENTS is 64 or more).
   static constexpr std::size_t kMaxSegments = 64;
+  // The receive buffer asked for [bytes] (best effort; the kernel doubles what it grants).
+  static constexpr int kRxBufferBytes = 4 << 20;
   // Datagrams one receive call (recvmmsg) fetches; receive() hands them out one by one.
   static constexpr std::size_t kRxBatch = 16;
   static constexpr std::size_t kRxSlot = msgpack_wire::kMaxDatagramSize + 1;  // one byte more than

@@ -67,7 +67,6 @@ constexpr int kExitRuntime = 3;
 constexpr const char* kDefaultIface = "udp:239.74.163.2:43113";
 constexpr auto kConnectTimeout = std::chrono::seconds(10);
 constexpr auto kGrantTimeout = std::chrono::seconds(60);
-constexpr std::int64_t kDrainLimitNs = 5'000'000'000;  // frames the twin sent must arrive within 5 s
 constexpr int kRtPriority = 40;
 constexpr int kDrainBatch = 256;  // frames handled before the wall loop looks at the clock again
 
@@ -78,6 +77,7 @@ struct Options {
   std::string clock = "wall";
   std::string sim_clock;
   double duration = -1;  // [s]; < 0: until a signal
+  double frames_timeout = 5;  // sim: how long the frames a grant counts may take to arrive [s]
   std::string log_level = "info";
   bool print_config = false;
   std::string script;  // ethercat: a Botnana script to run
@@ -159,13 +159,13 @@ class StateLog {
 // ---------------------------------------------------------------------------------------
 // Lockstep with the twin (--clock sim)
 
-// Waits for the next grant while watching for signals. ok / closed (End or twin gone) / …
-simclock::WaitStatus next_grant(simclock::Client& client, int sigfd, simclock::Grant& g,
-                                simclock::End& end, LoopStats& ls) {
-  pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-  const int r = ::poll(fds, 2, static_cast<int>(std::chrono::milliseconds(kGrantTimeout).count()));
-  if (r == 0) return simclock::WaitStatus::timeout;
-  if (r > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) {
+// Waits for the next grant while watching for signals, reading the bus meanwhile (frames held
+// for the grant's instant: can_master_loop.hpp). ok / closed (End or twin gone) / …
+simclock::WaitStatus next_grant(simclock::Client& client, int sigfd, can::Transport& tr, controller::HeldFrames& held,
+                                simclock::Grant& g, simclock::End& end, LoopStats& ls) {
+  const controller::GrantWait w = controller::wait_for_grant(client.fd(), sigfd, tr, held, kGrantTimeout);
+  if (w == controller::GrantWait::timeout) return simclock::WaitStatus::timeout;
+  if (w == controller::GrantWait::signal && signalled(sigfd)) {
     ls.interrupted = true;
     return simclock::WaitStatus::closed;
   }
@@ -173,9 +173,10 @@ simclock::WaitStatus next_grant(simclock::Client& client, int sigfd, simclock::G
 }
 
 // Hands the core every frame until `target` frames have been received in all; false when
-// they do not arrive within kDrainLimitNs.
-bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::int64_t t_ns, LoopStats& ls) {
-  const std::int64_t give_up = monotonic_ns() + kDrainLimitNs;
+// they do not arrive within `timeout`.
+bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::int64_t t_ns, LoopStats& ls,
+                 std::chrono::milliseconds timeout) {
+  const std::int64_t give_up = monotonic_ns() + timeout.count() * 1'000'000;
   while (ls.frames_rx < target) {
     if (auto tf = tr.receive()) {
       ++ls.frames_rx;
@@ -190,6 +191,16 @@ bool drain_until(can::Transport& tr, OmniMaster& m, std::uint64_t target, std::i
   return true;
 }
 
+// HeldFrames hands its frames to a runner: the core, counted.
+struct HeldSink {
+  OmniMaster& m;
+  LoopStats& ls;
+  void on_frame(const can::Frame& f, std::int64_t t) {
+    ++ls.frames_rx;
+    m.on_frame(f, t);
+  }
+};
+
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
             LoopStats& ls, Outbox& ob) {
   simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
@@ -198,20 +209,24 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
     return kExitOk;
   }
   spdlog::debug("connected to the twin's sim clock at {}", o.sim_clock);
+  const std::int64_t rcvbuf_errors0 = can::udp_receive_buffer_errors();
+  const auto frames_timeout = std::chrono::milliseconds(std::llround(o.frames_timeout * 1e3));
+  controller::HeldFrames held;
+  HeldSink sink{m, ls};
   StateLog log;
   log.reset(m.state());
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
-    const simclock::WaitStatus w = next_grant(client, sigfd, g, end, ls);
+    const simclock::WaitStatus w = next_grant(client, sigfd, tr, held, g, end, ls);
     if (ls.interrupted || (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd)) return kExitOk;
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     stamp_ns = g.t_ns;
-    if (!drain_until(tr, m, g.frames[0], g.t_ns, ls)) {
-      throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick, ls.frames_rx, g.frames[0])};
-    }
+    held.hand_to(sink, g.t_ns);
+    if (!drain_until(tr, m, g.frames[0], g.t_ns, ls, frames_timeout))
+      throw RuntimeFailure{controller::drain_failure(g.tick, ls.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};
     m.on_tick(g.t_ns);
     flush(tr, ob, m, ls);
     log.check(m);
@@ -315,6 +330,9 @@ void add_options(CLI::App& app, Options& o) {
   app.add_option("--sim-clock", o.sim_clock, "the twin's sim-clock address unix:PATH (with --clock sim)");
   app.add_option("--duration", o.duration, "wall clock: stop after S seconds (default: until SIGINT/SIGTERM)")
       ->check(controller::time_check(controller::kMaxRunSeconds));
+  app.add_option("--frames-timeout", o.frames_timeout,
+                 "sim, buses can, canopen and tml: seconds the frames a grant counts may take to arrive")
+      ->capture_default_str();
   app.add_option("--log-level", o.log_level, "trace, debug, info, warn, error, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
       ->capture_default_str();
@@ -324,6 +342,7 @@ void add_options(CLI::App& app, Options& o) {
 // Option combinations CLI11 cannot check; the message of the first problem, or "".
 std::string usage_problem(const Options& o) {
   if (o.config.empty()) return "--config is required";
+  if (!(o.frames_timeout > 0) || !std::isfinite(o.frames_timeout)) return "--frames-timeout: a positive number of seconds";
   if (o.bus != "can" && o.bus != "canopen" && o.bus != "tml" && o.bus != "ethercat" && o.bus != "m3")
     return fmt::format("--bus {}: not supported (can, canopen, tml, ethercat or m3)", o.bus);
   if (!o.script.empty() && o.bus != "ethercat") return "--script needs --bus ethercat (Botnana scripts drive the EtherCAT master)";
@@ -497,11 +516,11 @@ namespace {
 
 int dispatch(const Options& o) {
   if (o.bus == "tml") {
-    controller::tml::ProgramOptions to{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};
+    controller::tml::ProgramOptions to{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats, o.frames_timeout};
     return controller::tml::run_tml_program(to);
   }
   if (o.bus == "canopen") {
-    controller::canopen::ProgramOptions co{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats};
+    controller::canopen::ProgramOptions co{o.iface, o.config, o.clock, o.sim_clock, o.duration, o.print_config, o.stats, o.frames_timeout};
     return controller::canopen::run_canopen_program(co);
   }
   if (o.bus == "m3") {

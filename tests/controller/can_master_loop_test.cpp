@@ -4,13 +4,15 @@
 // frames that arrived meanwhile, stamped no later than that tick. Found by the CAN soak: the
 // Omni master (which keeps its own loop in omni_master_main, fixed the same way) read a 3 ms
 // stall as "none of the four slaves answered". Over the in-process `mem:` transport. And a
-// signal in lockstep: the end sequence (shutdown) goes out in the next tick the twin grants.
+// signal in lockstep: the end sequence (shutdown) goes out in the next tick the twin grants. And
+// a lockstep burst larger than the receive buffer: the master reads its bus while it waits.
 #include "controller/can_master_loop.hpp"
 
 #include <gtest/gtest.h>
 #include <fcntl.h>
 #include <sys/eventfd.h>
 #include <sys/signalfd.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -103,7 +105,7 @@ TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
   const std::string address = "unix:@omnitwin-can-master-loop-" + std::to_string(::getpid());
   simclock::Server server(address);
   int code = -1;
-  std::thread master([&] { code = run_lockstep(address, r, master_end, sig[0]); });
+  std::thread master([&] { code = run_lockstep(address, r, master_end, sig[0], std::chrono::seconds(5)); });
   ASSERT_EQ(server.accept(2s), simclock::WaitStatus::ok);
   simclock::Done d;
   ASSERT_EQ(server.grant(simclock::Grant{1, 2'000'000, {}}, d, 2s), simclock::WaitStatus::ok);
@@ -121,6 +123,66 @@ TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
   EXPECT_EQ(r.calls[0].what, 't');
   EXPECT_EQ(r.calls[1].what, 's') << "the granted tick after the signal runs the end, not a tick";
   EXPECT_EQ(r.calls[1].t, 4'000'000);
+}
+
+// What run_lockstep needs of a runner: it counts the frames handed to it.
+struct Counting {
+  std::uint64_t frames_rx = 0;
+  void on_frame(const can::Frame&, std::int64_t) { ++frames_rx; }
+  void tick(std::int64_t) {}
+  void shutdown(std::int64_t) {}
+  void flush() {}
+  std::uint64_t frames_tx() const { return 0; }
+  simclock::MasterReport report() const { return {}; }
+};
+
+// Lockstep over UDP: the twin puts a tick's frames on the transport just before its grant. The
+// master read its bus only after the grant, so a burst beyond its socket's receive buffer (435
+// frames at a 1 ms CANopen heartbeat and a 100 ms SYNC; about 275 fit in the default buffer)
+// was dropped by the kernel and the run died as "master lost". Here the burst is larger than
+// the master's receive buffer (even the raised one), sent in pieces before the grant: every
+// frame arrives, because the master reads while it waits for the grant.
+TEST(CanMasterLoop, ABurstLargerThanTheReceiveBufferArrivesWhileTheMasterWaitsForItsGrant) {
+  auto twin_end = can::open_transport("udp:239.74.164.9:0?ttl=0");
+  auto master_end = can::open_transport(twin_end->spec());
+  int rcvbuf = 0;
+  socklen_t len = sizeof rcvbuf;
+  ASSERT_EQ(::getsockopt(master_end->poll_fd(), SOL_SOCKET, SO_RCVBUF, &rcvbuf, &len), 0);
+  // A datagram costs the buffer far more than 256 bytes (its buffer's true size): more than fit.
+  const std::uint64_t burst = static_cast<std::uint64_t>(rcvbuf) / 256 + 512;
+  const std::string address = "unix:@omnitwin-can-master-loop-test-" + std::to_string(::getpid());
+  simclock::Server server(address);
+  const int sigfd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);  // never readable: no signal
+  ASSERT_GE(sigfd, 0);
+  Counting r;
+  std::string failure;
+  std::thread master([&] {
+    try {
+      run_lockstep(address, r, *master_end, sigfd, std::chrono::seconds(5));
+    } catch (const LoopFailure& f) {
+      failure = f.message;
+    }
+  });
+  ASSERT_EQ(server.accept(std::chrono::seconds(10)), simclock::WaitStatus::ok);
+  can::Frame f;
+  f.id = 0x702;
+  f.dlc = 1;
+  const std::vector<can::TimedFrame> piece(100, can::TimedFrame{f, 0});
+  std::uint64_t sent = 0;
+  while (sent < burst) {
+    sent += twin_end->send_many(piece);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  simclock::Grant g;
+  g.frames[0] = sent;
+  simclock::Done d;
+  const simclock::WaitStatus st = server.grant(g, d, std::chrono::seconds(20));
+  server.end(0);
+  master.join();
+  ::close(sigfd);
+  EXPECT_EQ(st, simclock::WaitStatus::ok) << failure;
+  EXPECT_EQ(failure, "");
+  EXPECT_EQ(r.frames_rx, sent) << "of a burst of " << sent << " with a receive buffer of " << rcvbuf << " bytes";
 }
 
 }  // namespace
