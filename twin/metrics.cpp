@@ -106,4 +106,14 @@ nlohmann::json DriveHistory::to_json() const {
           {"running_at_end", running_now_}};
 }
 
+void merge_master_stats(nlohmann::json& master, const nlohmann::json& stats) {
+  if (!stats.is_object()) return;
+  for (const auto& [key, value] : stats.items()) {
+    if (master.contains(key))
+      master["stats_" + key] = value;  // the twin's value (the sim-clock report) stays
+    else
+      master[key] = value;
+  }
+}
+
 }  // namespace omnitwin::twin

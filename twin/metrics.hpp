@@ -72,4 +72,11 @@ class DriveHistory {
   std::array<DriveStateCode, 4> last_{};
 };
 
+// metrics.json `master`: the master's own counters (master-stats.json) merged into what the
+// twin knows of it. The sim-clock report is authoritative for what both hold (`state`,
+// `stop_reason`: by name, as docs/scenarios.md says): such a key keeps the twin's value and
+// the master's own goes under `stats_KEY` (the EtherCAT master's free-text stop reason, its
+// state word). Every other key is added as it is. Not real-time safe.
+void merge_master_stats(nlohmann::json& master, const nlohmann::json& stats);
+
 }  // namespace omnitwin::twin

@@ -830,12 +830,10 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
       m["master"]["virtual_time"] = {{"waits", vtime_server_->waits()}, {"wakes", vtime_pacer_->wakes()},
                                      {"frame_wakes", vtime_pacer_->frame_wakes()},
                                      {"now_s", ns_to_seconds(vtime_pacer_->master_now())}};
-    // A master that keeps its own counters (bus ethercat) leaves them in master-stats.json.
+    // A master that keeps its own counters leaves them in master-stats.json; the sim-clock
+    // report keeps its state and stop reason (merge_master_stats).
     const fs::path stats = fs::path(o_.out_dir) / "master-stats.json";
-    if (std::ifstream f(stats); f) {
-      const nlohmann::json j = nlohmann::json::parse(f, nullptr, false);
-      if (j.is_object()) m["master"].update(j);
-    }
+    if (std::ifstream f(stats); f) merge_master_stats(m["master"], nlohmann::json::parse(f, nullptr, false));
   } else {
     m["bus"] = {{"name", to_string(s_.bus.kind)}, {"frames_tx", 0}, {"frames_rx", 0}, {"dropouts", 0},
                 {"dropout_rate", 0.0}, {"errors", 0}};

@@ -44,6 +44,7 @@ void expect_clean_run(const Finished& f, const nlohmann::json& m) {
   EXPECT_EQ(f.code, 0) << f.out << f.err;
   const nlohmann::json& ms = m.at("master");
   EXPECT_EQ(ms.at("state"), "finished");
+  EXPECT_EQ(ms.at("stop_reason"), "none") << "the sim-clock report's, by name (master-stats.json's is \"\")";
   EXPECT_EQ(ms.at("slaves"), 4);
   EXPECT_EQ(ms.at("wkc_errors"), 0);
   EXPECT_EQ(ms.at("expected_wkc"), 12);
@@ -122,6 +123,22 @@ TEST_F(CliEthercat, LockstepOverUdp) {
   expect_clean_run(f, m);
   EXPECT_EQ(m.at("bus").at("transport"), "udp:127.0.0.1:47611");
   EXPECT_EQ(m.at("bus").at("dropouts"), 0);
+}
+
+// The sim-clock report names the master's state and stop reason in metrics.json; the
+// EtherCAT master's own words (master-stats.json: state "stopped", a free-text stop reason)
+// overwrote them, leaving stop_reason "" for a master that stopped on a lost segment.
+TEST_F(CliEthercat, AStoppedMastersStopReasonInTheMetricsIsTheSimClocksByName) {
+  const fs::path out = dir_ / "master-stop";
+  const Finished f = run({"run", source_path("tests/regression/ethercat_master_stop.yaml"), "--out", out.string(), "--no-progress",
+                          "--no-video", "--no-report"});
+  ASSERT_NE(f.code, 3) << f.out << f.err;
+  const nlohmann::json ms = metrics(out).at("master");
+  EXPECT_EQ(ms.at("state"), "stopped") << ms.dump(2);
+  EXPECT_EQ(ms.at("stop_reason"), "node_missing") << ms.dump(2);
+  EXPECT_EQ(ms.at("stop_reason_code"), 1);
+  EXPECT_TRUE(contains(ms.at("stats_stop_reason").get<std::string>(), "segment lost")) << ms.dump(2);
+  EXPECT_FALSE(contains(f.out + f.err, "master stopped ()")) << f.out;
 }
 
 // Seed 001's 100 axes as a run (bus.ethercat.extra_axes): 13 multi-axis slaves behind the
