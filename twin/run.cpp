@@ -59,16 +59,49 @@ std::string one_line(std::string text) {
   return text;
 }
 
-// Pins this process and `pid` to the CPU this process runs on now (best effort).
-void share_cpu_with(pid_t pid) {
-  const int cpu = ::sched_getcpu();
-  if (cpu < 0) return;
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  CPU_SET(cpu, &set);
-  if (::sched_setaffinity(0, sizeof set, &set) != 0 || ::sched_setaffinity(pid, sizeof set, &set) != 0)
-    spdlog::debug("could not pin the master and the twin to CPU {}", cpu);
-}
+// Lockstep: the master and the run's thread strictly take turns, so on one CPU each hand-over
+// is a plain context switch instead of a cross-CPU wake-up. The pin is the run's only: the
+// thread's previous affinity comes back when the run ends (the master ends with it), and a run
+// pins only while it is the process's only pinned run, so concurrent runs (omnitwin check -j N)
+// keep every CPU instead of all sitting on the one the first was found on.
+class CpuShare {
+ public:
+  CpuShare() = default;
+  CpuShare(const CpuShare&) = delete;
+  CpuShare& operator=(const CpuShare&) = delete;
+  ~CpuShare() { release(); }
+
+  // Pins the calling thread and `pid` to the CPU the thread runs on now (best effort).
+  void pin_with(pid_t pid) {
+    if (pinned_ || ::sched_getaffinity(0, sizeof saved_, &saved_) != 0) return;
+    if (pinned_runs().fetch_add(1) != 0) {  // another run holds a pin: share no CPU with it
+      pinned_runs().fetch_sub(1);
+      return;
+    }
+    pinned_ = true;
+    const int cpu = ::sched_getcpu();
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    if (cpu >= 0) CPU_SET(cpu, &set);
+    if (cpu < 0 || ::sched_setaffinity(0, sizeof set, &set) != 0 || ::sched_setaffinity(pid, sizeof set, &set) != 0)
+      spdlog::debug("could not pin the master and the twin to CPU {}", cpu);
+  }
+  // The thread's affinity as it was before pin_with().
+  void release() {
+    if (!pinned_) return;
+    ::sched_setaffinity(0, sizeof saved_, &saved_);
+    pinned_ = false;
+    pinned_runs().fetch_sub(1);
+  }
+
+ private:
+  static std::atomic<int>& pinned_runs() {
+    static std::atomic<int> n{0};
+    return n;
+  }
+  cpu_set_t saved_{};
+  bool pinned_ = false;
+};
 
 // The master's last error line in its log ("" when none): why a master that ended before
 // answering a tick ended (frames lost in its receive path, say). Not real-time safe.
@@ -239,6 +272,7 @@ class PlatformRun {
   std::unique_ptr<VtimePacer> vtime_pacer_;
   std::string master_command_;  // as run, {iface}, {ifname} and {out} substituted
   std::unique_ptr<MasterProcess> master_;
+  CpuShare cpu_share_;  // lockstep: the run's thread and its master on one CPU, until stop_master()
   std::string master_program_;
   simclock::MasterReport report_{};
   std::uint64_t tick_ = 0;
@@ -356,7 +390,7 @@ void PlatformRun::start_master() {
   if (lockstep) {
     // The two processes strictly take turns: on one CPU each hand-over is a plain context
     // switch instead of a cross-CPU wake-up (3× cheaper per tick on this VM).
-    share_cpu_with(master_->pid());
+    cpu_share_.pin_with(master_->pid());
     // Wait for its Hello, noticing at once a master that died instead of connecting.
     const auto deadline = std::chrono::steady_clock::now() +
                           std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
@@ -408,7 +442,7 @@ void PlatformRun::start_own_master(const std::string& dir) {
   vtime_server_ = std::make_unique<VtimeServer>();
   master_ = std::make_unique<MasterProcess>(master_program_, args, log,
                                             vtime_server_->environment(find_vtime_library(), net_->master_iface()));
-  share_cpu_with(master_->pid());  // the two take turns: a context switch, not a cross-CPU wake-up
+  cpu_share_.pin_with(master_->pid());  // the two take turns: a context switch, not a cross-CPU wake-up
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(std::llround(s_.master.watchdog * 1e3));
   VtimeServer::Status st = VtimeServer::Status::timeout;
   while (st == VtimeServer::Status::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
@@ -430,6 +464,7 @@ void PlatformRun::stop_master() {
   const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 ? 300 : own ? std::llround(s_.master.stop_grace * 1e3) : 3000);
   const bool was_running = master_->running();
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
+  cpu_share_.release();  // the thread's own affinity again, the master gone
   log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
   if (own && was_running && master_->exit_code() == 128 + SIGKILL && error_.empty())
     error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: killed", master_program_,

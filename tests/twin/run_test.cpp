@@ -10,6 +10,7 @@
 #include <mujoco/mujoco.h>
 #include <nlohmann/json.hpp>
 
+#include <sched.h>
 #include <stdlib.h>
 
 #include <algorithm>
@@ -20,6 +21,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "tests/support/mujoco_fixture.hpp"
@@ -394,6 +396,77 @@ class RunShort : public omnitwin::testing::MujocoTest {
  protected:
   TempDir dir_{"omnitwin-run"};
 };
+
+// The calling thread's CPU affinity.
+cpu_set_t thread_cpus() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  EXPECT_EQ(::sched_getaffinity(0, sizeof set, &set), 0);
+  return set;
+}
+
+// Notes the run's thread's affinity at its first record (the master running), once both runs
+// of a pair have reached theirs (bounded), so the two are seen at the same time.
+class AffinityProbe : public RunObserver {
+ public:
+  explicit AffinityProbe(std::atomic<int>& arrived) : arrived_(arrived) {}
+  void on_start(const RunInfo&) override {}
+  void on_state(const StateSample&) override {
+    if (seen_) return;
+    seen_ = true;
+    ++arrived_;
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (arrived_.load() < 2 && std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    during = thread_cpus();
+  }
+  void on_event(const RunEvent&) override {}
+  void on_end(const nlohmann::json&) override {}
+  cpu_set_t during{};
+
+ private:
+  std::atomic<int>& arrived_;
+  bool seen_ = false;
+};
+
+// `omnitwin check -j N` runs scenarios on parallel threads. A lockstep bus run pinned its
+// thread and its master to the CPU the thread was on and never let go: every later run on that
+// thread, and every master it spawned, stayed there, and with -j 2 both job threads and all
+// masters sat on CPU 0 (run times doubled). The thread's affinity now comes back when the run
+// ends, and two runs at once are not both pinned to one and the same CPU.
+TEST_F(RunShort, ALockstepBusRunGivesItsThreadItsCpusBackAndTwoRunsDoNotShareOnePinnedCpu) {
+  const cpu_set_t before = thread_cpus();
+  if (CPU_COUNT(&before) < 2) GTEST_SKIP() << "one CPU: nothing to pin apart";
+  const std::vector<Override> shorter{{"duration", "0.3"}};
+  std::atomic<int> arrived{0};
+  AffinityProbe probe[2]{AffinityProbe(arrived), AffinityProbe(arrived)};
+  cpu_set_t after[2];
+  int codes[2] = {-1, -1};
+  const auto one = [&](int i) {
+    RunOptions o;
+    o.out_dir = (dir_ / ("run" + std::to_string(i))).string();
+    o.observer = &probe[i];
+    ::sched_setaffinity(0, sizeof before, &before);
+    codes[i] = run_scenario(load_scenario(test_scenario("canopen_short.yaml"), shorter), o).exit_code;
+    after[i] = thread_cpus();
+  };
+  std::thread a(one, 0), b(one, 1);
+  a.join();
+  b.join();
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_NE(codes[i], 3) << "run " << i;
+    EXPECT_TRUE(CPU_EQUAL(&after[i], &before)) << "run " << i << " left its thread on " << CPU_COUNT(&after[i])
+                                               << " CPU(s)";
+  }
+  const bool both_on_one = CPU_COUNT(&probe[0].during) == 1 && CPU_EQUAL(&probe[0].during, &probe[1].during);
+  EXPECT_FALSE(both_on_one) << "both runs pinned to the same single CPU";
+  // And on this thread: a run leaves it as it found it.
+  RunOptions o;
+  o.out_dir = (dir_ / "run-here").string();
+  run_scenario(load_scenario(test_scenario("canopen_short.yaml"), shorter), o);
+  const cpu_set_t here = thread_cpus();
+  EXPECT_TRUE(CPU_EQUAL(&here, &before)) << "left on " << CPU_COUNT(&here) << " CPU(s)";
+}
 
 // An expectation that cannot hold (final error ≤ 1 µm) fails the run: exit code 1,
 // passed false, and metrics.json names the metric, its value and the bound.
