@@ -3,7 +3,7 @@
 # UDP multicast: master and twin as two processes in lockstep, once over
 # udp:239.74.163.2:PORT here, once over socketcan:vcan0 through scripts/vcan-vm (a QEMU guest
 # with Debian's kernel where this kernel has no CAN). trajectory.csv must be byte-identical
-# (lockstep makes the run independent of the transport), the master must have run to the end
+# (lockstep makes the run independent of the transport), the master must have finished its path
 # both times, and the vcan run's capture must hold the master's commands.
 #
 # Usage: vcan_thesis_line_test.sh OMNITWIN VCAN_VM SCENARIO PORT
@@ -26,7 +26,7 @@ grep -E "simulated|real time" "$out/vcan.txt" || true
 
 for run in udp vcan; do
   grep -q '"lost": *false' "$out/$run/metrics.json" || fail "$run: the twin lost its master"
-  grep -q '"state": *"running"' "$out/$run/metrics.json" || fail "$run: the master stopped before the end"
+  grep -q '"state": *"finished"' "$out/$run/metrics.json" || fail "$run: the master did not finish its path"
 done
 rows=$(wc -l <"$out/vcan/trajectory.csv")
 [ "$rows" -gt 2000 ] || fail "the vcan trajectory has only $rows rows"
