@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <functional>
 #include <cmath>
@@ -36,6 +37,9 @@ using controller::PlatformLoop;
 constexpr int kExitOk = 0, kExitUsage = 2, kExitRuntime = 3;
 constexpr auto kConnectTimeout = std::chrono::seconds(10);
 constexpr int kGrantTimeoutMs = 60'000;
+// The end of a run (wall clock, or a signal in lockstep): this long for every servo to answer
+// SV_OFF and DISCONNECT.
+constexpr SimTime kShutdownNs = 100'000'000;
 constexpr int kRtPriority = 40;
 
 struct RuntimeFailure {
@@ -94,6 +98,22 @@ class Runner {
   const std::optional<std::string>& failure() const { return failure_; }
   bool finished() const { return finished_; }
   bool halted() const { return halted_; }
+
+  // The end of the run: the platform loop no longer runs; every axis to zero speed, SV_OFF and
+  // DISCONNECT, in the exchanges that follow (ServoAxis::shutdown).
+  void shutdown(SimTime t) {
+    stopping_ = true;
+    if (!communicating()) return;
+    spdlog::info("{} shutdown: zero speed, SV_OFF and DISCONNECT to every servo", stamp(t));
+    for (auto& a : axes_) a.shutdown(t);
+  }
+  // The driver exchanges commands with the servos (cyclic or event-driven communication).
+  bool communicating() const { return master_->state() == DriverState::cyclic || master_->state() == DriverState::event; }
+  // Every servo answered DISCONNECT, or none was ever connected (the driver not communicating).
+  bool shut_down() const {
+    if (!communicating()) return true;
+    return std::all_of(axes_.begin(), axes_.end(), [](const ServoAxis& a) { return a.step() == AxisStep::released; });
+  }
 
   // The program's state for --stats: failed | stopped | finished | running | starting.
   std::string state() const {
@@ -237,7 +257,7 @@ class Runner {
     return true;
   }
   void platform(SimTime t) {
-    if (failed() || halted_) return;
+    if (failed() || halted_ || stopping_) return;
     if (!loop_) return supervise_axes(t);
     if (!started_ && !begin(t)) return;
     if (const int k = lost_axis(); k >= 0) return halt(k, t);
@@ -266,29 +286,58 @@ class Runner {
   std::vector<int> misses_;  // per axis: cycles (exchanges) since its last fresh response
   std::vector<SimTime> requested_;  // event-driven: when each axis's exchange was requested
   std::array<double, 4> ref_per_s_{}, target_{};
-  bool started_ = false, finished_ = false, halted_ = false;
+  bool started_ = false, finished_ = false, halted_ = false, stopping_ = false;
   int lost_axis_ = -1;
   SimTime start_ns_ = 0, origin_ = -1;
   std::optional<std::string> failure_;
 };
 
-// Lockstep: one Grant per transmission cycle, every frame met with Sent/Horizon.
+void log_shutdown(const Runner& r) {
+  if (r.shut_down()) {
+    spdlog::info("shutdown: every servo off and disconnected");
+    return;
+  }
+  for (int k = 0; k < r.master().slaves(); ++k)
+    if (r.axis(k).step() != AxisStep::released)
+      spdlog::warn("shutdown: axis {} not disconnected within {} ms (step {})", k + 1, kShutdownNs / 1'000'000,
+                   to_string(r.axis(k).step()));
+}
+
+// Lockstep: one Grant per transmission cycle, every frame met with Sent/Horizon, until the
+// twin ends the run (End) or a failure (throws). SIGINT/SIGTERM ends it as the end of a
+// wall-clock run does, in the ticks the twin still grants (kShutdownNs of simulated time at
+// most): every servo to zero speed, SV_OFF and DISCONNECT; an End or the twin gone meanwhile
+// ends it at once (no simulated time is left to send in), as does a second signal.
 int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
   simclock::Client& client = ls.clock();
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
-  bool started = false;
+  bool started = false, stopping = false;
+  SimTime stop_from = -1;  // the first tick of the shutdown
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
     pollfd fds[2] = {{client.fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
     const int pr = ::poll(fds, 2, kGrantTimeoutMs);
     if (pr == 0) throw RuntimeFailure{"sim clock: no grant within 60 s"};
-    if (pr > 0 && (fds[1].revents & POLLIN) && controller::signalled(sigfd)) return kExitOk;
+    if (pr > 0 && (fds[1].revents & POLLIN) && controller::signalled(sigfd)) {
+      if (stopping || !started) {
+        if (stopping) spdlog::warn("shutdown: a second signal: ending without it");
+        return kExitOk;
+      }
+      stopping = true;
+      spdlog::info("signal: SV_OFF and DISCONNECT to every servo in the ticks the twin grants");
+      continue;
+    }
     const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+    if (w == simclock::WaitStatus::closed && stopping) {
+      spdlog::warn("shutdown: the twin ended the run before every servo answered DISCONNECT");
+      return kExitOk;
+    }
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     if (!started) r.start(g.t_ns), started = true;
+    if (stopping && stop_from < 0) r.shutdown(stop_from = g.t_ns);
     ls.begin_tick(g);
     r.master().advance(g.t_ns);
     r.event_tick(g.t_ns);
@@ -296,11 +345,17 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
       throw RuntimeFailure{fmt::format("tick {}: the twin stopped answering inside the tick ({})", g.tick, simclock::to_string(st))};
     simclock::Done done{g.tick, {ls.frames_sent(), 0, 0, 0}, r.report()};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+    if (stopping && (r.shut_down() || g.t_ns + cycle_ns - stop_from >= kShutdownNs)) {
+      if (r.communicating()) log_shutdown(r);
+      return kExitOk;
+    }
   }
 }
 
 // Wall clock: the core's next deadline is waited for on the transport; frames are handed over
-// as they arrive. A driver that failed detection (the twin not up yet) starts again.
+// as they arrive. A driver that failed detection (the twin not up yet) starts again. At the end
+// (--duration, SIGINT/SIGTERM) every servo to zero speed, SV_OFF and DISCONNECT, the exchanges
+// going on until every servo answered or kShutdownNs is over.
 int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::function<std::unique_ptr<Runner>()>& make,
              std::unique_ptr<Runner>& r, M3Transport& tr, int sigfd, std::uint64_t& rx) {
   controller::try_realtime(kRtPriority);
@@ -310,17 +365,9 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
   r->start(0);
   const SimTime tick = std::llround(pc.cycle * 1e9);
   SimTime next_tick = 0;
-  for (;;) {
-    SimTime now = controller::monotonic_ns() - start;
-    if (controller::signalled(sigfd) || now >= end) break;
-    if (r->master().state() == DriverState::failed) {
-      if (static_cast<double>(now) * 1e-9 > pc.startup_timeout) return kExitRuntime;
-      spdlog::warn("{} driver failed ({}); starting again in 20 ms", stamp(now), r->master().why());
-      ::usleep(20'000);  // the twin may not be up yet: the whole driver sequence again
-      r = make();
-      r->start(controller::monotonic_ns() - start);
-      continue;
-    }
+  // One wait on the transport, until the core's next deadline or the next event-driven tick
+  // (10 ms at most), then the frame that came and everything due.
+  auto serve = [&](SimTime now) {
     if (pc.event_driven && now >= next_tick) {
       r->event_tick(now);
       next_tick += tick * (1 + (now - next_tick) / tick);
@@ -333,6 +380,26 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
     if (n > 0) ++rx;
     if (n > 0) r->master().on_frame(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), now);
     r->master().advance(now);
+  };
+  for (;;) {
+    const SimTime now = controller::monotonic_ns() - start;
+    if (controller::signalled(sigfd) || now >= end) break;
+    if (r->master().state() == DriverState::failed) {
+      if (static_cast<double>(now) * 1e-9 > pc.startup_timeout) return kExitRuntime;
+      spdlog::warn("{} driver failed ({}); starting again in 20 ms", stamp(now), r->master().why());
+      ::usleep(20'000);  // the twin may not be up yet: the whole driver sequence again
+      r = make();
+      r->start(controller::monotonic_ns() - start);
+      continue;
+    }
+    serve(now);
+  }
+  const SimTime stop_from = controller::monotonic_ns() - start;
+  if (r->communicating()) {
+    r->shutdown(stop_from);
+    for (SimTime now = stop_from; !r->shut_down() && now - stop_from < kShutdownNs; now = controller::monotonic_ns() - start)
+      serve(now);
+    log_shutdown(*r);
   }
   return r->failed() ? kExitRuntime : kExitOk;
 }

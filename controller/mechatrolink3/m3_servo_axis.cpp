@@ -61,7 +61,8 @@ void ServoAxis::go(AxisStep next, SimTime t) {
 // Whether the response answers command c as accepted; a CMD_ALM alarm in start-up fails the axis.
 bool ServoAxis::accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t) {
   if (rsp[0] != static_cast<std::uint8_t>(c)) return false;  // not yet the answer to this command
-  if (!is_alarm(stat_.cmd_alm)) return true;
+  // The shut-down goes on whatever the answer: a slave that refused SV_OFF is still disconnected.
+  if (!is_alarm(stat_.cmd_alm) || stopping_) return true;
   if (c == Command::connect && stat_.cmd_alm == CmdAlarm::phase_error) {
     // Already connected: an earlier CONNECT of ours took effect but its answers were lost.
     // DISCONNECT and connect again rather than give up.
@@ -104,15 +105,32 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
         }
         break;
       case AxisStep::running:
-        if (stopping_) go(AxisStep::sv_off, t);
+        if (stop_written_) go(AxisStep::sv_off, t);  // the zero-speed command was answered
         break;
       case AxisStep::sv_off: go(AxisStep::release, t); break;
       case AxisStep::release: go(AxisStep::released, t); break;
       default: break;
     }
     if (step_ == AxisStep::params && cfg_.params.empty()) go(AxisStep::sens_on, t);
+    if (step_ == AxisStep::running && anchor_) position_ = apos_, anchor_ = false;
   }
   write(cmd);
+  if (stopping_ && step_ == AxisStep::running && !anchor_) stop_written_ = true;
+}
+
+void ServoAxis::shutdown(SimTime t) {
+  if (stopping_) return;
+  stopping_ = true;
+  hold();
+  switch (step_) {
+    case AxisStep::disconnect:
+    case AxisStep::connect: return go(AxisStep::release, t);  // not connected (yet): DISCONNECT is all
+    case AxisStep::running:
+    case AxisStep::sv_off:
+    case AxisStep::release:
+    case AxisStep::released: return;  // running: one zero-speed command answered first
+    default: return go(AxisStep::sv_off, t);  // start-up, a recovery, a failed start-up
+  }
 }
 
 // A slave back in phase 1 is connected again; a servo that went off while running, or a

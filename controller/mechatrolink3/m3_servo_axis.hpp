@@ -24,6 +24,10 @@
 // recoveries().
 // A step moves on when the response echoes its command with CMD_ALM normal (and, for SV_ON,
 // CMDRDY and SVCMD_STAT.SV_ON); a response that is not fresh leaves the step where it is.
+// Shut-down (shutdown()): a running axis first has one command at zero speed answered (INTERPOLATE:
+// its target held where the servo is), then SV_OFF and DISCONNECT; an axis in start-up goes to
+// SV_OFF at once, one not connected yet to DISCONNECT; the answers move on whatever their CMD_ALM.
+// After hold() the INTERPOLATE target follows the APOS of the servo's next fresh response.
 // Real-time safe after construction, except the log callback it is given.
 #pragma once
 
@@ -61,7 +65,11 @@ class ServoAxis {
   void on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std::span<std::uint8_t> cmd, SimTime t);
   void set_velocity(std::int32_t ref_per_s) { velocity_ = ref_per_s; }
   void set_position(std::int32_t ref, std::int32_t vff_ref_per_s) { position_ = ref; vff_ = vff_ref_per_s; }
-  void shutdown() { stopping_ = true; }
+  // Zero speed; the INTERPOLATE target becomes the APOS of the next fresh response (the wheel
+  // held where it is, not where a response of many cycles ago said it was).
+  void hold() { velocity_ = 0, vff_ = 0, anchor_ = true; }
+  // The end of the run: zero speed, then SV_OFF and DISCONNECT (see above) until released().
+  void shutdown(SimTime t);
 
   AxisStep step() const { return step_; }
   const std::string& why() const { return why_; }
@@ -83,6 +91,8 @@ class ServoAxis {
   AxisStep step_ = AxisStep::disconnect;
   std::size_t param_ = 0;
   bool stopping_ = false, recovering_ = false;
+  bool stop_written_ = false;  // shutting down: the zero-speed command was written
+  bool anchor_ = false;        // the INTERPOLATE target follows the next fresh APOS
   int recoveries_ = 0;
   std::int32_t velocity_ = 0, position_ = 0, vff_ = 0, apos_ = 0, fspd_ = 0;
   CmdStat stat_;

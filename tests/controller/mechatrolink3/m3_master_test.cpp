@@ -182,8 +182,8 @@ TEST(M3Master, FourServosStartAsFigure8SaysAndTurnAtTheCommandedSpeed) {
     at = rig.find(step, at);
     ASSERT_LT(at, rig.log.size()) << "missing or out of order: " << step;
   }
-  // Shut-down: SV_OFF, then DISCONNECT.
-  for (auto& a : rig.apps) a.shutdown();
+  // Shut-down: zero speed, SV_OFF, then DISCONNECT.
+  for (auto& a : rig.apps) a.shutdown(rig.now);
   rig.run_until(1600 * kMs);
   for (int k = 0; k < 4; ++k) {
     EXPECT_EQ(rig.apps[static_cast<std::size_t>(k)].step(), AxisStep::released);

@@ -55,12 +55,51 @@ TEST(M3ServoAxis, WalksFigure8AndRunsTheSetPoint) {
   EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::velctrl);
   EXPECT_EQ(axis.step(), AxisStep::running);
   EXPECT_EQ(get_i32(cmd, 16), 1234);
-  axis.shutdown();
-  EXPECT_EQ(next(), Command::sv_off);
+  axis.shutdown(0);
+  EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::velctrl) << "zero speed first";
+  EXPECT_EQ(get_i32(cmd, 16), 0);
+  EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::sv_off);
   EXPECT_EQ(next(), Command::disconnect);
   next();
   EXPECT_EQ(axis.step(), AxisStep::released);
   EXPECT_NE(std::find(log.begin(), log.end(), "axis 1: SENS_ON"), log.end());
+}
+
+// The end of the run in the middle of the start-up: an axis not connected yet is only
+// disconnected, one connected goes to SV_OFF at once; an alarm in the answers does not stop
+// the shut-down (a slave that refuses SV_OFF is still disconnected).
+TEST(M3ServoAxis, AShutDownDuringStartUpSwitchesOffAndDisconnectsWhateverTheAnswers) {
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  ServoAxis fresh("axis 1", ServoAxisConfig{});
+  fresh.on_interrupt(rsp, false, cmd, 0);
+  rsp = answer(cmd);
+  fresh.on_interrupt(rsp, true, cmd, 0);  // DISCONNECT accepted → CONNECT
+  fresh.shutdown(0);
+  rsp = answer(cmd);
+  fresh.on_interrupt(rsp, true, cmd, 0);  // the answer to CONNECT: not yet the DISCONNECT's
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::disconnect);
+  rsp = answer(cmd);
+  fresh.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(fresh.step(), AxisStep::released);
+
+  ServoAxis axis("axis 2", ServoAxisConfig{});
+  axis.on_interrupt(rsp, false, cmd, 0);
+  for (int i = 0; i < 3; ++i) {  // DISCONNECT, CONNECT, SYNC_SET → ID_RD
+    rsp = answer(cmd);
+    axis.on_interrupt(rsp, true, cmd, 0);
+  }
+  ASSERT_EQ(axis.step(), AxisStep::id_rd);
+  axis.shutdown(0);
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::sv_off);
+  rsp = answer(cmd, CmdStat{.cmd_alm = CmdAlarm::phase_error});
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::disconnect) << axis.why();
+  rsp = answer(cmd);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(axis.step(), AxisStep::released);
+  EXPECT_EQ(axis.recoveries(), 0) << "a phase error while shutting down is no reason to reconnect";
 }
 
 TEST(M3ServoAxis, ACommandAlarmDuringStartUpFailsTheAxis) {
