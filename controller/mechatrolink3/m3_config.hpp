@@ -36,7 +36,8 @@ struct M3ProgramConfig {
   std::size_t data_bytes = 32;          // 32 or 48 (subcommands); 64 when event-driven
   // Event-driven communication instead of cyclic: no SYNC, the servos stay in phase 2, and
   // the program asks for one exchange per axis every `cycle` (its tick), each answered within
-  // the 50 ms limit or retried by the driver. VELCTRL only (INTERPOLATE needs phase 3).
+  // the servo's T_RSP (at most 50 ms) or retried by the driver; lost_cycles counts these ticks.
+  // VELCTRL only (INTERPOLATE needs phase 3).
   bool event_driven = false;
   double response_us = 2.0;             // each slave's response time allowed for [µs]
   double margin_us = 1.0;               // added to every T_RSP [µs]

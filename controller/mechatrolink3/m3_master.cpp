@@ -96,8 +96,16 @@ void C1Master::next_station(SimTime t) {
   if (cfg_.event_driven) {
     for (const MasterSlave& c : cfg_.slaves)
       if (c.data_bytes != kMaxData) return fail(t, fmt::format("event-driven data is 64 bytes, slave {:02X}h has {}", c.address, c.data_bytes));
-    log(t, "communication parameters: event-driven (no transmission cycle, response limit " +
-               std::to_string(cfg_.event_timeout_ns / 1'000'000) + " ms)");
+    // Fig. 6: each slave answers within its own response time, 50 ms at most: T_RSP from its
+    // measured TR_DLY, as in cyclic communication, capped at the limit. A silent slave then
+    // holds the line for its three attempts of T_RSP, not of 50 ms.
+    const CyclePlan p = plan();
+    for (int k = 0; k < slaves(); ++k)
+      slave_[static_cast<std::size_t>(k)].t_rsp = std::min(p.t_rsp_ns[static_cast<std::size_t>(k)], cfg_.event_timeout_ns);
+    log(t, fmt::format("communication parameters: event-driven (no transmission cycle; each slave answers within its "
+                       "T_RSP, at most {} ms)", cfg_.event_timeout_ns / 1'000'000));
+    for (int k = 0; k < slaves(); ++k)
+      log(t, fmt::format("  station {:02X}h T_RSP {} ns", address(k), slave_[static_cast<std::size_t>(k)].t_rsp));
     state_ = DriverState::start;
     send(FrameType::comm_start, kBroadcast, std::array<std::uint8_t, 8>{2}, t);
     log(t, "communication start: event-driven");
@@ -137,7 +145,7 @@ void C1Master::finish_setup_exchange(SimTime t, bool answered) {
 }
 
 // Seed 000 fig. 10: T_RSP per station and INT_OFFSET from the measured delays.
-bool C1Master::compute_params(SimTime t) {
+CyclePlan C1Master::plan() const {
   std::vector<SimTime> tr;
   std::vector<StationTiming> st;
   for (int k = 0; k < slaves(); ++k) {
@@ -145,7 +153,11 @@ bool C1Master::compute_params(SimTime t) {
     const MasterSlave& c = cfg_.slaves[static_cast<std::size_t>(k)];
     st.push_back(StationTiming{.data_bytes = c.data_bytes, .response_ns = c.response_ns});
   }
-  const CyclePlan p = plan_cycle(tr, st, cfg_.retry_slots, cfg_.margin_ns, cfg_.software_ns);
+  return plan_cycle(tr, st, cfg_.retry_slots, cfg_.margin_ns, cfg_.software_ns);
+}
+
+bool C1Master::compute_params(SimTime t) {
+  const CyclePlan p = plan();
   for (int k = 0; k < slaves(); ++k) slave_[static_cast<std::size_t>(k)].t_rsp = p.t_rsp_ns[static_cast<std::size_t>(k)];
   int_offset_ = p.int_offset_ns;
   min_cycle_ = p.min_cycle_ns;
@@ -243,7 +255,7 @@ void C1Master::event_send(int k, SimTime t, bool retry) {
   send(FrameType::event_command, cfg_.slaves[static_cast<std::size_t>(k)].address, command(k), t, retry);
   if (retry) ++s.counters.retries;
   else ++s.counters.exchanges;
-  pending_ = Pending{k, FrameType::event_response, t, t + cfg_.event_timeout_ns};
+  pending_ = Pending{k, FrameType::event_response, t, t + s.t_rsp};
   pending_retry_ = retry;
   wake_ = pending_.deadline;
 }

@@ -18,10 +18,12 @@
 //               the interrupt hands the response buffer to the application
 //   event       event-driven communication (config.event_driven; no SYNC, no cycle): the
 //               application requests an exchange with one slave (request()); the master
-//               sends EVT_CMD (64 bytes) and waits up to event_timeout (seed 000: 50 ms) for
-//               EVT_RSP, retrying event_retries times (retries are the driver's job here),
-//               one exchange on the line at a time, requests queued in order; each slave's
-//               requests carry sequence numbers of their own (a retry repeats the number)
+//               sends EVT_CMD (64 bytes) and waits for EVT_RSP the slave's own response time
+//               (fig. 6): T_RSP(k) from its measured TR_DLY as in cyclic communication, at most
+//               event_timeout (seed 000: a slave answers within 50 ms), retrying event_retries
+//               times (retries are the driver's job here), one exchange on the line at a time,
+//               requests queued in order (a silent slave holds the line 3 × T_RSP, µs); each
+//               slave's requests carry sequence numbers of their own (a retry repeats the number)
 //   failed      a detected slave missing, a configuration that does not fit: why() says
 //
 // Protocol core: frames and simulated time in, frames out through a callback, no sockets, no
@@ -56,7 +58,7 @@ struct MasterConfig {
   SimTime software_ns = 100'000;   // the application's time after INT_OFFSET
   SimTime detect_timeout_ns = 100'000;  // per station, detection and delay measurement
   bool event_driven = false;            // event-driven instead of cyclic (data_bytes must be 64)
-  SimTime event_timeout_ns = 50'000'000;  // seed 000: a slave answers within 50 ms
+  SimTime event_timeout_ns = 50'000'000;  // seed 000: a slave answers within 50 ms (caps T_RSP)
   int event_retries = 2;
 };
 
@@ -129,6 +131,7 @@ class C1Master {
   void send(FrameType type, std::uint8_t dst, std::span<const std::uint8_t> data, SimTime t, bool retry = false);
   void next_station(SimTime t);
   void finish_setup_exchange(SimTime t, bool answered);
+  CyclePlan plan() const;
   bool compute_params(SimTime t);
   void begin_cycle(SimTime t);
   void poll_next(SimTime t);

@@ -63,6 +63,7 @@ class Runner {
       axes_.emplace_back(fmt::format("axis {} ({:02X}h)", i + 1, stations[i]), ac,
                          [](SimTime t, const std::string& s) { spdlog::info("{} {}", stamp(t), s); });
     misses_.assign(stations.size(), 0);
+    answered_.assign(stations.size(), false);
     requested_.assign(stations.size(), 0);
     master_ = std::make_unique<C1Master>(
         make_master_config(pc), std::move(emit), [this](std::uint64_t n, SimTime t) { on_interrupt(n, t); },
@@ -77,10 +78,17 @@ class Runner {
   }
 
   C1Master& master() { return *master_; }
-  // Event-driven: each tick the platform loop, then one exchange requested per axis (the
-  // driver queues them and runs one at a time). Cyclic communication needs none of this.
+  // Event-driven: each tick (one cycle) the misses, the platform loop, then one exchange
+  // requested per axis (the driver queues them and runs one at a time). An axis whose last
+  // cycle brought no fresh response misses one more, whether its exchange failed or is still
+  // under way: lost_cycles counts cycles, as in cyclic communication, not exchanges (a silent
+  // slave's exchange lasts three attempts). Cyclic communication needs none of this.
   void event_tick(SimTime t) {
     if (!pc_.event_driven || master_->state() != DriverState::event) return;
+    for (std::size_t i = 0; i < axes_.size(); ++i) {
+      misses_[i] = answered_[i] ? 0 : misses_[i] + 1;
+      answered_[i] = false;
+    }
     platform(t);
     for (int k = 0; k < static_cast<int>(axes_.size()); ++k) {
       requested_[static_cast<std::size_t>(k)] = t;
@@ -188,7 +196,7 @@ class Runner {
   // Event-driven: axis k's exchange ended (ok: its response came) latency after its request.
   void on_exchange(int k, bool ok, SimTime latency) {
     const auto i = static_cast<std::size_t>(k);
-    misses_[i] = ok ? 0 : misses_[i] + 1;
+    answered_[i] = answered_[i] || ok;
     axes_[i].on_interrupt(master_->response(k), ok, master_->command(k), requested_[i] + latency);
   }
 
@@ -283,7 +291,8 @@ class Runner {
   std::optional<PlatformLoop> loop_;
   controller::PlatformLoopOutput out_;
   std::int64_t every_ = 1, n_ = 0;
-  std::vector<int> misses_;  // per axis: cycles (exchanges) since its last fresh response
+  std::vector<int> misses_;  // per axis: cycles since its last fresh response
+  std::vector<bool> answered_;  // event-driven: a fresh response came this cycle
   std::vector<SimTime> requested_;  // event-driven: when each axis's exchange was requested
   std::array<double, 4> ref_per_s_{}, target_{};
   bool started_ = false, finished_ = false, halted_ = false, stopping_ = false;
