@@ -222,12 +222,15 @@ class Runner {
       if (misses_[static_cast<std::size_t>(k)] >= pc_.lost_cycles || axis(k).step() != AxisStep::running) return k;
     return -1;
   }
+  // Stops the platform for good: every wheel to zero speed, each held where its next response
+  // says it is (INTERPOLATE: the APOS of now, not of the lost_cycles old responses it may have).
   void halt(int k, SimTime t) {
     halted_ = true;
     lost_axis_ = k;
     const controller::WheelCounts c = counts();
     for (std::size_t i = 0; i < 4; ++i) target_[i] = c[i];
     command({0, 0, 0, 0});
+    for (auto& a : axes_) a.hold();
     spdlog::error("{} {} stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero", stamp(t),
                   loop_ ? "platform loop" : "servos", k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
   }

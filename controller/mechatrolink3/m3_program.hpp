@@ -15,11 +15,11 @@
 // At the cyclic interrupt (INT_OFFSET) the axes read their responses and write their next
 // commands; once every servo is on, the platform loop runs every loop period. A servo that
 // stops answering (lost_cycles without a fresh response) or leaves operation stops the
-// platform for good (every wheel commanded to zero); the axis itself reconnects when its
-// slave returns (ServoAxis recovery). The end of a run (--duration, SIGINT/SIGTERM; in lockstep a
-// signal, in the ticks the twin still grants) takes every servo to zero speed, SV_OFF and
-// DISCONNECT (fig. 8's end), waiting at most 100 ms for the answers; an End from the twin ends
-// a lockstep run at once. Exit codes as omni-master: 0 normal end, 2 usage,
+// platform for good (every wheel commanded to zero, held where it is); the axis itself
+// reconnects when its slave returns (ServoAxis recovery). The end of a run (--duration,
+// SIGINT/SIGTERM; in lockstep a signal, in the ticks the twin still grants) takes every servo
+// to zero speed, SV_OFF and DISCONNECT (fig. 8's end), waiting at most 100 ms for the answers;
+// an End from the twin ends a lockstep run at once. Exit codes as omni-master: 0 normal end, 2 usage,
 // configuration or transport spec, 3 runtime failure (the driver failed, the twin vanished).
 #pragma once
 

@@ -101,6 +101,7 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
       case AxisStep::sv_on:
         if (stat_.cmdrdy && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) != 0) {
           recovering_ = false;
+          vff_ = 0, anchor_ = true;  // INTERPOLATE from where the servo stands, not from an old target
           go(AxisStep::running, t);
         }
         break;

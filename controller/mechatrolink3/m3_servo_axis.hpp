@@ -27,7 +27,9 @@
 // Shut-down (shutdown()): a running axis first has one command at zero speed answered (INTERPOLATE:
 // its target held where the servo is), then SV_OFF and DISCONNECT; an axis in start-up goes to
 // SV_OFF at once, one not connected yet to DISCONNECT; the answers move on whatever their CMD_ALM.
-// After hold() the INTERPOLATE target follows the APOS of the servo's next fresh response.
+// INTERPOLATE targets follow the servo's APOS (its latest fresh response) when the axis enters
+// running (at start-up and after a recovery) and after hold(), so a servo switched on again, or
+// held, stays where it is instead of driving to a target of many cycles before.
 // Real-time safe after construction, except the log callback it is given.
 #pragma once
 

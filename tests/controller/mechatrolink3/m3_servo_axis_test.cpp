@@ -178,5 +178,39 @@ TEST(M3ServoAxis, PositionModeSendsInterpolate) {
   EXPECT_EQ(get_i32(cmd, 20), 11);
 }
 
+// INTERPOLATE after a recovery: the servo lost power while running to target 100000 and was
+// switched on again where it stood (APOS 98826). Its first INTERPOLATE holds it there, not
+// at the target it had before (a 1174-count step back, and a stopped platform that moved);
+// after hold() the target follows the next response's APOS too.
+TEST(M3ServoAxis, InterpolateTargetsFollowTheServoWhenItIsSwitchedOnAgainAndWhenHeld) {
+  ServoAxis axis("axis 4", ServoAxisConfig{.com_tim = 1, .position_mode = true, .params = {}});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  auto next = [&](std::int32_t apos, CmdStat st = {}, std::uint32_t svstat = 1u << 13) {
+    rsp = answer(cmd, st, svstat);
+    put_i32(rsp, 12, apos);
+    axis.on_interrupt(rsp, true, cmd, 0);
+    return static_cast<Command>(cmd[0]);
+  };
+  axis.on_interrupt(rsp, false, cmd, 0);
+  for (int i = 0; i < 10 && axis.step() != AxisStep::running; ++i) next(5000);
+  ASSERT_EQ(axis.step(), AxisStep::running) << axis.why();
+  EXPECT_EQ(get_i32(cmd, 16), 5000) << "the first INTERPOLATE holds the servo where it is";
+  axis.set_position(100000, 2000);
+  EXPECT_EQ(next(99000), Command::interpolate);
+  EXPECT_EQ(get_i32(cmd, 16), 100000);
+  ASSERT_EQ(next(0, CmdStat{.cmd_alm = CmdAlarm::phase_error}, 0), Command::disconnect) << "power lost: recovering";
+  for (int i = 0; i < 10 && axis.step() != AxisStep::running; ++i) next(98826);
+  ASSERT_EQ(axis.step(), AxisStep::running) << axis.why();
+  EXPECT_EQ(static_cast<Command>(cmd[0]), Command::interpolate);
+  EXPECT_EQ(get_i32(cmd, 16), 98826) << "switched on again: held where it stands, not driven to 100000";
+  EXPECT_EQ(get_i32(cmd, 20), 0) << "no feed-forward";
+  axis.set_position(120000, 2000);
+  next(98900);
+  axis.hold();
+  EXPECT_EQ(next(99100), Command::interpolate);
+  EXPECT_EQ(get_i32(cmd, 16), 99100) << "held at the APOS of the next response";
+  EXPECT_EQ(get_i32(cmd, 20), 0);
+}
+
 }  // namespace
 }  // namespace omnitwin::m3
