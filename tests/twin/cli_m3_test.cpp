@@ -152,7 +152,8 @@ TEST_F(CliM3, AnUnopenableTransportIsRefused) {
 
 // `omnitwin twin --bus m3` and `omni-master --bus m3` started by hand, both on the wall clock:
 // the master finds the four servos, measures the line (the transport's round trip included)
-// and brings every servo into operation.
+// and brings every servo into operation; at the end of --duration it switches each off and
+// disconnects it (SV_OFF, DISCONNECT).
 TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   const std::string iface = "udp:127.0.0.1:47711";
   Child twin({"twin", test_scenario("m3_short.yaml"), "--bus", "m3", "--set", "bus.transport=" + iface, "--set",
@@ -171,8 +172,9 @@ TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
   EXPECT_EQ(s.at("driver_state"), "cyclic communication") << s.dump(2);
   EXPECT_GT(s.at("cycles").get<int>(), 1000);
+  EXPECT_EQ(s.at("state"), "running") << "every servo in operation, none lost: " << s.dump(2);
   for (const auto& sl : s.at("slaves")) {
-    EXPECT_EQ(sl.at("axis_step"), "running") << s.dump(2);
+    EXPECT_EQ(sl.at("axis_step"), "released") << s.dump(2);
     EXPECT_GT(sl.at("tr_dly_ns").get<int>(), 1000) << "across processes the round trip is microseconds";
   }
 }
