@@ -319,25 +319,25 @@ TEST_F(M3Servo, SubcommandsReadMonitorsParametersAndAlarms) {
   EXPECT_EQ(servo.execute_sub(Command::mem_rd, alm, out), CmdAlarm::unsupported);
 }
 
-// Seed 000 fig. 8 through the slave link: DISCONNECT, CONNECT, ID_RD, SVPRM_WR, SENS_ON,
-// SV_ON, a motion command, SV_OFF, DISCONNECT; every response normal, phase 3 in between.
-TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
-  ServoProfile servo(config());
-  drive::AxisModel axis;
-  std::vector<std::vector<std::uint8_t>> sent;
-  SlaveLink link(LinkConfig{.address = 0x03}, servo,
-                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
-  SimTime t = 0;
-  std::uint8_t wdt = 0;
-  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
+// One servo behind its slave link at station 03h, driven one communication cycle at a time as
+// a master would drive it.
+struct LinkRig {
+  LinkRig() = default;
+  LinkRig(const LinkRig&) = delete;  // the link's callback holds `this`
+  LinkRig& operator=(const LinkRig&) = delete;
+
+  // One frame of `type` to `dst` at the rig's time.
+  void frame(FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
     std::vector<std::uint8_t> b(kMaxFrame);
     b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
     link.on_frame(b, t);
-  };
-  // One communication cycle: sync, the command, 1 ms of drive periods; returns CMD_STAT.
-  auto exchange = [&](std::vector<std::uint8_t> c) {
+  }
+  // One 1 ms cycle: SYNC, the command with the next WDT count (`advance` false repeats the last
+  // one: a WDT error in phase 3), the drive's periods; the response's data in `last`, its
+  // CMD_STAT returned.
+  CmdStat exchange(std::vector<std::uint8_t> c, bool advance = true) {
     frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
-    wdt = static_cast<std::uint8_t>(wdt + 0x10);
+    if (advance) wdt = static_cast<std::uint8_t>(wdt + 0x10);
     c[1] = wdt;
     frame(FrameType::cyclic_command, c, 0x03);
     axis.step(servo.step(t, axis.feedback()), 1e-3);
@@ -346,13 +346,48 @@ TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
     FrameView v;
     EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
     EXPECT_EQ(v.data[0], c[0]) << "RCMD";
+    last.assign(v.data.begin(), v.data.end());
     return unpack_stat(get_u16(v.data, 2));
-  };
-  link.power_on(0);
-  std::vector<std::uint8_t> notify(16, 0);
-  put_i32(notify, 0, 1'000'000);
-  frame(FrameType::cycle_notify, notify, kBroadcast);
-  frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);
+  }
+  // Power on and a 1 ms cycle notified.
+  void start() {
+    link.power_on(0);
+    std::vector<std::uint8_t> notify(16, 0);
+    put_i32(notify, 0, 1'000'000);
+    frame(FrameType::cycle_notify, notify, kBroadcast);
+  }
+  // CONNECT (profile version, synchronous, 1 cycle, profile 10h) and SYNC_SET, both answered
+  // normally.
+  void connect() {
+    auto con = cmd(Command::connect);
+    con[4] = kServoProfileVersion;
+    con[5] = kComModSync;
+    con[6] = 1;
+    con[7] = 0x10;
+    EXPECT_EQ(exchange(con).cmd_alm, CmdAlarm::normal);
+    EXPECT_EQ(exchange(cmd(Command::sync_set)).cmd_alm, CmdAlarm::normal);
+  }
+
+  ServoProfile servo{config()};
+  drive::AxisModel axis;
+  std::vector<std::vector<std::uint8_t>> sent;
+  SlaveLink link{LinkConfig{.address = 0x03}, servo,
+                 [this](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); }};
+  SimTime t = 0;
+  std::uint8_t wdt = 0;
+  std::vector<std::uint8_t> last;  // the last response's data
+};
+
+// Seed 000 fig. 8 through the slave link: DISCONNECT, CONNECT, ID_RD, SVPRM_WR, SENS_ON,
+// SV_ON, a motion command, SV_OFF, DISCONNECT; every response normal, phase 3 in between.
+TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
+  LinkRig r;
+  ServoProfile& servo = r.servo;
+  const drive::AxisModel& axis = r.axis;
+  const SlaveLink& link = r.link;
+  auto exchange = [&](std::vector<std::uint8_t> c) { return r.exchange(std::move(c)); };
+  r.start();
+  r.frame(FrameType::comm_start, std::vector<std::uint8_t>(8, 0), kBroadcast);
   EXPECT_EQ(exchange(cmd(Command::disconnect)).cmd_alm, CmdAlarm::normal);
   auto con = cmd(Command::connect);
   con[4] = kServoProfileVersion;
@@ -389,46 +424,12 @@ TEST(M3ServoOverTheLink, TheServoStartUpSequenceOfFigure8) {
 // from CONNECT → SENS_ON → SV_ON again. The encoder is off, POS_SET's offset and the home
 // (ZPOINT) gone, and SV_ON without SENS_ON is a condition error.
 TEST(M3ServoOverTheLink, DisconnectForgetsTheEncoderAndThePositionSoSvOnNeedsSensOnAgain) {
-  ServoProfile servo(config());
-  drive::AxisModel axis;
-  std::vector<std::vector<std::uint8_t>> sent;
-  SlaveLink link(LinkConfig{.address = 0x03}, servo,
-                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
-  SimTime t = 0;
-  std::uint8_t wdt = 0;
-  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
-    std::vector<std::uint8_t> b(kMaxFrame);
-    b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
-    link.on_frame(b, t);
-  };
-  std::vector<std::uint8_t> last;
-  auto exchange = [&](std::vector<std::uint8_t> c) {
-    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
-    wdt = static_cast<std::uint8_t>(wdt + 0x10);
-    c[1] = wdt;
-    frame(FrameType::cyclic_command, c, 0x03);
-    axis.step(servo.step(t, axis.feedback()), 1e-3);
-    t += 1'000'000;
-    link.advance(t);
-    FrameView v;
-    EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
-    last.assign(v.data.begin(), v.data.end());
-    return unpack_stat(get_u16(v.data, 2)).cmd_alm;
-  };
-  auto connect = [&] {
-    auto con = cmd(Command::connect);
-    put_u32(con, 4, 0);
-    con[4] = kServoProfileVersion;
-    con[5] = kComModSync;
-    con[6] = 1;
-    con[7] = 0x10;
-    EXPECT_EQ(exchange(con), CmdAlarm::normal);
-    EXPECT_EQ(exchange(cmd(Command::sync_set)), CmdAlarm::normal);
-  };
-  link.power_on(0);
-  std::vector<std::uint8_t> notify(16, 0);
-  put_i32(notify, 0, 1'000'000);
-  frame(FrameType::cycle_notify, notify, kBroadcast);
+  LinkRig r;
+  const ServoProfile& servo = r.servo;
+  const std::vector<std::uint8_t>& last = r.last;
+  auto exchange = [&](std::vector<std::uint8_t> c) { return r.exchange(std::move(c)).cmd_alm; };
+  auto connect = [&] { r.connect(); };
+  r.start();
   connect();
   ASSERT_EQ(exchange(cmd(Command::sens_on)), CmdAlarm::normal);
   ASSERT_EQ(exchange(cmd(Command::sv_on)), CmdAlarm::normal);
@@ -459,43 +460,12 @@ TEST(M3ServoOverTheLink, DisconnectForgetsTheEncoderAndThePositionSoSvOnNeedsSen
 // alarm, cleared by ALM_CLR or CMD_CTRL.ALM_CLR). Until then SV_ON is refused with CMD_ALM Ah
 // and the servo stays off; after ALM_CLR and SYNC_SET it switches on again.
 TEST(M3ServoOverTheLink, AfterAWatchdogAlarmSvOnIsRefusedUntilAlmClr) {
-  ServoProfile servo(config());
-  drive::AxisModel axis;
-  std::vector<std::vector<std::uint8_t>> sent;
-  SlaveLink link(LinkConfig{.address = 0x03}, servo,
-                 [&](std::span<const std::uint8_t> f, SimTime) { sent.emplace_back(f.begin(), f.end()); });
-  SimTime t = 0;
-  std::uint8_t wdt = 0;
-  auto frame = [&](FrameType type, std::vector<std::uint8_t> d, std::uint8_t dst) {
-    std::vector<std::uint8_t> b(kMaxFrame);
-    b.resize(encode(FrameSpec{.dst = dst, .type = type, .data = d}, b));
-    link.on_frame(b, t);
-  };
-  // One communication cycle; `advance`: false repeats the last WDT count (a WDT error in phase 3).
-  auto exchange = [&](std::vector<std::uint8_t> c, bool advance = true) {
-    frame(FrameType::sync, std::vector<std::uint8_t>(8, 0), kBroadcast);
-    if (advance) wdt = static_cast<std::uint8_t>(wdt + 0x10);
-    c[1] = wdt;
-    frame(FrameType::cyclic_command, c, 0x03);
-    axis.step(servo.step(t, axis.feedback()), 1e-3);
-    t += 1'000'000;
-    link.advance(t);
-    FrameView v;
-    EXPECT_EQ(decode(sent.back(), v), FrameStatus::ok);
-    return unpack_stat(get_u16(v.data, 2));
-  };
-  link.power_on(0);
-  std::vector<std::uint8_t> notify(16, 0);
-  put_i32(notify, 0, 1'000'000);
-  frame(FrameType::cycle_notify, notify, kBroadcast);
-  auto con = cmd(Command::connect);
-  put_u32(con, 4, 0);
-  con[4] = kServoProfileVersion;
-  con[5] = kComModSync;
-  con[6] = 1;
-  con[7] = 0x10;
-  ASSERT_EQ(exchange(con).cmd_alm, CmdAlarm::normal);
-  ASSERT_EQ(exchange(cmd(Command::sync_set)).cmd_alm, CmdAlarm::normal);
+  LinkRig r;
+  const ServoProfile& servo = r.servo;
+  const SlaveLink& link = r.link;
+  auto exchange = [&](std::vector<std::uint8_t> c, bool advance = true) { return r.exchange(std::move(c), advance); };
+  r.start();
+  r.connect();
   ASSERT_EQ(exchange(cmd(Command::sens_on)).cmd_alm, CmdAlarm::normal);
   ASSERT_EQ(exchange(cmd(Command::sv_on)).cmd_alm, CmdAlarm::normal);
   for (int k = 0; k < 10; ++k) exchange(cmd(Command::nop));
