@@ -38,6 +38,36 @@ std::int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+// Four of B's CiA 402 drives in one chain, each with its axis model: the slaves of both
+// stand-ins for the twin below.
+struct FourDrives {
+  FourDrives() {
+    for (int i = 0; i < 4; ++i) {
+      omnitwin::ethercat::DriveSlaveConfig sc;
+      sc.serial = static_cast<std::uint32_t>(100 + i);
+      slaves.push_back(std::make_unique<omnitwin::ethercat::DriveSlave>(devices[0], sc));
+      models.emplace_back();
+    }
+    for (auto& s : slaves) chain.add(&s->esc());
+  }
+  // Steps each powered drive's firmware and its axis model one period of `dt_ns` at `t` [ns].
+  void firmware(std::int64_t t, std::int64_t dt_ns) {
+    for (std::size_t i = 0; i < slaves.size(); ++i) {
+      if (!chain.powered(static_cast<int>(i))) continue;
+      const auto cmd = slaves[i]->axis(0).step(t, models[i].feedback());
+      models[i].step(cmd, static_cast<double>(dt_ns) * 1e-9);
+      slaves[i]->cycle(t);
+    }
+  }
+  omnitwin::ethercat::AlState al_state(int i) const { return slaves[static_cast<std::size_t>(i)]->esc().al_state(); }
+  omnitwin::drive::State drive_state(int i) const { return slaves[static_cast<std::size_t>(i)]->axis(0).state(); }
+
+  std::vector<omnitwin::ethercat::DeviceDescription> devices = ecbench::drive_esi();
+  std::vector<std::unique_ptr<omnitwin::ethercat::DriveSlave>> slaves;
+  std::vector<omnitwin::drive::AxisModel> models;
+  omnitwin::ethercat::EscChain chain;
+};
+
 // The slaves' side of `mem:NAME`: four drives, their firmware stepped every millisecond of wall
 // time, each frame through the chain and back. Slave `power_off` (0-based, -1 = none) loses
 // power `power_off_at` [s] after every slave first reached OP (counted from OP, not from the
@@ -50,13 +80,6 @@ class Segment {
         power_off_(power_off),
         power_off_at_ns_(static_cast<std::int64_t>(power_off_at * 1e9)),
         power_back_after_ns_(static_cast<std::int64_t>(power_back_after * 1e9)) {
-    for (int i = 0; i < 4; ++i) {
-      omnitwin::ethercat::DriveSlaveConfig sc;
-      sc.serial = static_cast<std::uint32_t>(100 + i);
-      slaves_.push_back(std::make_unique<omnitwin::ethercat::DriveSlave>(devices_[0], sc));
-      models_.emplace_back();
-    }
-    for (auto& s : slaves_) chain_.add(&s->esc());
     thread_ = std::thread([this] { serve(); });
   }
   ~Segment() { stop(); }
@@ -64,8 +87,8 @@ class Segment {
     run_ = false;
     if (thread_.joinable()) thread_.join();
   }
-  omnitwin::ethercat::AlState al_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->esc().al_state(); }
-  omnitwin::drive::State drive_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->axis(0).state(); }
+  omnitwin::ethercat::AlState al_state(int i) const { return drives_.al_state(i); }
+  omnitwin::drive::State drive_state(int i) const { return drives_.drive_state(i); }
   // When every slave was first in OP [s since the start]; negative: never. Read after stop().
   double op_at() const { return static_cast<double>(op_at_) * 1e-9; }
   bool power_lost() const { return off_at_ >= 0; }
@@ -98,24 +121,16 @@ class Segment {
     }
   }
   bool all_in_op() const {
-    return std::all_of(slaves_.begin(), slaves_.end(),
-                       [](const auto& s) { return s->esc().al_state() == omnitwin::ethercat::AlState::op; });
+    for (int i = 0; i < 4; ++i)
+      if (drives_.al_state(i) != omnitwin::ethercat::AlState::op) return false;
+    return true;
   }
-  void firmware(std::int64_t t) {
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
-      if (!chain_.powered(static_cast<int>(i))) continue;
-      const auto cmd = slaves_[i]->axis(0).step(t, models_[i].feedback());
-      models_[i].step(cmd, static_cast<double>(kCycle) * 1e-9);
-      slaves_[i]->cycle(t);
-    }
-  }
+  void firmware(std::int64_t t) { drives_.firmware(t, kCycle); }
 
   static constexpr std::int64_t kCycle = 1'000'000;
   std::unique_ptr<omnitwin::ethercat::EcTransport> tr_;
-  std::vector<omnitwin::ethercat::DeviceDescription> devices_ = ecbench::drive_esi();
-  std::vector<std::unique_ptr<omnitwin::ethercat::DriveSlave>> slaves_;
-  std::vector<omnitwin::drive::AxisModel> models_;
-  omnitwin::ethercat::EscChain chain_;
+  FourDrives drives_;
+  omnitwin::ethercat::EscChain& chain_ = drives_.chain;
   int power_off_;
   std::int64_t power_off_at_ns_;
   std::int64_t power_back_after_ns_;  // 0: the power stays off
@@ -138,21 +153,14 @@ class LockstepSegment {
         server_(clock),
         signal_after_(signal_after),
         max_ticks_(max_ticks) {
-    for (int i = 0; i < 4; ++i) {
-      omnitwin::ethercat::DriveSlaveConfig sc;
-      sc.serial = static_cast<std::uint32_t>(100 + i);
-      slaves_.push_back(std::make_unique<omnitwin::ethercat::DriveSlave>(devices_[0], sc));
-      models_.emplace_back();
-    }
-    for (auto& s : slaves_) chain_.add(&s->esc());
     thread_ = std::thread([this] { serve(); });
   }
   ~LockstepSegment() { join(); }
   void join() {
     if (thread_.joinable()) thread_.join();
   }
-  omnitwin::ethercat::AlState al_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->esc().al_state(); }
-  omnitwin::drive::State drive_state(int i) const { return slaves_[static_cast<std::size_t>(i)]->axis(0).state(); }
+  omnitwin::ethercat::AlState al_state(int i) const { return drives_.al_state(i); }
+  omnitwin::drive::State drive_state(int i) const { return drives_.drive_state(i); }
   std::int64_t signalled_tick = -1;  // the tick after whose Done SIGINT was sent (-1: never)
   std::int64_t last_tick = -1;       // the last tick the master answered
   bool closed = false;               // the master closed the channel (else max_ticks ended it)
@@ -200,21 +208,13 @@ class LockstepSegment {
     }
     server_.end(max_ticks_ * kCycle);
   }
-  void firmware(std::int64_t t) {
-    for (std::size_t i = 0; i < slaves_.size(); ++i) {
-      const auto cmd = slaves_[i]->axis(0).step(t, models_[i].feedback());
-      models_[i].step(cmd, static_cast<double>(kStep) * 1e-9);
-      slaves_[i]->cycle(t);
-    }
-  }
+  void firmware(std::int64_t t) { drives_.firmware(t, kStep); }
 
   static constexpr std::int64_t kCycle = 2'000'000, kStep = 1'000'000;
   std::unique_ptr<omnitwin::ethercat::EcTransport> tr_;
   simclock::Server server_;
-  std::vector<omnitwin::ethercat::DeviceDescription> devices_ = ecbench::drive_esi();
-  std::vector<std::unique_ptr<omnitwin::ethercat::DriveSlave>> slaves_;
-  std::vector<omnitwin::drive::AxisModel> models_;
-  omnitwin::ethercat::EscChain chain_;
+  FourDrives drives_;
+  omnitwin::ethercat::EscChain& chain_ = drives_.chain;
   int signal_after_, max_ticks_;
   std::thread thread_;
 };
