@@ -145,8 +145,10 @@ bool ServoAxis::recover(std::span<const std::uint8_t> rsp, SimTime t) {
                        to_string(static_cast<Command>(rsp[0])));
   } else if (step_ == AxisStep::running && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) == 0) {
     why_ = fmt::format("the servo went off (COMM_ALM {:X}h, D_ALM {})", static_cast<int>(stat_.comm_alm), stat_.d_alm);
-  } else if (is_alarm(stat_.comm_alm)) {
-    // During start-up: the slave refuses SV_ON until the alarm is cleared.
+  } else if (step_ < AxisStep::running && is_alarm(stat_.comm_alm)) {
+    // During start-up: the slave refuses SV_ON until the alarm is cleared. (While running, an
+    // alarm that leaves the servo on needs no recovery: a recovery takes the axis out of
+    // running, and the platform loop stops for a lost axis.)
     why_ = fmt::format("a communication alarm (COMM_ALM {:X}h) during start-up", static_cast<int>(stat_.comm_alm));
   } else {
     return false;

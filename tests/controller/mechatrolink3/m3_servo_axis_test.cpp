@@ -162,6 +162,28 @@ TEST(M3ServoAxis, ACommunicationAlarmDuringStartUpIsClearedBeforeSvOn) {
   EXPECT_EQ(axis.recoveries(), 1);
 }
 
+// The start-up rule above is for start-up only: a running axis whose response carries a
+// communication alarm with the servo still on stays running (its recovery, which takes it out
+// of running and so stops the platform as a lost axis, starts when the servo goes off).
+TEST(M3ServoAxis, ARunningAxisRecoversWhenTheServoGoesOffNotOnTheAlarmAlone) {
+  ServoAxis axis("axis 2", ServoAxisConfig{});
+  std::array<std::uint8_t, 32> cmd{}, rsp{};
+  axis.on_interrupt(rsp, false, cmd, 0);
+  for (int i = 0; i < 6; ++i) {
+    rsp = answer(cmd, CmdStat{}, 1u << 13);
+    axis.on_interrupt(rsp, true, cmd, 0);
+  }
+  ASSERT_EQ(axis.step(), AxisStep::running) << axis.why();
+  rsp = answer(cmd, CmdStat{.comm_alm = CommAlarm::no_sync}, 1u << 13);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(axis.step(), AxisStep::running) << axis.why();
+  EXPECT_EQ(axis.recoveries(), 0);
+  rsp = answer(cmd, CmdStat{.comm_alm = CommAlarm::no_sync}, 0);
+  axis.on_interrupt(rsp, true, cmd, 0);
+  EXPECT_EQ(axis.step(), AxisStep::alm_clr);
+  EXPECT_EQ(axis.recoveries(), 1);
+}
+
 TEST(M3ServoAxis, PositionModeSendsInterpolate) {
   ServoAxis axis("axis 1", ServoAxisConfig{.com_tim = 1, .position_mode = true, .params = {}});
   std::array<std::uint8_t, 32> cmd{}, rsp{};
