@@ -70,6 +70,18 @@ struct Network {
       now += kMs;
     }
   }
+  // Start-up, then every wheel at 5000 for 10 ms: the platform running.
+  void drive_on() {
+    run(40);
+    ASSERT_EQ(master->phase(), TmlPhase::running);
+    for (int i = 0; i < 4; ++i) master->set_speed(i, 5000);
+    run(10);
+  }
+  // Drive i (0-3) loses its power: it neither hears nor steps.
+  void power_off(std::size_t i) {
+    powered[i] = false;
+    drives[i]->power_off();
+  }
   // The TML message in a frame from the master (false: not one).
   bool message_of(const can::Frame& f, t::Message& m) const {
     if (!cfg.techcan) return t::decode_tmlcan(f, m) == t::CanStatus::ok;
@@ -101,12 +113,8 @@ TEST_P(TmlMasterTest, FindsSwitchesOnAndCommandsTheFourAxes) {
 
 TEST_P(TmlMasterTest, ADriveLosingPowerStopsThePlatform) {
   Network n(GetParam());
-  n.run(40);
-  ASSERT_EQ(n.master->phase(), TmlPhase::running);
-  for (int i = 0; i < 4; ++i) n.master->set_speed(i, 5000);
-  n.run(10);
-  n.powered[2] = false;
-  n.drives[2]->power_off();
+  ASSERT_NO_FATAL_FAILURE(n.drive_on());
+  n.power_off(2);
   n.bus.detach(3, n.now);
   n.run(2 * (n.cfg.lost_ticks + 2));
   EXPECT_EQ(n.master->phase(), TmlPhase::stopped);
@@ -121,12 +129,8 @@ TEST_P(TmlMasterTest, ADriveLosingPowerStopsThePlatform) {
 // and the other wheels drove on without wheel 3.
 TEST_P(TmlMasterTest, ADriveThatCameBackSwitchedOffStopsThePlatform) {
   Network n(GetParam());
-  n.run(40);
-  ASSERT_EQ(n.master->phase(), TmlPhase::running);
-  for (int i = 0; i < 4; ++i) n.master->set_speed(i, 5000);
-  n.run(10);
-  n.powered[2] = false;
-  n.drives[2]->power_off();
+  ASSERT_NO_FATAL_FAILURE(n.drive_on());
+  n.power_off(2);
   n.run(12);
   n.drives[2]->power_on(n.now);
   n.powered[2] = true;
