@@ -187,10 +187,11 @@ bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64
 // Lockstep with the twin until it ends the run (End), a signal, or a failure (throws
 // LoopFailure / simclock::ChannelError). The bus is read while the grant is awaited
 // (HeldFrames); the frames a grant counts may take `frames_timeout` to arrive. After a signal
-// the next tick the twin grants runs r.shutdown() instead of r.tick() (the end sequence the wall
-// clock's end sends, counted in that tick's Done so the twin delivers it); without such a grant
+// the next tick the twin grants runs r.shutdown() instead of r.tick(), and the ticks after it
+// r.end_tick() until r.shut_down() (the end sequence the wall clock's end sends, counted in
+// each tick's Done so the twin delivers it; the core bounds its length); without such grants
 // (End, the twin gone, nothing in 1 s) the end sequence cannot reach the simulated bus and is
-// not sent. Returns 0.
+// cut short. Returns 0.
 template <class Runner>
 int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, int sigfd,
                  std::chrono::milliseconds frames_timeout) {
@@ -199,7 +200,7 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
   if (client.stopped()) return 0;  // SIGINT/SIGTERM while waiting for the twin's socket
   constexpr std::int64_t kNoEnd = std::numeric_limits<std::int64_t>::min();
   HeldFrames held;
-  bool stopping = false;
+  bool stopping = false, ending = false;  // a signal came; the end sequence has begun
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
@@ -210,7 +211,8 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
     }
     const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
     if (stopping && w != simclock::WaitStatus::ok) {
-      spdlog::warn("signal: the twin granted no further tick ({}): no end sequence sent", simclock::to_string(w));
+      spdlog::warn("signal: the twin granted no further tick ({}): {}", simclock::to_string(w),
+                   ending ? "the end sequence was cut short" : "no end sequence sent");
       return 0;
     }
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return 0;
@@ -219,12 +221,13 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
     held.hand_to(r, g.t_ns);
     if (!drain_until(tr, r, g.frames[0], g.t_ns, frames_timeout))
       throw LoopFailure{drain_failure(g.tick, r.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};
-    if (stopping) r.shutdown(g.t_ns);
-    else r.tick(g.t_ns);
+    if (!stopping) r.tick(g.t_ns);
+    else if (ending) r.end_tick(g.t_ns);
+    else r.shutdown(g.t_ns), ending = true;
     r.flush();
     const simclock::Done done{g.tick, {r.frames_tx(), 0, 0, 0}, r.report()};
     if (!client.done(done)) throw LoopFailure{"sim clock: the twin is gone"};
-    if (stopping) return 0;
+    if (ending && r.shut_down()) return 0;
   }
 }
 
@@ -238,8 +241,35 @@ void receive_waiting(Runner& r, can::Transport& tr, std::int64_t at_ns) {
   }
 }
 
-// The wall clock: a tick every period_ns until duration_s (< 0: until a signal); then
-// r.shutdown(). Returns 0.
+// The end of a wall-clock run, begun at `start` + t: r.shutdown(), then r.end_tick() every
+// period_ns, the bus read in between, until r.shut_down() (the core bounds its length) or a
+// second signal.
+template <class Runner>
+void end_wall_clock(std::int64_t period_ns, Runner& r, can::Transport& tr, int sigfd, std::int64_t start) {
+  std::int64_t next = monotonic_ns();
+  r.shutdown(next - start);
+  next += period_ns;
+  while (!r.shut_down()) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= next) {
+      r.end_tick(now - start);
+      next = now + period_ns;  // late: one tick, not a burst of them
+      continue;
+    }
+    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+    const timespec timeout = to_timespec(next - now);
+    const int p = ::ppoll(fds, 2, &timeout, nullptr);
+    if (p < 0 && errno != EINTR) throw LoopFailure{fmt::format("poll failed: {}", std::strerror(errno))};
+    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) {
+      spdlog::warn("a second signal: ending without the rest of the end sequence");
+      return;
+    }
+    receive_waiting(r, tr, monotonic_ns() - start);
+  }
+}
+
+// The wall clock: a tick every period_ns until duration_s (< 0: until a signal); then the end
+// sequence (end_wall_clock). Returns 0.
 template <class Runner>
 int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Transport& tr, int sigfd) {
   try_realtime(40);
@@ -274,7 +304,7 @@ int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Tr
     }
   }
   if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
-  r.shutdown(monotonic_ns() - start);
+  end_wall_clock(period_ns, r, tr, sigfd, start);
   return 0;
 }
 
@@ -311,7 +341,11 @@ class CanRunner {
   // Lockstep: the tick's frames in one batch. Refusals reach the core.
   void flush() { master_.note_send_failures(out_.flush()); }
   void release() { out_.release(); }
+  // The end sequence: shutdown() begins it, end_tick() runs its following ticks (the core's
+  // tick without the platform loop) until shut_down().
   void shutdown(std::int64_t t) { master_.shutdown(t); }
+  void end_tick(std::int64_t t) { master_.on_tick(t); }
+  bool shut_down() const { return master_.shut_down(); }
 
   simclock::MasterReport report() const {
     simclock::MasterReport r;

@@ -257,8 +257,10 @@ void CoMaster::on_heartbeat_event(const co::HeartbeatEvent& e) {
 // The cycle
 
 void CoMaster::on_tick(SimTime t) {
+  if (end_done_) return;  // NMT stop sent: the master is silent
   ++stats_.ticks;
   if (start_ < 0) start_ = t;
+  if (end_from_ >= 0) return end_tick(t);
   consumer_.on_time(t);
   sdo_.on_time(t);
   const bool cyclic = phase_ != CoPhase::resetting && phase_ != CoPhase::configuring && phase_ != CoPhase::failed;
@@ -424,7 +426,7 @@ void CoMaster::send_rpdos(SimTime t) {
     Node& n = nodes_[i];
     if (!n.view.configured) continue;
     can::Frame f = co::frame11(0x200u + n.view.id, 6);
-    co::put_u16(f.data.data(), controlword_for(n));
+    co::put_u16(f.data.data(), end_from_ >= 0 ? ending_controlword(n, t) : controlword_for(n));
     const std::int32_t v = phase_ == CoPhase::running ? velocity_[i] : 0;
     co::put_u32(f.data.data() + 2, static_cast<std::uint32_t>(v));
     send(f, t);
@@ -437,10 +439,46 @@ void CoMaster::finish(SimTime t) {
   enter(CoPhase::finished, t);
 }
 
+// Operation enabled → quick stop (0x02: the drive brakes on its quick-stop ramp); quick stop
+// active → quick stop until half of kEndNs is over, then disable voltage (0x00: a drive whose
+// quick-stop option holds it there is let go); any other state → disable voltage.
+std::uint16_t CoMaster::ending_controlword(const Node& n, SimTime t) const {
+  const std::uint16_t sw = n.view.statusword & 0x6F;
+  if (sw == 0x27) return 0x02;
+  if (sw == 0x07 && t - end_from_ < kEndNs / 2) return 0x02;
+  return 0x00;
+}
+
+// A drive still powering its motor: operation enabled or quick stop active.
+bool CoMaster::any_enabled() const {
+  for (const Node& n : nodes_) {
+    const std::uint16_t sw = n.view.statusword & 0x6F;
+    if (n.view.configured && !n.view.lost && (sw == 0x27 || sw == 0x07)) return true;
+  }
+  return false;
+}
+
+// One tick of the end sequence: NMT stop once no drive is enabled (or kEndNs is over), else
+// SYNC and the ending controlwords.
+void CoMaster::end_tick(SimTime t) {
+  sdo_.on_time(t);
+  if (!any_enabled() || t - end_from_ >= kEndNs) {
+    if (any_enabled()) event(t, fmt::format("end: a drive still enabled after {} ms: NMT stop regardless", kEndNs / kMs), true);
+    nmt(co::NmtCommand::stop, 0, t);
+    end_done_ = true;
+    return;
+  }
+  if (cfg_.sync_producer == 0 && sync_.send_one(t, [this](const can::Frame& f, SimTime at) { return send(f, at); }))
+    ++stats_.syncs;
+  send_rpdos(t);
+}
+
 void CoMaster::shutdown(SimTime t) {
+  if (end_from_ >= 0) return;  // already ending
   velocity_ = {};
   if (phase_ == CoPhase::running || phase_ == CoPhase::enabling) enter(CoPhase::finished, t);
-  nmt(co::NmtCommand::stop, 0, t);
+  end_from_ = t;
+  end_tick(t);
 }
 
 }  // namespace omnitwin::controller::canopen

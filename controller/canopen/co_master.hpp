@@ -75,6 +75,10 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::ca
 //  finished    — the application ended: drives shut down (controlword 0x06). Legal: shutdown.
 //  failed      — start-up did not complete (reason startup_timeout or config_failed, node,
 //                in the report; no heartbeat supervision). Legal: shutdown.
+// shutdown (the program ends) is not a phase but an end sequence over the following ticks:
+// an enabled drive (operation enabled, quick stop active) is quick-stopped, then its voltage
+// disabled; NMT stop to all once none is enabled or after kEndNs, and the master then sends
+// nothing more (shut_down()). An NMT stop to an enabled drive would fault it (0x6007).
 enum class CoPhase : std::uint8_t { resetting, configuring, starting, enabling, running, stopped, finished, failed };
 const char* to_string(CoPhase p);
 
@@ -117,8 +121,11 @@ class CoMaster {
   std::int32_t position(int wheel) const { return nodes_[static_cast<std::size_t>(wheel)].view.position; }
   // The application ended its path: drives to ready to switch on (controlword 0x06).
   void finish(SimTime t);
-  // The program ends: drives shut down, NMT stop all. Real-time safe.
+  // The program ends: the end sequence begins at t (above); the ticks that follow run it. Real-time safe.
   void shutdown(SimTime t);
+  // The end sequence is over: NMT stop sent (the program may exit).
+  bool shut_down() const { return end_done_; }
+  static constexpr SimTime kEndNs = 100'000'000;  // the longest the drives get to stop [ns]
   // The transport refused n frames.
   void note_send_failures(std::uint64_t n) { stats_.tx_refused += n; }
 
@@ -154,6 +161,9 @@ class CoMaster {
   bool identity_ok(Node& n, std::uint8_t sub, std::uint32_t v, SimTime t);
   void send_rpdos(SimTime t);
   std::uint16_t controlword_for(Node& n);
+  std::uint16_t ending_controlword(const Node& n, SimTime t) const;
+  bool any_enabled() const;
+  void end_tick(SimTime t);
   Node* by_id(std::uint8_t id);
 
   CoProgramConfig cfg_;
@@ -170,6 +180,8 @@ class CoMaster {
   std::uint8_t reason_node_ = 0;
   SimTime start_ = -1, running_since_ = -1, next_heartbeat_ = 0;
   bool reset_sent_ = false;
+  SimTime end_from_ = -1;   // shutdown() began the end sequence (-1: not ending)
+  bool end_done_ = false;   // NMT stop sent: nothing more goes out
   CoMasterStats stats_;
 };
 

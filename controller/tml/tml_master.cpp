@@ -244,6 +244,7 @@ void TmlMaster::shutdown(SimTime t) {
   if (phase_ == TmlPhase::running) enter(TmlPhase::finished, t);
   if (phase_ != TmlPhase::detecting) speeds(t, true);
   send(t::instruction(group(), t::instr::axisoff), t);
+  shut_down_ = true;
 }
 
 }  // namespace omnitwin::controller::tml

@@ -75,6 +75,8 @@ class TmlMaster {
   std::int32_t position(int wheel) const { return axes_[static_cast<std::size_t>(wheel)].apos; }
   void finish(SimTime t);
   void shutdown(SimTime t);
+  // TML's end is the one tick shutdown() sends (CSPD 0, UPD, AXISOFF): over once it is sent.
+  bool shut_down() const { return shut_down_; }
   void note_send_failures(std::uint64_t n) { stats_.tx_refused += n; }
 
   TmlPhase phase() const { return phase_; }
@@ -121,6 +123,7 @@ class TmlMaster {
   simclock::StopReason reason_ = simclock::StopReason::none;
   std::uint8_t reason_node_ = 0;
   SimTime start_ = -1;
+  bool shut_down_ = false;  // shutdown() sent the end
   TmlMasterStats stats_;
 };
 

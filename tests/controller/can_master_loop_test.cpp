@@ -4,7 +4,8 @@
 // frames that arrived meanwhile, stamped no later than that tick. Found by the CAN soak: the
 // Omni master (which keeps its own loop in omni_master_main, fixed the same way) read a 3 ms
 // stall as "none of the four slaves answered". Over the in-process `mem:` transport. And a
-// signal in lockstep: the end sequence (shutdown) goes out in the next tick the twin grants. And
+// signal in lockstep: the end sequence (shutdown, then end ticks until the runner says it is
+// over) goes out in the ticks the twin grants next; the wall clock's end runs it on its period. And
 // a lockstep burst larger than the receive buffer: the master reads its bus while it waits.
 #include "controller/can_master_loop.hpp"
 
@@ -15,6 +16,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <string>
 #include <thread>
@@ -43,7 +45,13 @@ struct Recorder {
       std::this_thread::sleep_for(stall);
     }
   }
-  void shutdown(std::int64_t) {}
+  void shutdown(std::int64_t t) { calls.push_back({'s', t}); }
+  void end_tick(std::int64_t t) { calls.push_back({'e', t}); }
+  // The end takes `end_ticks` ticks after shutdown().
+  int end_ticks = 0;
+  bool shut_down() const {
+    return std::count_if(calls.begin(), calls.end(), [](const Call& c) { return c.what == 'e'; }) >= end_ticks;
+  }
 };
 
 TEST(CanMasterLoop, AFrameThatCameDuringAStallGoesBeforeTheLateTick) {
@@ -88,6 +96,16 @@ struct Ender {
     f.dlc = 2;  // as an NMT stop or an AXISOFF would go out
     sent += tr.send(f, t) ? 1 : 0;
   }
+  // The end takes `end_ticks` ticks after shutdown(), one frame each (a CANopen quick stop).
+  int end_ticks = 0, ended = 0;
+  void end_tick(std::int64_t t) {
+    calls.push_back({'e', t});
+    ++ended;
+    can::Frame f;
+    f.dlc = 6;
+    sent += tr.send(f, t) ? 1 : 0;
+  }
+  bool shut_down() const { return ended >= end_ticks; }
   void flush() {}
   std::uint64_t frames_tx() const { return sent; }
   simclock::MasterReport report() const { return {}; }
@@ -125,12 +143,73 @@ TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
   EXPECT_EQ(r.calls[1].t, 4'000'000);
 }
 
+// An end sequence longer than one tick (CANopen: quick stop until the drives are disabled,
+// then NMT stop) runs in the ticks the twin grants after the signal until the runner says it
+// is over. Before, the loop returned after the first: an NMT stop to enabled drives faults them.
+TEST(CanMasterLoop, AnEndSequenceOfSeveralTicksRunsInTheTicksTheTwinStillGrants) {
+  using namespace std::chrono_literals;
+  const std::string bus = "can-master-loop-long-end-test";
+  can::MemTransport master_end(bus), slave_end(bus);
+  Ender r(master_end);
+  r.end_ticks = 2;
+  int sig[2];
+  ASSERT_EQ(::pipe2(sig, O_NONBLOCK | O_CLOEXEC), 0);  // stands in for the signalfd
+  const std::string address = "unix:@omnitwin-can-master-loop-long-" + std::to_string(::getpid());
+  simclock::Server server(address);
+  int code = -1;
+  std::thread master([&] { code = run_lockstep(address, r, master_end, sig[0], std::chrono::seconds(5)); });
+  ASSERT_EQ(server.accept(2s), simclock::WaitStatus::ok);
+  simclock::Done d;
+  ASSERT_EQ(server.grant(simclock::Grant{1, 2'000'000, {}}, d, 2s), simclock::WaitStatus::ok);
+  const signalfd_siginfo info{};
+  ASSERT_EQ(::write(sig[1], &info, sizeof info), static_cast<ssize_t>(sizeof info));
+  for (std::uint64_t k = 2; k <= 4; ++k) {
+    ASSERT_EQ(server.grant(simclock::Grant{k, static_cast<std::int64_t>(k) * 2'000'000, {}}, d, 2s),
+              simclock::WaitStatus::ok)
+        << "tick " << k << ": the master left before its end sequence was over";
+    EXPECT_EQ(d.frames[0], k - 1) << "each end tick's frame is counted in its Done";
+  }
+  master.join();
+  ::close(sig[0]);
+  ::close(sig[1]);
+  EXPECT_EQ(code, 0);
+  const std::string order = [&] {
+    std::string o;
+    for (const auto& c : r.calls) o += c.what;
+    return o;
+  }();
+  EXPECT_EQ(order, "tsee");
+}
+
+// The wall clock's end runs the end sequence's ticks on its period too.
+TEST(CanMasterLoop, TheWallClocksEndRunsTheEndSequenceUntilItIsOver) {
+  const std::string bus = "can-master-loop-wall-end-test";
+  can::MemTransport master_end(bus), slave_end(bus);
+  Recorder r;
+  r.end_ticks = 3;
+  const int sigfd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);  // never readable: no signal
+  ASSERT_GE(sigfd, 0);
+  run_wall_clock(5'000'000, 0.02, r, master_end, sigfd);
+  ::close(sigfd);
+  std::string order;
+  std::vector<std::int64_t> end_at;
+  for (const auto& c : r.calls) {
+    order += c.what;
+    if (c.what == 's' || c.what == 'e') end_at.push_back(c.t);
+  }
+  EXPECT_EQ(order.substr(order.find('s')), "seee");
+  ASSERT_EQ(end_at.size(), 4u);
+  for (std::size_t i = 1; i < end_at.size(); ++i) EXPECT_GE(end_at[i] - end_at[i - 1], 4'000'000) << "a tick per period";
+}
+
 // What run_lockstep needs of a runner: it counts the frames handed to it.
 struct Counting {
   std::uint64_t frames_rx = 0;
   void on_frame(const can::Frame&, std::int64_t) { ++frames_rx; }
   void tick(std::int64_t) {}
   void shutdown(std::int64_t) {}
+  void end_tick(std::int64_t) {}
+  bool shut_down() const { return true; }
   void flush() {}
   std::uint64_t frames_tx() const { return 0; }
   simclock::MasterReport report() const { return {}; }

@@ -3,7 +3,8 @@
 // (can_bus), in process: the start-up (reset, SDO configuration, NMT start, CiA 402 power-up),
 // velocities reaching the drives through RPDO1 and positions coming back in TPDO1, a drive
 // losing power (heartbeat timeout: the platform stops; back on: configured and started
-// again), a drive fault signalled by EMCY, and the start-up script's checks against the EDS.
+// again), a drive fault signalled by EMCY, the end sequence (quick stop, then NMT stop, no
+// drive faulted by it), and the start-up script's checks against the EDS.
 #include "controller/canopen/co_master.hpp"
 
 #include <gtest/gtest.h>
@@ -76,6 +77,77 @@ TEST(CoMaster, ADriveFaultStopsThePlatformWithItsNode) {
   EXPECT_EQ(n.master->reason(), simclock::StopReason::drive_fault);
   EXPECT_EQ(n.master->reason_node(), 3);
   EXPECT_EQ(n.master->node(2).last_emcy, drive::kErrorFollowing);
+}
+
+// The frames the master sends from now on go into `sent`, in order.
+void record_sends(Network& n, std::vector<can::Frame>& sent) {
+  n.on_master_send = [&sent](const can::Frame& f) { sent.push_back(f); };
+}
+
+bool is_nmt_stop(const can::Frame& f) { return f.id == co::cob::nmt && f.data[0] == static_cast<std::uint8_t>(co::NmtCommand::stop); }
+
+TEST(CoMaster, TheEndQuickStopsEnabledDrivesBeforeNmtStopSoNoneFaults) {
+  Network n;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  for (int i = 0; i < 4; ++i) n.master->set_velocity(i, 2000);
+  n.run(5);
+  std::vector<can::Frame> sent;
+  record_sends(n, sent);
+  const std::uint64_t emcy = n.master->stats().emcy;
+  n.master->shutdown(n.now);  // a signal mid-path: the drives are enabled
+  EXPECT_FALSE(n.master->shut_down());
+  n.run(CoMaster::kEndNs / kMs);
+  ASSERT_TRUE(n.master->shut_down());
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(n.drives[i]->drive().state(), drive::State::switch_on_disabled) << "drive " << i + 1;
+    EXPECT_EQ(n.drives[i]->node().state(), co::NmtState::stopped) << "drive " << i + 1;
+    EXPECT_EQ(n.drives[i]->stats().comm_faults, 0u) << "drive " << i + 1 << ": NMT stop reached it enabled";
+  }
+  EXPECT_EQ(n.master->stats().emcy, emcy);
+  // Quick stop first, NMT stop last, then silence.
+  const auto first_rpdo = std::find_if(sent.begin(), sent.end(), [](const can::Frame& f) { return f.id == 0x201u; });
+  ASSERT_NE(first_rpdo, sent.end());
+  EXPECT_EQ(co::get_u16(first_rpdo->data.data()), 0x02) << "quick stop";
+  EXPECT_TRUE(is_nmt_stop(sent.back()));
+  EXPECT_EQ(std::count_if(sent.begin(), sent.end(), is_nmt_stop), 1);
+  const std::size_t count = sent.size();
+  n.run(20);
+  EXPECT_EQ(sent.size(), count);
+}
+
+TEST(CoMaster, TheEndOfAFinishedPathIsNmtStopAtOnce) {
+  Network n;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  n.master->finish(n.now);
+  n.run(10);  // controlword 0x06: ready to switch on
+  ASSERT_EQ(n.drives[0]->drive().state(), drive::State::ready_to_switch_on);
+  std::vector<can::Frame> sent;
+  record_sends(n, sent);
+  n.master->shutdown(n.now);
+  EXPECT_TRUE(n.master->shut_down());
+  ASSERT_EQ(sent.size(), 1u);
+  EXPECT_TRUE(is_nmt_stop(sent[0]));
+  n.run(5);
+  for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(n.drives[i]->stats().comm_faults, 0u);
+}
+
+TEST(CoMaster, ADriveHeldInQuickStopIsLetGoWithinTheEndsBound) {
+  Network n;
+  for (auto& d : n.drives) d->drive().objects().quick_stop_option = 6;  // stay in quick stop active
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  n.master->shutdown(n.now);
+  n.run(CoMaster::kEndNs / kMs / 4);
+  EXPECT_EQ(n.drives[0]->drive().state(), drive::State::quick_stop_active);
+  EXPECT_FALSE(n.master->shut_down());
+  n.run(CoMaster::kEndNs / kMs);
+  EXPECT_TRUE(n.master->shut_down());
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(n.drives[i]->drive().state(), drive::State::switch_on_disabled);
+    EXPECT_EQ(n.drives[i]->stats().comm_faults, 0u);
+  }
 }
 
 TEST(CoMaster, StartupFailsWhenTheDrivesDoNotAnswer) {
