@@ -191,6 +191,15 @@ std::string apply_override(YAML::Node& root, const Override& o) {
   for (std::size_t i = 0; i < parts.size(); ++i) {
     std::string why;
     const bool last = i + 1 == parts.size();
+    // An index into a list the file does not write: there is no list to index (the default
+    // lives in the program), so the whole list must be given.
+    if (!last && parse_index(parts[i + 1]) >= 0 && cur.IsMap() && !cur[parts[i]]) {
+      const std::string list = join(parts, 0, i + 1);
+      throw ScenarioError(kOverrideFile, 0, o.key,
+                          fmt::format("cannot apply: {} is not written in the scenario, so it has no element {} to "
+                                      "set; give the whole list (--set {}=[...])",
+                                      list, parts[i + 1], list));
+    }
     if (!descend(cur, parts[i], last ? &value : nullptr, why)) {
       throw ScenarioError(kOverrideFile, 0, o.key, fmt::format("cannot apply: {}", why));
     }

@@ -822,6 +822,18 @@ TEST(ScenarioOverrides, NumberListIndexAndNestedPlatformKey) {
   EXPECT_DOUBLE_EQ(s.platform.geometry.r, 0.06);  // still from the parameter file
 }
 
+// Found in review: the docs' own example `--set controller.kp.0=3` on a scenario that does not
+// write controller.kp made a mapping {0: 3} and failed as "expected a list of 3 numbers, got a
+// mapping". It is now refused naming the list and how to set it.
+TEST(ScenarioOverrides, AnIndexIntoAListTheFileDoesNotWriteSaysToGiveTheWholeList) {
+  const ScenarioError e = load_error(scenario("minimal.yaml"), {parse_override("controller.kp.0=3")});
+  expect_error(e, "--set", 0, "controller.kp.0");
+  EXPECT_NE(std::string(e.what()).find("controller.kp is not written in the scenario"), std::string::npos) << e.what();
+  EXPECT_NE(std::string(e.what()).find("--set controller.kp=[...]"), std::string::npos) << e.what();
+  const Scenario s = load_scenario(scenario("minimal.yaml"), {parse_override("controller.kp=[3, 3, 0.5]")});
+  EXPECT_DOUBLE_EQ(s.controller.kp[0], 3);
+}
+
 TEST(ScenarioOverrides, ValuesAreParsedAsYaml) {
   const Scenario s = load_scenario(scenario("minimal.yaml"), {parse_override("controller.ki=[1, 2, 3]"),
                                                               parse_override("controller.feedforward=true"),
