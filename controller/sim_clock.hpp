@@ -57,7 +57,8 @@ enum class StopReason : std::uint8_t {
   bus_error = 5,       // its transport refused frames
   drive_fault = 6,     // a drive reported a fault (CANopen EMCY; node in `node`)
   config_failed = 7,   // a slave's configuration failed at start-up: an SDO aborted, a wrong
-                       // device type or identity (node in `node`)
+                       // device type or identity (node in `node`); or the configuration does
+                       // not fit the line (M-III: a transmission cycle too short)
 };
 const char* to_string(MasterState s);
 const char* to_string(StopReason r);

@@ -95,7 +95,10 @@ void C1Master::next_station(SimTime t) {
   state_ = DriverState::params;
   if (cfg_.event_driven) {
     for (const MasterSlave& c : cfg_.slaves)
-      if (c.data_bytes != kMaxData) return fail(t, fmt::format("event-driven data is 64 bytes, slave {:02X}h has {}", c.address, c.data_bytes));
+      if (c.data_bytes != kMaxData) {
+        misfit_ = true;
+        return fail(t, fmt::format("event-driven data is 64 bytes, slave {:02X}h has {}", c.address, c.data_bytes));
+      }
     // Fig. 6: each slave answers within its own response time, 50 ms at most: T_RSP from its
     // measured TR_DLY, as in cyclic communication, capped at the limit. A silent slave then
     // holds the line for its three attempts of T_RSP, not of 50 ms.
@@ -166,6 +169,7 @@ bool C1Master::compute_params(SimTime t) {
     log(t, fmt::format("  station {:02X}h T_RSP {} ns", cfg_.slaves[static_cast<std::size_t>(k)].address,
                        slave_[static_cast<std::size_t>(k)].t_rsp));
   if (std::string why = check_cycle(p, cfg_.cycle_ns); !why.empty()) {
+    misfit_ = true;
     fail(t, why);
     return false;
   }

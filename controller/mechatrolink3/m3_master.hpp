@@ -101,6 +101,9 @@ class C1Master {
 
   DriverState state() const { return state_; }
   const std::string& why() const { return why_; }
+  // Failed because the configuration does not fit the line (the cycle, event-driven data),
+  // not because a slave was silent at start-up.
+  bool misfit() const { return misfit_; }
   std::uint8_t address(int k) const { return cfg_.slaves[static_cast<std::size_t>(k)].address; }
   SimTime tr_dly_ns(int k) const { return slave_[static_cast<std::size_t>(k)].tr_dly; }
   SimTime t_rsp_ns(int k) const { return slave_[static_cast<std::size_t>(k)].t_rsp; }
@@ -154,6 +157,7 @@ class C1Master {
   std::vector<Slave> slave_;
   DriverState state_ = DriverState::idle;
   std::string why_;
+  bool misfit_ = false;
   SimTime wake_ = -1, cycle_start_ = 0, int_offset_ = 0, min_cycle_ = 0;
   std::uint64_t cycle_ = 0, foreign_master_ = 0;
   int station_ = 0;                 // setup: the station being detected or measured

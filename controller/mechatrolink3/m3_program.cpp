@@ -134,8 +134,9 @@ class Runner {
   simclock::MasterReport report() const {
     simclock::MasterReport r;
     if (failed()) {
+      // A configuration the line cannot take, or slaves that did not come up in time.
       r.state = simclock::MasterState::stopped;
-      r.reason = simclock::StopReason::startup_timeout;
+      r.reason = !failure_ && master_->misfit() ? simclock::StopReason::config_failed : simclock::StopReason::startup_timeout;
     } else if (halted_) {
       r.state = simclock::MasterState::stopped;
       r.reason = simclock::StopReason::feedback_missing;
