@@ -140,6 +140,7 @@ void CoMaster::nmt(co::NmtCommand c, std::uint8_t node, SimTime t) {
 }
 
 simclock::MasterState CoMaster::report_state() const {
+  if (end_from_ >= 0 && !end_done_) return state_at_end_;
   switch (phase_) {
     case CoPhase::running: return simclock::MasterState::running;
     case CoPhase::stopped:
@@ -449,6 +450,20 @@ std::uint16_t CoMaster::ending_controlword(const Node& n, SimTime t) const {
   return 0x00;
 }
 
+// A drive whose TPDOs run: it has sent one, or its heartbeat says OPERATIONAL (the heartbeat
+// may lag the NMT start by a period, the TPDOs do not).
+bool CoMaster::reporting(const Node& n) const {
+  return n.view.configured && !n.view.lost && (n.view.tpdos > 0 || consumer_.state(n.view.id) == NmtState::operational);
+}
+
+// Every reporting drive has sent a statusword since the end began: the last one before it
+// may predate a controlword the drive has since taken (switched on → operation enabled).
+bool CoMaster::statuswords_fresh() const {
+  for (const Node& n : nodes_)
+    if (reporting(n) && n.view.tpdos <= n.tpdos_at_end) return false;
+  return true;
+}
+
 // A drive still powering its motor: operation enabled or quick stop active.
 bool CoMaster::any_enabled() const {
   for (const Node& n : nodes_) {
@@ -458,12 +473,26 @@ bool CoMaster::any_enabled() const {
   return false;
 }
 
+// The end's bound passed: which drive is still enabled, or has not reported since it began.
+void CoMaster::warn_unfinished_end(SimTime t) {
+  for (const Node& n : nodes_) {
+    if (!n.view.configured || n.view.lost) continue;
+    const std::uint16_t sw = n.view.statusword & 0x6F;
+    if (sw == 0x27 || sw == 0x07)
+      event(t, fmt::format("end: node {} still enabled after {} ms (statusword 0x{:04X}): NMT stop regardless", n.view.id,
+                           kEndNs / kMs, n.view.statusword), true);
+    else if (reporting(n) && n.view.tpdos <= n.tpdos_at_end)
+      event(t, fmt::format("end: node {} sent no statusword in {} ms: NMT stop regardless", n.view.id, kEndNs / kMs), true);
+  }
+}
+
 // One tick of the end sequence: NMT stop once no drive is enabled (or kEndNs is over), else
 // SYNC and the ending controlwords.
 void CoMaster::end_tick(SimTime t) {
   sdo_.on_time(t);
-  if (!any_enabled() || t - end_from_ >= kEndNs) {
-    if (any_enabled()) event(t, fmt::format("end: a drive still enabled after {} ms: NMT stop regardless", kEndNs / kMs), true);
+  const bool over = statuswords_fresh() && !any_enabled();
+  if (over || t - end_from_ >= kEndNs) {
+    if (!over) warn_unfinished_end(t);
     nmt(co::NmtCommand::stop, 0, t);
     end_done_ = true;
     return;
@@ -476,7 +505,9 @@ void CoMaster::end_tick(SimTime t) {
 void CoMaster::shutdown(SimTime t) {
   if (end_from_ >= 0) return;  // already ending
   velocity_ = {};
+  state_at_end_ = report_state();
   if (phase_ == CoPhase::running || phase_ == CoPhase::enabling) enter(CoPhase::finished, t);
+  for (Node& n : nodes_) n.tpdos_at_end = n.view.tpdos;
   end_from_ = t;
   end_tick(t);
 }

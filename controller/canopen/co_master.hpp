@@ -77,8 +77,10 @@ std::vector<SdoStep> startup_script(const CoProgramConfig& c, const omnitwin::ca
 //                in the report; no heartbeat supervision). Legal: shutdown.
 // shutdown (the program ends) is not a phase but an end sequence over the following ticks:
 // an enabled drive (operation enabled, quick stop active) is quick-stopped, then its voltage
-// disabled; NMT stop to all once none is enabled or after kEndNs, and the master then sends
-// nothing more (shut_down()). An NMT stop to an enabled drive would fault it (0x6007).
+// disabled; NMT stop to all once every drive whose TPDOs run has sent a statusword since the end
+// began and none is enabled, or after kEndNs; the master then sends nothing more (shut_down()).
+// An NMT stop to an enabled drive would fault it (0x6007). Until the end is over the master
+// reports the state it ended from (a cut-short end leaves the drives running).
 enum class CoPhase : std::uint8_t { resetting, configuring, starting, enabling, running, stopped, finished, failed };
 const char* to_string(CoPhase p);
 
@@ -141,6 +143,7 @@ class CoMaster {
  private:
   struct Node {
     CoNodeView view;
+    std::uint64_t tpdos_at_end = 0;  // TPDOs received when the end began
     std::vector<SdoStep> script;
     std::size_t step = 0;
     bool step_sent = false;
@@ -163,6 +166,9 @@ class CoMaster {
   std::uint16_t controlword_for(Node& n);
   std::uint16_t ending_controlword(const Node& n, SimTime t) const;
   bool any_enabled() const;
+  bool reporting(const Node& n) const;
+  bool statuswords_fresh() const;
+  void warn_unfinished_end(SimTime t);
   void end_tick(SimTime t);
   Node* by_id(std::uint8_t id);
 
@@ -182,6 +188,7 @@ class CoMaster {
   bool reset_sent_ = false;
   SimTime end_from_ = -1;   // shutdown() began the end sequence (-1: not ending)
   bool end_done_ = false;   // NMT stop sent: nothing more goes out
+  simclock::MasterState state_at_end_ = simclock::MasterState::detecting;  // reported until the end is over
   CoMasterStats stats_;
 };
 
