@@ -201,6 +201,31 @@ struct HeldSink {
   }
 };
 
+// A signal in lockstep: the end (NMT stop all) goes out in the next tick the twin grants, in
+// place of that tick and counted in its Done, as the other CAN masters' loop does
+// (can_master_loop.hpp); without such a grant (End, the twin gone, nothing in 1 s) it cannot
+// reach the simulated bus and is not sent. Returns kExitOk.
+int end_in_next_tick(simclock::Client& client, can::Transport& tr, OmniMaster& m, controller::HeldFrames& held,
+                     std::int64_t& stamp_ns, LoopStats& ls, Outbox& ob, std::chrono::milliseconds frames_timeout) {
+  simclock::Grant g;
+  simclock::End end{std::numeric_limits<std::int64_t>::min()};
+  const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
+  if (w != simclock::WaitStatus::ok) {
+    spdlog::warn("signal: the twin granted no further tick ({}): no NMT stop sent", simclock::to_string(w));
+    return kExitOk;
+  }
+  stamp_ns = g.t_ns;
+  HeldSink sink{m, ls};
+  held.hand_to(sink, g.t_ns);
+  if (!drain_until(tr, m, g.frames[0], g.t_ns, ls, frames_timeout))
+    throw RuntimeFailure{fmt::format("tick {}: the frames the twin sent did not arrive", g.tick)};
+  m.shutdown();
+  flush(tr, ob, m, ls);
+  if (!client.done(simclock::Done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()}))
+    throw RuntimeFailure{"sim clock: the twin is gone"};
+  return kExitOk;
+}
+
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
             LoopStats& ls, Outbox& ob) {
   simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
@@ -220,7 +245,8 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
     simclock::Grant g;
     simclock::End end{kNoEnd};
     const simclock::WaitStatus w = next_grant(client, sigfd, tr, held, g, end, ls);
-    if (ls.interrupted || (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd)) return kExitOk;
+    if (ls.interrupted) return end_in_next_tick(client, tr, m, held, stamp_ns, ls, ob, frames_timeout);
+    if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     stamp_ns = g.t_ns;
@@ -442,8 +468,9 @@ int run(const Options& o, const controller::MasterConfig& cfg, can::Transport& t
     spdlog::error("{}", e.what());
     code = kExitRuntime;
   }
-  // Shutdown as a real master: stop the slaves unless they already are.
-  if (code == kExitOk && (o.clock == "wall" || ls.interrupted)) master.shutdown();
+  // Shutdown as a real master: stop the slaves unless they already are (in lockstep a signal's
+  // end went out in a granted tick: run_sim).
+  if (code == kExitOk && o.clock == "wall") master.shutdown();
   flush(tr, ob, master, ls);  // what a failed tick or the shutdown queued
   ob.hold = false;
   if (master.report().reason == controller::StopReason::bus_error) code = kExitRuntime;

@@ -7,8 +7,9 @@
 // --script with another bus or a directory. Each is exit 2 with a short message (3 for
 // --stats; 0 for the signal, as for any signal), within a second or two; --sim-clock with the wall clock
 // on every bus, and --stats on bus can. omni-tml send on CAN prints only the answer to its
-// query (not a running master's traffic), and names the recovery of its link. UDP ports
-// 48310-48319.
+// query (not a running master's traffic), and names the recovery of its link. A signal in
+// lockstep: the Omni master's NMT stop goes out in the next granted tick. UDP ports
+// 48310-48320.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -25,6 +26,7 @@
 #include <vector>
 
 #include "bus_emulators/can/transport.hpp"
+#include "controller/sim_clock.hpp"
 #include "tests/twin/cli_support.hpp"
 
 namespace omnitwin::controller {
@@ -187,6 +189,36 @@ TEST_F(ProgramsCli, CtrlCEndsTheWaitForTheSimClockSocket) {
     c.signal(SIGINT);
     EXPECT_EQ(c.wait(2s), 0) << c.err();
   }
+}
+
+// Found in review: on a signal in lockstep the Omni master sent NMT stop after its loop had
+// ended, outside any granted tick: the twin never took it off the transport (it counted one
+// frame fewer than the master had sent) and the capture had no NMT stop. It now goes out in
+// the next tick the twin grants, counted in that tick's Done.
+TEST_F(ProgramsCli, ASignalInLockstepSendsTheOmniMastersNmtStopInTheNextGrantedTick) {
+  const std::string iface = "udp:239.74.163.9:48320";
+  const std::unique_ptr<can::Transport> bus = can::open_transport(iface);
+  ASSERT_TRUE(bus);
+  const std::string sock = "unix:" + (dir_.path() / "clock.sock").string();
+  simclock::Server server(sock);
+  Child c(binary_path("controller/omni-master"),
+          {"--bus", "can", "--config", data("master/loopback.yaml"), "--iface", iface, "--clock", "sim", "--sim-clock", sock},
+          dir_.path(), dir_.path(), "omni-lockstep-signal");
+  ASSERT_EQ(server.accept(5s), simclock::WaitStatus::ok) << c.err();
+  simclock::Done d;
+  ASSERT_EQ(server.grant(simclock::Grant{1, 10'000'000, {}}, d, 2s), simclock::WaitStatus::ok) << c.err();
+  const std::uint64_t before = d.frames[0];
+  c.signal(SIGTERM);
+  std::this_thread::sleep_for(300ms);  // the master reads the signal while it awaits its grant
+  ASSERT_EQ(server.grant(simclock::Grant{2, 20'000'000, {}}, d, 2s), simclock::WaitStatus::ok)
+      << "the master left without an end tick: " << c.err();
+  EXPECT_EQ(d.frames[0], before + 1) << "the NMT stop, counted in the Done so the twin delivers it";
+  EXPECT_EQ(c.wait(3s), 0) << c.err();
+  bool nmt_stop = false;
+  can::wait_readable(*bus, 500ms);
+  while (auto tf = bus->receive())
+    nmt_stop = nmt_stop || (tf->frame.id == 0 && tf->frame.dlc == 2 && tf->frame.data[0] == 0 && tf->frame.data[1] == 0x02);
+  EXPECT_TRUE(nmt_stop) << "NMT stop all (00 02, omni-can.md) on the bus";
 }
 
 // Found in review: an unwritable --stats logged "cannot write" and exited 0, and a failed
