@@ -471,7 +471,7 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
   if (f["master_iface"].exists()) e.master_iface = f["master_iface"].string();
   if (e.transport.starts_with("raw:") && e.master_iface.empty())
     f["transport"].fail("raw:IFACE needs master_iface: the interface the master sends on");
-  if (const YamlField esi = f["esi"]; esi.exists()) {
+  if (const YamlField esi = f["esi"]; esi.exists() && !esi.string().empty()) {  // "": the shipped one
     const fs::path given = esi.string();
     const fs::path resolved =
         given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();
@@ -503,7 +503,7 @@ void read_ethercat(const YamlField& f, EthercatSpec& e, const std::string& scena
 
 // The `canopen` bus's own settings (bus: {type: canopen, …}); the wire's are read by read_can.
 void read_canopen(const YamlField& f, CanopenSpec& c, const std::string& scenario_file) {
-  if (const YamlField eds = f["eds"]; eds.exists()) {
+  if (const YamlField eds = f["eds"]; eds.exists() && !eds.string().empty()) {  // "": the shipped one
     const fs::path given = eds.string();
     const fs::path resolved =
         given.is_absolute() ? given : (fs::path(scenario_file).parent_path() / given).lexically_normal();

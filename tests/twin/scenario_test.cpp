@@ -825,6 +825,15 @@ TEST(ScenarioOverrides, NumberListIndexAndNestedPlatformKey) {
 // Found in review: the docs' own example `--set controller.kp.0=3` on a scenario that does not
 // write controller.kp made a mapping {0: 3} and failed as "expected a list of 3 numbers, got a
 // mapping". It is now refused naming the list and how to set it.
+// Found in review: the documented defaults `esi: ""` and `eds: ""` were taken as paths and
+// refused ("cannot open device description ''"). An empty one is the shipped description.
+TEST(ScenarioOverrides, AnEmptyDeviceDescriptionIsTheShippedOne) {
+  const Scenario e = load_scenario(scenario("minimal.yaml"), {parse_override("bus={type: ethercat, esi: ''}")});
+  EXPECT_EQ(e.bus.ethercat.esi, "");
+  const Scenario c = load_scenario(scenario("minimal.yaml"), {parse_override("bus={type: canopen, eds: ''}")});
+  EXPECT_EQ(c.bus.canopen.eds, "");
+}
+
 TEST(ScenarioOverrides, AnIndexIntoAListTheFileDoesNotWriteSaysToGiveTheWholeList) {
   const ScenarioError e = load_error(scenario("minimal.yaml"), {parse_override("controller.kp.0=3")});
   expect_error(e, "--set", 0, "controller.kp.0");
