@@ -602,7 +602,7 @@ int main(int argc, char** argv) {
 
   RunArgs ta;
   ta.external_master = true;
-  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, ethercat or m3, realtime) for an external master");
+  CLI::App* twin = app.add_subcommand("twin", "run the twin alone (bus can, canopen, tml, ethercat or m3, realtime) for an external master");
   twin->add_option("scenario", ta.scenario, "scenario file (YAML)")->required();
   twin->add_option("--out", ta.out, "run directory (default out/<scenario name>/)");
   twin->add_option("--clock", ta.clock, "clock mode (realtime)")->check(CLI::IsMember({"realtime"}));
