@@ -195,6 +195,7 @@ nlohmann::json CanDriveNetwork::slave_metrics() const {
     nlohmann::json j = {{"node", i + 1},
                         {"drive_state", drive::to_string(d.state())},
                         {"error_code", d.objects().error_code},
+                        {"mode", d.objects().mode_display},  // 0x6061: the mode the drive ran in
                         {"can_state", error_state_name(wire_.bus().error_state(i + 1))},
                         {"tec", wire_.bus().tec(i + 1)},
                         {"tx_errors", ns.tx_errors},

@@ -119,6 +119,7 @@ int CanWire::poll_transport(SimTime t) {
 
 bool CanWire::completed(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
   if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
+  if (f.extended) ++extended_frames_;
   if (sender == kFar) return true;
   // A node's frame reaches the master (and anyone else on the transport) when it completes.
   if (!arrives(FaultSpec::kMaster)) return false;
@@ -191,6 +192,7 @@ nlohmann::json CanWire::metrics(const char* name, SimTime now) const {
           {"frames_tx", frames_tx()},
           {"frames_rx", from_transport_},
           {"frames", bus_.stats().frames},
+          {"extended_frames", extended_frames_},  // of those, with a 29-bit identifier
           {"error_frames", bus_.stats().error_frames},
           {"lost_frames", lost_frames_},
           {"bus_off_events", bus_off_events_},

@@ -117,6 +117,7 @@ class CanWire {
   std::vector<can::TimedFrame> pending_;
   std::size_t unyielded_ = 0;  // frames handed to the transport since the master last had a turn
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
+  std::uint64_t extended_frames_ = 0;  // completed on the wire with a 29-bit identifier
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t master_sender_ = 0;                  // the first sender seen (0: none yet)
   std::uint64_t foreign_frames_ = 0, refused_foreign_ = 0;

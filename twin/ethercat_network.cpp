@@ -506,6 +506,8 @@ nlohmann::json EthercatNetwork::slave_metrics() const {
                    {"al_status_code", static_cast<unsigned>(esc.al_status_code())},
                    {"drive_state", drive::to_string(d.state())},
                    {"error_code", d.objects().error_code},
+                   {"mode", d.objects().mode_display},              // 0x6061: the mode the drive ran in
+                   {"dc_sync0", esc.dc().sync0_active() ? 1 : 0},  // SYNC0 pulses running (DC mode)
                    {"drift", drift_[k]},
                    {"powered", powered_[k]}});
   }

@@ -29,13 +29,13 @@ constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
 // M-III's, the next three CANopen's; foreign_frames and refused_frames EtherCAT's and the
-// CAN family's over UDP).
-constexpr std::array<std::string_view, 23> kBusMetrics = {
+// CAN family's over UDP; extended_frames the CAN family's: frames with a 29-bit identifier).
+constexpr std::array<std::string_view, 24> kBusMetrics = {
     "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
     "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",
     "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s",
     "corrupted_frames", "servos_on_since_s", "emcy", "sdo_aborts", "power_cycles",
-    "foreign_frames", "refused_frames"};
+    "foreign_frames", "refused_frames", "extended_frames"};
 // The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
 // bus ethercat also its own counters (from the master's statistics file).
 // The twin's view (lockstep report, realtime supervision: lost_at_s) and the EtherCAT and
@@ -51,15 +51,17 @@ constexpr std::array<std::string_view, 36> kMasterMetrics = {
     "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
     "tpdo_rx",      "answers",          "axes_lost",    "emergencies"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
-// (tec, bus_off_events and error_code serve CANopen too), then TML's three.
-constexpr std::array<std::string_view, 35> kSlaveMetrics = {
+// (tec, bus_off_events and error_code serve CANopen too), then TML's three; then the drive
+// core's mode of operation (0x6061; every bus with CiA 402 drives) and EtherCAT's SYNC0.
+constexpr std::array<std::string_view, 37> kSlaveMetrics = {
     "samples", "dropouts",       "dropout_percent", "resyncs",         "commands",   "bad_frames",
     "tec",     "bus_off_events", "stale_samples",   "al_status_code",  "station_address", "error_code",
     "phase",   "responses",      "fcs_errors",      "missed_syncs",    "missed_commands", "wdt_errors",
     "phase_errors", "comm_alarms", "repeated",
     "emcy",    "sdo_aborts",     "rpdo_rx",         "tpdo_tx",         "pdo_length_errors", "syncs",
     "heartbeats", "faults",      "comm_faults",
-    "handled", "take_data2",     "unknown_opcodes", "rpdo_per_s", "tpdo_per_s"};
+    "handled", "take_data2",     "unknown_opcodes", "rpdo_per_s", "tpdo_per_s",
+    "mode",    "dc_sync0"};
 constexpr std::array<std::string_view, 4> kRealtimeMetrics = {"overruns", "jitter_mean_us",
                                                               "jitter_p99_us", "jitter_max_us"};
 constexpr int kAxes = 4;
