@@ -20,22 +20,30 @@ const std::array<Row, 4>& rows() {
        {13612, 2091, 13702, 2971.9},
        {13919, 2041.9, 14419, 2611.3},
        {7.633, 1.092, 7.652, 2.067},
-       {7.755, 1.244, 8.044, 1.807}},
+       {7.755, 1.244, 8.044, 1.807},
+       {3174.5, 2453, 3655.5, 2604.5},
+       {2278, 2354, 3021.7, 2791.5}},
       {250,
        {11207, 2673, 11549, 3069.3},
        {8448.7, 1752.4, 8636.5, 2217.9},
        {6.21, 1.432, 6.370, 2.154},
-       {4.585, 0.933, 4.679, 1.550}},
+       {4.585, 0.933, 4.679, 1.550},
+       {3338, 2406, 4046, 2487},
+       {2107, 2084, 2609.7, 2071}},
       {500,
        {11456, 2514, 11758, 2626.5},
        {7850.5, 1617.3, 8035.2, 2238.7},
        {6.3, 1.349, 6.451, 1.809},
-       {4.384, 0.864, 4.470, 1.558}},
+       {4.384, 0.864, 4.470, 1.558},
+       {2659, 2186, 3343, 2318},
+       {2111.3, 2063, 2600, 2180.3}},
       {1000,
        {11043, 2139.4, 11263, 2737.8},
        {6741.1, 1307.9, 6879.6, 2308.2},
        {6.07, 1.151, 6.177, 1.945},
-       {3.726, 0.718, 3.798, 1.600}},
+       {3.726, 0.718, 3.798, 1.600},
+       {2789.5, 2292.5, 3629, 2240},
+       {2240, 1891, 3058, 2043.7}},
   }};
   return kRows;
 }
@@ -94,6 +102,7 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
   x.true_final = m.at("platform").at("final_error_cm");
   x.axis_iae = avg_axes(m, "iae_velocity_pulse");
   x.axis_std = avg_axes(m, "std_velocity_pulse");
+  for (std::size_t k = 0; k < 4; ++k) x.axes_iae[k] = m.at("axes").at(k).at("iae_velocity_pulse").get<double>();
   x.dropout_pct = 100.0 * m.at("bus").at("dropout_rate").get<double>();
   x.load_pct = 100.0 * m.at("bus").at("load").get<double>();
   x.exit_code = r.exit_code;
@@ -114,6 +123,11 @@ Result average(const std::vector<Result>& ts) {
     double sum = 0;
     for (const Result& t : ts) sum += t.*f;
     m.*f = sum / static_cast<double>(ts.size());
+  }
+  for (std::size_t k = 0; k < 4; ++k) {
+    double sum = 0;
+    for (const Result& t : ts) sum += t.axes_iae[k];
+    m.axes_iae[k] = sum / static_cast<double>(ts.size());
   }
   for (const Result& t : ts) {
     m.c_min = std::min(m.c_min, t.iae_c), m.c_max = std::max(m.c_max, t.iae_c);
