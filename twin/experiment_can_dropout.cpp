@@ -497,12 +497,14 @@ Finding finding_period(const std::vector<Row>& rows, const Scale& s) {
     lag.push_back(p_by_size(rows, s, 1'000'000, pm, s.n_size, false, SlaveClock::isr_lag).front());
   f.ours = fmt("%d B: %.2f / %.2f / %.2f %% at 1/5/10 ms (isr-lag clock: %.2f / %.2f / %.2f %%)", s.sizes.front(),
                by_p[0].front(), by_p[1].front(), by_p[2].front(), lag[0], lag[1], lag[2]);
-  f.why =
-      "Direction only. A 0.362 % oscillator error slides one period every 1/0.00362 = 276 periods whatever "
-      "the period, so with 2000 messages every period loses ~90 %; the period enters only through T_tx/P. "
+  f.why = fmt(
+      "Direction only. A 0.362 %% oscillator error slides one period every 1/0.00362 = 276 periods whatever "
+      "the period, so with %d messages every period loses %.0f … %.0f %% (%d B); the period enters only through T_tx/P. "
       "A fixed lag per interrupt (isr-lag rows: the thesis's own estimate, 0.72 ms per 40 messages) gives "
-      "the strong separation, but no drift of this size leaves 2000 messages at 10 ms loss-free: the "
-      "thesis's 10 ms run must have been shorter or its slave steadier.";
+      "the strong separation, but no drift of this size leaves %d messages at 10 ms loss-free: the "
+      "thesis's 10 ms run must have been shorter or its slave steadier.",
+      s.n_size, std::min({by_p[0].front(), by_p[1].front(), by_p[2].front()}),
+      std::max({by_p[0].front(), by_p[1].front(), by_p[2].front()}), s.sizes.front(), s.n_size);
   return f;
 }
 
@@ -548,8 +550,9 @@ Finding finding_count(const std::vector<Row>& rows, const Scale& s) {
   f.ours = fmt("%d B: p %.2f %% (N %d) → %.2f %% (N %d); N_drift %d and %d", s.sizes.front(), lo.p_percent,
                s.counts.front(), hi.p_percent, s.counts.back(), lo.n_drift, hi.n_drift);
   f.why =
-      "Matches in kind: N_drift is set by the drift and T_tx alone, so it is identical for every N and "
-      "p = 1 − N_drift/N. The thesis's message counts are not in its text; ours are 1000/2000/3000.";
+      "Matches in kind: N_drift is set by the drift and T_tx alone, so it is identical for every N and " +
+      fmt("p = 1 − N_drift/N. The thesis's message counts are not in its text; ours are %d/%d/%d.", s.counts[0],
+          s.counts[1], s.counts[2]);
   return f;
 }
 
