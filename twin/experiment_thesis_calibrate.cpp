@@ -238,7 +238,8 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
                        best.values[i], p.why);
   }
   out << "\nEverything else stays the platform file's (models/platform/omni4.yaml): mass, motor, encoder, DA, the "
-         "8051's arithmetic. The master's heading gains stay the scenario's.\n\n"
+         "PI's arithmetic (`real`: the fitted ki is fractional, which int16 refuses). The master's heading gains "
+         "stay the scenario's.\n\n"
       << "## The fitted row, ours against the thesis\n\n| figure | start | fitted | thesis | fitted / thesis |\n"
       << "|---|---|---|---|---|\n";
   for (std::size_t k = 0; k < 8; ++k) {

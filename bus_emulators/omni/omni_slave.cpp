@@ -218,6 +218,12 @@ TimerAction OmniSlave::handle(const Message& m, std::int64_t now_ns) {
       ++stats_.parameters_unknown;
       return {};
     }
+    // The 8051's integer PI holds whole gains: a fractional one is refused, not rounded.
+    if (params_.velocity_loop.arithmetic == physics::LoopArithmetic::int16 && p->value % 100 != 0) {
+      ++stats_.frames_ignored;
+      ++stats_.parameters_refused;
+      return {};
+    }
     ++stats_.frames_handled;
     ++stats_.parameters_set;
     params_.velocity_loop.kp = static_cast<double>(p->value) / 100.0;
