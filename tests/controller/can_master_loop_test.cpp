@@ -111,74 +111,81 @@ struct Ender {
   simclock::MasterReport report() const { return {}; }
 };
 
+// A twin's sim clock and an Ender in lockstep on its own thread over the `mem:` transport; a
+// pipe stands in for the signalfd.
+struct LockstepRig {
+  explicit LockstepRig(const std::string& name)
+      : master_end(name), slave_end(name), address("unix:@omnitwin-" + name + "-" + std::to_string(::getpid())),
+        server(address), r(master_end) {
+    EXPECT_EQ(::pipe2(sig, O_NONBLOCK | O_CLOEXEC), 0);
+  }
+  ~LockstepRig() {
+    if (master.joinable()) master.join();
+    ::close(sig[0]);
+    ::close(sig[1]);
+  }
+  void start() {
+    master = std::thread([this] { code = run_lockstep(address, r, master_end, sig[0], std::chrono::seconds(5)); });
+  }
+  void signal() {
+    const signalfd_siginfo info{};  // what signalled() reads: one siginfo
+    ASSERT_EQ(::write(sig[1], &info, sizeof info), static_cast<ssize_t>(sizeof info));
+  }
+  simclock::WaitStatus grant(std::uint64_t tick, simclock::Done& d) {
+    return server.grant(simclock::Grant{tick, static_cast<std::int64_t>(tick) * 2'000'000, {}}, d,
+                        std::chrono::seconds(2));
+  }
+  std::string order() const {
+    std::string o;
+    for (const auto& c : r.calls) o += c.what;
+    return o;
+  }
+  can::MemTransport master_end, slave_end;
+  std::string address;
+  simclock::Server server;
+  Ender r;
+  int sig[2] = {-1, -1};
+  int code = -1;
+  std::thread master;
+};
+
 // Found in review: SIGINT/SIGTERM in lockstep returned at once, without the end sequence (TML:
 // CSPD 0, UPD, AXISOFF; CANopen: NMT stop all) that the wall clock's end sends.
 TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
-  using namespace std::chrono_literals;
-  const std::string bus = "can-master-loop-signal-test";
-  can::MemTransport master_end(bus), slave_end(bus);
-  Ender r(master_end);
-  int sig[2];
-  ASSERT_EQ(::pipe2(sig, O_NONBLOCK | O_CLOEXEC), 0);  // stands in for the signalfd
-  const std::string address = "unix:@omnitwin-can-master-loop-" + std::to_string(::getpid());
-  simclock::Server server(address);
-  int code = -1;
-  std::thread master([&] { code = run_lockstep(address, r, master_end, sig[0], std::chrono::seconds(5)); });
-  ASSERT_EQ(server.accept(2s), simclock::WaitStatus::ok);
+  LockstepRig rig("can-master-loop-signal");
+  rig.start();
+  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
   simclock::Done d;
-  ASSERT_EQ(server.grant(simclock::Grant{1, 2'000'000, {}}, d, 2s), simclock::WaitStatus::ok);
-  const signalfd_siginfo info{};  // what signalled() reads: one siginfo
-  ASSERT_EQ(::write(sig[1], &info, sizeof info), static_cast<ssize_t>(sizeof info));
-  EXPECT_EQ(server.grant(simclock::Grant{2, 4'000'000, {}}, d, 2s), simclock::WaitStatus::ok)
-      << "the master left without an end tick";
+  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  rig.signal();
+  EXPECT_EQ(rig.grant(2, d), simclock::WaitStatus::ok) << "the master left without an end tick";
   EXPECT_EQ(d.tick, 2u);
   EXPECT_EQ(d.frames[0], 1u) << "the end sequence is counted in the Done, so the twin delivers it";
-  master.join();
-  ::close(sig[0]);
-  ::close(sig[1]);
-  EXPECT_EQ(code, 0);
-  ASSERT_EQ(r.calls.size(), 2u);
-  EXPECT_EQ(r.calls[0].what, 't');
-  EXPECT_EQ(r.calls[1].what, 's') << "the granted tick after the signal runs the end, not a tick";
-  EXPECT_EQ(r.calls[1].t, 4'000'000);
+  rig.master.join();
+  EXPECT_EQ(rig.code, 0);
+  EXPECT_EQ(rig.order(), "ts") << "the granted tick after the signal runs the end, not a tick";
+  ASSERT_EQ(rig.r.calls.size(), 2u);
+  EXPECT_EQ(rig.r.calls[1].t, 4'000'000);
 }
 
 // An end sequence longer than one tick (CANopen: quick stop until the drives are disabled,
 // then NMT stop) runs in the ticks the twin grants after the signal until the runner says it
 // is over. Before, the loop returned after the first: an NMT stop to enabled drives faults them.
 TEST(CanMasterLoop, AnEndSequenceOfSeveralTicksRunsInTheTicksTheTwinStillGrants) {
-  using namespace std::chrono_literals;
-  const std::string bus = "can-master-loop-long-end-test";
-  can::MemTransport master_end(bus), slave_end(bus);
-  Ender r(master_end);
-  r.end_ticks = 2;
-  int sig[2];
-  ASSERT_EQ(::pipe2(sig, O_NONBLOCK | O_CLOEXEC), 0);  // stands in for the signalfd
-  const std::string address = "unix:@omnitwin-can-master-loop-long-" + std::to_string(::getpid());
-  simclock::Server server(address);
-  int code = -1;
-  std::thread master([&] { code = run_lockstep(address, r, master_end, sig[0], std::chrono::seconds(5)); });
-  ASSERT_EQ(server.accept(2s), simclock::WaitStatus::ok);
+  LockstepRig rig("can-master-loop-long-end");
+  rig.r.end_ticks = 2;
+  rig.start();
+  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
   simclock::Done d;
-  ASSERT_EQ(server.grant(simclock::Grant{1, 2'000'000, {}}, d, 2s), simclock::WaitStatus::ok);
-  const signalfd_siginfo info{};
-  ASSERT_EQ(::write(sig[1], &info, sizeof info), static_cast<ssize_t>(sizeof info));
+  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  rig.signal();
   for (std::uint64_t k = 2; k <= 4; ++k) {
-    ASSERT_EQ(server.grant(simclock::Grant{k, static_cast<std::int64_t>(k) * 2'000'000, {}}, d, 2s),
-              simclock::WaitStatus::ok)
-        << "tick " << k << ": the master left before its end sequence was over";
+    ASSERT_EQ(rig.grant(k, d), simclock::WaitStatus::ok) << "tick " << k << ": the master left before its end sequence was over";
     EXPECT_EQ(d.frames[0], k - 1) << "each end tick's frame is counted in its Done";
   }
-  master.join();
-  ::close(sig[0]);
-  ::close(sig[1]);
-  EXPECT_EQ(code, 0);
-  const std::string order = [&] {
-    std::string o;
-    for (const auto& c : r.calls) o += c.what;
-    return o;
-  }();
-  EXPECT_EQ(order, "tsee");
+  rig.master.join();
+  EXPECT_EQ(rig.code, 0);
+  EXPECT_EQ(rig.order(), "tsee");
 }
 
 // The wall clock's end runs the end sequence's ticks on its period too.
