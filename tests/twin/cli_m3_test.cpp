@@ -173,7 +173,7 @@ TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   EXPECT_NE(twin.wait(30s), -1);
   const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
   EXPECT_EQ(s.at("driver_state"), "cyclic communication") << s.dump(2);
-  EXPECT_GT(s.at("cycles").get<int>(), 1000);
+  EXPECT_GT(s.at("cycles").get<int>(), 800);  // 2 s at servos_only.yaml's 2 ms cycle, less the start-up
   EXPECT_EQ(s.at("state"), "running") << "every servo in operation, none lost: " << s.dump(2);
   for (const auto& sl : s.at("slaves")) {
     EXPECT_EQ(sl.at("axis_step"), "released") << s.dump(2);
