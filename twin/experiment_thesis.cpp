@@ -22,28 +22,36 @@ const std::array<Row, 4>& rows() {
        {7.633, 1.092, 7.652, 2.067},
        {7.755, 1.244, 8.044, 1.807},
        {3174.5, 2453, 3655.5, 2604.5},
-       {2278, 2354, 3021.7, 2791.5}},
+       {2278, 2354, 3021.7, 2791.5},
+       {2.288, 1.712, 2.450, 1.819},
+       {1.634, 1.663, 2.004, 1.927}},
       {250,
        {11207, 2673, 11549, 3069.3},
        {8448.7, 1752.4, 8636.5, 2217.9},
        {6.21, 1.432, 6.370, 2.154},
        {4.585, 0.933, 4.679, 1.550},
        {3338, 2406, 4046, 2487},
-       {2107, 2084, 2609.7, 2071}},
+       {2107, 2084, 2609.7, 2071},
+       {2.367, 1.800, 2.676, 1.771},
+       {1.460, 1.458, 1.794, 1.488}},
       {500,
        {11456, 2514, 11758, 2626.5},
        {7850.5, 1617.3, 8035.2, 2238.7},
        {6.3, 1.349, 6.451, 1.809},
        {4.384, 0.864, 4.470, 1.558},
        {2659, 2186, 3343, 2318},
-       {2111.3, 2063, 2600, 2180.3}},
+       {2111.3, 2063, 2600, 2180.3},
+       {1.826, 1.545, 2.155, 1.709},
+       {1.462, 1.420, 1.788, 1.563}},
       {1000,
        {11043, 2139.4, 11263, 2737.8},
        {6741.1, 1307.9, 6879.6, 2308.2},
        {6.07, 1.151, 6.177, 1.945},
        {3.726, 0.718, 3.798, 1.600},
        {2789.5, 2292.5, 3629, 2240},
-       {2240, 1891, 3058, 2043.7}},
+       {2240, 1891, 3058, 2043.7},
+       {2.057, 1.710, 2.382, 1.630},
+       {1.501, 1.380, 1.954, 1.566}},
   }};
   return kRows;
 }
@@ -102,7 +110,10 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
   x.true_final = m.at("platform").at("final_error_cm");
   x.axis_iae = avg_axes(m, "iae_velocity_pulse");
   x.axis_std = avg_axes(m, "std_velocity_pulse");
-  for (std::size_t k = 0; k < 4; ++k) x.axes_iae[k] = m.at("axes").at(k).at("iae_velocity_pulse").get<double>();
+  for (std::size_t k = 0; k < 4; ++k) {
+    x.axes_iae[k] = m.at("axes").at(k).at("iae_velocity_pulse").get<double>();
+    x.axes_std[k] = m.at("axes").at(k).at("std_velocity_pulse").get<double>();
+  }
   x.dropout_pct = 100.0 * m.at("bus").at("dropout_rate").get<double>();
   x.load_pct = 100.0 * m.at("bus").at("load").get<double>();
   x.exit_code = r.exit_code;
@@ -125,9 +136,10 @@ Result average(const std::vector<Result>& ts) {
     m.*f = sum / static_cast<double>(ts.size());
   }
   for (std::size_t k = 0; k < 4; ++k) {
-    double sum = 0;
-    for (const Result& t : ts) sum += t.axes_iae[k];
-    m.axes_iae[k] = sum / static_cast<double>(ts.size());
+    double iae = 0, sd = 0;
+    for (const Result& t : ts) iae += t.axes_iae[k], sd += t.axes_std[k];
+    m.axes_iae[k] = iae / static_cast<double>(ts.size());
+    m.axes_std[k] = sd / static_cast<double>(ts.size());
   }
   for (const Result& t : ts) {
     m.c_min = std::min(m.c_min, t.iae_c), m.c_max = std::max(m.c_max, t.iae_c);

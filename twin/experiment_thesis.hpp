@@ -17,7 +17,8 @@ namespace omnitwin::twin::thesis {
 
 // The thesis's tables by bit rate, no sync and sync, each {X, Y, contour [cm], axis average
 // [pulses]}: IAE from tables 4-3/4-4 and 4-7/4-8, σ from tables 4-5/4-6 and 4-9/4-10; and
-// each axis's IAE [pulses] (tables 4-4, 4-8), from which table 4-12 takes its rates.
+// each axis's IAE and σ [pulses] (tables 4-4, 4-8; 4-6, 4-10), from which tables 4-12 and
+// 4-14 take their rates.
 struct Row {
   int rate_kbps;
   std::array<double, 4> nosync;
@@ -26,6 +27,8 @@ struct Row {
   std::array<double, 4> sync_std;
   std::array<double, 4> nosync_axes;
   std::array<double, 4> sync_axes;
+  std::array<double, 4> nosync_axes_std;
+  std::array<double, 4> sync_axes_std;
 };
 const std::array<Row, 4>& rows();
 const Row& row(int rate_kbps);  // throws std::logic_error for a rate the thesis did not run
@@ -53,7 +56,7 @@ struct Result {
   double iae_x = 0, iae_y = 0, iae_c = 0, std_x = 0, std_y = 0, std_c = 0;  // odometry [cm]
   double true_iae_c = 0, true_final = 0;                                    // MuJoCo pose [cm]
   double axis_iae = 0, axis_std = 0;                                        // averages over the four axes [pulses]
-  std::array<double, 4> axes_iae{};                                         // each axis's IAE [pulses]
+  std::array<double, 4> axes_iae{}, axes_std{};                             // each axis's IAE, σ [pulses]
   double dropout_pct = 0, load_pct = 0;
   double stale = 0;  // interrupts without a new command (loop skipped), four slaves
   // Over the trials (random start phases) of one configuration; a single run: all equal.

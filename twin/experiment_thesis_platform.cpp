@@ -179,23 +179,32 @@ std::string run_table(const std::vector<Result>& rs) {
   return out.str();
 }
 
-// Tables 4-4, 4-8 and 4-12 for clock reading `clock`: each axis's IAE without and with sync,
-// ours / thesis, and each axis's improvement.
-std::string axes_table(const std::vector<Result>& rs, const std::string& clock) {
+// Tables 4-4, 4-8 and 4-12 (IAE) or 4-6, 4-10 and 4-14 (σ) for clock reading `clock`: each
+// axis's figure without and with sync, ours / thesis, and each axis's improvement.
+std::string axes_table(const std::vector<Result>& rs, const std::string& clock, bool sigma) {
+  const char* what_name = sigma ? "σ" : "IAE";
   std::ostringstream out;
   out << "| kbit/s | | axis 1: ours / thesis | axis 2 | axis 3 | axis 4 |\n|---|---|---|---|---|---|\n";
   for (std::size_t i = 0; i + 1 < rs.size(); i += 2) {
     const Result &a = rs[i], &b = rs[i + 1];
     if (a.clock.name != clock) continue;
     const thesis::Row& t = thesis::row(a.rate_kbps);
+    const auto& ours_no = sigma ? a.axes_std : a.axes_iae;
+    const auto& ours_yes = sigma ? b.axes_std : b.axes_iae;
+    const auto& thesis_no = sigma ? t.nosync_axes_std : t.nosync_axes;
+    const auto& thesis_yes = sigma ? t.sync_axes_std : t.sync_axes;
     for (int what = 0; what < 3; ++what) {
-      out << fmt::format("| {} | {} |", a.rate_kbps, what == 0 ? "IAE, no sync" : what == 1 ? "IAE, sync" : "improvement");
+      out << fmt::format("| {} | {} |", a.rate_kbps,
+                         what == 0 ? fmt::format("{}, no sync", what_name)
+                                   : what == 1 ? fmt::format("{}, sync", what_name) : std::string("improvement"));
       for (std::size_t k = 0; k < 4; ++k) {
-        if (what == 0) out << fmt::format(" {:.0f} / {} |", a.axes_iae[k], t.nosync_axes[k]);
-        if (what == 1) out << fmt::format(" {:.0f} / {} |", b.axes_iae[k], t.sync_axes[k]);
+        if (what == 0) out << (sigma ? fmt::format(" {:.3f} / {} |", ours_no[k], thesis_no[k])
+                                     : fmt::format(" {:.0f} / {} |", ours_no[k], thesis_no[k]));
+        if (what == 1) out << (sigma ? fmt::format(" {:.3f} / {} |", ours_yes[k], thesis_yes[k])
+                                     : fmt::format(" {:.0f} / {} |", ours_yes[k], thesis_yes[k]));
         if (what == 2)
-          out << fmt::format(" {:+.1f} % / {:+.1f} % |", improvement(a.axes_iae[k], b.axes_iae[k]),
-                             improvement(t.nosync_axes[k], t.sync_axes[k]));
+          out << fmt::format(" {:+.1f} % / {:+.1f} % |", improvement(ours_no[k], ours_yes[k]),
+                             improvement(thesis_no[k], thesis_yes[k]));
       }
       out << "\n";
     }
@@ -399,8 +408,9 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
       << ".\n\n### " << clocks[1].name << " slave clocks\n\n" << effect_table(slow) << "\n"
       << "Directions: " << (failed(slow) == 0 ? "every bit rate matches" : fmt::format("{} bit rate(s) differ", failed(slow)))
       << ".\n\nThe axis column is table 4-12's rate: each axis's improvement, then their mean. Each axis, "
-      << clocks[0].name << " slave clocks (tables 4-4, 4-8, 4-12):\n\n"
-      << axes_table(rs, clocks[0].name)
+      << clocks[0].name << " slave clocks, IAE (tables 4-4, 4-8, 4-12):\n\n"
+      << axes_table(rs, clocks[0].name, false) << "\nand σ (tables 4-6, 4-10, 4-14):\n\n"
+      << axes_table(rs, clocks[0].name, true)
       << "\n## What matches, where magnitudes differ, and why\n\n"
       << fmt::format(
              "- **Axis velocity IAE, fast clocks: sync {} ({}; the thesis: {}).** A fast slave's "

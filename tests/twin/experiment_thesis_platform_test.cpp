@@ -46,6 +46,9 @@ TEST(ThesisPlatform, AQuickRunOfTheFittedScenarioReportsTheFitRowAndPredictions)
   EXPECT_NE(md.find(" / 3338 |"), std::string::npos);        // axis 1, 250 kbit/s, no sync
   EXPECT_NE(md.find(" / +36.9 % |"), std::string::npos);     // axis 1's rate at 250 kbit/s
   EXPECT_NE(md.find("thesis σ x / y / contour"), std::string::npos);
+  EXPECT_NE(md.find("| 250 | σ, no sync | "), std::string::npos);  // tables 4-6, 4-10, 4-14
+  EXPECT_NE(md.find(" / 2.367 |"), std::string::npos);             // axis 1, 250 kbit/s, no sync
+  EXPECT_NE(md.find(" / +38.3 % |"), std::string::npos);           // its rate (table 4-14)
   // The time series: both runs at 250 kbit/s, 10 ms samples over the 4 s path and its 2 s settle,
   // the contour error the hypotenuse of X and Y.
   const std::vector<std::string> lines =
