@@ -270,13 +270,7 @@ void CoMaster::on_tick(SimTime t) {
     if (cfg_.sync_producer == 0 && sync_.send_one(t, [this](const can::Frame& f, SimTime at) { return send(f, at); }))
       ++stats_.syncs;
     send_rpdos(t);
-  }
-  // The master's own heartbeat.
-  if (cfg_.master_node_id != 0 && cfg_.master_heartbeat_ms != 0 && cyclic && t >= next_heartbeat_) {
-    can::Frame hb = co::frame11(co::cob::heartbeat + cfg_.master_node_id, 1);
-    hb.data[0] = static_cast<std::uint8_t>(NmtState::operational);
-    send(hb, t);
-    next_heartbeat_ = t + cfg_.master_heartbeat_ms * kMs;
+    send_heartbeat(t);
   }
   const bool late = t - start_ > std::llround(cfg_.startup_timeout * 1e9);
   switch (phase_) {
@@ -440,6 +434,15 @@ void CoMaster::finish(SimTime t) {
   enter(CoPhase::finished, t);
 }
 
+// The master's own heartbeat, when one is due (the drives watch it: 0x1016).
+void CoMaster::send_heartbeat(SimTime t) {
+  if (cfg_.master_node_id == 0 || cfg_.master_heartbeat_ms == 0 || t < next_heartbeat_) return;
+  can::Frame hb = co::frame11(co::cob::heartbeat + cfg_.master_node_id, 1);
+  hb.data[0] = static_cast<std::uint8_t>(NmtState::operational);
+  send(hb, t);
+  next_heartbeat_ = t + cfg_.master_heartbeat_ms * kMs;
+}
+
 // Operation enabled → quick stop (0x02: the drive brakes on its quick-stop ramp); quick stop
 // active → quick stop until half of kEndNs is over, then disable voltage (0x00: a drive whose
 // quick-stop option holds it there is let go); any other state → disable voltage.
@@ -500,6 +503,9 @@ void CoMaster::end_tick(SimTime t) {
   if (cfg_.sync_producer == 0 && sync_.send_one(t, [this](const can::Frame& f, SimTime at) { return send(f, at); }))
     ++stats_.syncs;
   send_rpdos(t);
+  // The drives still watch the master's heartbeat: a gap longer than their timeout would
+  // fault one still enabled.
+  if (phase_ != CoPhase::resetting && phase_ != CoPhase::configuring && phase_ != CoPhase::failed) send_heartbeat(t);
 }
 
 void CoMaster::shutdown(SimTime t) {

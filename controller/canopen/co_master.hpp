@@ -163,6 +163,7 @@ class CoMaster {
   bool run_script(Node& n, SimTime t);
   bool identity_ok(Node& n, std::uint8_t sub, std::uint32_t v, SimTime t);
   void send_rpdos(SimTime t);
+  void send_heartbeat(SimTime t);
   std::uint16_t controlword_for(Node& n);
   std::uint16_t ending_controlword(const Node& n, SimTime t) const;
   bool any_enabled() const;

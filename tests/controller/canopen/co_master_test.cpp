@@ -161,6 +161,25 @@ TEST(CoMaster, AnEndBegunAsTheDrivesEnableWaitsForTheirNextStatusword) {
   }
 }
 
+// Found in the final re-read: the end ticks sent no master heartbeat, and the drives watch it
+// (0x1016): an end longer than their timeout faulted a drive still enabled. Here the drives hold
+// in quick stop (about 50 ms of end) and time the master out after 40 ms.
+TEST(CoMaster, TheEndKeepsTheMastersHeartbeatGoing) {
+  Network n(shipped_eds(), [](CoProgramConfig& c) {
+    c.master_heartbeat_ms = 30;
+    c.node_heartbeat_ms = 20;
+    c.heartbeat_timeout_ms = 40;
+  });
+  for (auto& d : n.drives) d->drive().objects().quick_stop_option = 6;
+  n.run(300);
+  ASSERT_EQ(n.master->phase(), CoPhase::running);
+  n.master->shutdown(n.now);
+  n.run(CoMaster::kEndNs / kMs);
+  ASSERT_TRUE(n.master->shut_down());
+  for (std::size_t i = 0; i < 4; ++i)
+    EXPECT_EQ(n.drives[i]->stats().comm_faults, 0u) << "drive " << i + 1 << " timed the master out during the end";
+}
+
 // Until the end is over the report says what the master was doing: a run cut short during the
 // end (a Ctrl-C to the whole run) does not record drives still running as "finished".
 TEST(CoMaster, TheReportSaysRunningUntilTheEndIsOver) {

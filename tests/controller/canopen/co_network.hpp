@@ -33,11 +33,14 @@ struct Network {
   SimTime now = 0;
   std::function<void(const can::Frame&)> on_master_send;  // sees every frame the master sends
 
-  // The master reads `master_eds` (the drives are always built from the shipped one).
-  explicit Network(const co::EdsDevice& master_eds = shipped_eds()) {
+  // The master reads `master_eds` (the drives are always built from the shipped one);
+  // `configure` may change its configuration before it is built.
+  explicit Network(const co::EdsDevice& master_eds = shipped_eds(),
+                   const std::function<void(CoProgramConfig&)>& configure = {}) {
     for (int i = 0; i < 5; ++i) bus.attach();
     cfg.eds = master_eds.source;
     cfg.wheel_counts_per_rev = 10000;
+    if (configure) configure(cfg);
     master = std::make_unique<CoMaster>(cfg, master_eds, [this](const can::Frame& f, SimTime t) {
       if (on_master_send) on_master_send(f);
       return bus.submit(0, f, t) == can::SubmitStatus::queued;
