@@ -136,7 +136,8 @@ class Runner {
     if (failed()) {
       // A configuration the line cannot take, or slaves that did not come up in time.
       r.state = simclock::MasterState::stopped;
-      r.reason = !failure_ && master_->misfit() ? simclock::StopReason::config_failed : simclock::StopReason::startup_timeout;
+      // (the misfit first: the axes then never start, and the start-up timeout follows from it).
+      r.reason = master_->misfit() ? simclock::StopReason::config_failed : simclock::StopReason::startup_timeout;
     } else if (halted_) {
       r.state = simclock::MasterState::stopped;
       r.reason = simclock::StopReason::feedback_missing;
