@@ -124,9 +124,19 @@ TEST_P(CliSignals, TwentyRandomMomentsLeaveValidRecordsAndNoProcess) {
     }
     c.signal(sig);
     const int code = c.wait(60s);
+    // A moment in the run's last 5 % can come after a faster run has written its last record
+    // (the signal then meets a process on its way out): exit 0 with a whole, uninterrupted
+    // run is that run finishing first, not a signal ignored mid-run.
+    const std::vector<std::string> problems = record_problems(out);
+    if (code == 0 && at > 0.95 * span_s && problems == std::vector<std::string>{"metrics.json does not say interrupted"} &&
+        fs::exists(out / "video.mp4") && fs::exists(out / "report.html")) {
+      ++finished_first;
+      std::cout << "  " << what << ": exit 0, the run had finished\n";
+      continue;
+    }
     ++interrupted;
     EXPECT_EQ(code, 3) << what << "\n" << c.out() << c.err();
-    for (const std::string& problem : record_problems(out)) ADD_FAILURE() << what << ": " << problem << "\n" << c.out();
+    for (const std::string& problem : problems) ADD_FAILURE() << what << ": " << problem << "\n" << c.out();
     std::this_thread::sleep_for(100ms);  // an orphan would still be there
     EXPECT_TRUE(processes_naming(out).empty()) << what << ": a process of the run survived it";
     std::cout << "  " << what << ": exit " << code << "\n";
