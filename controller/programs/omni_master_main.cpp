@@ -201,31 +201,10 @@ struct HeldSink {
   }
 };
 
-// A signal in lockstep: the end (NMT stop all) goes out in the next tick the twin grants, in
-// place of that tick and counted in its Done, as the other CAN masters' loop does
-// (can_master_loop.hpp); without such a grant (End, the twin gone, nothing in 1 s) it cannot
-// reach the simulated bus and is not sent. Returns kExitOk.
-int end_in_next_tick(simclock::Client& client, can::Transport& tr, OmniMaster& m, controller::HeldFrames& held,
-                     std::int64_t& stamp_ns, LoopStats& ls, Outbox& ob, std::chrono::milliseconds frames_timeout) {
-  simclock::Grant g;
-  simclock::End end{std::numeric_limits<std::int64_t>::min()};
-  const simclock::WaitStatus w = client.next(g, std::chrono::seconds(1), &end);
-  if (w != simclock::WaitStatus::ok) {
-    spdlog::warn("signal: the twin granted no further tick ({}): no NMT stop sent", simclock::to_string(w));
-    return kExitOk;
-  }
-  stamp_ns = g.t_ns;
-  HeldSink sink{m, ls};
-  held.hand_to(sink, g.t_ns);
-  if (!drain_until(tr, m, g.frames[0], g.t_ns, ls, frames_timeout))
-    throw RuntimeFailure{fmt::format("tick {}: the frames the twin sent did not arrive", g.tick)};
-  m.shutdown();
-  flush(tr, ob, m, ls);
-  if (!client.done(simclock::Done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()}))
-    throw RuntimeFailure{"sim clock: the twin is gone"};
-  return kExitOk;
-}
-
+// Lockstep until the twin ends the run (End) or a signal. A signal's end (NMT stop all) goes
+// out in the next tick the twin grants, in place of that tick and counted in its Done, as the
+// other CAN masters' loop does (can_master_loop.hpp); without such a grant (End, the twin gone,
+// nothing in 1 s) it cannot reach the simulated bus and is not sent.
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
             LoopStats& ls, Outbox& ob) {
   simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
@@ -244,8 +223,14 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
   for (;;) {
     simclock::Grant g;
     simclock::End end{kNoEnd};
-    const simclock::WaitStatus w = next_grant(client, sigfd, tr, held, g, end, ls);
-    if (ls.interrupted) return end_in_next_tick(client, tr, m, held, stamp_ns, ls, ob, frames_timeout);
+    simclock::WaitStatus w = next_grant(client, sigfd, tr, held, g, end, ls);
+    if (ls.interrupted) {  // the signal came while awaiting this grant: it carries the end
+      w = client.next(g, std::chrono::seconds(1), &end);
+      if (w != simclock::WaitStatus::ok) {
+        spdlog::warn("signal: the twin granted no further tick ({}): no NMT stop sent", simclock::to_string(w));
+        return kExitOk;
+      }
+    }
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return kExitOk;
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
@@ -253,11 +238,13 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
     held.hand_to(sink, g.t_ns);
     if (!drain_until(tr, m, g.frames[0], g.t_ns, ls, frames_timeout))
       throw RuntimeFailure{controller::drain_failure(g.tick, ls.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};
-    m.on_tick(g.t_ns);
+    if (ls.interrupted) m.shutdown();
+    else m.on_tick(g.t_ns);
     flush(tr, ob, m, ls);
     log.check(m);
     const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
+    if (ls.interrupted) return kExitOk;
   }
 }
 
