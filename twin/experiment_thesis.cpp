@@ -72,11 +72,7 @@ std::array<ClockReading, 2> clock_readings(const Scenario& s) {
 
 namespace {
 
-double avg_axes(const nlohmann::json& m, const char* key) {
-  double s = 0;
-  for (const auto& a : m.at("axes")) s += a.at(key).get<double>();
-  return s / 4.0;
-}
+double mean(const std::array<double, 4>& v) { return (v[0] + v[1] + v[2] + v[3]) / 4.0; }
 
 }  // namespace
 
@@ -108,12 +104,11 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
   x.std_x = od.at("std_x_cm"), x.std_y = od.at("std_y_cm"), x.std_c = od.at("std_contour_cm");
   x.true_iae_c = m.at("platform").at("iae_contour_cm");
   x.true_final = m.at("platform").at("final_error_cm");
-  x.axis_iae = avg_axes(m, "iae_velocity_pulse");
-  x.axis_std = avg_axes(m, "std_velocity_pulse");
   for (std::size_t k = 0; k < 4; ++k) {
     x.axes_iae[k] = m.at("axes").at(k).at("iae_velocity_pulse").get<double>();
     x.axes_std[k] = m.at("axes").at(k).at("std_velocity_pulse").get<double>();
   }
+  x.axis_iae = mean(x.axes_iae), x.axis_std = mean(x.axes_std);
   x.dropout_pct = 100.0 * m.at("bus").at("dropout_rate").get<double>();
   x.load_pct = 100.0 * m.at("bus").at("load").get<double>();
   x.exit_code = r.exit_code;

@@ -182,7 +182,10 @@ std::string run_table(const std::vector<Result>& rs) {
 // Tables 4-4, 4-8 and 4-12 (IAE) or 4-6, 4-10 and 4-14 (σ) for clock reading `clock`: each
 // axis's figure without and with sync, ours / thesis, and each axis's improvement.
 std::string axes_table(const std::vector<Result>& rs, const std::string& clock, bool sigma) {
-  const char* what_name = sigma ? "σ" : "IAE";
+  const char* name = sigma ? "σ" : "IAE";
+  const auto value = [sigma](double ours, double theirs) {
+    return sigma ? fmt::format(" {:.3f} / {} |", ours, theirs) : fmt::format(" {:.0f} / {} |", ours, theirs);
+  };
   std::ostringstream out;
   out << "| kbit/s | | axis 1: ours / thesis | axis 2 | axis 3 | axis 4 |\n|---|---|---|---|---|---|\n";
   for (std::size_t i = 0; i + 1 < rs.size(); i += 2) {
@@ -193,21 +196,16 @@ std::string axes_table(const std::vector<Result>& rs, const std::string& clock, 
     const auto& ours_yes = sigma ? b.axes_std : b.axes_iae;
     const auto& thesis_no = sigma ? t.nosync_axes_std : t.nosync_axes;
     const auto& thesis_yes = sigma ? t.sync_axes_std : t.sync_axes;
-    for (int what = 0; what < 3; ++what) {
-      out << fmt::format("| {} | {} |", a.rate_kbps,
-                         what == 0 ? fmt::format("{}, no sync", what_name)
-                                   : what == 1 ? fmt::format("{}, sync", what_name) : std::string("improvement"));
-      for (std::size_t k = 0; k < 4; ++k) {
-        if (what == 0) out << (sigma ? fmt::format(" {:.3f} / {} |", ours_no[k], thesis_no[k])
-                                     : fmt::format(" {:.0f} / {} |", ours_no[k], thesis_no[k]));
-        if (what == 1) out << (sigma ? fmt::format(" {:.3f} / {} |", ours_yes[k], thesis_yes[k])
-                                     : fmt::format(" {:.0f} / {} |", ours_yes[k], thesis_yes[k]));
-        if (what == 2)
-          out << fmt::format(" {:+.1f} % / {:+.1f} % |", improvement(ours_no[k], ours_yes[k]),
-                             improvement(thesis_no[k], thesis_yes[k]));
-      }
-      out << "\n";
+    std::string no = fmt::format("| {} | {}, no sync |", a.rate_kbps, name);
+    std::string yes = fmt::format("| {} | {}, sync |", a.rate_kbps, name);
+    std::string rate = fmt::format("| {} | improvement |", a.rate_kbps);
+    for (std::size_t k = 0; k < 4; ++k) {
+      no += value(ours_no[k], thesis_no[k]);
+      yes += value(ours_yes[k], thesis_yes[k]);
+      rate += fmt::format(" {:+.1f} % / {:+.1f} % |", improvement(ours_no[k], ours_yes[k]),
+                          improvement(thesis_no[k], thesis_yes[k]));
     }
+    out << no << "\n" << yes << "\n" << rate << "\n";
   }
   return out.str();
 }
@@ -364,7 +362,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
   }
   std::ostringstream out;
   out << "# thesis-platform: tables 4-3 … 4-14 on the twin\n\n"
-      << "Runs of `" << (source_relative_name(scenario)) << "` (200 cm along world X in 20 s"
+      << "Runs of `" << source_relative_name(scenario) << "` (200 cm along world X in 20 s"
       << (quick ? "; QUICK run: 40 cm in 4 s, not comparable" : "")
       << ") with `--bus can`: the master program and the twin as two processes over UDP multicast in lockstep, "
          "four emulated 8051 slaves whose oscillators drift 0.362 % against the master's. IAE = Σ|e| and "

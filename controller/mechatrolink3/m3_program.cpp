@@ -134,9 +134,9 @@ class Runner {
   simclock::MasterReport report() const {
     simclock::MasterReport r;
     if (failed()) {
-      // A configuration the line cannot take, or slaves that did not come up in time.
+      // A configuration the line cannot take, else slaves that did not come up in time (the
+      // misfit first: the axes then never start, and the start-up timeout follows from it).
       r.state = simclock::MasterState::stopped;
-      // (the misfit first: the axes then never start, and the start-up timeout follows from it).
       r.reason = master_->misfit() ? simclock::StopReason::config_failed : simclock::StopReason::startup_timeout;
     } else if (halted_) {
       r.state = simclock::MasterState::stopped;
