@@ -241,6 +241,23 @@ void receive_waiting(Runner& r, can::Transport& tr, std::int64_t at_ns) {
   }
 }
 
+// The wall clock between ticks: waits on the bus and the signal fd until `until` [monotonic ns],
+// handing the runner each frame at its arrival (since `start`). True when a signal came.
+template <class Runner>
+bool wait_on_bus(Runner& r, can::Transport& tr, int sigfd, std::int64_t until, std::int64_t start) {
+  pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
+  const timespec timeout = to_timespec(std::max<std::int64_t>(0, until - monotonic_ns()));
+  const int p = ::ppoll(fds, 2, &timeout, nullptr);
+  if (p < 0 && errno != EINTR) throw LoopFailure{fmt::format("poll failed: {}", std::strerror(errno))};
+  if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) return true;
+  for (int i = 0; i < 256; ++i) {
+    auto tf = tr.receive();
+    if (!tf) break;
+    r.on_frame(tf->frame, monotonic_ns() - start);
+  }
+  return false;
+}
+
 // The end of a wall-clock run, begun at `start` + t: r.shutdown(), then r.end_tick() every
 // period_ns, the bus read in between, until r.shut_down() (the core bounds its length) or a
 // second signal.
@@ -256,15 +273,10 @@ void end_wall_clock(std::int64_t period_ns, Runner& r, can::Transport& tr, int s
       next = now + period_ns;  // late: one tick, not a burst of them
       continue;
     }
-    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-    const timespec timeout = to_timespec(next - now);
-    const int p = ::ppoll(fds, 2, &timeout, nullptr);
-    if (p < 0 && errno != EINTR) throw LoopFailure{fmt::format("poll failed: {}", std::strerror(errno))};
-    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) {
+    if (wait_on_bus(r, tr, sigfd, next, start)) {
       spdlog::warn("a second signal: ending without the rest of the end sequence");
       return;
     }
-    receive_waiting(r, tr, monotonic_ns() - start);
   }
 }
 
@@ -292,16 +304,7 @@ int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Tr
       deadline += period_ns;
       continue;
     }
-    pollfd fds[2] = {{tr.poll_fd(), POLLIN, 0}, {sigfd, POLLIN, 0}};
-    const timespec timeout = to_timespec(std::max<std::int64_t>(0, std::min(deadline, end) - now));
-    const int p = ::ppoll(fds, 2, &timeout, nullptr);
-    if (p < 0 && errno != EINTR) throw LoopFailure{fmt::format("poll failed: {}", std::strerror(errno))};
-    if (p > 0 && (fds[1].revents & POLLIN) && signalled(sigfd)) break;
-    for (int i = 0; i < 256; ++i) {
-      auto tf = tr.receive();
-      if (!tf) break;
-      r.on_frame(tf->frame, monotonic_ns() - start);
-    }
+    if (wait_on_bus(r, tr, sigfd, std::min(deadline, end), start)) break;
   }
   if (overruns) spdlog::info("wall clock: {} ticks were a period or more late", overruns);
   end_wall_clock(period_ns, r, tr, sigfd, start);

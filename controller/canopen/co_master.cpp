@@ -459,32 +459,32 @@ bool CoMaster::reporting(const Node& n) const {
   return n.view.configured && !n.view.lost && (n.view.tpdos > 0 || consumer_.state(n.view.id) == NmtState::operational);
 }
 
-// Every reporting drive has sent a statusword since the end began: the last one before it
+// A reporting drive that has sent no statusword since the end began: the last one before it
 // may predate a controlword the drive has since taken (switched on → operation enabled).
+bool CoMaster::awaiting_statusword(const Node& n) const { return reporting(n) && n.view.tpdos <= n.tpdos_at_end; }
+
 bool CoMaster::statuswords_fresh() const {
-  for (const Node& n : nodes_)
-    if (reporting(n) && n.view.tpdos <= n.tpdos_at_end) return false;
-  return true;
+  return std::none_of(nodes_.begin(), nodes_.end(), [this](const Node& n) { return awaiting_statusword(n); });
 }
 
-// A drive still powering its motor: operation enabled or quick stop active.
+// A drive still powering its motor, as its last statusword says: operation enabled or quick
+// stop active.
+bool CoMaster::enabled(const Node& n) {
+  const std::uint16_t sw = n.view.statusword & 0x6F;
+  return n.view.configured && !n.view.lost && (sw == 0x27 || sw == 0x07);
+}
+
 bool CoMaster::any_enabled() const {
-  for (const Node& n : nodes_) {
-    const std::uint16_t sw = n.view.statusword & 0x6F;
-    if (n.view.configured && !n.view.lost && (sw == 0x27 || sw == 0x07)) return true;
-  }
-  return false;
+  return std::any_of(nodes_.begin(), nodes_.end(), [](const Node& n) { return enabled(n); });
 }
 
 // The end's bound passed: which drive is still enabled, or has not reported since it began.
 void CoMaster::warn_unfinished_end(SimTime t) {
   for (const Node& n : nodes_) {
-    if (!n.view.configured || n.view.lost) continue;
-    const std::uint16_t sw = n.view.statusword & 0x6F;
-    if (sw == 0x27 || sw == 0x07)
+    if (enabled(n))
       event(t, fmt::format("end: node {} still enabled after {} ms (statusword 0x{:04X}): NMT stop regardless", n.view.id,
                            kEndNs / kMs, n.view.statusword), true);
-    else if (reporting(n) && n.view.tpdos <= n.tpdos_at_end)
+    else if (awaiting_statusword(n))
       event(t, fmt::format("end: node {} sent no statusword in {} ms: NMT stop regardless", n.view.id, kEndNs / kMs), true);
   }
 }

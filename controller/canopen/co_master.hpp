@@ -166,8 +166,10 @@ class CoMaster {
   void send_heartbeat(SimTime t);
   std::uint16_t controlword_for(Node& n);
   std::uint16_t ending_controlword(const Node& n, SimTime t) const;
+  static bool enabled(const Node& n);
   bool any_enabled() const;
   bool reporting(const Node& n) const;
+  bool awaiting_statusword(const Node& n) const;
   bool statuswords_fresh() const;
   void warn_unfinished_end(SimTime t);
   void end_tick(SimTime t);
