@@ -130,7 +130,9 @@ TEST(CoMaster, TheEndOfAFinishedPathIsNmtStopOnceTheDrivesHaveReported) {
   EXPECT_TRUE(n.master->shut_down());
   EXPECT_EQ(std::count_if(sent.begin(), sent.end(), is_nmt_stop), 1);
   for (const can::Frame& f : sent) {
-    if ((f.id & 0x780) == 0x200) EXPECT_EQ(co::get_u16(f.data.data()), 0x00) << "no quick stop: the drives are off";
+    if ((f.id & 0x780) == 0x200) {
+      EXPECT_EQ(co::get_u16(f.data.data()), 0x00) << "no quick stop: the drives are off";
+    }
   }
   n.run(5);
   for (std::size_t i = 0; i < 4; ++i) EXPECT_EQ(n.drives[i]->stats().comm_faults, 0u);
