@@ -52,7 +52,7 @@ class OsmesaGl final : public OffscreenGl {
   int width() const override { return width_; }
   int height() const override { return height_; }
   std::string describe() const override {
-    return gl_string(GL_VENDOR) + " / " + gl_string(GL_RENDERER) + " / OpenGL " + gl_string(GL_VERSION);
+    return gl_string(GL_VENDOR) + " / " + gl_string(GL_RENDERER) + " / OpenGL " + gl_string(GL_VERSION) + " (OSMesa)";
   }
 
  private:

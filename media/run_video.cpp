@@ -305,6 +305,7 @@ VideoResult render_frames(Recording& rec, SceneRenderer& renderer, VideoEncoder&
   const bool end_frame = steps / o.fps < end - 1e-9;
   const int total = steps + 1 + (end_frame ? 1 : 0);
   VideoResult res{encoder.path()};
+  res.renderer = renderer.gl_description();
   for (int k = 0; k < total; ++k) {
     res.stopped_early = stop && stop->load();
     if (res.stopped_early) break;

@@ -140,7 +140,8 @@ bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<voi
   g_rendering.store(false);
   if (!o.video.empty())
     std::cout << fmt::format("  {} ({} frames, {:.2f} s of video, rendered in {:.1f} s{})\n", o.video, o.video_frames,
-                             o.video_s, o.render_wall_s, o.video_stopped_early ? ", STOPPED EARLY" : "");
+                             o.video_s, o.render_wall_s, o.video_stopped_early ? ", STOPPED EARLY" : "")
+              << "    drawn by " << o.renderer << "\n";
   else if (o.video_stopped_early)
     std::cout << "  no video: stopped before its first frame\n";
   if (!o.report.empty()) std::cout << "  " << o.report << "\n";

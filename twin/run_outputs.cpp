@@ -32,6 +32,7 @@ void render_video(const std::string& run_dir, const OutputPlan& plan, const std:
     r.video_s = v.duration_s;
     r.video_stopped_early = v.stopped_early;
     r.render_wall_s = v.render_s;
+    r.renderer = v.renderer;
   } catch (const media::BadRunRecord& e) {
     r.errors.push_back(fmt::format("video: {}", e.what()));
     r.bad_record = true;

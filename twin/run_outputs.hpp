@@ -32,6 +32,7 @@ struct OutputsResult {
   double video_s = 0;               // its duration [s]
   bool video_stopped_early = false; // `stop` cut the rendering short (the file is still valid)
   double render_wall_s = 0;
+  std::string renderer;             // the GL that drew the video (vendor / renderer / version)
   std::string report;               // report.html ("" if none)
   double report_wall_s = 0;
   std::vector<std::string> errors;  // one line per output that could not be made

@@ -101,6 +101,7 @@ TEST_F(RunVideo, OneFramePerFrameIntervalOfSimTimeFromZeroToTheLastSample) {
   EXPECT_NEAR(r.duration_s, 2.1, 1e-9);
   EXPECT_FALSE(r.stopped_early);
   EXPECT_GT(r.render_s, 0);
+  EXPECT_NE(r.renderer.find(" / OpenGL "), std::string::npos) << r.renderer;
   const auto s = probe(out());
   ASSERT_EQ(s.status, 0);
   EXPECT_EQ(s.codec, "h264");

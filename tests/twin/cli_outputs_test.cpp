@@ -151,6 +151,8 @@ TEST_F(CliOutputs, RunVideoAndRenderAgree) {
                           mp4.string(), "--set", kSmallVideo});
   ASSERT_EQ(f.code, 0) << f.err;
   EXPECT_TRUE(contains(f.out, mp4.string() + " (36 frames")) << f.out;
+  // It says which GL drew the frames (the default backend is OSMesa).
+  EXPECT_TRUE(contains(f.out, "    drawn by ") && contains(f.out, "(OSMesa)\n")) << f.out;
   const Probe p = probe(mp4, io());
   ASSERT_TRUE(p.ok) << p.raw;
   EXPECT_EQ(p.codec, "h264");
