@@ -1,4 +1,4 @@
-// physics layer — the thesis slave's electronics and drive; see drive_chain.hpp.
+// The thesis slave's firmware and board, emulated; see drive_chain.hpp.
 #include "physics/drive_chain.hpp"
 
 #include <algorithm>
@@ -11,7 +11,7 @@ namespace {
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 }  // namespace
 
-// ---- DA converter and analog driver input -------------------------------------------------
+// ---- DA converter -----------------------------------------------------------------------------
 
 int dac_max_code(const DacParams& dac) { return (1 << dac.bits) - 1; }
 
@@ -25,14 +25,6 @@ int dac_clamp_code(const DacParams& dac, double code) {
 double dac_volts(const DacParams& dac, int code) {
   const int d = std::clamp(code, 0, dac_max_code(dac));
   return static_cast<double>(d) / static_cast<double>(1 << dac.bits) * dac.vref;
-}
-
-double driver_setpoint(const DriverParams& driver, const MotorParams& motor, double volts) {
-  // Input dead band around the zero voltage: inside it the amplifier sees 0.
-  const double v = volts - driver.zero_volts;
-  const double outside = std::max(std::abs(v) - driver.dead_band, 0.0);
-  const double w = driver.gain * std::copysign(outside, v);
-  return std::clamp(w, -motor.speed_limit, motor.speed_limit);
 }
 
 // ---- HCTL-2032 style quadrature counter ----------------------------------------------------
@@ -153,12 +145,10 @@ void VelocityLoop::reset() {
   saturated_ = false;
 }
 
-// ---- one wheel: counter + loop + DA + driver ------------------------------------------------
+// ---- one wheel's node: counter + loop + DA ------------------------------------------------------
 
 WheelDriveChain::WheelDriveChain(const PlatformParams& params, double shaft_angle)
     : dac_(params.dac),
-      driver_(params.driver),
-      motor_(params.motor),
       counter_(params.encoder, shaft_angle),
       loop_(params.velocity_loop, params.dac, params.driver, params.counts_per_rev()) {
   write_code(dac_clamp_code(dac_, loop_.zero_code()));
@@ -173,9 +163,9 @@ double WheelDriveChain::sample(double shaft_angle, double command_counts_per_sam
   last_.delta_counts = counter_delta(count, previous_count_);
   last_.count = previous_count_ = count;
   last_.command = command_counts_per_sample;
-  // PI → DA → driver.
+  // PI → DA.
   write_code(loop_.step(command_counts_per_sample, last_.delta_counts));
-  return last_.setpoint;
+  return last_.volts;
 }
 
 void WheelDriveChain::reset() {
@@ -189,7 +179,6 @@ void WheelDriveChain::reset() {
 void WheelDriveChain::write_code(int code) {
   last_.code = code;
   last_.volts = dac_volts(dac_, code);
-  last_.setpoint = driver_setpoint(driver_, motor_, last_.volts);
 }
 
 }  // namespace omnitwin::physics

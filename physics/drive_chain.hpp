@@ -1,11 +1,14 @@
-// physics layer — the thesis slave's electronics and drive (seed 002, §4-3; DESIGN §5).
+// The thesis slave's firmware and board, emulated (seed 002, §4-3; DESIGN §5).
 //
 // One wheel of the thesis platform is driven by an 8051 slave: it reads an HCTL-2032
-// quadrature counter, runs a velocity PI in counts per sample, writes a 12-bit DA (AD7541,
-// eq. 4-8), and the DA voltage drives an analog velocity-mode amplifier. This file models
-// that chain as pure computation (no MuJoCo): the amplifier+motor itself is the MuJoCo
-// velocity servo elsewhere; we only produce its speed setpoint. Every piece takes its fixed
-// configuration from platform_params.hpp and keeps only changing state; nothing allocates.
+// quadrature counter, runs a velocity PI in counts per sample and writes a 12-bit DA (AD7541,
+// eq. 4-8). This is the node's side of the line between node and physics, and it ends at the
+// DA's output voltage: the analog amplifier that takes that voltage (physics/amplifier.hpp),
+// the motor and the wheel are physics (PlatformSim::set_wheel_amplifier_input). It lives in
+// physics/ beside the parameters it shares with the plant, and because bus `direct` runs it
+// without a network; bus `can` runs it inside the emulated node (bus_emulators/omni/). Pure
+// computation (no MuJoCo): every piece takes its fixed configuration from platform_params.hpp
+// and keeps only changing state; nothing allocates.
 #pragma once
 
 #include <cstdint>
@@ -14,7 +17,7 @@
 
 namespace omnitwin::physics {
 
-// ---- DA converter and analog driver input -------------------------------------------------
+// ---- DA converter -----------------------------------------------------------------------------
 
 // Largest DA code, 2^bits − 1 (4095 for 12 bits). Real-time safe.
 int dac_max_code(const DacParams& dac);
@@ -25,11 +28,6 @@ int dac_clamp_code(const DacParams& dac, double code);
 // DA output voltage for a code, eq. 4-8: V = D/2^bits · vref [V]; code clamped first.
 // Real-time safe.
 double dac_volts(const DacParams& dac, int code);
-
-// Analog velocity driver: speed setpoint [rad/s] = gain·(V − zero_volts) with the input
-// dead band taken out (|V − zero_volts| <= dead_band gives 0, beyond it the band is
-// subtracted), clamped to ±motor.speed_limit. Real-time safe.
-double driver_setpoint(const DriverParams& driver, const MotorParams& motor, double volts);
 
 // ---- HCTL-2032 style quadrature counter ----------------------------------------------------
 
@@ -124,7 +122,7 @@ class VelocityLoop {
   bool saturated_ = false;
 };
 
-// ---- one wheel: counter + loop + DA + driver ------------------------------------------------
+// ---- one wheel's node: counter + loop + DA ------------------------------------------------------
 
 // What one slave sample produced, kept for logging.
 struct WheelDriveSample {
@@ -132,37 +130,35 @@ struct WheelDriveSample {
   int32_t delta_counts = 0;    // measured speed [counts/sample]
   double command = 0.0;        // velocity command [counts/sample]
   int code = 0;                // DA code written
-  double volts = 0.0;          // DA output [V]
-  double setpoint = 0.0;       // driver speed setpoint [rad/s]
+  double volts = 0.0;          // DA output [V]: the amplifier's input
 };
 
-// The whole thesis slave chain of one wheel. The twin calls observe() whenever it likes
-// (e.g. every physics step, so index crossings are seen) and sample() at the slave's period.
+// The thesis slave of one wheel, from the encoder's lines to the DA's pin. The twin calls
+// observe() whenever it likes (e.g. every physics step, so index crossings are seen) and
+// sample() at the slave's period, and hands the DA voltage to physics.
 class WheelDriveChain {
  public:
-  // Counter starts at 0 at `shaft_angle` [rad]; the setpoint starts at the DA's zero code.
+  // Counter starts at 0 at `shaft_angle` [rad]; the DA starts at its zero code.
   explicit WheelDriveChain(const PlatformParams& params, double shaft_angle = 0.0);
 
   // Feeds the shaft angle [rad] to the counter between samples. Real-time safe.
   void observe(double shaft_angle);
-  // One slave sample at shaft angle [rad] with a command [counts/sample]; returns the new
-  // driver speed setpoint [rad/s] (held until the next sample). Real-time safe.
+  // One slave sample at shaft angle [rad] with a command [counts/sample]; returns the new DA
+  // output [V] (held until the next sample). Real-time safe.
   double sample(double shaft_angle, double command_counts_per_sample);
   // Counter RST at the current angle, PI cleared, output back to the zero code.
   void reset();
 
   const WheelDriveSample& last() const { return last_; }
-  double setpoint() const { return last_.setpoint; }  // [rad/s]
+  double volts() const { return last_.volts; }  // DA output [V]
   const QuadratureCounter& counter() const { return counter_; }
   QuadratureCounter& counter() { return counter_; }
   const VelocityLoop& loop() const { return loop_; }
 
  private:
-  void write_code(int code);  // DA → volts → setpoint into last_
+  void write_code(int code);  // DA code → volts into last_
 
   DacParams dac_;
-  DriverParams driver_;
-  MotorParams motor_;
   QuadratureCounter counter_;
   VelocityLoop loop_;
   int32_t previous_count_ = 0;

@@ -9,6 +9,7 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "physics/amplifier.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "physics/wheel_contact.hpp"
 
@@ -124,6 +125,8 @@ PlatformSim::PlatformSim(ModelPtr model, const PlatformParams& p)
     : model_(std::move(model)),
       speed_limit_(p.motor.speed_limit),
       gain_error_(p.driver.gain_error),
+      driver_(p.driver),
+      motor_params_(p.motor),
       nominal_height_(p.geometry.r) {
   // Names first (throws on a broken contract), then data, then the initial placement.
   resolve_ids();
@@ -198,6 +201,7 @@ void PlatformSim::reset(double x, double y, double phi) {
   mjModel* m = model_.get();
   mjData* d = data_.get();
   mj_resetData(m, d);
+  setpoint_.fill(0.0);
   // Pose at the nominal hub height, level, yawed by phi.
   mjtNum* q = d->qpos + root_qpos_;
   q[0] = x, q[1] = y, q[2] = nominal_height_;
@@ -212,10 +216,16 @@ void PlatformSim::reset(double x, double y, double phi) {
 
 bool PlatformSim::set_wheel_speed_setpoint(int wheel0, double rad_s) {
   if (!valid_wheel(wheel0) || std::isnan(rad_s)) return false;
+  setpoint_[static_cast<std::size_t>(wheel0)] = rad_s;
   // The amplifier's own gain error scales what it makes of the setpoint, then its limit.
   const double actual = rad_s * (1.0 + gain_error_[static_cast<std::size_t>(wheel0)]);
   data_->ctrl[motor_[wheel0]] = std::clamp(actual, -speed_limit_, speed_limit_);
   return true;
+}
+
+bool PlatformSim::set_wheel_amplifier_input(int wheel0, double volts) {
+  if (std::isnan(volts)) return false;
+  return set_wheel_speed_setpoint(wheel0, driver_setpoint(driver_, motor_params_, volts));
 }
 
 void PlatformSim::step() {

@@ -61,9 +61,18 @@ class PlatformSim {
   // does not allocate.
   void reset(double x, double y, double phi);
 
-  // Speed setpoint of one amplifier [rad/s], clamped to ±speed_limit and written to ctrl.
-  // Returns false (and changes nothing) for a wheel index outside 0..3. Real-time safe.
+  // Speed setpoint of one amplifier [rad/s]: the amplifier makes rad_s·(1 + gain error) of
+  // it, clamped to ±speed_limit, and that is written to ctrl. Returns false (and changes
+  // nothing) for a wheel index outside 0..3 or a NaN. Real-time safe.
   bool set_wheel_speed_setpoint(int wheel0, double rad_s);
+  // Input voltage of one analog amplifier [V] (the thesis node's DA output): its input stage
+  // (zero volts, dead band, gain, limit: physics/amplifier.hpp) makes the speed setpoint,
+  // then as set_wheel_speed_setpoint. The node's firmware ends at this voltage; the amplifier,
+  // motor and wheel are physics. Same returns. Real-time safe.
+  bool set_wheel_amplifier_input(int wheel0, double volts);
+  // The speed setpoint last given to wheel 0..3 [rad/s], before the amplifier's gain error
+  // (what trajectory.csv records and replay gives back). Real-time safe.
+  double wheel_setpoint(int wheel0) const { return setpoint_[static_cast<std::size_t>(wheel0)]; }
 
   // Advances one MuJoCo step (timestep() seconds) and tracks the unwrapped yaw.
   // Real-time safe.
@@ -121,6 +130,9 @@ class PlatformSim {
   DataPtr data_;
   double speed_limit_ = 0;     // |setpoint| limit [rad/s]
   std::array<double, 4> gain_error_{};  // driver.gain_error: speed = setpoint·(1 + e)
+  DriverParams driver_;                  // the amplifiers' input stage
+  MotorParams motor_params_;             // its speed limit
+  std::array<double, 4> setpoint_{};     // last speed setpoint asked of each wheel [rad/s]
   double nominal_height_ = 0;  // first guess for the chassis height [m] (wheel radius)
   int root_qpos_ = 0, root_dof_ = 0;
   std::array<int, 4> wheel_qpos_{}, wheel_dof_{}, motor_{};

@@ -52,6 +52,9 @@ struct NetworkHooks {
   std::function<double(int wheel, SimTime t)> wheel_angle_at;
   std::function<double(int wheel)> wheel_speed;              // shaft speed [rad/s]
   std::function<void(int wheel, double rad_s)> set_setpoint; // amplifier speed setpoint [rad/s]
+  // The analog amplifier's input voltage [V], from a node that ends at a DA (the thesis
+  // node): physics makes the speed setpoint of it (PlatformSim::set_wheel_amplifier_input).
+  std::function<void(int wheel, double volts)> set_amplifier_input;
   std::function<void(int wheel, double err)> axis_sample;    // velocity error, drive units
   std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
 };

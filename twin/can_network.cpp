@@ -145,8 +145,8 @@ void OmniCanNetwork::after_slave_input(int i, std::uint64_t steps_before, const 
   if (a.request == omni::TimerRequest::stop) sched_.cancel(id);
   if (a.request == omni::TimerRequest::restart) sched_.restart(id, a.first_ns);
   const omni::OmniSlave& sl = *slaves_[static_cast<std::size_t>(i)];
-  // The driver follows the chain's output (the zero code after a stop).
-  hooks_.set_setpoint(i, sl.setpoint());
+  // The amplifier follows the DA (the zero code after a stop).
+  hooks_.set_amplifier_input(i, sl.da_volts());
   if (sl.stats().steps() > steps_before) {  // a skipped interrupt (no new command) logs nothing
     const physics::WheelDriveSample& w = sl.drive_chain().last();
     hooks_.axis_sample(i, w.command - w.delta_counts);
@@ -199,7 +199,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
         slaves_[n]->set_drift(drift);
         wire_.bus().reattach(bus_node(f.wheel), t);
         powered_[n] = true;
-        hooks_.set_setpoint(f.wheel, slaves_[n]->setpoint());
+        hooks_.set_amplifier_input(f.wheel, slaves_[n]->da_volts());
       }
       hooks_.log(t, "fault", fmt::format("power_loss of {} ({})", who, edge));
       return;

@@ -297,8 +297,12 @@ void PlatformRun::build_network() {
   h.wheel_angle_at = [this](int i, SimTime t) { return sim_.wheel_angle_at(i, ns_to_seconds(t)); };
   h.wheel_speed = [this](int i) { return sim_.wheel_speed(i); };
   h.set_setpoint = [this](int i, double w) {
-    bus_setpoint_[static_cast<std::size_t>(i)] = w;
     sim_.set_wheel_speed_setpoint(i, w);
+    bus_setpoint_[static_cast<std::size_t>(i)] = sim_.wheel_setpoint(i);
+  };
+  h.set_amplifier_input = [this](int i, double volts) {
+    sim_.set_wheel_amplifier_input(i, volts);
+    bus_setpoint_[static_cast<std::size_t>(i)] = sim_.wheel_setpoint(i);
   };
   h.axis_sample = [this](int i, double e) { axis_stats_[static_cast<std::size_t>(i)].add(e); };
   h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
@@ -640,8 +644,9 @@ void PlatformRun::on_master(SimTime t) {
 void PlatformRun::on_device(int wheel) {
   // The slave converts the speed it was sent into counts per its own nominal sample.
   const double per_sample = s_.platform.velocity_loop.period * s_.platform.counts_per_rev() / (2 * std::numbers::pi);
-  const double setpoint = chains_[wheel]->sample(sim_.wheel_angle(wheel), wheel_cmd_rad_s_[wheel] * per_sample);
-  sim_.set_wheel_speed_setpoint(wheel, setpoint);
+  // The node ends at its DA; the amplifier, motor and wheel are physics.
+  const double volts = chains_[wheel]->sample(sim_.wheel_angle(wheel), wheel_cmd_rad_s_[wheel] * per_sample);
+  sim_.set_wheel_amplifier_input(wheel, volts);
   const physics::WheelDriveSample& last = chains_[wheel]->last();
   axis_stats_[wheel].add(last.command - last.delta_counts);
 }
@@ -662,7 +667,7 @@ void PlatformRun::on_record(SimTime t) {
       const physics::WheelDriveSample& w = chains_[i]->last();
       row_.insert(row_.end(), {wheel_cmd_rad_s_[i], sim_.wheel_speed(i), sim_.wheel_angle(i),
                                static_cast<double>(chains_[i]->counter().count()), w.command,
-                               static_cast<double>(w.delta_counts), static_cast<double>(w.code), w.setpoint,
+                               static_cast<double>(w.delta_counts), static_cast<double>(w.code), sim_.wheel_setpoint(i),
                                sim_.wheel_torque(i)});
     }
   }

@@ -4,7 +4,8 @@
 // The slave program as the twin sees it: frames arrive from the bus through an SJA1000
 // receive model (acceptance filter, 64-byte FIFO, INT line → the receive interrupt), the
 // timer interrupt on the node's own drifting oscillator runs the velocity loop of the wheel
-// drive chain (counter + PI + DA + driver, physics/drive_chain.hpp) and sends the speed
+// node (counter + PI + DA, physics/drive_chain.hpp: the DA's voltage is where physics takes
+// over, PlatformSim::set_wheel_amplifier_input) and sends the speed
 // feedback when a new command has arrived since the last step (fig. 4-16; an interrupt that
 // finds none skips the loop: the DA holds its output, no feedback goes out, and the next step's
 // counter reading spans both periods), and the optional synchronisation of 3-2-2 switches every
@@ -231,8 +232,8 @@ class OmniSlave {
   // physics step; the event-driven step uses the last angle seen here). Real-time safe.
   void observe(double shaft_angle_rad) { chain_.observe(shaft_angle_rad); }
 
-  // The driver's speed setpoint for the wheel [rad/s], held between samples. Real-time safe.
-  double setpoint() const { return chain_.setpoint(); }
+  // The DA's output [V], the amplifier's input, held between samples. Real-time safe.
+  double da_volts() const { return chain_.volts(); }
 
   SlaveState state() const { return state_; }
   bool started() const { return state_ != SlaveState::stopped; }

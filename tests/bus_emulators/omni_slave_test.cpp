@@ -9,6 +9,8 @@
 // converging on a simple simulated wheel.
 #include "bus_emulators/omni/omni_slave.hpp"
 
+#include "physics/amplifier.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -22,6 +24,13 @@ namespace omnitwin::omni {
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586;
+
+// The speed setpoint the (default) amplifier makes of the slave's DA output [rad/s]: the
+// slave ends at its DA, the amplifier is physics (physics/amplifier.hpp).
+double amplifier_setpoint(const OmniSlave& s) {
+  const physics::PlatformParams p;
+  return physics::driver_setpoint(p.driver, p.motor, s.da_volts());
+}
 
 struct Sent {
   can::Frame frame;
@@ -155,7 +164,7 @@ TEST(OmniSlave, StoppedNodeSendsNothingAndIgnoresCommands) {
   EXPECT_EQ(slave.stats().samples, 0u);
   EXPECT_EQ(slave.stats().spurious_timer_interrupts, 1u);
   EXPECT_TRUE(wire.sent.empty());
-  EXPECT_DOUBLE_EQ(slave.setpoint(), 0.0);
+  EXPECT_DOUBLE_EQ(amplifier_setpoint(slave), 0.0);
 
   // After start and stop the same holds again, and the setpoint is back to zero.
   slave.on_frame(start_all(), 20'000'000);
@@ -164,11 +173,11 @@ TEST(OmniSlave, StoppedNodeSendsNothingAndIgnoresCommands) {
   slave.on_frame(command({50, 0, 0, 0}), 22'000'000);  // axis 1 (last byte on the wire)
   EXPECT_EQ(slave.command(), 50);
   slave.on_timer(30'000'000, 0.0);
-  EXPECT_NE(slave.setpoint(), 0.0);
+  EXPECT_NE(amplifier_setpoint(slave), 0.0);
   const auto sent_running = wire.sent.size();
   EXPECT_EQ(sent_running, 1u);  // the feedback
   slave.on_frame(stop_all(), 31'000'000);
-  EXPECT_DOUBLE_EQ(slave.setpoint(), 0.0);
+  EXPECT_DOUBLE_EQ(amplifier_setpoint(slave), 0.0);
   slave.on_frame(command({0, 0, 0, 7}), 32'000'000);
   EXPECT_EQ(slave.command(), 50);
   EXPECT_EQ(slave.on_timer(40'000'000, 0.5).request, TimerRequest::stop);
@@ -391,14 +400,14 @@ TEST(OmniSlave, InterruptWithoutANewCommandSkipsTheLoopAndTheFeedback) {
   slave.observe(10 * rad_per_count);
   slave.on_timer(5'000'000, 10 * rad_per_count);  // a step: 10 counts measured
   ASSERT_EQ(wire.sent.size(), 1u);
-  const double setpoint = slave.setpoint();
+  const double setpoint = amplifier_setpoint(slave);
   const int code = slave.drive_chain().last().code;
 
   // No command in the next period: the interrupt is a (dropout) sample that runs nothing.
   slave.observe(20 * rad_per_count);
   slave.on_timer(10'000'000, 20 * rad_per_count);
   EXPECT_EQ(wire.sent.size(), 1u);  // no feedback
-  EXPECT_EQ(slave.setpoint(), setpoint);  // the DA holds its output
+  EXPECT_EQ(amplifier_setpoint(slave), setpoint);  // the DA holds its output
   EXPECT_EQ(slave.drive_chain().last().code, code);
   EXPECT_EQ(slave.stats().samples, 2u);
   EXPECT_EQ(slave.stats().stale_samples, 1u);
@@ -503,7 +512,7 @@ TEST(OmniSlave, ParameterFrameSetsKpAndOtherNodesParametersAreFiltered) {
     s->on_timer(10'000'000, 0.0);  // wheel at rest: e = 10 counts/sample
   }
   EXPECT_EQ(b.drive_chain().last().code - a.drive_chain().last().code, 300);
-  EXPECT_GT(b.setpoint(), a.setpoint());
+  EXPECT_GT(amplifier_setpoint(b), amplifier_setpoint(a));
 
   // Started: parameters are refused (4-4-1: set in the stopped state).
   b.on_frame(enc(ParameterSetup{node::axis1, node::master, data_type::axis_controller_setting,
@@ -616,7 +625,7 @@ TEST(OmniSlave, RandomFramesKeepTheBookkeepingConsistent) {
     EXPECT_EQ(s.bad_frames, s.frames_invalid + s.decode_errors);
     EXPECT_EQ(s.samples, s.timer_samples + s.event_samples);
     EXPECT_EQ(s.illegal_transitions, 0u);
-    EXPECT_TRUE(std::isfinite(slave.setpoint()));
+    EXPECT_TRUE(std::isfinite(amplifier_setpoint(slave)));
     EXPECT_GT(s.frames_accepted, 0u);
   }
 }
@@ -662,7 +671,7 @@ TEST(OmniSlave, SetpointConvergesToCommandedSpeedOnSimpleWheel) {
   const double tau = 0.03, dt = 1e-3;
   const double a = std::exp(-dt / tau);
   double omega = 0.0, theta = 0.0;
-  EXPECT_DOUBLE_EQ(slave.setpoint(), 0.0);
+  EXPECT_DOUBLE_EQ(amplifier_setpoint(slave), 0.0);
 
   const std::int64_t step_ns = 1'000'000, master_p = 10'000'000, t_tx = 130'000;
   SlaveTimer timer{cfg.timer_period_ns, cfg.drift};
@@ -685,12 +694,12 @@ TEST(OmniSlave, SetpointConvergesToCommandedSpeedOnSimpleWheel) {
         timer.apply(slave.on_timer(tt, theta + omega * static_cast<double>(tt - t) * 1e-9));
       }
     }
-    const double sp = slave.setpoint();
+    const double sp = amplifier_setpoint(slave);
     omega = sp + (omega - sp) * a;
     theta += omega * dt;  // (rectangle rule: exact enough for this check)
     slave.observe(theta);
   }
-  EXPECT_NEAR(slave.setpoint(), target, 0.05 * target);
+  EXPECT_NEAR(amplifier_setpoint(slave), target, 0.05 * target);
   EXPECT_NEAR(omega, target, 0.05 * target);
   ASSERT_GT(feedback.size(), 250u);
   for (std::size_t i = feedback.size() - 20; i < feedback.size(); ++i) EXPECT_NEAR(feedback[i], c, 1) << i;

@@ -1,9 +1,12 @@
-// Tests physics/drive_chain: the thesis slave's electronics — 12-bit DA (eq. 4-8), the analog
-// driver's input mapping and clamp, the HCTL-2032 style counter (exact counts, direction,
-// 32-bit wrap, index latching, RST), and the 8051 velocity PI closed around a first-order
-// motor simulated here (tracking within a count, anti-windup after saturation), the driver's
-// input dead band, and the 8051's 16-bit integer PI with its wrap-around on overflow.
+// Tests physics/drive_chain: the thesis node's firmware and board — 12-bit DA (eq. 4-8), the
+// HCTL-2032 style counter (exact counts, direction, 32-bit wrap, index latching, RST), and
+// the 8051 velocity PI closed around an amplifier (physics/amplifier.hpp) and a first-order
+// motor simulated here (tracking within a count, anti-windup after saturation, a small
+// command held up by the amplifier's dead band), and the 8051's 16-bit integer PI with its
+// wrap-around on overflow. The chain ends at the DA's voltage.
 #include "physics/drive_chain.hpp"
+
+#include "physics/amplifier.hpp"
 
 #include <gtest/gtest.h>
 
@@ -32,17 +35,6 @@ TEST(Dac, CodesAreClampedToTheConverterRange) {
   EXPECT_EQ(dac_clamp_code(dac, -3.2), 0);
   EXPECT_EQ(dac_clamp_code(dac, 5000.0), 4095);
   EXPECT_EQ(dac_clamp_code(dac, 1000.6), 1001);
-}
-
-TEST(Driver, SetpointIsGainTimesOffsetVoltsAndClamped) {
-  const DriverParams drv;  // 2.5 V zero, 8 rad/s/V
-  MotorParams motor;
-  motor.speed_limit = 10.0;
-  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 2.5), 0.0);
-  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 3.0), 4.0);
-  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 2.0), -4.0);
-  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 5.0), 10.0);   // 20 rad/s asked, 10 allowed
-  EXPECT_DOUBLE_EQ(driver_setpoint(drv, motor, 0.0), -10.0);
 }
 
 TEST(Counter, ExactCountsForKnownAnglesBothDirections) {
@@ -137,10 +129,14 @@ TEST(Counter, IndexCountFollowsTheResetReference) {
   EXPECT_EQ(c.index_count(), 500);  // edge 2000 reads 2000 − 1500
 }
 
-// First-order motor: speed follows the driver setpoint with time constant tau and a gain
-// error; the shaft angle integrates it. Stepped at 1 ms under the slave's 10 ms loop.
+// The amplifier's input stage (physics/amplifier.hpp) and a first-order motor: speed
+// follows the setpoint made of the DA's volts with time constant tau and a gain error; the
+// shaft angle integrates it. Stepped at 1 ms under the slave's 10 ms loop.
 struct MotorPlant {
+  DriverParams driver;
+  MotorParams motor;
   double tau = 0.02, gain = 1.0, speed = 0.0, angle = 0.0;
+  double setpoint(double volts) const { return driver_setpoint(driver, motor, volts); }
   void step(double setpoint, double dt) {
     speed += (gain * setpoint - speed) * (dt / tau);
     angle += speed * dt;
@@ -150,7 +146,7 @@ struct MotorPlant {
 // Runs the drive chain for `samples` samples of command c; returns the chain.
 void run(WheelDriveChain& chain, MotorPlant& plant, double c, int samples, double period) {
   for (int k = 0; k < samples; ++k) {
-    const double sp = chain.sample(plant.angle, c);
+    const double sp = plant.setpoint(chain.sample(plant.angle, c));
     for (int i = 0; i < 10; ++i) {
       plant.step(sp, period / 10.0);
       chain.observe(plant.angle);
@@ -187,23 +183,6 @@ TEST(VelocityLoop, TracksTheCommandOnAFirstOrderMotorWithGainError) {
   }
 }
 
-TEST(Driver, DeadBandGivesZeroInsideAndSubtractsTheBandOutside) {
-  // ±0.05 V around 2.5 V is standstill; beyond it the band is taken off, so the curve is
-  // continuous (3.0 V: 0.45 V effective → 3.6 rad/s) and odd about the zero voltage.
-  DriverParams drv;
-  drv.dead_band = 0.05;
-  const MotorParams motor;
-  EXPECT_EQ(driver_setpoint(drv, motor, 2.5), 0.0);
-  EXPECT_EQ(driver_setpoint(drv, motor, 2.54), 0.0);
-  EXPECT_EQ(driver_setpoint(drv, motor, 2.46), 0.0);
-  EXPECT_NEAR(driver_setpoint(drv, motor, 2.55), 0.0, 1e-12);
-  EXPECT_NEAR(driver_setpoint(drv, motor, 3.0), 3.6, 1e-12);
-  EXPECT_NEAR(driver_setpoint(drv, motor, 2.0), -3.6, 1e-12);
-  // A dead band wider than the whole input range leaves the motor still.
-  drv.dead_band = 3.0;
-  EXPECT_EQ(driver_setpoint(drv, motor, 5.0), 0.0);
-}
-
 TEST(VelocityLoop, DeadBandMakesASmallCommandStallUntilTheIntegralPushesThrough) {
   // A command of 1 count/sample asks for 0.314 rad/s at 10 ms, 32 codes = 0.039 V; the
   // first sample adds kp·e = 20 and ki·e = 4 codes, 0.068 V in all, inside a 0.1 V dead band:
@@ -213,11 +192,11 @@ TEST(VelocityLoop, DeadBandMakesASmallCommandStallUntilTheIntegralPushesThrough)
     PlatformParams p;
     p.driver.dead_band = band;
     WheelDriveChain chain(p);
-    MotorPlant plant;
+    MotorPlant plant{.driver = p.driver};
     int still = 0;
-    for (int k = 0; k < 20 && chain.setpoint() == 0.0; ++k) {
+    for (int k = 0; k < 20 && plant.setpoint(chain.volts()) == 0.0; ++k) {
       run(chain, plant, 1.0, 1, p.velocity_loop.period);
-      if (chain.setpoint() == 0.0) ++still;
+      if (plant.setpoint(chain.volts()) == 0.0) ++still;
     }
     if (band == 0.0) {
       EXPECT_EQ(still, 0);
@@ -293,7 +272,7 @@ TEST(VelocityLoop, ResetClearsTheIntegralAndTheChainRestartsAtZeroSpeed) {
   const PlatformParams p;
   WheelDriveChain chain(p);
   EXPECT_EQ(chain.last().code, 2048);
-  EXPECT_DOUBLE_EQ(chain.setpoint(), 0.0);
+  EXPECT_DOUBLE_EQ(chain.volts(), p.driver.zero_volts);
   MotorPlant plant;
   plant.gain = 0.8;
   run(chain, plant, 20.0, 50, p.velocity_loop.period);
@@ -301,7 +280,7 @@ TEST(VelocityLoop, ResetClearsTheIntegralAndTheChainRestartsAtZeroSpeed) {
   chain.reset();
   EXPECT_EQ(chain.loop().integral(), 0.0);
   EXPECT_EQ(chain.counter().count(), 0);
-  EXPECT_DOUBLE_EQ(chain.setpoint(), 0.0);
+  EXPECT_DOUBLE_EQ(chain.volts(), p.driver.zero_volts);
 }
 
 }  // namespace

@@ -275,6 +275,28 @@ TEST_F(PlatformSimTest, BadArgumentsAreRejectedWithoutSideEffects) {
   EXPECT_DOUBLE_EQ(s.data()->ctrl[1], -20.0);
 }
 
+TEST_F(PlatformSimTest, TheAmplifierInputStageMakesTheSpeedSetpointOfTheDaVolts) {
+  // Where the node ends and physics begins: the DA's voltage goes in, and the amplifier's
+  // input stage (dead band, gain), then its gain error and limit, make the servo's setpoint.
+  PlatformParams p = params(ModelVariant::capsule);
+  p.driver.dead_band = 0.05;
+  p.driver.gain_error = {0.0, 0.1, 0.0, 0.0};
+  PlatformSim s(p);
+  const double zero = p.driver.zero_volts;
+  ASSERT_TRUE(s.set_wheel_amplifier_input(1, zero + 0.04));  // inside the dead band
+  EXPECT_EQ(s.wheel_setpoint(1), 0.0);
+  EXPECT_EQ(s.data()->ctrl[1], 0.0);
+  ASSERT_TRUE(s.set_wheel_amplifier_input(1, zero - 0.5));  // 0.45 V past the band, reversed
+  const double want = -0.45 * p.driver.gain;
+  EXPECT_NEAR(s.wheel_setpoint(1), want, 1e-12);          // as asked (what the records keep)
+  EXPECT_NEAR(s.data()->ctrl[1], 1.1 * want, 1e-12);      // as this amplifier makes it
+  EXPECT_FALSE(s.set_wheel_amplifier_input(4, zero + 1.0));
+  EXPECT_FALSE(s.set_wheel_amplifier_input(1, std::nan("")));
+  EXPECT_NEAR(s.wheel_setpoint(1), want, 1e-12);
+  s.reset(0, 0, 0);
+  EXPECT_EQ(s.wheel_setpoint(1), 0.0);
+}
+
 TEST_F(PlatformSimTest, WheelTorqueStaysWithinTheMotorLimitAndSaturates) {
   // The amplifier's torque limit holds: a full-scale step from rest (+speed_limit on every
   // wheel, kv·speed_limit far beyond torque_limit) and then a full reversal (-speed_limit)
@@ -413,7 +435,7 @@ TEST_F(PlatformSimTest, MovedSimKeepsWorking) {
 }
 
 // The platform at rest on the floor with each wheel closed by its own slave chain (counter,
-// PI, DA, driver) at zero command, sampled every 10 ms; returns how far O_m moved [m] between
+// PI, DA; the amplifier is the sim's) at zero command, sampled every 10 ms; returns how far O_m moved [m] between
 // t = 1 s and t = 1 + seconds.
 double standstill_walk(const PlatformParams& p, double seconds) {
   PlatformSim s(p);
@@ -424,7 +446,7 @@ double standstill_walk(const PlatformParams& p, double seconds) {
   const int steps = static_cast<int>(std::lround((1.0 + seconds) / p.sim.timestep));
   for (int k = 0; k < steps; ++k) {
     if (k % per_sample == 0)
-      for (int i = 0; i < 4; ++i) s.set_wheel_speed_setpoint(i, chains[i].sample(s.wheel_angle(i), 0.0));
+      for (int i = 0; i < 4; ++i) s.set_wheel_amplifier_input(i, chains[i].sample(s.wheel_angle(i), 0.0));
     s.step();
     if (k + 1 == static_cast<int>(std::lround(1.0 / p.sim.timestep))) a = s.pose();
   }

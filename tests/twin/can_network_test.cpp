@@ -33,6 +33,7 @@
 #include "bus_emulators/can/can_timing.hpp"
 #include "bus_emulators/can/transport_mem.hpp"
 #include "bus_emulators/omni/omni_codec.hpp"
+#include "physics/amplifier.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace omnitwin::twin {
@@ -101,6 +102,13 @@ class Rig {
     OmniCanNetwork::Hooks h;
     h.wheel_angle = [this](int i) { return angle_at(i, sched.now()); };
     h.set_setpoint = [this](int i, double w) {
+      setpoint[static_cast<std::size_t>(i)] = w;
+      setpoint_calls[static_cast<std::size_t>(i)].push_back({sched.now(), w});
+    };
+    // The amplifier's input stage, as PlatformSim applies it: the DA's volts make the setpoint.
+    h.set_amplifier_input = [this](int i, double volts) {
+      da_volts[static_cast<std::size_t>(i)] = volts;
+      const double w = physics::driver_setpoint(s.platform.driver, s.platform.motor, volts);
       setpoint[static_cast<std::size_t>(i)] = w;
       setpoint_calls[static_cast<std::size_t>(i)].push_back({sched.now(), w});
     };
@@ -187,7 +195,8 @@ class Rig {
   Scheduler sched;
   NullPacer pacer;
   std::array<double, 4> counts_per_s_;
-  std::array<double, 4> setpoint{};
+  std::array<double, 4> setpoint{};  // [rad/s]
+  std::array<double, 4> da_volts{};  // the nodes' DA outputs [V]
   std::array<std::vector<std::pair<SimTime, double>>, 4> setpoint_calls;
   std::array<std::vector<Sample>, 4> samples;
   std::vector<LogLine> logs;
@@ -304,8 +313,8 @@ TEST(OmniCanNetwork, NmtStartRunsEachSlaveOnItsOwnPeriodWithFeedbackFromTheCount
       EXPECT_EQ(r.samples[n][k].err, held - static_cast<double>(delta)) << "sample " << k;
       prev = want_t[k];
     }
-    // The last hook value is the driver setpoint the chain holds.
-    EXPECT_EQ(r.setpoint[n], sl.setpoint());
+    // The last hook value is the DA output the chain holds.
+    EXPECT_EQ(r.da_volts[n], sl.da_volts());
   }
   // Nominal counts per sample for 2000 counts/s at 10 ms: 20.
   EXPECT_EQ(feedback_of(r.heard_id(0x202).back().frame).value, 20);
