@@ -177,7 +177,8 @@ std::string write_summary(const fs::path& file, const nlohmann::json& summary) {
 
 }  // namespace
 
-ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video) {
+ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video,
+                              const std::string& renderer) {
   const auto t0 = Clock::now();
   ReportResult r;
   try {
@@ -187,6 +188,7 @@ ReportResult write_run_report(const std::string& run_dir, const ReportTools& too
     } else {
       std::vector<std::string> args{run_dir};
       if (!video.empty()) args.insert(args.end(), {"--video", video});
+      if (!renderer.empty()) args.insert(args.end(), {"--renderer", renderer});
       run_script(tools, "run_report.py", args, r);
       if (r.ok) r.path = (fs::path(run_dir) / "report.html").string();
     }

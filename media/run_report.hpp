@@ -41,7 +41,9 @@ struct ReportResult {
 // process, blocks until it ends (or tools.timeout_s passes), allocates. Thread-safe.
 // `video`: the run's video when it is not RUN_DIR/video.mp4 (run --video FILE, render --out
 // FILE); the report embeds and links it by a path relative to the run directory.
-ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video = "");
+// `renderer`: the GL that drew the video (VideoResult::renderer), said under it; "" for none.
+ReportResult write_run_report(const std::string& run_dir, const ReportTools& tools, const std::string& video = "",
+                              const std::string& renderer = "");
 
 // Writes out_html, the index page over the scenarios `omnitwin check` ran. `summary` is
 // {"title": str, "results": [{"scenario", "file", "run_dir", "exit_code", "passed",

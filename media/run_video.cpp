@@ -265,8 +265,10 @@ class Recording {
     const auto& ts = bus_->need("t");
     const size_t r = std::max<ptrdiff_t>(0, std::upper_bound(ts.begin(), ts.end(), t) - ts.begin() - 1);
     auto val = [&](const std::string& name) { const auto* c = bus_->find(name); return c ? (*c)[r] : NAN; };
-    s.bus = fmt::format("tx {:.0f}  rx {:.0f}  drop {:.0f}  err {:.0f}  load {:.0f}%", val("frames_tx"),
-                        val("frames_rx"), val("dropouts"), val("errors"), 100 * val("load"));
+    // Load with a decimal below 10 % (an EtherCAT segment's is 0.4 … 1.3 %: "0%" said nothing).
+    const double load = 100 * val("load");
+    s.bus = fmt::format("tx {:.0f}  rx {:.0f}  drop {:.0f}  err {:.0f}  load {:.{}f}%", val("frames_tx"),
+                        val("frames_rx"), val("dropouts"), val("errors"), load, load < 9.95 ? 1 : 0);
     for (int i = 1; i <= 4; ++i) {
       const std::string name = fmt::format("s{}_state", i);
       if (bus_->find(name)) s.slaves += fmt::format("{}{}", s.slaves.empty() ? "" : " ", state_word(val(name)));

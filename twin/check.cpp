@@ -97,6 +97,7 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
   const std::string out_root = opt.out_root;
   std::string run_dir;
   nlohmann::json metrics;
+  std::string renderer;  // the GL that drew its video ("" when none was made)
   JunitCase c;
   c.name = fs::path(file).stem().string();
   c.classname = "omnitwin.check";
@@ -124,6 +125,7 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
     plan.video_spec = s.outputs.video;
     plan.report = opt.report && s.outputs.report;
     const OutputsResult out = make_run_outputs(r.out_dir, plan, opt.interrupt);
+    if (!out.video.empty()) renderer = out.renderer;
     // What `omnitwin run` ends with exit 3 for (a record, the video or the report not written
     // whole) is a runtime failure here too, whatever the bounds said: an <error>, not a pass.
     std::vector<std::string> broken;
@@ -157,6 +159,7 @@ JunitCase check_one(const std::string& file, const CheckOptions& opt, CheckShare
   entry = index_entry(file, run_dir, c, metrics);
   std::error_code ec;  // the non-throwing form: this runs on a -j worker, outside the try above
   entry["run_dir_rel"] = run_dir.empty() ? "" : fs::relative(run_dir, opt.out_root, ec).generic_string();
+  if (!renderer.empty()) entry["video_renderer"] = renderer;
   return c;
 }
 
@@ -178,11 +181,16 @@ std::vector<JunitCase> run_checks(const std::vector<std::string>& files, const C
   std::vector<nlohmann::json> entries(files.size());
   std::vector<bool> done(files.size(), false);
   std::mutex print;
+  bool said_renderer = false;  // which GL draws the videos: said once (one backend per process)
   run_jobs(files.size(), jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
     JunitCase c = check_one(files[i], opt, shared, entries[i]);
     const std::lock_guard lock(print);
     std::cout << fmt::format("{} {} ({:.1f} s)\n", c.passed ? "PASS" : (c.error ? "ERROR" : "FAIL"), c.name, c.time_s);
     for (const auto& msg : c.failures) std::cout << "     " << msg << "\n";
+    if (!said_renderer && entries[i].contains("video_renderer")) {
+      std::cout << "     videos drawn by " << entries[i]["video_renderer"].get<std::string>() << "\n";
+      said_renderer = true;
+    }
     std::cout << std::flush;
     cases[i] = std::move(c);
     done[i] = true;

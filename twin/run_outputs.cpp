@@ -45,7 +45,8 @@ void write_report(const std::string& run_dir, OutputsResult& r) {
   // A video made elsewhere (--video FILE) is the run's video too: the report embeds it.
   std::error_code ec;
   const bool elsewhere = !r.video.empty() && !fs::equivalent(r.video, fs::path(run_dir) / "video.mp4", ec);
-  const media::ReportResult rep = media::write_run_report(run_dir, report_tools(), elsewhere ? r.video : "");
+  const media::ReportResult rep =
+      media::write_run_report(run_dir, report_tools(), elsewhere ? r.video : "", r.video.empty() ? "" : r.renderer);
   if (rep.ok) {
     r.report = rep.path;
     r.report_wall_s = rep.seconds;

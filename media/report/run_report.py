@@ -48,12 +48,20 @@ LINKED_FILES = (
     ("events.log", "run events"),
     ("master.log", "the master process's output"),
     ("master.yaml", "the master process's configuration"),
+    ("master-platform.yaml", "the master's platform loop"),
+    ("master-stats.json", "the master's counters when it ended"),
+    ("realtime.csv", "realtime runs: tick lateness per second of sim time"),
     ("platform.xml", "the MJCF model MuJoCo compiled"),
 )
 POSE_METRICS = ("final_error_cm", "max_error_cm", "iae_contour_cm", "std_contour_cm",
                 "iae_x_cm", "std_x_cm", "iae_y_cm", "std_y_cm",
                 "final_phi_error_deg", "max_phi_error_deg", "iae_phi_deg", "std_phi_deg")
 DRIVE_STATES = ("off", "waiting", "running", "syncing", "fault")
+# metrics.json groups the metrics section shows in its own tables (the expectations have
+# their own section), and top-level values the header already shows.
+SHOWN_GROUPS = ("platform", "platform_odometry", "bus", "drives", "master", "realtime", "physics",
+                "expectations")
+HEADER_SCALARS = ("scenario", "scenario_file", "clock", "sim_time_s", "wall_time_s", "real_time_factor")
 FAULT_COLOR = "tab:red"
 EVENT_LINE = re.compile(r"^\s*(\S+)\s+(\S+)\s*(.*)$")   # events.log: time, kind, message
 CSS = """
@@ -219,9 +227,16 @@ def grid_table(header, rows):
 # ---------------------------------------------------------------------------------------
 # Expectations
 
+def interrupted_in_outputs(metrics):
+    """True when a signal came after the run loop's end, while the video or report was made:
+    the run and its records are whole and its expectations were judged."""
+    return bool(metrics) and bool(metrics.get("interrupted")) and metrics.get("interrupted_phase") == "outputs"
+
+
 def run_cut_short(metrics):
     """True when the run was interrupted or failed, so bounds were not evaluated."""
-    return bool(metrics) and (bool(metrics.get("interrupted")) or "error" in metrics)
+    return (bool(metrics) and (bool(metrics.get("interrupted")) or "error" in metrics)
+            and not interrupted_in_outputs(metrics))
 
 
 def check_bound(expectation, metrics):
@@ -327,7 +342,15 @@ def status_banner(metrics, metrics_problem):
     if "error" in metrics:
         banners.append(f'<div class="banner fail">ERROR<span class="sub">{esc(metrics["error"])}'
                        '</span></div>')
-    if metrics.get("interrupted"):
+    if interrupted_in_outputs(metrics):
+        ex = group(metrics, "expectations")
+        judged = "met" if ex.get("passed") is True else "not all met"
+        banners.append('<div class="banner warn">INTERRUPTED<span class="sub">a signal came after '
+                       f'the run had ended (t = {esc(fmt_value(metrics.get("sim_time_s")))} s), '
+                       'while its video or this report was being made: the run and its records '
+                       f'are whole and its expectations were judged ({judged}), but the video may '
+                       'stop before the run\'s end, and the run does not pass.</span></div>')
+    elif metrics.get("interrupted"):
         banners.append('<div class="banner warn">INTERRUPTED<span class="sub">the run was stopped '
                        f'at t = {esc(fmt_value(metrics.get("sim_time_s")))} s; the records hold '
                        'a part of it and the expectations were not evaluated.</span></div>')
@@ -429,10 +452,18 @@ def metrics_section(metrics):
         parts += ["<h3>Platform pose errors</h3>", platform_table(metrics)]
     if isinstance(metrics.get("axes"), list) and metrics["axes"]:
         parts += ["<h3>Axes</h3>", axes_table(metrics)]
-    for group, title in (("bus", "Bus"), ("master", "Master"), ("realtime", "Real-time pacing"),
-                         ("physics", "Physics")):
+    for group, title in (("bus", "Bus"), ("drives", "Drives"), ("master", "Master"),
+                         ("realtime", "Real-time pacing"), ("physics", "Physics")):
         if isinstance(metrics.get(group), dict):
             parts += [f"<h3>{title}</h3>", kv_table(metrics[group])]
+    # Any other group (a newer metrics.json's) under its own name, and the run's own figures
+    # that the header does not show (stopped_by, interrupted_phase …): nothing is left out.
+    for group in sorted(k for k, v in metrics.items() if isinstance(v, dict) and k not in SHOWN_GROUPS):
+        parts += [f"<h3>{esc(group)}</h3>", kv_table(metrics[group])]
+    rest = {k: v for k, v in metrics.items()
+            if not isinstance(v, (dict, list)) and k not in HEADER_SCALARS}
+    if rest:
+        parts += ["<h3>Run</h3>", kv_table(rest)]
     slaves = metrics.get("slaves") if isinstance(metrics.get("slaves"), list) else []
     slaves = [s for s in slaves if isinstance(s, dict)]
     if slaves:
@@ -492,8 +523,10 @@ def save_png(fig, plots_dir, name):
     return name
 
 
-def plot_path(c, plots_dir):
-    """x-y path: reference, MuJoCo truth and odometry, equal aspect, start and goal marked."""
+def plot_path(c, plots_dir, goal_reached=True):
+    """x-y path: reference, MuJoCo truth and odometry, equal aspect, start and goal marked.
+    `goal_reached` False (metrics.json's path_done_s < 0): the plan stopped short of its goal,
+    and its last point is marked as that, not as the goal."""
     if not (finite(c.get("x", [])) and finite(c.get("y", []))):
         return None
     fig, ax = plt.subplots(figsize=(7, 5.5))
@@ -505,7 +538,8 @@ def plot_path(c, plots_dir):
         ax.plot(c["odom_x"], c["odom_y"], ":", color="tab:orange", lw=1.2, label="odometry")
     sx, sy = (c["ref_x"], c["ref_y"]) if ref else (c["x"], c["y"])
     ax.plot(sx[0], sy[0], "o", color="tab:green", ms=8, label="start")
-    ax.plot(sx[-1], sy[-1], "*", color="tab:red", ms=12, label="goal")
+    ax.plot(sx[-1], sy[-1], "*", color="tab:red", ms=12,
+            label="goal" if goal_reached else "end of the plan run (goal not reached)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -591,6 +625,9 @@ def windowed_rates(t, counter):
             ends.append(ti)
             rates.append((ci - c0) / (ti - t0))
             t0, c0, edge = ti, ci, ti + window
+    if t[-1] > t0:  # the last, partial window: the run's end is drawn too
+        ends.append(t[-1])
+        rates.append((counter[-1] - c0) / (t[-1] - t0))
     if len(rates) > 1:
         rates[0] = rates[1]  # the first window's rate drawn from its start
     return ends, rates
@@ -649,8 +686,10 @@ def run_end(run, traj, bus):
     return float(planned) if isinstance(planned, (int, float)) else 0.0
 
 
-def make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind):
+def make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind, metrics=None):
     """Draws every plot the data allows; ([(file, caption)], [notes]). Stale plots removed."""
+    done = number(group(metrics, "platform").get("path_done_s")) if metrics else None
+    goal_reached = done is None or done >= 0
     plots_dir = os.path.join(run_dir, "plots")
     os.makedirs(plots_dir, exist_ok=True)
     spans = fault_spans(run, run_end(run, traj, bus))
@@ -658,7 +697,7 @@ def make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind):
     made = []
     if traj_rows:
         made = [(name, caption) for name, caption in (
-            (plot_path(c, plots_dir), "Path vs reference"),
+            (plot_path(c, plots_dir, goal_reached), "Path vs reference"),
             (plot_errors(c, plots_dir, spans), "Pose errors over time"),
             (plot_wheels(c, plots_dir, spans), "Wheel speeds vs commands")) if name]
     notes = [f"{caption}: no trajectory data." for caption in TRAJECTORY_PLOTS
@@ -705,12 +744,14 @@ def video_link(run_dir, video):
     return os.path.relpath(os.path.abspath(path), os.path.abspath(run_dir))
 
 
-def video_section(run_dir, video=None):
-    """The run's video right under the verdict, or nothing when it was not rendered."""
+def video_section(run_dir, video=None, renderer=None):
+    """The run's video right under the verdict, or nothing when it was not rendered;
+    `renderer`: the GL that drew it, when the process that made it says so."""
     link = video_link(run_dir, video)
     if link is None:
         return ""
-    return f'<video controls preload="metadata" src="{href(link)}"></video>'
+    drawn = f'<p class="note">Video drawn by {esc(renderer)}.</p>' if renderer else ""
+    return f'<video controls preload="metadata" src="{href(link)}"></video>{drawn}'
 
 
 def collapsible(html_text, open_=False):
@@ -742,8 +783,11 @@ def events_section(events, problem):
 def expected_files(bus_kind):
     """The files a complete run directory of this bus has (video aside)."""
     names = ["run.json", "trajectory.csv", "bus.csv", "events.log", "metrics.json"]
-    if bus_kind == "can":
-        names += ["bus-can.pcap", "master.log"]
+    wire = {"can": "can", "canopen": "can", "tml": "can", "ethercat": "ethercat", "m3": "m3"}.get(bus_kind)
+    if wire:
+        names += [f"bus-{wire}.pcap", "master.log"]
+    if bus_kind in ("canopen", "tml", "ethercat", "m3"):
+        names += ["master-stats.json"]
     return names
 
 
@@ -796,9 +840,10 @@ def data_notes(traj_problem, traj_rows, bus_problem, run_problem):
     return notes
 
 
-def build_report(run_dir, video=None):
+def build_report(run_dir, video=None, renderer=None):
     """Reads the run directory, draws the plots and writes report.html; returns its path.
-    `video`: the run's video when it is not RUN_DIR/video.mp4."""
+    `video`: the run's video when it is not RUN_DIR/video.mp4; `renderer`: the GL that drew
+    it (said under the video)."""
     run, run_problem = load_json(os.path.join(run_dir, "run.json"))
     run = run if isinstance(run, dict) else None
     metrics, metrics_problem = load_json(os.path.join(run_dir, "metrics.json"))
@@ -808,14 +853,14 @@ def build_report(run_dir, video=None):
     bus, bus_rows, bus_problem = read_table(os.path.join(run_dir, "bus.csv"))
     events, events_problem = read_events(os.path.join(run_dir, "events.log"))
     bus_kind = bus_name(run, metrics)
-    made, plot_notes = make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind)
+    made, plot_notes = make_plots(run_dir, run, traj, traj_rows, bus, bus_rows, bus_kind, metrics)
     notes = data_notes(traj_problem, traj_rows, bus_problem, run_problem)
     title = first_of("scenario", run, metrics) or os.path.basename(os.path.abspath(run_dir))
     # What a person wants first: the verdict, the video, the headline plots and the
     # expectations; the detailed tables below, folded.
     body = [header_section(run_dir, run, metrics, metrics_problem),
             "".join(f'<p class="note">{esc(n)}</p>' for n in notes),
-            video_section(run_dir, video),
+            video_section(run_dir, video, renderer),
             plots_section(made[:HEADLINE_PLOTS], [], "At a glance"),
             expectations_section(run, metrics),
             collapsible(metrics_section(metrics)),
@@ -837,19 +882,23 @@ def usage_error(message):
 
 
 def main(argv):
-    """Entry point: run_report.py RUN_DIR [--video FILE]."""
-    video = None
-    if len(argv) == 4 and argv[2] == "--video":
-        video = argv[3]
-    elif len(argv) != 2:
-        usage_error("usage: run_report.py RUN_DIR [--video FILE]")
+    """Entry point: run_report.py RUN_DIR [--video FILE] [--renderer TEXT]."""
+    usage = "usage: run_report.py RUN_DIR [--video FILE] [--renderer TEXT]"
+    if len(argv) < 2 or len(argv) % 2 != 0:
+        usage_error(usage)
+    options = {}
+    for flag, value in zip(argv[2::2], argv[3::2]):
+        if flag not in ("--video", "--renderer") or flag in options:
+            usage_error(usage)
+        options[flag] = value
+    video, renderer = options.get("--video"), options.get("--renderer")
     run_dir = argv[1]
     if not os.path.isdir(run_dir):
         usage_error(f"'{run_dir}' is not a directory")
     if not any(os.path.isfile(os.path.join(run_dir, n)) for n in RUN_FILES):
         usage_error(f"'{run_dir}' is not a run directory (none of {', '.join(RUN_FILES)})")
     try:
-        out = build_report(run_dir, video)
+        out = build_report(run_dir, video, renderer)
     except OSError as e:
         sys.stderr.write(f"run_report.py: cannot write the report in '{run_dir}': {e}\n")
         sys.exit(3)

@@ -272,6 +272,77 @@ TEST(RunReport, InterruptedRunSaysSo) {
   EXPECT_FALSE(fs::exists(run / "plots" / "bus.png"));  // no bus.csv, no bus plot
 }
 
+// A signal after the run loop's end (while the video or the report was made) leaves the run
+// and its records whole and its expectations judged: the page said the records were partial,
+// marked every bound NOT EVALUATED and then "Run verdict: passed" (found in review).
+TEST(RunReport, InterruptedWhileTheOutputsWereMadeJudgesTheWholeRun) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  nlohmann::json m = read_json(run / "metrics.json");
+  m["interrupted"] = true;
+  m["interrupted_phase"] = "outputs";
+  write_file(run / "metrics.json", m.dump(2));
+  const std::string page = report_of(run);
+  EXPECT_NE(page.find(">INTERRUPTED<"), std::string::npos);
+  EXPECT_NE(page.find("the run and its records are whole"), std::string::npos) << page;
+  EXPECT_NE(page.find("the video may stop before the run's end"), std::string::npos);
+  EXPECT_EQ(page.find("NOT EVALUATED"), std::string::npos);
+  EXPECT_EQ(count_of(page, R"(class="PASS")"), 2u);  // the fixture's bounds, judged
+  EXPECT_EQ(count_of(page, R"(class="FAIL")"), 1u);
+}
+
+// Every metric group and top-level figure of metrics.json is on the page: `drives` (when the
+// drives stopped, how many ended running) and `stopped_by` were left out (found in review).
+TEST(RunReport, EveryMetricGroupAndRunFigureIsShown) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  nlohmann::json m = read_json(run / "metrics.json");
+  m["drives"] = {{"all_running_at_s", 0.02}, {"running_at_end", 3}, {"stopped_at_s", 2.02}, {"faults", 1}};
+  m["stopped_by"] = "a test";
+  m["a_newer_group"] = {{"some_figure", 42}};
+  write_file(run / "metrics.json", m.dump(2));
+  const std::string page = report_of(run);
+  for (const char* what : {"<h3>Drives</h3>", "running_at_end", "stopped_at_s", "<h3>a_newer_group</h3>",
+                           "some_figure", "stopped_by", "a test"})
+    EXPECT_NE(page.find(what), std::string::npos) << what;
+}
+
+// The GL that drew the video is said under it when the process that made it passes it on.
+TEST(RunReport, SaysWhichGlDrewTheVideo) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  write_file(run / "video.mp4", "not really a video");
+  const ReportResult r = write_run_report(run.string(), tools(), "", "Vendor / A GPU / OpenGL 4.6 (EGL device)");
+  ASSERT_TRUE(r.ok) << r.error;
+  const std::string page = read_bytes(run / "report.html");
+  EXPECT_NE(page.find("Video drawn by Vendor / A GPU / OpenGL 4.6 (EGL device)."), std::string::npos);
+  EXPECT_EQ(report_of(run).find("Video drawn by"), std::string::npos);  // not known: not said
+}
+
+// Each bus's capture and master files are expected: a canopen or EtherCAT run without them
+// said nothing (only bus can's were known; found in review).
+TEST(RunReport, EachBusExpectsItsOwnCaptureAndMasterFiles) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  nlohmann::json r = read_json(run / "run.json");
+  r["bus"] = "ethercat";
+  write_file(run / "run.json", r.dump(2));
+  const std::string page = report_of(run);
+  EXPECT_NE(page.find("Absent: bus-ethercat.pcap, master-stats.json"), std::string::npos) << page;
+}
+
+// The frame rates of bus.csv run to the end of the run: the last, partial window was never
+// drawn, so a loss in the last second did not show (found in review).
+TEST(RunReport, FrameRatesIncludeTheLastPartialWindow) {
+  const std::string check =
+      tools().python + " -c \"import sys; sys.path.insert(0, '" + tools().scripts_dir + "'); import run_report as r; "
+      "t = [i * 0.05 for i in range(113)]; c = [min(i, 101) * 10 for i in range(113)]; "
+      "ends, rates = r.windowed_rates(t, c); "
+      "ok = abs(ends[-1] - 5.6) < 1e-9 and rates[-1] < 20 and abs(rates[1] - 200) < 1e-6; "
+      "sys.exit(0 if ok else print(ends[-3:], rates[-3:]) or 1)\"";
+  EXPECT_EQ(std::system(check.c_str()), 0);
+}
+
 TEST(RunReport, RunWithoutMetricsSaysSo) {
   TempDir tmp("omnitwin-report");
   const fs::path run = copy_fixture(tmp);

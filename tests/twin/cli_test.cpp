@@ -299,6 +299,34 @@ TEST_F(CliCheck, RealtimeScenariosRunOneAtATimeWhateverTheJobs) {
   EXPECT_TRUE(contains(f.out, "2 passed, 0 failed")) << f.out;
 }
 
+// `check --video` says once which GL drew the videos, and check.json keeps it per run (CI
+// logs and artefacts showed no trace of it; found in review).
+TEST_F(CliCheck, VideoSaysWhichGlDrewIt) {
+  // Two copies of a short scenario, each with its own name and a small video.
+  const fs::path scenarios = dir_ / "scenarios";
+  fs::create_directories(scenarios);
+  const std::string source = read_bytes(test_scenario("run_short_line.yaml"));
+  const std::string outputs = "outputs: {video: false, report: false}";
+  for (const std::string name : {"v_a", "v_b"}) {
+    std::string text = source;
+    const auto at = text.find("name: ");
+    text.replace(at, text.find('\n', at) - at, "name: " + name);
+    text.replace(text.find(outputs), outputs.size(),
+                 "outputs: {video: {enabled: false, width: 64, height: 48, fps: 5}, report: false}");
+    std::ofstream(scenarios / (name + ".yaml")) << text;
+  }
+  const Finished f = run({"check", scenarios.string(), "--video", "--no-report", "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 0) << f.out << f.err;
+  const auto said = f.out.find("videos drawn by ");
+  EXPECT_NE(said, std::string::npos) << f.out;
+  EXPECT_EQ(f.out.find("videos drawn by ", said + 1), std::string::npos) << f.out;  // once
+  EXPECT_TRUE(contains(f.out, "(OSMesa)\n")) << f.out;
+  const nlohmann::json cj = nlohmann::json::parse(read_bytes(dir_ / "runs" / "check.json"));
+  ASSERT_EQ(cj["results"].size(), 2u);
+  for (const auto& r : cj["results"])
+    EXPECT_NE(r.value("video_renderer", "").find("OpenGL"), std::string::npos) << r.dump();
+}
+
 // A directory holding a bad scenario: check exits 2 and the bad file is an <error> case
 // (errors="1") naming its line and key, while the good one still runs and passes.
 TEST_F(CliCheck, BadScenarioIsAnError) {
