@@ -55,7 +55,9 @@ struct NetworkHooks {
   // The analog amplifier's input voltage [V], from a node that ends at a DA (the thesis
   // node): physics makes the speed setpoint of it (PlatformSim::set_wheel_amplifier_input).
   std::function<void(int wheel, double volts)> set_amplifier_input;
-  std::function<void(int wheel, double err)> axis_sample;    // velocity error, drive units
+  // Velocity error (command − measured) of one node's control step [encoder pulses per step];
+  // used by networks whose samples_axes() is true.
+  std::function<void(int wheel, double err)> axis_sample;
   std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
 };
 
@@ -90,6 +92,10 @@ class BusNetwork {
   // Lockstep on a polling bus (M-III): the master reports each frame it sends inside the tick
   // (Sent) and waits for the answer (Horizon) — docs/protocols/sim-clock.md, "Inside a tick".
   virtual bool answers_inside_tick() const { return false; }
+  // Whether the network gives the axes' velocity errors itself (hooks.axis_sample, once per
+  // its nodes' own control step: the thesis node); otherwise the run takes them from
+  // wheel_record() once per control sample while the drive runs.
+  virtual bool samples_axes() const { return false; }
   // The frames counted in `s` enter the bus at s.t_ns; answers what reached the master, and
   // when. If the master's frames did not all arrive within `timeout`, arrival_ns is -2 (the
   // run then fails the tick). Real-time safe apart from the wait.

@@ -105,9 +105,6 @@ void CanDriveNetwork::on_drive_timer(int i, SimTime t) {
   fb.velocity_rad_s = hooks_.wheel_speed(i);
   const drive::Command c = drive_step(i, t, fb);
   hooks_.set_setpoint(i, (c.power && !c.brake_engaged) ? c.velocity_rad_s : 0.0);
-  const drive::Objects& o = drive_core(i).objects();
-  if (o.velocity_demand != 0 || o.velocity_actual != 0)
-    hooks_.axis_sample(i, static_cast<double>(o.velocity_demand - o.velocity_actual) * setup_.drive_period);
   watch(i, t);
 }
 

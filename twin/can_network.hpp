@@ -52,6 +52,7 @@ class OmniCanNetwork final : public BusNetwork {
   ~OmniCanNetwork() override;
 
   const char* name() const override { return "can"; }
+  bool samples_axes() const override { return true; }  // each slave step, by hooks.axis_sample
   std::string master_iface() const override { return wire_.transport().spec(); }  // as opened (a port 0 named)
 
   // Starts the capture file (set-up; throws std::runtime_error if it cannot be created).

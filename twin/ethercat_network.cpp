@@ -346,9 +346,6 @@ void EthercatNetwork::drive_step(int axis0, SimTime t) {
   const drive::Command c = d.step(t, fb);
   const double setpoint = (c.power && !c.brake_engaged) ? c.velocity_rad_s : 0.0;
   hooks_.set_setpoint(axis0, setpoint);
-  const drive::Objects& o = d.objects();
-  if (o.velocity_demand != 0 || o.velocity_actual != 0)
-    hooks_.axis_sample(axis0, static_cast<double>(o.velocity_demand - o.velocity_actual) * spec_.drive_period);
 }
 
 // Events for AL and drive state changes, and the instant all four drives first ran in OP.

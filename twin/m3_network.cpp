@@ -174,9 +174,6 @@ void M3Network::on_drive_timer(int axis0, SimTime t) {
   fb.velocity_rad_s = hooks_.wheel_speed(axis0);
   const drive::Command c = segment_->step_drive(axis0, t, fb);
   hooks_.set_setpoint(axis0, (c.power && !c.brake_engaged) ? c.velocity_rad_s : 0.0);
-  const drive::Objects& o = segment_->servo(axis0).drive().objects();
-  if (o.velocity_demand != 0 || o.velocity_actual != 0)
-    hooks_.axis_sample(axis0, static_cast<double>(o.velocity_demand - o.velocity_actual) * spec_.drive_period);
   watch_states(t);
 }
 

@@ -804,6 +804,11 @@ void PlatformRun::record_bus(SimTime t, const physics::Pose& p, const Eigen::Vec
     row_.insert(row_.end(), {w.command_rad_s, sim_.wheel_speed(i), sim_.wheel_angle(i), w.count, w.command_counts,
                              w.measured_counts, w.output, bus_setpoint_[static_cast<std::size_t>(i)],
                              sim_.wheel_torque(i)});
+    // A drive's velocity error per control sample while it runs, in encoder pulses per
+    // sample as the thesis's tables (its demand and actual are counts/s): the figure is the
+    // records' (cmd_counts − meas_counts) × period, whatever the drive's own period.
+    if (!net_->samples_axes() && net_->drive_state(i) == DriveStateCode::running)
+      axis_stats_[static_cast<std::size_t>(i)].add((w.command_counts - w.measured_counts) * s_.controller.period);
   }
 }
 
