@@ -14,6 +14,9 @@ PlatformDriver::PlatformDriver(const std::optional<MasterConfig>& platform, doub
   lc.counts_per_rev = static_cast<int>(std::lround(counts_per_rev));
   loop_.emplace(lc, build_path(platform_->path));
   every_ = std::max<std::int64_t>(1, std::llround(lc.period / tick_s));
+  // Until the loop starts, its plan and odometry say the start pose (as the Omni master's).
+  out_.reference = loop_->path().sample(0.0);
+  out_.odom_pose = loop_->path().start_pose();
 }
 
 PlatformDriver::Step PlatformDriver::tick(std::int64_t t, bool ready, const WheelCounts& counts) {

@@ -15,7 +15,11 @@ OdometryConfig odometry_config(const PlatformLoopConfig& c) {
 }  // namespace
 
 PlatformLoop::PlatformLoop(const PlatformLoopConfig& config, const Path& path)
-    : config_(config), path_(path), odometry_(odometry_config(config)) {}
+    : config_(config), path_(path), odometry_(odometry_config(config)) {
+  // Until reset() with the counters at the start, the odometry says the path's start pose:
+  // a master reporting it before its start read (0, 0, 0), an error of the whole start offset.
+  odometry_.reset(path_.start_pose(), WheelCounts{});
+}
 
 void PlatformLoop::reset(const Pose2& start, const WheelCounts& counts) {
   odometry_.reset(start, counts);

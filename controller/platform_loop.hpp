@@ -42,7 +42,8 @@ struct PlatformLoopOutput {
 
 class PlatformLoop {
  public:
-  // Keeps its own copy of the path (construction allocates; step() does not).
+  // Keeps its own copy of the path (construction allocates; step() does not). The odometry
+  // starts at the path's start pose with every count zero.
   PlatformLoop(const PlatformLoopConfig& config, const Path& path);
 
   // Odometry starts at `start` with these counter readings; integrators cleared. `start.phi`

@@ -147,6 +147,20 @@ TEST(PlatformLoop, AStartHeadingPastOneTurnIsTrackedAsPlanned) {
   EXPECT_NEAR(r.true_end.phi, 370.0 * kDeg, 1e-3);
 }
 
+// Before reset(), the odometry already says the path's start pose: a fieldbus master reports
+// it from its first tick, and (0, 0, 0) there read as an error of the whole start offset in
+// platform_odometry (111.8 cm for a start at (1, 0.5), 190° for a start at 190°; found in
+// review).
+TEST(PlatformLoop, OdometryStartsAtThePathsStartPose) {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  Path path({1.0, 0.5, 190.0 * kDeg});
+  path.add_line(1.0, 0.0, 0.0, 10.0);
+  const PlatformLoop loop(thesis_config(false), path);
+  EXPECT_DOUBLE_EQ(loop.odometry().pose().x, 1.0);
+  EXPECT_DOUBLE_EQ(loop.odometry().pose().y, 0.5);
+  EXPECT_DOUBLE_EQ(loop.odometry().pose().phi, 190.0 * kDeg);
+}
+
 TEST(PlatformLoop, LimitsHoldAndIntegratorsDoNotWindUp) {
   // The platform starts 1 m off and 1 rad off its (standing) reference with tight limits.
   PlatformLoopConfig cfg = thesis_config(true);
