@@ -373,7 +373,7 @@ nlohmann::json M3Network::slave_metrics() const {
                    {"cmd_alarm", m3::to_string(l.cmd_alarm())},
                    {"servo", drive::to_string(d.state())},
                    {"error_code", d.objects().error_code},
-                   {"mode", d.objects().mode_display},  // the drive core's: VELCTRL 9 (CSV), INTERPOLATE 8 (CSP)
+                   {"mode", segment_->servo(i).motion_mode()},  // the last motion command's: VELCTRL 9, INTERPOLATE 8; 0 none
                    {"powered", powered_[static_cast<std::size_t>(i)]},
                    {"commands", st.commands},
                    {"responses", st.responses},

@@ -380,6 +380,7 @@ drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
                                            drive::Mode::pv,  drive::Mode::cst, drive::Mode::hm, drive::Mode::pp};
   o.mode = static_cast<std::int8_t>(kModes[static_cast<int>(motion_)]);
   if (motion_ == Motion::none) o.target_velocity = 0;  // no motion: hold at standstill
+  else motion_mode_ = o.mode;
   o.controlword = controlword();
   const drive::Command out = drive_.step(t, fb);
   if (!drive_.homed()) home_lost_ = false;  // a new homing started: the drive's flag tells again

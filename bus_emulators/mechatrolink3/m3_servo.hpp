@@ -94,6 +94,10 @@ class ServoProfile final : public Profile {
   drive::Cia402Drive& drive() { return drive_; }
   const drive::Cia402Drive& drive() const { return drive_; }
   bool servo_on() const;
+  // The CiA 402 mode (0x6061 numbering) of the last motion command that ran: 9 VELCTRL, 8
+  // INTERPOLATE, 1 POSING/EX_POSING, 3 FEED, 10 TRQCTRL, 6 ZRET; 0 while none has run since
+  // power-on (the drive core then holds still in CSV, which is no motion command).
+  std::int8_t motion_mode() const { return motion_mode_; }
   bool position_ready() const { return sensor_on_; }
   // The monitor value for code `sel` (see the header). Real-time safe.
   std::int32_t monitor(std::uint8_t sel) const;
@@ -118,6 +122,7 @@ class ServoProfile final : public Profile {
   drive::Cia402Drive drive_;
   bool want_on_ = false, sensor_on_ = false, paused_ = false, fault_reset_ = false;
   Motion motion_ = Motion::none;
+  std::int8_t motion_mode_ = 0;    // see motion_mode()
   bool new_set_point_ = false;     // POSING/FEED: pulse controlword bit 4 once
   std::int32_t user_offset_ = 0;   // POS_SET: reported = drive position + offset [ref]
   std::int32_t target_ = 0;        // the last TPOS [ref], for CPOS/PERR

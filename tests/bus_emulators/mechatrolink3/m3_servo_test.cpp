@@ -83,9 +83,13 @@ TEST_F(M3Servo, ServoOnNeedsTheSensorAndHoldsCmdrdyUntilTheDriveIsEnabled) {
 
 TEST_F(M3Servo, VelctrlTurnsTheAxisAtTheCommandedSpeed) {
   servo_on();
+  // slaves.N.mode: no motion command has run yet (the drive core holding still in CSV is not
+  // VELCTRL; a never-connected servo reported 9, found in review).
+  EXPECT_EQ(servo.motion_mode(), 0);
   const auto vref = static_cast<std::int32_t>(kCpr);  // one revolution per second
   EXPECT_EQ(send(cmd(Command::velctrl, {{16, vref}})), CmdAlarm::normal);
   run(1.0);
+  EXPECT_EQ(servo.motion_mode(), 9);
   EXPECT_NEAR(axis.velocity_rad_s(), 2 * M_PI, 0.05 * 2 * M_PI);
   send(cmd(Command::velctrl, {{16, vref}}));
   EXPECT_NEAR(monitor(1), vref, 0.05 * vref) << "FSPD";
@@ -121,6 +125,7 @@ TEST_F(M3Servo, InterpolateFollowsAPositionRamp) {
   EXPECT_NEAR(monitor(0), 2000, 20) << "APOS at the last target";
   EXPECT_LT(std::abs(monitor(2)), 20) << "PERR";
   EXPECT_NE(svcmd_io() & (1u << 9), 0u) << "PSET";
+  EXPECT_EQ(servo.motion_mode(), 8);
 }
 
 TEST_F(M3Servo, PosingReachesItsTargetAndFeedRunsWithoutOne) {
