@@ -412,10 +412,12 @@ int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& inde
       return 3;
     }
   }
-  if (bad_input) return 2;
+  // No verdict: a runtime failure (a run that could not leave its records, video or report,
+  // or an interrupted suite) before bad input, so that a script keying on 3 for "the
+  // machinery failed" sees it even when a bad scenario file is in the same suite.
   if (interrupted(opt)) return 3;
-  // A run that could not leave its records (or its video or report) is a runtime failure.
   if (std::any_of(cases.begin(), cases.end(), runtime_failure)) return 3;
+  if (bad_input) return 2;
   return failed ? 1 : 0;
 }
 

@@ -345,6 +345,21 @@ TEST_F(CliCheck, BadScenarioIsAnError) {
   EXPECT_FALSE(fs::exists(dir_ / "runs/bad_unknown_top"));
 }
 
+// A bad scenario file and a run that could not finish in one suite: exit 3 (no verdict, the
+// machinery failed), not 2 — a script keying on 3 missed the runtime failure (found in review).
+TEST_F(CliCheck, ARuntimeFailureOutranksBadInputInTheExitCode) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"bad_unknown_top.yaml"});
+  std::ofstream(scenarios / "gone.yaml")
+      << "name: gone\nplatform:\n  params: " << source_path("models/platform/omni4.yaml")
+      << "\nbus: {type: can, transport: \"udp:239.74.163.2:0\"}\nmaster: {command: \"/bin/sh -c 'exit 0'\"}\n"
+      << "path:\n  segments:\n    - line: {dx: 0.1, dy: 0.0, duration: 0.5}\nsettle: 0.2\n"
+      << "outputs: {video: false, report: false}\nexpect:\n  platform.final_error_cm: {max: 5}\n";
+  const Finished f = run({"check", scenarios.string(), "--no-report", "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "ERROR bad_unknown_top")) << f.out;
+  EXPECT_TRUE(contains(f.out, "ERROR gone")) << f.out;
+}
+
 // Two scenario files with the same name would share (and overwrite) one run directory: the
 // second is an error naming the first, and the first still runs.
 TEST_F(CliCheck, DuplicateScenarioNamesAreAnError) {
