@@ -213,6 +213,7 @@ class PlatformRun {
   // always_fail: the run ends whatever on_master_loss says (lockstep: nobody answers ticks).
   void master_lost(SimTime t, std::string why, bool always_fail = false);
   std::vector<std::string> expected_records() const;
+  const char* master_kind() const;
   controller::Pose2 bus_reference(SimTime t) const;
   SimTime plan_origin() const;  // when the plan's path time was 0 (−1: not started)
   // A record write that failed (disk full…) ends the run as a runtime failure: remember
@@ -783,7 +784,7 @@ void PlatformRun::write_run_description() const {
                             {"physics_timestep_s", s_.platform.sim.timestep}, {"duration_s", s_.duration},
                             {"start_pose", {s_.path.x0, s_.path.y0, s_.path.phi0_deg * kDeg}},
                             {"overrides", s_.overrides}, {"controller", controller_json(s_.controller)},
-                            {"drive_chain", drive_chain_json(s_.platform)},
+                            {"drive_chain", drive_chain_json(s_.platform)}, {"master_kind", master_kind()},
                             {"faults", faults}, {"expectations", expect}};
   write_json_atomic((dir / "run.json").string(), j);
 }
@@ -1052,6 +1053,15 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   if (o_.observer) o_.observer->on_end(r.metrics);
   r.exit_code = cut_short || !records_whole ? 3 : (r.passed ? 0 : 1);
   return r;
+}
+
+// Who masters the bus, for run.json: "none" (bus direct: the twin's own loop), "omni-master"
+// (the built-in master, started by the twin), "command" (master.command, started by the twin)
+// or "external" (`omnitwin twin`: a master the twin did not start).
+const char* PlatformRun::master_kind() const {
+  if (!on_bus()) return "none";
+  if (o_.external_master) return "external";
+  return s_.master.command.empty() ? "omni-master" : "command";
 }
 
 // The records this run must leave (docs/run-directory.md), video and report aside.

@@ -46,6 +46,7 @@ void ServoProfile::power_cycle() {
   drive_.power_cycle();
   want_on_ = sensor_on_ = paused_ = fault_reset_ = new_set_point_ = false;
   motion_ = Motion::none;
+  motion_mode_ = 0;  // no motion command has run since this power-on
   user_offset_ = target_ = 0;
   last_error_ = 0;
   home_lost_ = false;

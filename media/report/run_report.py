@@ -321,7 +321,12 @@ def verdict_html(metrics):
         return '<p class="note">metrics.json holds no expectation result.</p>'
     passed = ex.get("passed") is True
     failures = ex.get("failures") if isinstance(ex.get("failures"), list) else []
-    text = f"<p>Run verdict (metrics.json): <b>{'passed' if passed else 'FAILED'}</b>"
+    if interrupted_in_outputs(metrics):
+        # The bounds were judged, but a run a signal cut during its outputs does not pass.
+        text = ("<p>Run verdict (metrics.json): <b>INTERRUPTED</b> (a signal while the video or "
+                f"report was made); the expectations alone: {'met' if passed else 'FAILED'}")
+    else:
+        text = f"<p>Run verdict (metrics.json): <b>{'passed' if passed else 'FAILED'}</b>"
     if not failures:
         return text + ", no failures.</p>"
     items = "".join(f"<li>{esc(f)}</li>" for f in failures)
@@ -780,18 +785,24 @@ def events_section(events, problem):
             f"<th>message</th></tr>{''.join(rows)}</table></div>{more}")
 
 
-def expected_files(bus_kind):
+def expected_files(bus_kind, master_kind=None):
     """The files a complete run directory of this bus has (video aside)."""
     names = ["run.json", "trajectory.csv", "bus.csv", "events.log", "metrics.json"]
     wire = {"can": "can", "canopen": "can", "tml": "can", "ethercat": "ethercat", "m3": "m3"}.get(bus_kind)
     if wire:
-        names += [f"bus-{wire}.pcap", "master.log"]
-    if bus_kind in ("canopen", "tml", "ethercat", "m3"):
-        names += ["master-stats.json"]
+        names.append(f"bus-{wire}.pcap")
+    # A master the twin started writes master.log; the built-in one on these buses also its
+    # counters. An external master (`omnitwin twin`) leaves neither here. run.json says which
+    # (an older run.json does not: then only bus can's master.log is expected, as before).
+    kind = master_kind if master_kind is not None else ("omni-master" if bus_kind == "can" else None)
+    if wire and kind in ("omni-master", "command"):
+        names.append("master.log")
+    if kind == "omni-master" and bus_kind in ("canopen", "tml", "ethercat", "m3"):
+        names.append("master-stats.json")
     return names
 
 
-def files_section(run_dir, bus_kind, video=None):
+def files_section(run_dir, bus_kind, video=None, run=None):
     """Video (embedded when present) and links to the run's files that exist."""
     parts = ["<h2>Files</h2>"]
     pcaps = sorted(n for n in os.listdir(run_dir) if re.fullmatch(r"bus-[^/]+\.pcap", n))
@@ -805,7 +816,9 @@ def files_section(run_dir, bus_kind, video=None):
             size = fmt_size(os.path.getsize(path))
             items.append(f'<li><a href="{href(name)}">{esc(name)}</a> ({esc(size)}): {esc(what)}</li>')
     parts.append(f"<ul>{''.join(items)}</ul>")
-    missing = [n for n in expected_files(bus_kind) if not os.path.isfile(os.path.join(run_dir, n))]
+    master_kind = run.get("master_kind") if isinstance(run, dict) else None
+    missing = [n for n in expected_files(bus_kind, master_kind)
+               if not os.path.isfile(os.path.join(run_dir, n))]
     if video_link(run_dir, video) is None:
         missing.append("video.mp4 (not rendered: --no-video, or `omnitwin render` not run yet)")
     if missing:
@@ -866,7 +879,7 @@ def build_report(run_dir, video=None, renderer=None):
             collapsible(metrics_section(metrics)),
             collapsible(plots_section(made[HEADLINE_PLOTS:], plot_notes, "More plots"), open_=True),
             collapsible(events_section(events, events_problem)),
-            collapsible(files_section(run_dir, bus_kind, video), open_=True)]
+            collapsible(files_section(run_dir, bus_kind, video, run), open_=True)]
     page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>omnitwin run: {esc(title)}</title><style>{CSS}</style></head>\n<body>\n"
             + "\n".join(body) + "\n</body></html>\n")

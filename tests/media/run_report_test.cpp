@@ -289,6 +289,14 @@ TEST(RunReport, InterruptedWhileTheOutputsWereMadeJudgesTheWholeRun) {
   EXPECT_EQ(page.find("NOT EVALUATED"), std::string::npos);
   EXPECT_EQ(count_of(page, R"(class="PASS")"), 2u);  // the fixture's bounds, judged
   EXPECT_EQ(count_of(page, R"(class="FAIL")"), 1u);
+  EXPECT_NE(page.find("Run verdict (metrics.json): <b>INTERRUPTED</b>"), std::string::npos);
+  // Even when every bound held, the page never calls such a run passed.
+  m["expectations"] = {{"passed", true}, {"failures", nlohmann::json::array()}};
+  write_file(run / "metrics.json", m.dump(2));
+  const std::string all_met = report_of(run);
+  EXPECT_EQ(all_met.find("<b>passed</b>"), std::string::npos);
+  EXPECT_EQ(all_met.find(">PASSED<"), std::string::npos);
+  EXPECT_NE(all_met.find("the expectations alone: met"), std::string::npos);
 }
 
 // Every metric group and top-level figure of metrics.json is on the page: `drives` (when the
@@ -326,9 +334,30 @@ TEST(RunReport, EachBusExpectsItsOwnCaptureAndMasterFiles) {
   const fs::path run = copy_fixture(tmp);
   nlohmann::json r = read_json(run / "run.json");
   r["bus"] = "ethercat";
+  r["master_kind"] = "omni-master";
   write_file(run / "run.json", r.dump(2));
   const std::string page = report_of(run);
   EXPECT_NE(page.find("Absent: bus-ethercat.pcap, master-stats.json"), std::string::npos) << page;
+}
+
+// A run whose master the twin did not start (`omnitwin twin`) leaves no master.log or
+// master-stats.json, and its report must not call them absent; the built-in master's run
+// must (found in review).
+TEST(RunReport, MasterFilesAreExpectedOnlyFromAMasterTheTwinStarted) {
+  TempDir tmp("omnitwin-report");
+  const fs::path run = copy_fixture(tmp);
+  fs::remove(run / "master.log");
+  nlohmann::json r = read_json(run / "run.json");
+  r["bus"] = "canopen";
+  r["master_kind"] = "external";
+  write_file(run / "run.json", r.dump(2));
+  EXPECT_EQ(report_of(run).find("Absent: master"), std::string::npos);
+  r["master_kind"] = "command";
+  write_file(run / "run.json", r.dump(2));
+  EXPECT_NE(report_of(run).find("Absent: master.log, video.mp4"), std::string::npos);
+  r["master_kind"] = "omni-master";
+  write_file(run / "run.json", r.dump(2));
+  EXPECT_NE(report_of(run).find("Absent: master.log, master-stats.json, video.mp4"), std::string::npos);
 }
 
 // The frame rates of bus.csv run to the end of the run: the last, partial window was never

@@ -94,6 +94,11 @@ TEST_F(M3Servo, VelctrlTurnsTheAxisAtTheCommandedSpeed) {
   send(cmd(Command::velctrl, {{16, vref}}));
   EXPECT_NEAR(monitor(1), vref, 0.05 * vref) << "FSPD";
   EXPECT_GT(monitor(0), 0.8 * kCpr) << "APOS after about a second";
+  // A power cycle starts the servo afresh: no motion command has run since (9 survived it,
+  // found in review).
+  servo.power_cycle();
+  run(0.01);
+  EXPECT_EQ(servo.motion_mode(), 0);
 }
 
 TEST_F(M3Servo, MotionNeedsTheServoOnAndTheBrakeNeedsItOff) {
