@@ -15,12 +15,14 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <optional>
 #include <utility>
 
 #include "controller/master_bounds.hpp"
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
+#include "twin/scheduler.hpp"
 #include "twin/yaml_schema.hpp"
 
 namespace omnitwin::twin {
@@ -817,12 +819,18 @@ void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& fau
   if (f.at >= run_duration)
     v["at"].fail(fmt::format("{} s is not inside the run (it lasts {} s): the fault would never happen", f.at,
                              run_duration));
-  const auto end_of = [](const FaultSpec& x) { return x.duration > 0 ? x.at + x.duration : 1e300; };
+  // In the scheduler's integer nanoseconds, as the run schedules them: in doubles 0.2 + 0.1
+  // ends after 0.3 begins, and back-to-back faults were refused or not by rounding (found in
+  // review). A fault's end runs before a later-listed fault's start at the same instant.
+  const auto start_of = [](const FaultSpec& x) { return seconds_to_ns(x.at); };
+  const auto end_of = [](const FaultSpec& x) {
+    return x.duration > 0 ? seconds_to_ns(x.at + x.duration) : std::numeric_limits<SimTime>::max();
+  };
   for (std::size_t i = 0; i + 1 < faults.size(); ++i) {
     const FaultSpec& g = faults[i];
     const bool line_wide =
         (bus == BusKind::ethercat || bus == BusKind::m3) && f.kind != FaultSpec::Kind::wheel_slip;
-    if (g.kind == f.kind && (g.wheel == f.wheel || line_wide) && f.at < end_of(g) && g.at < end_of(f))
+    if (g.kind == f.kind && (g.wheel == f.wheel || line_wide) && start_of(f) < end_of(g) && start_of(g) < end_of(f))
       v["at"].fail(fmt::format("overlaps the {} fault at line {}", to_string(g.kind), g.line));
   }
 }

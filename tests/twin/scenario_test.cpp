@@ -971,6 +971,14 @@ TEST(ScenarioErrors, OverlappingFaultsOnOneWheel) {
   EXPECT_NE(std::string(e.what()).find("line 7"), std::string::npos) << e.what();
   // The same two faults on different wheels are fine.
   EXPECT_NO_THROW(load_scenario(scenario("bad_fault_overlap.yaml"), {{"faults.1.wheel_slip.wheel", "3"}}));
+  // Back to back is fine whatever the doubles' rounding: 0.2 + 0.1 ends after 0.3 in doubles
+  // and was refused, 0.7 + 0.1 before 0.8 and was not (found in review). The run schedules
+  // in integer nanoseconds, and so does the check.
+  for (const auto& [at, next] : {std::pair{"0.2", "0.3"}, std::pair{"0.7", "0.8"}, std::pair{"1.1", "1.2"}})
+    EXPECT_NO_THROW(load_scenario(scenario("bad_fault_overlap.yaml"),
+                                  {{"faults.0.wheel_slip.at", at}, {"faults.0.wheel_slip.duration", "0.1"},
+                                   {"faults.1.wheel_slip.at", next}}))
+        << at << " + 0.1, then " << next;
 }
 
 // A fault after the end of the run would silently never happen: refused.
