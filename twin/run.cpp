@@ -991,7 +991,10 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
     ex.failures.assign({fmt::format("{} at t = {:.3f} s: expectations not evaluated",
                                     interrupted ? "interrupted" : "failed", ns_to_seconds(sched_.now()))});
   }
-  if (o_.external_master && on_bus() && r.metrics["bus"].value("frames_rx", 0) == 0) {
+  // Any master, the user's own above all (`omnitwin twin` or master.command): one that never
+  // sent a frame commanded nothing, whatever the bounds say (a master.command of `sleep 60`
+  // passed; found in review).
+  if (on_bus() && r.metrics["bus"].value("frames_rx", 0) == 0) {
     ex.passed = false;
     ex.failures.push_back(fmt::format("no master connected: no frame reached the twin on {} in {:.1f} s",
                                       r.metrics["bus"].value("transport", std::string("its transport")),

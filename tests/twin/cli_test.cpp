@@ -172,6 +172,19 @@ TEST_F(CliRun, FailedExpectationExitsOne) {
 }
 
 // A passing scenario exits 0 and prints its summary and the paths of its three records.
+// A master.command that never sends a frame commanded nothing: the run fails with "no
+// master connected" as a twin run does (a `sleep 60` passed in lockstep; found in review).
+TEST_F(CliRun, AMasterCommandThatNeverSendsAFrameFails) {
+  const fs::path scenario = dir_ / "silent.yaml";
+  std::ofstream(scenario) << "name: silent\nplatform:\n  params: " << source_path("models/platform/omni4.yaml")
+                          << "\nbus: {type: can, transport: \"udp:239.74.163.2:0\"}\nmaster: {command: \"sleep 60\"}\n"
+                          << "path:\n  segments:\n    - line: {dx: 0.0, dy: 0.0, duration: 0.5}\nsettle: 0.2\n"
+                          << "outputs: {video: false, report: false}\nexpect:\n  platform.final_error_cm: {max: 5}\n";
+  const Finished f = run({"run", scenario.string(), "--out", (dir_ / "out").string(), "--no-progress"});
+  EXPECT_EQ(f.code, 1) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "no master connected")) << f.out;
+}
+
 TEST_F(CliRun, PassingRunExitsZeroAndPrintsRecords) {
   const fs::path out = dir_ / "out";
   const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", out.string(), "--no-progress"});
@@ -705,6 +718,16 @@ TEST_F(CliTwin, NonFiniteDoubleOptionsAreBadUsage) {
     EXPECT_EQ(code, 2) << args[0] << " " << args[args.size() - 3] << ": " << c.err();
     EXPECT_TRUE(contains(c.err(), "finite")) << c.err();
   }
+}
+
+// `twin --duration S` is checked like --set duration=S: a fault after the end was accepted,
+// listed in run.json and never happened (found in review).
+TEST_F(CliTwin, AFaultOutsideTheDurationIsBadInput) {
+  Child c({"twin", source_path("tests/regression/can_power_loss.yaml"), "--duration", "1", "--out",
+           (dir_ / "t").string(), "--no-progress"},
+          work(), io());
+  EXPECT_EQ(c.wait(std::chrono::seconds(10)), 2) << c.err();
+  EXPECT_TRUE(contains(c.err(), "is not inside the run (it lasts 1 s)")) << c.err();
 }
 
 // Found in review: experiments ignored Ctrl-C (exit 0, summary written), bad input was a
