@@ -142,7 +142,7 @@ void CanDriveNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
     case FaultSpec::Kind::drift: {
       const double d = begin ? f.drift : setup_.drift[n];
       sched_.set_drift(timers_[n], timer_drift(d));
-      hooks_.log(t, "fault", fmt::format("drift of {} now {} ({})", who, d, edge));
+      hooks_.log(t, "fault", fmt::format("drift of {} now {}, its period x{:.6f} ({})", who, d, 1.0 + timer_drift(d), edge));
       return;
     }
     case FaultSpec::Kind::power_loss:

@@ -179,7 +179,7 @@ void OmniCanNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       const double d = begin ? f.drift : s_.bus.can.drift[n];
       sched_.set_drift(timers_[n], d);
       slaves_[n]->set_drift(d);  // so that an NMT start or a resync asks for the same period
-      hooks_.log(t, "fault", fmt::format("drift of {} now {} ({})", who, d, edge));
+      hooks_.log(t, "fault", fmt::format("drift of {} now {}, its period x{:.6f} ({})", who, d, 1.0 + d, edge));
       return;
     }
     case FaultSpec::Kind::power_loss:

@@ -394,7 +394,7 @@ void EthercatNetwork::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       drift_[k] = begin ? f.drift : spec_.drift[k];
       slaves_[k]->esc().set_oscillator_drift(drift_[k], t);
       sched_.set_drift(timers_[k], timer_drift(drift_[k]));
-      what = fmt::format("drift slave {} {}", k + 1, drift_[k]);
+      what = fmt::format("drift slave {} {}, its period x{:.6f}", k + 1, drift_[k], 1.0 + timer_drift(drift_[k]));
       break;
     }
     case FaultSpec::Kind::power_loss:

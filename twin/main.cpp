@@ -208,29 +208,36 @@ void print_summary(const RunResult& r) {
                              rt.value("scheduling", "?"), rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
+  // A master's own counter as metrics.json holds it; "?" where it has none (a master the twin
+  // did not start, or one that keeps no counters: zeros were printed as if counted).
+  const auto counter = [](const nlohmann::json& ms, const char* k) {
+    return ms.contains(k) && ms[k].is_number() ? ms[k].dump() : std::string("?");
+  };
   if (m.contains("master") && m["bus"].value("name", "") == "ethercat") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
     std::cout << fmt::format("  master {} ({}), {}; {} cycles, WKC errors {}, lost frames {}, recoveries {}; "
                              "segment {} frames in, {} returned, {} lost\n",
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
-                             ms.value("cycles", 0), ms.value("wkc_errors", 0), ms.value("lost_frames", 0),
-                             ms.value("recoveries", 0), b.value("frames_rx", 0), b.value("frames_tx", 0),
+                             counter(ms, "cycles"), counter(ms, "wkc_errors"), counter(ms, "lost_frames"),
+                             counter(ms, "recoveries"), b.value("frames_rx", 0), b.value("frames_tx", 0),
                              b.value("dropouts", 0));
   } else if (m.contains("master") && m["bus"].value("name", "") == "m3") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
     std::uint64_t retries = 0, missed = 0, late = 0;
+    const bool counted = ms.contains("slaves");
     for (const auto& sl : ms.value("slaves", nlohmann::json::array())) {
       retries += sl.value("retries", std::uint64_t{0});
       missed += sl.value("missed", std::uint64_t{0});
       late += sl.value("late", std::uint64_t{0});
     }
+    const auto sum = [counted](std::uint64_t n) { return counted ? std::to_string(n) : std::string("?"); };
     std::cout << fmt::format("  master {} ({}), {}; {} cycles, retries {}, missed {}, late {}; "
                              "line {} frames in, {} answered, {} lost, {} corrupted\n",
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
-                             ms.value("cycles", 0), retries, missed, late, b.value("frames_rx", 0), b.value("frames_tx", 0),
-                             b.value("lost_frames", 0), b.value("corrupted_frames", 0));
+                             counter(ms, "cycles"), sum(retries), sum(missed), sum(late), b.value("frames_rx", 0),
+                             b.value("frames_tx", 0), b.value("lost_frames", 0), b.value("corrupted_frames", 0));
   } else if (m.contains("master") && m["bus"].value("name", "") == "canopen") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
@@ -245,7 +252,7 @@ void print_summary(const RunResult& r) {
     std::cout << fmt::format("  master {} ({}), {}; {} bus {} frames, {} error frames, load {:.1f} %, answers {}, axes lost {}\n",
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
                              b.value("protocol", "?"), b.value("frames", 0), b.value("error_frames", 0),
-                             100.0 * b.value("load", 0.0), ms.value("answers", 0), ms.value("axes_lost", 0));
+                             100.0 * b.value("load", 0.0), counter(ms, "answers"), counter(ms, "axes_lost"));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];

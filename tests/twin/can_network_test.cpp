@@ -704,8 +704,8 @@ TEST(OmniCanNetwork, DriftFaultChangesThePeriodFromItsStartAndBack) {
   // The other axes are untouched.
   ASSERT_EQ(r.samples[1].size(), 8u);
   EXPECT_EQ(r.samples[1].back().t, e + 80 * kMs);
-  EXPECT_TRUE(r.logged("fault", "drift of axis 1 (node 0x04) now 0.01 (begins)"));
-  EXPECT_TRUE(r.logged("fault", "drift of axis 1 (node 0x04) now 0 (ends)"));
+  EXPECT_TRUE(r.logged("fault", "drift of axis 1 (node 0x04) now 0.01, its period x1.010000 (begins)"));
+  EXPECT_TRUE(r.logged("fault", "drift of axis 1 (node 0x04) now 0, its period x1.000000 (ends)"));
 }
 
 TEST(OmniCanNetwork, NmtStartDuringADriftFaultRunsOnTheFaultsOscillatorFromTheFirstPeriod) {
