@@ -239,16 +239,17 @@ void EthercatNetwork::send_reply(const Pending& p, SimTime t) {
   }
   Reply& r = replies_[replies_count_++];
   r.at = t;
+  r.delayed = delay_ns_ + delay_jitter_ns_ > 0;
   r.size = static_cast<std::uint16_t>(size);
   std::copy_n(pdu, size, r.pdu.begin());
 }
 
 // Hands over the replies due by t (realtime with a delay fault), in order.
-void EthercatNetwork::release_replies(SimTime t) {
+void EthercatNetwork::release_replies(SimTime t, bool undelayed_too) {
   std::size_t kept = 0;
   for (std::size_t i = 0; i < replies_count_; ++i) {
     Reply& r = replies_[i];
-    if (r.at > t) {
+    if (r.at > t && !(undelayed_too && !r.delayed)) {
       if (kept != i) replies_[kept] = r;
       ++kept;
       continue;
@@ -262,9 +263,11 @@ void EthercatNetwork::release_replies(SimTime t) {
 }
 
 void EthercatNetwork::flush_transport() {
-  // Lockstep: everything that returned by now goes before the grant; a delayed reply that is
-  // not back yet waits for a later grant (the master sees a lost frame meanwhile).
-  release_replies(batch_ && delay_ns_ + delay_jitter_ns_ <= 0 ? std::numeric_limits<SimTime>::max() : sched_.now());
+  // Lockstep: every reply no delay held goes before the grant; a delayed reply that is not
+  // back yet waits for a later grant (the master sees a lost frame meanwhile), also when the
+  // delay fault has ended in between: it was released with everything at the fault's end, a
+  // frame early (found in review).
+  release_replies(sched_.now(), batch_);
 }
 
 SimTime EthercatNetwork::next_master_event() const {

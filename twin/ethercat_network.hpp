@@ -106,6 +106,7 @@ class EthercatNetwork final : public BusNetwork {
   };
   struct Reply {                 // a returned frame, waiting for its instant / the next grant
     SimTime at = 0;
+    bool delayed = false;        // a delay fault held it: it waits for `at` even after the fault
     std::uint16_t size = 0;
     std::array<std::uint8_t, ethercat::kMaxPdu> pdu{};
   };
@@ -115,7 +116,9 @@ class EthercatNetwork final : public BusNetwork {
   void process_frame(Pending& p);
   void send_reply(const Pending& p, SimTime t);
   void capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir);
-  void release_replies(SimTime t);
+  // Hands over the replies due by t; with undelayed_too, also every reply no delay fault
+  // held (lockstep: those go before the next grant whatever their instant).
+  void release_replies(SimTime t, bool undelayed_too = false);
   void on_drive_timer(int axis0, SimTime t);
   void drive_cycle(int axis0, SimTime t);
   void drive_step(int axis0, SimTime t);

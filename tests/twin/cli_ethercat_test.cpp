@@ -125,6 +125,22 @@ TEST_F(CliEthercat, LockstepOverUdp) {
   EXPECT_EQ(m.at("bus").at("dropouts"), 0);
 }
 
+// A delay fault on the returned frames: each frame it held reaches the master extra_ms late,
+// also the last one when the fault ends on a tick. At its end every held reply was released
+// at once, a frame early: a 7 ms delay lasting one 5 ms cycle never reached the master, and
+// one of 0.2 s cost 39 frames where 40 came back late (found in review).
+TEST_F(CliEthercat, EveryFrameADelayFaultHoldsComesBackLate) {
+  for (const auto& [duration, lost] : {std::pair{"0.005", 1}, std::pair{"0.2", 40}}) {
+    const fs::path out = dir_ / (std::string("delay") + duration);
+    const Finished f = run({"run", test_scenario("ethercat_short.yaml"), "--out", out.string(), "--no-progress",
+                            "--set", "duration=2.3", "--set",
+                            std::string("faults=[{delay: {node: master, at: 2.0, duration: ") + duration +
+                                ", extra_ms: 7}}]"});
+    ASSERT_NE(f.code, 2) << f.err;
+    EXPECT_EQ(metrics(out).at("master").at("lost_frames").get<int>(), lost) << duration;
+  }
+}
+
 // The sim-clock report names the master's state and stop reason in metrics.json; the
 // EtherCAT master's own words (master-stats.json: state "stopped", a free-text stop reason)
 // overwrote them, leaving stop_reason "" for a master that stopped on a lost segment.
