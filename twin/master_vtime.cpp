@@ -186,7 +186,7 @@ void VtimeServer::end(SimTime now) {
 // ---- the pacer ----------------------------------------------------------------------------
 
 VtimePacer::VtimePacer(VtimeServer& server, BusNetwork& net, Scheduler& sched, std::chrono::milliseconds watchdog,
-                       std::function<void(std::string)> fail, std::function<std::string()> master_status)
+                       FailFn fail, std::function<std::string()> master_status)
     : server_(server),
       net_(net),
       sched_(sched),
@@ -194,9 +194,9 @@ VtimePacer::VtimePacer(VtimeServer& server, BusNetwork& net, Scheduler& sched, s
       fail_(std::move(fail)),
       master_status_(std::move(master_status)) {}
 
-void VtimePacer::failure(std::string why) {
+void VtimePacer::failure(std::string why, bool gone) {
   failed_ = true;
-  fail_(std::move(why));
+  fail_(std::move(why), gone);
 }
 
 // The master's next wait: its frames enter the network at the wait's instant.
@@ -211,9 +211,10 @@ bool VtimePacer::take_wait() {
       failure(fmt::format("master: it neither waited nor ended for {:.0f} s of wall time at t = {:.6f} s (a loop "
                           "without any clock read, sleep, poll or receive the virtual clock sees?); {}",
                           watchdog_.count() / 1e3, ns_to_seconds(now_), master_status_()));
-    else
-      failure(fmt::format("master: it left the virtual clock at t = {:.6f} s ({}; {})", ns_to_seconds(now_),
-                          to_string(st), master_status_()));
+    else  // ended or killed mid-run: a lost master (master.lost), as in realtime (found in review)
+      failure(fmt::format("the master process left the virtual clock at t = {:.6f} s ({}; {})",
+                          ns_to_seconds(now_), to_string(st), master_status_()),
+              true);
     return false;
   }
   if (wait_.now != now_) {

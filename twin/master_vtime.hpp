@@ -67,11 +67,13 @@ const char* to_string(VtimeServer::Status s);
 // Paces a run on the master's waits. wait_until(t) is the scheduler asking to run instant t:
 // it meets the master (Wait, drain its frames, run the network to a frame for it or to its
 // deadline, Wake) as often as needed before t may run. A failure (the master died, a watchdog,
-// a second process) is reported through `fail` and stops the scheduler.
+// a second process) is reported through `fail` and stops the scheduler; `gone` is true where
+// the master process left the virtual clock (ended or was killed): a lost master.
 class VtimePacer : public Pacer {
  public:
+  using FailFn = std::function<void(std::string why, bool gone)>;
   VtimePacer(VtimeServer& server, BusNetwork& net, Scheduler& sched, std::chrono::milliseconds watchdog,
-             std::function<void(std::string)> fail, std::function<std::string()> master_status);
+             FailFn fail, std::function<std::string()> master_status);
 
   void start() override {}
   void wait_until(SimTime t) override;
@@ -85,13 +87,13 @@ class VtimePacer : public Pacer {
  private:
   bool take_wait();
   bool wake_at(SimTime t);
-  void failure(std::string why);
+  void failure(std::string why, bool gone = false);
 
   VtimeServer& server_;
   BusNetwork& net_;
   Scheduler& sched_;
   std::chrono::milliseconds watchdog_;
-  std::function<void(std::string)> fail_;
+  FailFn fail_;
   std::function<std::string()> master_status_;
   bool have_wait_ = false;
   bool failed_ = false;

@@ -944,7 +944,10 @@ RunResult PlatformRun::execute() {
   } else if (vtime_server_) {
     vtime_pacer_ = std::make_unique<VtimePacer>(
         *vtime_server_, *net_, sched_, std::chrono::milliseconds(std::llround(s_.master.watchdog * 1e3)),
-        [this](std::string why) { fail(std::move(why)); },
+        [this](std::string why, bool gone) {
+          if (gone) master_lost(sched_.now(), std::move(why), true);
+          else fail(std::move(why));
+        },
         [this] { return master_ ? (master_->running() ? std::string("still running") : master_->describe_exit())
                                 : std::string("not started"); });
     pacer_ = vtime_pacer_.get();

@@ -569,6 +569,12 @@ TEST_F(CliVtime, AMasterThatExitsEarlyEndsTheRunWithExit3) {
   EXPECT_TRUE(contains(f.out, "exit 0")) << f.out;
   EXPECT_TRUE(fs::exists(dir_ / "early" / "metrics.json"));
   EXPECT_TRUE(fs::exists(dir_ / "early" / "master.log"));
+  // A lost master, as in realtime: master.lost and its instant (it stayed false; found in
+  // review).
+  const nlohmann::json ms = metrics("early")["master"];
+  EXPECT_TRUE(ms.value("lost", false)) << ms.dump(2);
+  EXPECT_NEAR(ms.value("lost_at_s", -1.0), 0.1, 0.011) << ms.dump(2);
+  EXPECT_TRUE(contains(f.out, "master lost: the master process left the virtual clock")) << f.out;
 }
 
 // {ifname}: the interface's bare name (raw:NAME → NAME), as SOEM's samples take it.
