@@ -822,8 +822,10 @@ void PlatformRun::log_faults_still_active() {
     const SimTime from = seconds_to_ns(f.at);
     if (from > t || (f.duration > 0 && from + seconds_to_ns(f.duration) <= t)) continue;
     // Named as run.json names it (kind and target), so it pairs with its "(begins)" line.
-    note(log_event(t, "fault", fmt::format("{} {} (scenario line {}), from {} s (still active at the end of the run)",
-                                           to_string(f.kind), fault_target(f), f.line, f.at)),
+    // A fault given by --set has no line of the file (0): say where it came from instead.
+    const std::string where = f.line > 0 ? fmt::format("scenario line {}", f.line) : std::string("given by --set");
+    note(log_event(t, "fault", fmt::format("{} {} ({}), from {} s (still active at the end of the run)",
+                                           to_string(f.kind), fault_target(f), where, f.at)),
          *events_);
   }
 }

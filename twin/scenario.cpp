@@ -831,7 +831,8 @@ void check_fault_timing(const YamlField& item, const std::vector<FaultSpec>& fau
     const bool line_wide =
         (bus == BusKind::ethercat || bus == BusKind::m3) && f.kind != FaultSpec::Kind::wheel_slip;
     if (g.kind == f.kind && (g.wheel == f.wheel || line_wide) && start_of(f) < end_of(g) && start_of(g) < end_of(f))
-      v["at"].fail(fmt::format("overlaps the {} fault at line {}", to_string(g.kind), g.line));
+      v["at"].fail(g.line > 0 ? fmt::format("overlaps the {} fault at line {}", to_string(g.kind), g.line)
+                              : fmt::format("overlaps the {} fault given by --set", to_string(g.kind)));
   }
 }
 

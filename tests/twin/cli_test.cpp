@@ -207,6 +207,13 @@ TEST_F(CliRun, FaultsStillActiveAtTheEndAreLogged) {
   EXPECT_TRUE(contains(events, "wheel_slip wheel 2 (scenario line 10), from 3 s (still active at the end of the run)")) << events;
   EXPECT_TRUE(contains(events, "wheel_slip wheel 3 (scenario line 11), from 1 s (still active at the end of the run)")) << events;
   EXPECT_FALSE(contains(events, "line 12), from")) << events;  // ended at 2 s
+  // A fault given by --set has no line: it said "scenario line 0" (found in review).
+  const fs::path set = dir_ / "set";
+  const Finished g = run({"run", test_scenario("run_fault_past_end.yaml"), "--out", set.string(), "--no-progress",
+                          "--set", "faults=[{wheel_slip: {wheel: 1, at: 1.0, friction_scale: 0.5}}]"});
+  ASSERT_EQ(g.code, 0) << g.out << g.err;
+  EXPECT_TRUE(contains(read_bytes(set / "events.log"), "wheel_slip wheel 1 (given by --set), from 1 s (still active"))
+      << read_bytes(set / "events.log");
 }
 
 // Without --out, `run` writes into out/<scenario name>/ under the working directory.
