@@ -1142,7 +1142,8 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
   }
   if (options.external_master && (bus == BusKind::direct || scenario.clock != ClockMode::realtime))
     throw RunSetupError(
-        "the twin alone needs bus: can or ethercat and clock: realtime (an external master keeps its own time)");
+        "the twin alone needs a bus (can, canopen, tml, ethercat or m3; not direct) and clock: realtime (an "
+        "external master keeps its own time)");
   // Decided here, after a static master may have moved the run onto the wall clock.
   std::unique_lock<std::mutex> turn;
   if (options.realtime_turn && scenario.clock == ClockMode::realtime) turn = std::unique_lock<std::mutex>(*options.realtime_turn);
