@@ -94,7 +94,8 @@ m3::Fate M3Network::fate(bool from_master, int k, std::span<const std::uint8_t>)
     ++lost_;
     return m3::Fate::drop;
   }
-  if (corrupt_[i] > 0 && std::uniform_real_distribution<double>(0, 1)(rng_) < corrupt_[i]) {
+  const double corrupt = from_master ? std::max(corrupt_[i], master_corrupt_) : corrupt_[i];
+  if (corrupt > 0 && std::uniform_real_distribution<double>(0, 1)(rng_) < corrupt) {
     ++corrupted_;
     return m3::Fate::corrupt;
   }
@@ -240,8 +241,11 @@ void M3Network::apply_fault(const FaultSpec& f, bool begin, SimTime t) {
       what = fmt::format("frame_loss {} rate {}", who, f.rate);
       break;
     case FaultSpec::Kind::corruption:
+      // Node master: the master's commands only, as frame_loss (it corrupted the slaves'
+      // responses too, as `all`; found in review); a node: its commands and responses.
+      if (master) master_corrupt_ = begin ? f.rate : 0.0;
       for (int i = 0; i < spec_.stations; ++i)
-        if (all || master || i == k) corrupt_[static_cast<std::size_t>(i)] = begin ? f.rate : 0.0;
+        if (all || (!master && i == k)) corrupt_[static_cast<std::size_t>(i)] = begin ? f.rate : 0.0;
       what = fmt::format("corruption {} rate {}", who, f.rate);
       break;
     case FaultSpec::Kind::delay: {

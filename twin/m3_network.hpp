@@ -120,6 +120,7 @@ class M3Network final : public BusNetwork {
   // Frame faults: per target station, the loss and corruption probabilities.
   std::vector<double> loss_, corrupt_;
   double master_loss_ = 0;                 // frames from the master, to every slave
+  double master_corrupt_ = 0;              // the same for corruption (node master)
   bool second_master_ = false;             // fault: another C1 master on the line
   std::uint8_t second_sequence_ = 0;
   std::mt19937_64 rng_;

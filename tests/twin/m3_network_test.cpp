@@ -198,6 +198,24 @@ TEST_F(M3NetworkTest, CorruptionIsAnFcsErrorAtTheSlaveAndARetryAtTheMaster) {
   EXPECT_GT(net_->bus_metrics(sched_.now())["corrupted_frames"].get<int>(), 0);
 }
 
+// Corruption on node master corrupts the master's commands only, as frame_loss on the master
+// loses them: the slaves count FCS errors and no response reaches the master bad (it acted as
+// `all`, corrupting the responses too; found in review).
+TEST_F(M3NetworkTest, CorruptionOnTheMasterCorruptsItsCommandsOnly) {
+  build("m3net-corrupt-master", {{"bus.seed", "3"}});
+  run_until(0.1);
+  FaultSpec f;
+  f.kind = FaultSpec::Kind::corruption;
+  f.wheel = FaultSpec::kMaster;
+  f.rate = 0.05;
+  net_->apply_fault(f, true, sched_.now());
+  run_until(1.1);
+  for (int k = 0; k < 4; ++k) {
+    EXPECT_GT(net_->slave_metrics()[static_cast<std::size_t>(k)]["fcs_errors"].get<int>(), 0) << k;
+    EXPECT_EQ(master_->counters(k).bad, 0u) << k;
+  }
+}
+
 TEST_F(M3NetworkTest, ALateStationsResponsesAreLateAtTheMaster) {
   build("m3net-late");
   run_until(0.1);
