@@ -12,6 +12,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace omnitwin::bus_emulators {
 
@@ -42,6 +43,15 @@ class EthernetCapture {
   std::string error() const;
   std::string part_path() const;  // where the capture is until close()
 
+  // From now on records wait in a hold of `capacity` slots (allocated here) until release()
+  // writes them in time order: a frame a delay fault made late is stamped later than frames
+  // recorded after it, and a capture written in recording order went backwards in time. A
+  // full hold is released whole first; close() releases what is left. Not real-time safe.
+  void hold_in_time_order(std::size_t capacity);
+  // Writes the held records stamped at or before upto_ns, sorted by time (stable: equal
+  // stamps keep their recording order); later ones stay held. Real-time safe.
+  void release(std::int64_t upto_ns);
+
   std::uint64_t written() const { return written_[0] + written_[1]; }
   std::uint64_t refused() const { return refused_; }
   const std::string& path() const { return path_; }
@@ -64,6 +74,16 @@ class EthernetCapture {
   bool flush_each_frame_;
   std::unique_ptr<PcapFile> file_;
   std::array<std::uint8_t, kMaxEthFrame> frame_{};
+  struct Held {  // a record waiting for release()
+    std::int64_t t_ns = 0;
+    int dir = 0;
+    std::size_t size = 0;
+    std::array<std::uint8_t, kMaxEthFrame> bytes{};
+  };
+  std::vector<Held> held_, spare_;  // empty: records are written as they come
+  std::size_t held_count_ = 0;
+  std::vector<std::size_t> order_;  // release()'s sort, allocated with held_
+  bool dump(const std::uint8_t* data, std::size_t size, std::int64_t t_ns, int dir);
   std::uint64_t written_[2] = {0, 0};
   std::uint64_t refused_ = 0;
 };

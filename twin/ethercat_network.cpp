@@ -128,8 +128,7 @@ void EthercatNetwork::add_extra_slaves(SimTime period) {
   });
 }
 
-// A capture closed by destruction (no close_pcap: an error path, a test) keeps its held records.
-EthercatNetwork::~EthercatNetwork() { write_held(std::numeric_limits<SimTime>::max()); }
+EthercatNetwork::~EthercatNetwork() = default;
 
 void EthercatNetwork::open_transport(const Scenario& s) {
   std::string spec = spec_.transport;
@@ -154,20 +153,16 @@ void EthercatNetwork::open_transport(const Scenario& s) {
 
 void EthercatNetwork::open_pcap(const std::string& path) {
   pcap_ = std::make_unique<ethercat::PcapWriter>(path);
-  held_.resize(kHeld);
-  held_spare_.resize(kHeld);
-  held_order_.reserve(kHeld);
+  pcap_->hold_in_time_order(kHeld);
 }
 
-std::string EthercatNetwork::close_pcap() {
-  write_held(std::numeric_limits<SimTime>::max());
-  return close_capture(pcap_.get());
-}
+std::string EthercatNetwork::close_pcap() { return close_capture(pcap_.get()); }
 std::string EthercatNetwork::pcap_error() const { return capture_error(pcap_.get()); }
 
 void EthercatNetwork::flush_pcap() {
-  write_held(sched_.now());
-  if (pcap_) pcap_->flush();
+  if (!pcap_) return;
+  pcap_->release(sched_.now());
+  pcap_->flush();
 }
 
 // ---- frames ----------------------------------------------------------------------------
@@ -219,43 +214,18 @@ void EthercatNetwork::process_frame(Pending& p) {
   send_reply(p, chain_.last_return_time() + std::llround(delay_ns_ + jitter));
 }
 
-// One record of the capture, held until the tick passes its instant (write_held): with the
-// addresses the frame carried when the transport knows them. A full hold is written first.
+// One record of the capture (held by it until the tick passes its instant): with the
+// addresses the frame carried when the transport knows them.
 void EthercatNetwork::capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir) {
   if (!pcap_) return;
-  if (held_count_ == held_.size()) write_held(std::numeric_limits<SimTime>::max());
-  Held& h = held_[held_count_++];
-  h.t = t;
-  h.dir = dir;
-  h.wire = p.wire;
-  if (p.wire) {
-    std::copy_n(p.hdr.begin(), 6, h.dst.begin());
-    std::copy_n(p.hdr.begin() + 6, 6, h.src.begin());
+  if (!p.wire) {
+    pcap_->write(pdu, t, dir);
+    return;
   }
-  h.size = static_cast<std::uint16_t>(std::min(pdu.size(), h.pdu.size()));
-  std::copy_n(pdu.begin(), h.size, h.pdu.begin());
-}
-
-void EthercatNetwork::write_held(SimTime upto) {
-  if (!pcap_ || held_count_ == 0) return;
-  held_order_.clear();
-  for (std::size_t i = 0; i < held_count_; ++i) held_order_.push_back(i);
-  std::stable_sort(held_order_.begin(), held_order_.end(),
-                   [this](std::size_t a, std::size_t b) { return held_[a].t < held_[b].t; });
-  std::size_t written = 0;
-  for (const std::size_t i : held_order_) {
-    const Held& h = held_[i];
-    if (h.t > upto) break;
-    const std::span<const std::uint8_t> pdu(h.pdu.data(), h.size);
-    if (h.wire) pcap_->write(pdu, h.t, h.dir, h.dst, h.src);
-    else pcap_->write(pdu, h.t, h.dir);
-    ++written;
-  }
-  // The later ones stay, in time order, at the front (through the spare buffer).
-  std::size_t kept = 0;
-  for (std::size_t k = written; k < held_order_.size(); ++k) held_spare_[kept++] = held_[held_order_[k]];
-  std::swap(held_, held_spare_);
-  held_count_ = kept;
+  ethercat::Mac dst{}, src{};
+  std::copy_n(p.hdr.begin(), 6, dst.begin());
+  std::copy_n(p.hdr.begin() + 6, 6, src.begin());
+  pcap_->write(pdu, t, dir, dst, src);
 }
 
 void EthercatNetwork::send_reply(const Pending& p, SimTime t) {

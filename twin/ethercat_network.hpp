@@ -116,8 +116,6 @@ class EthercatNetwork final : public BusNetwork {
   void process_frame(Pending& p);
   void send_reply(const Pending& p, SimTime t);
   void capture(const Pending& p, std::span<const std::uint8_t> pdu, SimTime t, ethercat::Direction dir);
-  // Writes the held capture records stamped at or before `upto`, in time order (stable).
-  void write_held(SimTime upto);
   // Hands over the replies due by t; with undelayed_too, also every reply no delay fault
   // held (lockstep: those go before the next grant whatever their instant).
   void release_replies(SimTime t, bool undelayed_too = false);
@@ -141,20 +139,10 @@ class EthercatNetwork final : public BusNetwork {
   std::shared_ptr<ethercat::VethPair> veth_;
   std::unique_ptr<ethercat::EcTransport> transport_;
   std::unique_ptr<ethercat::PcapWriter> pcap_;
-  // Capture records wait here until the tick has passed their instant: a reply a delay fault
-  // holds is stamped later than frames the master sends meanwhile, and was written before
-  // them (40 of 1000 records out of time order under a 12 ms delay; found in review).
-  struct Held {
-    SimTime t = 0;
-    ethercat::Direction dir{};
-    bool wire = false;
-    ethercat::Mac dst{}, src{};
-    std::uint16_t size = 0;
-    std::array<std::uint8_t, ethercat::kMaxPdu> pdu{};
-  };
-  std::vector<Held> held_, held_spare_;  // kHeld slots each, allocated by open_pcap()
-  std::size_t held_count_ = 0;
-  std::vector<std::size_t> held_order_;
+  // The capture's records wait in its hold (EthernetCapture) until the tick has passed their
+  // instant: a reply a delay fault holds is stamped later than frames the master sends
+  // meanwhile, and was written before them (40 of 1000 records out of time order under a
+  // 12 ms delay; found in review).
   static constexpr std::size_t kHeld = 2048;
   std::string transport_spec_, master_iface_;
   std::array<Scheduler::TimerId, 4> timers_{};

@@ -2,6 +2,7 @@
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
 
 #include <algorithm>
+#include <limits>
 
 namespace omnitwin::m3 {
 
@@ -22,31 +23,16 @@ M3Segment::~M3Segment() = default;
 
 void M3Segment::open_pcap(const std::string& path) {
   pcap_ = std::make_unique<PcapWriter>(path);
-  held_.resize(kHeld);
-  order_.reserve(kHeld);
+  pcap_->hold_in_time_order(kHeld);
 }
 
-// Into the held records (written in time order by flush_capture); a full hold flushes first.
+// Into the capture's hold (written in time order by flush_capture).
 void M3Segment::capture(std::span<const std::uint8_t> frame, SimTime t, Direction dir) {
-  if (!pcap_) return;
-  if (held_count_ == held_.size()) flush_capture();
-  Held& h = held_[held_count_++];
-  h.size = std::min(frame.size(), h.bytes.size());
-  std::copy_n(frame.begin(), h.size, h.bytes.begin());
-  h.t = t;
-  h.dir = dir;
+  if (pcap_) pcap_->write_frame(frame, t, dir);
 }
 
 void M3Segment::flush_capture() {
-  if (!pcap_ || held_count_ == 0) return;
-  order_.clear();
-  for (std::size_t i = 0; i < held_count_; ++i) order_.push_back(i);
-  std::stable_sort(order_.begin(), order_.end(), [this](std::size_t a, std::size_t b) { return held_[a].t < held_[b].t; });
-  for (const std::size_t i : order_) {
-    const Held& h = held_[i];
-    pcap_->write_frame(std::span<const std::uint8_t>(h.bytes.data(), h.size), h.t, h.dir);
-  }
-  held_count_ = 0;
+  if (pcap_) pcap_->release(std::numeric_limits<SimTime>::max());
 }
 
 // A frame whose last bit reached the master at t: onto the transport and into the capture.

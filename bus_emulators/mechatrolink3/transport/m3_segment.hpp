@@ -113,16 +113,7 @@ class M3Segment {
     SimTime at = 0;
   };
   std::array<Batched, 8> batch_{};
-  struct Held {  // a capture record waiting for flush_capture()
-    std::array<std::uint8_t, 2 * kMaxFrame> bytes{};
-    std::size_t size = 0;
-    SimTime t = 0;
-    Direction dir = Direction::out;
-  };
-  std::vector<Held> held_;       // kHeld slots, allocated by open_pcap()
-  std::size_t held_count_ = 0;
-  std::vector<std::size_t> order_;  // flush_capture()'s sort, allocated with held_
-  static constexpr std::size_t kHeld = 4096;
+  static constexpr std::size_t kHeld = 4096;  // the capture's hold (EthernetCapture)
 };
 
 }  // namespace omnitwin::m3
