@@ -123,8 +123,6 @@ PlatformSim PlatformSim::from_file(const std::string& mjcf_path, const PlatformP
 
 PlatformSim::PlatformSim(ModelPtr model, const PlatformParams& p)
     : model_(std::move(model)),
-      speed_limit_(p.motor.speed_limit),
-      gain_error_(p.driver.gain_error),
       driver_(p.driver),
       motor_params_(p.motor),
       nominal_height_(p.geometry.r) {
@@ -218,8 +216,9 @@ bool PlatformSim::set_wheel_speed_setpoint(int wheel0, double rad_s) {
   if (!valid_wheel(wheel0) || std::isnan(rad_s)) return false;
   setpoint_[static_cast<std::size_t>(wheel0)] = rad_s;
   // The amplifier's own gain error scales what it makes of the setpoint, then its limit.
-  const double actual = rad_s * (1.0 + gain_error_[static_cast<std::size_t>(wheel0)]);
-  data_->ctrl[motor_[wheel0]] = std::clamp(actual, -speed_limit_, speed_limit_);
+  const double actual = rad_s * (1.0 + driver_.gain_error[static_cast<std::size_t>(wheel0)]);
+  const double limit = motor_params_.speed_limit;
+  data_->ctrl[motor_[wheel0]] = std::clamp(actual, -limit, limit);
   return true;
 }
 

@@ -128,10 +128,8 @@ class PlatformSim {
 
   ModelPtr model_;
   DataPtr data_;
-  double speed_limit_ = 0;     // |setpoint| limit [rad/s]
-  std::array<double, 4> gain_error_{};  // driver.gain_error: speed = setpoint·(1 + e)
-  DriverParams driver_;                  // the amplifiers' input stage
-  MotorParams motor_params_;             // its speed limit
+  DriverParams driver_;       // the amplifiers: input stage, gain_error (speed = setpoint·(1 + e))
+  MotorParams motor_params_;  // speed_limit: |setpoint| limit [rad/s]
   std::array<double, 4> setpoint_{};     // last speed setpoint asked of each wheel [rad/s]
   double nominal_height_ = 0;  // first guess for the chassis height [m] (wheel radius)
   int root_qpos_ = 0, root_dof_ = 0;
