@@ -261,6 +261,14 @@ void print_summary(const RunResult& r) {
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              b.value("dropouts", 0), 100.0 * b.value("dropout_rate", 0.0));
   }
+  // The end of a master on its own clock: the SIGTERM at `duration`, served until it exited.
+  if (m.contains("master") && m["master"].value("sigterm_at_s", -1.0) >= 0) {
+    const auto& ms = m["master"];
+    const double shutdown = ms.value("shutdown_s", -1.0);
+    std::cout << fmt::format("  end: SIGTERM to the master at {:.3f} s; ", ms.value("sigterm_at_s", -1.0))
+              << (shutdown >= 0 ? fmt::format("served, it exited {:.3f} s later\n", shutdown)
+                                : fmt::format("it had not exited when its grace ran out ({})\n", ms.value("exit", "?")));
+  }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";
   for (const std::string& f : r.missing_records) std::cout << "  MISSING: " << f << " was not written\n";

@@ -92,10 +92,15 @@ bool MasterProcess::wait(std::chrono::milliseconds timeout) {
   return true;
 }
 
-void MasterProcess::stop(std::chrono::milliseconds grace) {
+void MasterProcess::terminate() {
   if (!running()) return;
   kill(pid_, SIGTERM);
   kill(pid_, SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
+}
+
+void MasterProcess::stop(std::chrono::milliseconds grace) {
+  if (!running()) return;
+  terminate();
   if (wait(grace)) return;
   kill(pid_, SIGKILL);
   int status = 0;

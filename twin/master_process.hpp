@@ -37,6 +37,8 @@ class MasterProcess {
   bool wait(std::chrono::milliseconds timeout);
   // SIGTERM, up to `grace` to exit, then SIGKILL. Returns once it is reaped.
   void stop(std::chrono::milliseconds grace);
+  // SIGTERM (and SIGCONT) and return at once: the caller serves it while it shuts down.
+  void terminate();
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"

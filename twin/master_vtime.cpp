@@ -202,6 +202,10 @@ void VtimePacer::failure(std::string why, bool gone) {
 // The master's next wait: its frames enter the network at the wait's instant.
 bool VtimePacer::take_wait() {
   const VtimeServer::Status st = server_.next_wait(wait_, watchdog_, now_);
+  if (st == VtimeServer::Status::closed && expect_end_) {
+    ended_ = true;  // it exited after the SIGTERM of the run's end, as asked
+    return false;
+  }
   if (st != VtimeServer::Status::ok) {
     if (st == VtimeServer::Status::second_process)
       failure(fmt::format("master: a second process (pid {}) started under the virtual clock: it serves one "
@@ -236,6 +240,10 @@ bool VtimePacer::wake_at(SimTime t) {
   have_wait_ = false;
   ++wakes_;
   if (!server_.wake(wait_.seq, now_, net_.frames_to_transport())) {
+    if (expect_end_) {
+      ended_ = true;
+      return false;
+    }
     failure(fmt::format("master: gone at t = {:.6f} s ({})", ns_to_seconds(now_), master_status_()));
     return false;
   }
@@ -243,7 +251,8 @@ bool VtimePacer::wake_at(SimTime t) {
 }
 
 void VtimePacer::wait_until(SimTime t) {
-  while (!failed_) {
+  if (ended_) return;  // the master has ended at the run's end: time runs free (the last record)
+  while (!failed_ && !ended_) {
     if (!have_wait_) {
       if (!take_wait()) break;
       continue;
@@ -276,7 +285,7 @@ void VtimePacer::wait_until(SimTime t) {
     }
     return;  // instant t comes first
   }
-  if (failed_) sched_.stop();
+  if (failed_ || ended_) sched_.stop();
 }
 
 // ---- finding things -------------------------------------------------------------------------

@@ -81,6 +81,11 @@ class VtimePacer : public Pacer {
 
   SimTime master_now() const { return now_; }
   bool failed() const { return failed_; }
+  // From the run's end on, the master was asked to stop (SIGTERM): its leaving the clock is
+  // its end, not a lost master. ended(): it has left; the scheduler was stopped then, and
+  // from then on time runs free (nothing is left to pace).
+  void expect_end() { expect_end_ = true; }
+  bool ended() const { return ended_; }
   std::uint64_t wakes() const { return wakes_; }
   std::uint64_t frame_wakes() const { return frame_wakes_; }
 
@@ -97,6 +102,8 @@ class VtimePacer : public Pacer {
   std::function<std::string()> master_status_;
   bool have_wait_ = false;
   bool failed_ = false;
+  bool expect_end_ = false;
+  bool ended_ = false;
   vtime::Record wait_{};
   SimTime now_ = 0;                    // the master's simulated time [ns]
   std::uint64_t delivered_at_wait_ = 0;

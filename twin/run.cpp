@@ -194,6 +194,8 @@ class PlatformRun {
   bool on_bus() const { return net_ != nullptr; }
   void start_master();
   void start_own_master(const std::string& dir);
+  void serve_master_shutdown();
+  double master_grace_s() const;
   void stop_master();
   void on_master_bus(SimTime t);
   static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
@@ -284,6 +286,9 @@ class PlatformRun {
   int silent_periods_ = 0;           // control periods without one since
   SimTime master_lost_ns_ = -1;
   std::string master_lost_why_;
+  // the run's end: SIGTERM to a master on its own clock, which is served until it exits
+  SimTime sigterm_ns_ = -1;       // when it was sent (−1: not sent; a lockstep master ends on End)
+  SimTime master_exit_ns_ = -1;   // when the master was seen to exit after it (−1: not seen)
   std::array<double, 4> bus_setpoint_{};  // what the network last asked of each wheel [rad/s]
   double handshake_timeout_s_ = 10;
 };
@@ -459,18 +464,55 @@ void PlatformRun::start_own_master(const std::string& dir) {
   log_event(0, "master", fmt::format("{} started (pid {}, clock virtual)", master_command_, master_->pid()));
 }
 
+// How long a master on its own clock may take to end after the SIGTERM of the run's end [s]:
+// master.stop_grace for a program of the user's, 3 s for ours.
+double PlatformRun::master_grace_s() const { return s_.master.command.empty() ? 3.0 : s_.master.stop_grace; }
+
+// The run has reached its end. A master on its own clock (realtime, or a program of the user's
+// on the virtual clock) is sent SIGTERM, and the bus, the physics and the records (and the
+// virtual clock) go on until it has exited, for at most its grace: the frames of its own
+// shutdown (drives disabled, slaves to INIT, NMT stop) are answered and recorded, and the
+// records end one control period after its exit. A lockstep
+// master of ours ends on End (stop_master); a lost, failed or interrupted run is not extended.
+void PlatformRun::serve_master_shutdown() {
+  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0 || signalled()) return;
+  if (!master_->running()) return;
+  sigterm_ns_ = sched_.now();
+  master_->terminate();
+  note(log_event(sigterm_ns_, "master",
+                 fmt::format("end of the run: SIGTERM; the bus is served until the master exits (at most {} s)",
+                             master_grace_s())),
+       *events_);
+  if (vtime_pacer_) vtime_pacer_->expect_end();
+  sched_.run_until(sigterm_ns_ + seconds_to_ns(master_grace_s()) + 1, *pacer_, [this] { return signalled(); });
+  if (vtime_pacer_ && vtime_pacer_->ended()) master_exit_ns_ = vtime_pacer_->master_now();
+  if (master_exit_ns_ < 0) return;
+  // Its exit in time order in events.log (it has left the clock; reaped within a moment).
+  master_->wait(std::chrono::milliseconds(std::llround(master_grace_s() * 1e3)));
+  log_event(master_exit_ns_, "master", fmt::format("ended: {}", master_->describe_exit()));
+  if (signalled() || !error_.empty()) return;
+  // One more control period, to a control sample: the last record shows the state the master
+  // left behind, and its last AL or NMT change is logged (the slaves' next cycles log it).
+  const SimTime tm = seconds_to_ns(s_.controller.period);
+  sched_.run_until((master_exit_ns_ / tm + 2) * tm + 1, *pacer_, [this] { return signalled(); });
+}
+
 void PlatformRun::stop_master() {
   if (!master_) return;
   if (clock_server_) clock_server_->end(sched_.now());
   if (vtime_server_) vtime_server_->end(vtime_pacer_ ? vtime_pacer_->master_now() : sched_.now());
-  // The master exits on End (lockstep); in realtime, and a master of the user's, by SIGTERM.
-  // A master already found lost gets a short grace: the run's end is not kept waiting on it.
+  // The master exits on End (lockstep); in realtime, and a master of the user's, by SIGTERM,
+  // sent at the run's end (serve_master_shutdown) and again here. A master already found lost,
+  // or one that had its grace while it was served, gets a short one: the end is not kept
+  // waiting on it.
   const bool own = !s_.master.command.empty();
-  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 ? 300 : own ? std::llround(s_.master.stop_grace * 1e3) : 3000);
+  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 || sigterm_ns_ >= 0 ? 300
+                                               : own ? std::llround(s_.master.stop_grace * 1e3)
+                                                     : 3000);
   const bool was_running = master_->running();
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   cpu_share_.release();  // the thread's own affinity again, the master gone
-  log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
+  if (master_exit_ns_ < 0) log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
   if (own && was_running && master_->exit_code() == 128 + SIGKILL && error_.empty())
     error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: killed", master_program_,
                          s_.master.stop_grace);
@@ -537,8 +579,16 @@ void PlatformRun::supervise_master(SimTime t) {
   if (!master_ || master_lost_ns_ >= 0) return;
   if (!master_->running()) {
     if (signalled()) return;  // the same Ctrl-C ended it (see on_master_bus())
+    if (sigterm_ns_ >= 0) {   // the end the run asked for: the records end a period later
+      if (master_exit_ns_ < 0) {
+        master_exit_ns_ = t;
+        sched_.stop();
+      }
+      return;
+    }
     return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
   }
+  if (sigterm_ns_ >= 0) return;  // shutting down: it may fall silent
   const std::uint64_t rx = net_->frames_from_transport();
   if (rx != heard_frames_) {
     heard_frames_ = rx;
@@ -873,7 +923,10 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"exit", master_ ? master_->describe_exit() : "not started"},
                    {"lost", master_lost_ns_ >= 0},
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
-                   {"lost_reason", master_lost_why_}};
+                   {"lost_reason", master_lost_why_},
+                   {"sigterm_at_s", sigterm_ns_ < 0 ? -1.0 : ns_to_seconds(sigterm_ns_)},
+                   {"exited_at_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_)},
+                   {"shutdown_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_ - sigterm_ns_)}};
     if (vtime_pacer_)
       m["master"]["virtual_time"] = {{"waits", vtime_server_->waits()}, {"wakes", vtime_pacer_->wakes()},
                                      {"frame_wakes", vtime_pacer_->frame_wakes()},
@@ -963,6 +1016,7 @@ RunResult PlatformRun::execute() {
   // from inside a step ends the run like a record failure: records closed, metrics written.
   try {
     sched_.run_until(end_ + 1, *pacer_, [this] { return signalled(); });
+    serve_master_shutdown();
   } catch (const std::exception& e) {
     if (error_.empty()) error_ = e.what();
   }
