@@ -490,6 +490,8 @@ nlohmann::json EthercatNetwork::bus_metrics(SimTime now) const {
           {"lost_frames", lost_frames_},
           {"foreign_frames", transport_->stats().foreign_sender},  // from a second sender
           {"refused_frames", transport_->stats().refused_sender},
+          // EtherCAT frames of another header type than 1 (network variables, mailbox gateway)
+          {"other_pdu_types", transport_->stats().dropped_foreign},
           {"not_returned", not_returned_},
           {"malformed", malformed()},
           {"send_failures", send_failures_},

@@ -43,19 +43,16 @@ RawTransport::RawTransport(const std::string& ifname, Role role, RawOptions opti
   ::setsockopt(fd_, SOL_PACKET, PACKET_IGNORE_OUTGOING, &one, sizeof one);
   if (options.qdisc_bypass)
     qdisc_bypass_ = ::setsockopt(fd_, SOL_PACKET, PACKET_QDISC_BYPASS, &one, sizeof one) == 0;
-  // Keep: incoming frames (not OUTGOING) with EtherType 0x88A4 whose EtherCAT header type (high
-  // nibble of byte 15: the header is little endian) is 1. A frame too short to load byte 15
-  // ends the program, which drops it.
+  // Keep: incoming frames (not OUTGOING) with EtherType 0x88A4. The EtherCAT header type is
+  // checked in receive(), so frames of another type (network variables, mailbox gateway) are
+  // counted in dropped_foreign rather than vanishing in the kernel.
   sock_filter prog[] = {
       BPF_STMT(BPF_LD | BPF_W | BPF_ABS, static_cast<std::uint32_t>(SKF_AD_OFF + SKF_AD_PKTTYPE)),  // 0
-      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, PACKET_OUTGOING, 6, 0),                                    // 1 → 8
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, PACKET_OUTGOING, 3, 0),                                    // 1 → 5
       BPF_STMT(BPF_LD | BPF_H | BPF_ABS, 12),                                                        // 2
-      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, kEtherType, 0, 4),                                         // 3 → 8
-      BPF_STMT(BPF_LD | BPF_B | BPF_ABS, 15),                                                        // 4
-      BPF_STMT(BPF_ALU | BPF_AND | BPF_K, 0xF0),                                                     // 5
-      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, static_cast<std::uint32_t>(kPduTypeSlaves) << 4, 0, 1),   // 6
-      BPF_STMT(BPF_RET | BPF_K, 0xFFFFFFFFu),                                                        // 7 keep
-      BPF_STMT(BPF_RET | BPF_K, 0),                                                                  // 8 drop
+      BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, kEtherType, 0, 1),                                         // 3 → 5
+      BPF_STMT(BPF_RET | BPF_K, 0xFFFFFFFFu),                                                        // 4 keep
+      BPF_STMT(BPF_RET | BPF_K, 0),                                                                  // 5 drop
   };
   sock_fprog fp{static_cast<unsigned short>(sizeof prog / sizeof prog[0]), prog};
   kernel_filter_ = ::setsockopt(fd_, SOL_SOCKET, SO_ATTACH_FILTER, &fp, sizeof fp) == 0;

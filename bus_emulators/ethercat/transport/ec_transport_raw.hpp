@@ -4,8 +4,10 @@
 // An AF_PACKET SOCK_RAW socket, non-blocking, bound to one interface with protocol 0x88A4, so
 // the kernel hands it EtherCAT frames of that interface only. A classic BPF filter on the
 // socket also drops, in the kernel (no wake-up, no copy), our own outgoing frames
-// (pkttype OUTGOING) and frames whose EtherCAT header type is not 1; the same checks run again
-// here in case the kernel refused the filter, and counted there. PACKET_IGNORE_OUTGOING (Linux
+// (pkttype OUTGOING); the same check runs again here in case the kernel refused the filter.
+// Frames of another EtherCAT header type than 1 pass it and are counted in dropped_foreign
+// here (they used to be dropped in the kernel, uncounted: a master's network-variable or
+// mailbox-gateway frames then vanished without a trace). PACKET_IGNORE_OUTGOING (Linux
 // ≥ 4.20) is set where the kernel has it, and PACKET_QDISC_BYPASS (≥ 3.14) unless turned off:
 // a frame goes straight to the driver, as a real-time master wants (no queueing discipline, no
 // reordering). Its price: frames sent that way skip the interface's taps, so tcpdump or
