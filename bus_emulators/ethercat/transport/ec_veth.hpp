@@ -5,7 +5,9 @@
 // Names are unique per process and instance ("ot" + pid + counter + "a"/"b", at most 15
 // characters), so tests running in parallel (ctest -j: one process each) never share or delete
 // each other's interfaces; a leftover pair with the same names (a crashed earlier process with
-// the same pid) is deleted first. Both ends are brought up with IPv6 disabled on them (no router
+// the same pid) is deleted first. The first end carries the alias "omnitwin-pid-PID"; a pair
+// whose process is gone (SIGKILL, a crash: no destructor ran) is deleted by the next VethPair
+// made on the machine (sweep_stale()), so killed runs do not pile up interfaces. Both ends are brought up with IPv6 disabled on them (no router
 // solicitations or DAD frames on the wire). The destructor deletes the pair (deleting one end
 // deletes both), also when the test fails, since a failed assertion returns from the test body
 // and unwinds the fixture.
@@ -15,8 +17,12 @@
 // Set-up code only: runs `ip` as child processes.
 #pragma once
 
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <filesystem>
 
 #include <array>
 #include <atomic>
@@ -45,9 +51,11 @@ class VethPair {
     a_ = base + "a";
     b_ = base + "b";
     if (b_.size() > 15) throw std::runtime_error("veth name too long: " + b_);
+    sweep_stale();
     run(ip() + " link del " + a_);  // a leftover of a crashed process with the same pid
     if (const auto err = run(ip() + " link add " + a_ + " type veth peer name " + b_))
       throw std::runtime_error("cannot create veth pair " + a_ + "/" + b_ + ": " + *err);
+    run(ip() + " link set dev " + a_ + " alias " + kAliasPrefix + std::to_string(::getpid()));  // best effort
     for (const std::string& n : {a_, b_}) {
       std::ofstream(std::string("/proc/sys/net/ipv6/conf/") + n + "/disable_ipv6") << "1\n";  // best effort
       if (const auto err = run(ip() + " link set " + n + " up")) {
@@ -73,6 +81,24 @@ class VethPair {
   // Whether an interface of this name exists now.
   static bool exists(const std::string& ifname) {
     return ::access(("/sys/class/net/" + ifname).c_str(), F_OK) == 0;
+  }
+
+  // Deletes every interface whose alias says a VethPair of a process that no longer exists
+  // made it; returns how many. Best effort (another process may delete it first).
+  static int sweep_stale() {
+    int deleted = 0;
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator("/sys/class/net", ec)) {
+      std::ifstream f(entry.path() / "ifalias");
+      std::string alias;
+      if (!f || !std::getline(f, alias) || alias.rfind(kAliasPrefix, 0) != 0) continue;
+      const std::string digits = alias.substr(std::char_traits<char>::length(kAliasPrefix));
+      if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+      const long pid = std::stol(digits);
+      if (pid <= 0 || ::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+      if (!run(ip() + " link del " + entry.path().filename().string())) ++deleted;
+    }
+    return deleted;
   }
 
  private:
@@ -111,6 +137,7 @@ class VethPair {
     return std::nullopt;
   }
 
+  static constexpr const char* kAliasPrefix = "omnitwin-pid-";
   std::string a_;
   std::string b_;
 };
