@@ -43,7 +43,7 @@ constexpr std::array<std::string_view, 25> kBusMetrics = {
 // M-III masters' own counters (master-stats.json: segment losses and returns among them;
 // M-III: exchanges … int_offset_ns, summed over the slaves where per slave; CANopen: syncs …
 // tpdo_rx, with recoveries = drives brought back to OPERATIONAL; TML: answers, axes_lost).
-constexpr std::array<std::string_view, 39> kMasterMetrics = {
+constexpr std::array<std::string_view, 40> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
     "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
     "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s",
@@ -51,7 +51,7 @@ constexpr std::array<std::string_view, 39> kMasterMetrics = {
     "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns",
     "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
     "tpdo_rx",      "answers",          "axes_lost",    "emergencies",
-    "sigterm_at_s", "exited_at_s",      "shutdown_s"};
+    "sigterm_at_s", "exited_at_s",      "shutdown_s",   "exit_code"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
 // (tec, bus_off_events and error_code serve CANopen too), then TML's three; then the drive
 // core's mode of operation (0x6061; every bus with CiA 402 drives) and EtherCAT's SYNC0.

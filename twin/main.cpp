@@ -266,8 +266,8 @@ void print_summary(const RunResult& r) {
     const auto& ms = m["master"];
     const double shutdown = ms.value("shutdown_s", -1.0);
     std::cout << fmt::format("  end: SIGTERM to the master at {:.3f} s; ", ms.value("sigterm_at_s", -1.0))
-              << (shutdown >= 0 ? fmt::format("served, it exited {:.3f} s later\n", shutdown)
-                                : fmt::format("it had not exited when its grace ran out ({})\n", ms.value("exit", "?")));
+              << (shutdown >= 0 ? fmt::format("served until it ended {:.3f} s later ({})\n", shutdown, ms.value("exit", "?"))
+                                : fmt::format("it had not ended when the run did ({})\n", ms.value("exit", "?")));
   }
   if (r.interrupted) std::cout << "  INTERRUPTED: records were closed at the point reached\n";
   if (!r.error.empty()) std::cout << "  ERROR: " << r.error << "\n";

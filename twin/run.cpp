@@ -197,6 +197,7 @@ class PlatformRun {
   void serve_master_shutdown();
   double master_grace_s() const;
   void stop_master();
+  void rename_master_log();
   void on_master_bus(SimTime t);
   static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
   // How often the master is met: its bus cycle on M-III (a polling master exchanges with
@@ -310,7 +311,9 @@ void PlatformRun::build_network() {
     sim_.set_wheel_amplifier_input(i, volts);
     bus_setpoint_[static_cast<std::size_t>(i)] = sim_.wheel_setpoint(i);
   };
-  h.axis_sample = [this](int i, double e) { axis_stats_[static_cast<std::size_t>(i)].add(e); };
+  h.axis_sample = [this](int i, double e) {
+    if (sched_.now() <= end_) axis_stats_[static_cast<std::size_t>(i)].add(e);  // not the master's shutdown
+  };
   h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
     if (events_) note(log_event(t, kind, text), *events_);
   };
@@ -472,7 +475,7 @@ double PlatformRun::master_grace_s() const { return s_.master.command.empty() ? 
 // on the virtual clock) is sent SIGTERM, and the bus, the physics and the records (and the
 // virtual clock) go on until it has exited, for at most its grace: the frames of its own
 // shutdown (drives disabled, slaves to INIT, NMT stop) are answered and recorded, and the
-// records end one control period after its exit. A lockstep
+// records end at the first control sample a control period or more after its exit. A lockstep
 // master of ours ends on End (stop_master); a lost, failed or interrupted run is not extended.
 void PlatformRun::serve_master_shutdown() {
   if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0 || signalled()) return;
@@ -491,10 +494,11 @@ void PlatformRun::serve_master_shutdown() {
   master_->wait(std::chrono::milliseconds(std::llround(master_grace_s() * 1e3)));
   log_event(master_exit_ns_, "master", fmt::format("ended: {}", master_->describe_exit()));
   if (signalled() || !error_.empty()) return;
-  // One more control period, to a control sample: the last record shows the state the master
-  // left behind, and its last AL or NMT change is logged (the slaves' next cycles log it).
+  // To the first control sample a control period or more after it: the last record shows the
+  // state the master left behind, and its last AL or NMT change is logged (the slaves' next
+  // cycles log it).
   const SimTime tm = seconds_to_ns(s_.controller.period);
-  sched_.run_until((master_exit_ns_ / tm + 2) * tm + 1, *pacer_, [this] { return signalled(); });
+  sched_.run_until((master_exit_ns_ + 2 * tm - 1) / tm * tm + 1, *pacer_, [this] { return signalled(); });
 }
 
 void PlatformRun::stop_master() {
@@ -513,9 +517,24 @@ void PlatformRun::stop_master() {
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   cpu_share_.release();  // the thread's own affinity again, the master gone
   if (master_exit_ns_ < 0) log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
-  if (own && was_running && master_->exit_code() == 128 + SIGKILL && error_.empty())
-    error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: killed", master_program_,
-                         s_.master.stop_grace);
+  if (!error_.empty() || signalled()) return rename_master_log();
+  const int code = master_->exit_code();
+  // Served for its whole grace and still there: the verdict does not hang on how it ended
+  // after (a master failing on the unserved bus in the last 0.3 s passed; found in review).
+  const bool outlived = sigterm_ns_ >= 0 && master_exit_ns_ < 0 && was_running;
+  if (outlived || (own && was_running && code == 128 + SIGKILL))
+    error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: {}", master_program_, master_grace_s(),
+                         code == 128 + SIGKILL ? std::string("killed") : "it ended after (" + master_->describe_exit() + ")");
+  // Exited while served, but not cleanly: its shutdown failed (exit 0, or killed by the SIGTERM
+  // itself for a program without a handler, are clean).
+  else if (master_exit_ns_ >= 0 && code != 0 && code != 128 + SIGTERM)
+    error_ = fmt::format("master: {} ended its shutdown with {} (see master.log)", master_program_,
+                         master_->describe_exit());
+  rename_master_log();
+}
+
+// .master.log.part becomes master.log once the master is gone.
+void PlatformRun::rename_master_log() {
   const fs::path dir(o_.out_dir);
   std::error_code ec;
   fs::rename(dir / ".master.log.part", dir / "master.log", ec);
@@ -725,7 +744,7 @@ void PlatformRun::on_record(SimTime t) {
   // The plan's end, once a control sample reaches it: final_error_cm means "at the goal" only
   // when this is set (a master that started late leaves the run mid-path).
   const SimTime origin = plan_origin();
-  if (path_done_ns_ < 0 && origin >= 0 && t - origin >= seconds_to_ns(path_.duration())) {
+  if (path_done_ns_ < 0 && origin >= 0 && t <= end_ && t - origin >= seconds_to_ns(path_.duration())) {
     path_done_ns_ = origin + seconds_to_ns(path_.duration());
   }
   note(csv_->row(row_), *csv_);
@@ -779,7 +798,7 @@ void PlatformRun::record_bus_and_state(SimTime t) {
                    static_cast<double>(st.active_faults)});
   for (const DriveSample& d : st.drives) bus_row_.push_back(static_cast<double>(d.state));
   drive_history_.add(ns_to_seconds(t), {st.drives[0].state, st.drives[1].state, st.drives[2].state, st.drives[3].state});
-  final_pose_ = {st.x, st.y, st.phi};
+  if (t <= end_) final_pose_ = {st.x, st.y, st.phi};  // the platform at the run's end (as its figures)
   note(bus_csv_->row(bus_row_), *bus_csv_);
   if (o_.observer) o_.observer->on_state(st);
 }
@@ -846,8 +865,10 @@ void PlatformRun::record_bus(SimTime t, const physics::Pose& p, const Eigen::Vec
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const bool lockstep = clock_server_ != nullptr;
   const std::array<double, 3> odo = lockstep ? report_.odometry : std::array<double, 3>{nan, nan, nan};
-  truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
-  if (lockstep) odom_stats_.add(ref.x - odo[0], ref.y - odo[1], ref.phi - odo[2]);
+  // The tracking figures cover the run to `duration`; rows after it are a master's shutdown.
+  const bool in_run = t <= end_;
+  if (in_run) truth_stats_.add(ref.x - p.x, ref.y - p.y, ref.phi - p.phi);
+  if (lockstep && in_run) odom_stats_.add(ref.x - odo[0], ref.y - odo[1], ref.phi - odo[2]);
   row_.assign({ns_to_seconds(t), ref.x, ref.y, ref.phi, p.x, p.y, p.phi, odo[0], odo[1], odo[2], v(0), v(1), v(2),
                nan, nan, nan});
   for (int i = 0; i < 4; ++i) {
@@ -858,13 +879,14 @@ void PlatformRun::record_bus(SimTime t, const physics::Pose& p, const Eigen::Vec
     // A drive's velocity error per control sample while it runs, in encoder pulses per
     // sample as the thesis's tables (its demand and actual are counts/s): the figure is the
     // records' (cmd_counts − meas_counts) × period, whatever the drive's own period.
-    if (!net_->samples_axes() && net_->drive_state(i) == DriveStateCode::running)
+    if (in_run && !net_->samples_axes() && net_->drive_state(i) == DriveStateCode::running)
       axis_stats_[static_cast<std::size_t>(i)].add((w.command_counts - w.measured_counts) * s_.controller.period);
   }
 }
 
 // Each fault that began and never ended (duration 0, or an end past the run's) gets its last
-// line in events.log, so that every "(begins)" there has its counterpart.
+// line in events.log, so that every "(begins)" there has its counterpart. A fault active at
+// `duration` stays so through a master's shutdown after it (on_fault), and its line comes last.
 void PlatformRun::log_faults_still_active() {
   if (!events_) return;
   const SimTime t = std::min(sched_.now(), end_);
@@ -874,13 +896,16 @@ void PlatformRun::log_faults_still_active() {
     // Named as run.json names it (kind and target), so it pairs with its "(begins)" line.
     // A fault given by --set has no line of the file (0): say where it came from instead.
     const std::string where = f.line > 0 ? fmt::format("scenario line {}", f.line) : std::string("given by --set");
-    note(log_event(t, "fault", fmt::format("{} {} ({}), from {} s (still active at the end of the run)",
+    note(log_event(sched_.now(), "fault", fmt::format("{} {} ({}), from {} s (still active at the end of the run)",
                                            to_string(f.kind), fault_target(f), where, f.at)),
          *events_);
   }
 }
 
 void PlatformRun::on_fault(const FaultSpec& f, bool begin, SimTime t) {
+  // Past `duration` (a master's shutdown) the world stays as the run left it: no fault begins
+  // or ends there.
+  if (t > end_) return;
   if (f.kind != FaultSpec::Kind::wheel_slip) return net_->apply_fault(f, begin, t);
   const double scale = begin ? f.friction_scale : 1.0;
   sim_.set_wheel_friction_scale(f.wheel, scale);
@@ -921,6 +946,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"clock", clock_server_ ? "sim" : vtime_server_ ? "virtual" : "wall"},
                    {"command", master_command_},
                    {"exit", master_ ? master_->describe_exit() : "not started"},
+                   {"exit_code", master_ ? master_->exit_code() : -1},  // 128 + N: killed by signal N
                    {"lost", master_lost_ns_ >= 0},
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
                    {"lost_reason", master_lost_why_},

@@ -609,6 +609,9 @@ TEST_F(CliVtime, AMasterOfYourOwnInRealtimeIsServedUntilItHasShutDown) {
   EXPECT_LT(m["master"]["shutdown_s"].get<double>(), 3.0) << m["master"].dump(2);
   EXPECT_EQ(m["drives"]["running_at_end"], 0) << m["drives"].dump();
   EXPECT_TRUE(contains(read_bytes(dir_ / "rt" / "events.log"), "slave 1 AL INIT, drive switch on disabled"));
+  // Seen gone at a master tick (a control sample here): the records end one period later (two,
+  // before; found in review).
+  EXPECT_NEAR(m["sim_time_s"].get<double>(), m["master"]["exited_at_s"].get<double>() + 0.005, 1e-9);
 }
 
 TEST_F(CliVtime, AMasterThatExitsEarlyEndsTheRunWithExit3) {
@@ -662,6 +665,76 @@ TEST_F(CliVtime, AMasterThatIgnoresSigtermIsKilledAndSaidSo) {
   EXPECT_EQ(m["master"]["exited_at_s"].get<double>(), -1.0);
   EXPECT_NEAR(m["sim_time_s"].get<double>(), 1.0, 1e-6) << m.dump(2);
   EXPECT_EQ(m["master"]["exit"], "killed by signal 9");
+}
+
+// Served for its whole grace, it ends by itself in the moment before SIGKILL (on the unserved
+// bus a real master fails there): still a master that did not end in its grace (it passed,
+// exit 0; found in review).
+TEST_F(CliVtime, AMasterThatOutlivesItsGraceFailsTheRunHoweverItEndsAfter) {
+  const Finished f = run_master("late", probe("ignore-term-exit-late"),
+                                {"--set", "duration=0.5", "--set", "master.stop_grace=0.5"});
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "did not end within 0.5 s of SIGTERM: it ended after (exit 1)")) << f.out;
+  EXPECT_TRUE(contains(f.out, "it had not ended when the run did (exit 1)")) << f.out;
+  EXPECT_EQ(metrics("late")["master"]["exit_code"], 1);
+}
+
+// A master that exits non-zero during its served shutdown failed it: the run says so (exit 3;
+// it passed as a normal end, found in review). master.exit_code lets expectations judge it too.
+TEST_F(CliVtime, AMasterWhoseShutdownFailsFailsTheRun) {
+  const Finished f = run_master("failterm", probe("fail-on-term"), {"--set", "duration=0.5"});
+  EXPECT_EQ(f.code, 3) << f.out;
+  EXPECT_TRUE(contains(f.out, "ended its shutdown with exit 1 (see master.log)")) << f.out;
+  EXPECT_TRUE(contains(f.out, "served until it ended 0.0")) << f.out;
+  const nlohmann::json m = metrics("failterm")["master"];
+  EXPECT_EQ(m["exit_code"], 1);
+  EXPECT_FALSE(m["lost"].get<bool>());
+  EXPECT_NEAR(m["shutdown_s"].get<double>(), 0.03, 0.011) << m.dump(2);  // its next wake, then 20 ms
+}
+
+// The tracking figures cover the run to `duration`, not the master's shutdown after it: a path
+// ending in the shutdown is not done (path_done_s was set there, after the run's end), and the
+// platform's figures and final pose are those of the run's last sample within `duration`.
+// Faults stay as the run left them: none ends during the shutdown, and the "still active" lines
+// come last, in time order (found in review).
+TEST_F(CliVtime, TheFiguresAndFaultsEndAtTheDurationNotWithTheMastersShutdown) {
+  const std::string cmd = omni_master() + " --bus ethercat --clock wall --iface {iface} --config {out}/master.yaml";
+  const Finished f = run_master("cut", cmd,
+                                {"--set", "duration=3.9", "--set", "expect={}", "--set",
+                                 "faults=[{wheel_slip: {wheel: 2, at: 2.0, duration: 2.5, friction_scale: 0.5}}]"});
+  ASSERT_EQ(f.code, 0) << f.out;
+  const nlohmann::json m = metrics("cut");
+  ASSERT_GT(m["sim_time_s"].get<double>(), 3.9);  // records past the end: its shutdown
+  EXPECT_EQ(m["platform"]["path_done_s"].get<double>(), -1.0) << m["platform"].dump(2);
+  // The rows up to 3.9 s are the figures' samples; the final pose is the 3.9 s row's.
+  std::istringstream csv(read_bytes(dir_ / "cut" / "trajectory.csv"));
+  std::string line, at_end;
+  int within = 0;
+  std::getline(csv, line);
+  while (std::getline(csv, line))
+    if (std::stod(line.substr(0, line.find(','))) <= 3.9 + 1e-9) {
+      ++within;
+      at_end = line;
+    }
+  EXPECT_EQ(m["platform"]["samples"].get<int>(), within);
+  std::istringstream row(at_end);
+  std::vector<double> v;
+  for (std::string x; std::getline(row, x, ',');) v.push_back(x.empty() ? 0.0 : std::stod(x));
+  ASSERT_GT(v.size(), 6u);
+  EXPECT_NEAR(m["platform"]["final_x_m"].get<double>(), v[4], 1e-9);  // the CSV has 10 digits
+  // The slip fault would end at 4.5 s, after the run: it does not, and its line is the last.
+  const std::string events = read_bytes(dir_ / "cut" / "events.log");
+  EXPECT_FALSE(contains(events, "friction x1 (ends)")) << events;
+  const std::size_t still = events.find("still active at the end of the run");
+  ASSERT_NE(still, std::string::npos) << events;
+  EXPECT_GT(still, events.rfind("ended: exit 0")) << events;
+  double last = 0;
+  std::istringstream ev(events);
+  for (std::string l; std::getline(ev, l);) {
+    const double t = std::stod(l);
+    EXPECT_GE(t, last) << l;
+    last = t;
+  }
 }
 
 TEST_F(CliVtime, AStaticMasterIsRefusedOrRunsInRealtimeWhenAsked) {

@@ -3,7 +3,8 @@
  * returned ("NAME VALUE" lines, times in ns on the monotonic clock) so the test can compare them
  * with what the kernel would give on the simulated clock; the regression modes each repeat a
  * defect found in review; the other modes are the bad masters (exits early, crashes, never
- * waits, ignores SIGTERM, forks). Built dynamic and static. */
+ * waits, ignores SIGTERM, outlives its grace then fails, fails its shutdown, forks). Built
+ * dynamic and static. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -26,6 +27,12 @@
 #include <netinet/in.h>
 #include <time.h>
 #include <unistd.h>
+
+static volatile sig_atomic_t term_flag;
+static void on_term_flag(int sig) {
+  (void)sig;
+  term_flag = 1;
+}
 
 static long long mono(void) {
   struct timespec t;
@@ -600,6 +607,18 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "ignore-term")) {
     signal(SIGTERM, SIG_IGN);
     for (;;) usleep(10000);
+  }
+  if (!strcmp(mode, "ignore-term-exit-late")) {  /* outlives its grace, then fails by itself */
+    signal(SIGTERM, SIG_IGN);
+    const long long t0 = mono();
+    while (mono() - t0 < 1050000000LL) usleep(10000);  /* 1.05 s on its clock */
+    return 1;
+  }
+  if (!strcmp(mode, "fail-on-term")) {  /* its shutdown fails: exit 1 at the next wake */
+    signal(SIGTERM, on_term_flag);
+    while (!term_flag) usleep(10000);
+    usleep(20000);
+    return 1;
   }
   if (!strcmp(mode, "fork")) {
     usleep(100000);
