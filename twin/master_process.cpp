@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <stdexcept>
 #include <thread>
 
@@ -57,9 +58,15 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
   std::vector<char*> envp;
   for (std::string& e : env_s) envp.push_back(e.data());
   envp.push_back(nullptr);
+  // A process group of its own (its pid): see the header.
+  posix_spawnattr_t attr;
+  posix_spawnattr_init(&attr);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
+  posix_spawnattr_setpgroup(&attr, 0);
   const int rc = program.find('/') == std::string::npos
-                     ? posix_spawnp(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data())
-                     : posix_spawn(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data());
+                     ? posix_spawnp(&pid_, program.c_str(), &fa, &attr, argv.data(), envp.data())
+                     : posix_spawn(&pid_, program.c_str(), &fa, &attr, argv.data(), envp.data());
+  posix_spawnattr_destroy(&attr);
   posix_spawn_file_actions_destroy(&fa);
   if (rc != 0) {
     pid_ = -1;
@@ -68,7 +75,7 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
 }
 
 MasterProcess::~MasterProcess() {
-  if (pid_ > 0 && exit_code_ < 0) stop(std::chrono::milliseconds(2000));
+  if (pid_ > 0 && (exit_code_ < 0 || group_alive())) stop(std::chrono::milliseconds(2000));
 }
 
 void MasterProcess::reap(int status) {
@@ -83,6 +90,28 @@ bool MasterProcess::running() {
   return exit_code_ < 0;
 }
 
+// A process of the group that is not a zombie: an orphan of it that has ended stays a zombie
+// until init reaps it, which in a container can take seconds.
+bool MasterProcess::group_alive() const {
+  if (pid_ <= 0 || (::kill(-pid_, 0) != 0 && errno != EPERM)) return false;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator("/proc", ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream f(e.path() / "stat");
+    std::string stat;
+    if (!std::getline(f, stat)) continue;
+    const auto close = stat.rfind(')');
+    if (close == std::string::npos || close + 2 >= stat.size()) continue;
+    std::istringstream rest(stat.substr(close + 2));
+    char state = 0;
+    long ppid = 0, pgrp = 0;
+    rest >> state >> ppid >> pgrp;
+    if (pgrp == pid_ && state != 'Z') return true;
+  }
+  return false;
+}
+
 bool MasterProcess::wait(std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (running()) {
@@ -93,16 +122,22 @@ bool MasterProcess::wait(std::chrono::milliseconds timeout) {
 }
 
 void MasterProcess::terminate() {
-  if (!running()) return;
-  kill(pid_, SIGTERM);
-  kill(pid_, SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
+  if (!running() && !group_alive()) return;
+  kill(-pid_, SIGTERM);
+  kill(-pid_, SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
 }
 
 void MasterProcess::stop(std::chrono::milliseconds grace) {
-  if (!running()) return;
+  if (!running() && !group_alive()) return;
   terminate();
-  if (wait(grace)) return;
-  kill(pid_, SIGKILL);
+  // The program, then the rest of its group, within the grace.
+  const auto deadline = std::chrono::steady_clock::now() + grace;
+  const bool program_ended = wait(grace);
+  while (group_alive() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  if (program_ended && !group_alive()) return;
+  kill(-pid_, SIGKILL);
+  if (program_ended) return;
   int status = 0;
   while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {
   }

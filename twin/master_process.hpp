@@ -6,6 +6,12 @@
 // (its end, an error, Ctrl-C) ends the master too: End on the sim-clock channel, then
 // SIGTERM, then SIGKILL after a grace period. The two programs share no memory and no code
 // at run time; they meet only on the CAN transport and the sim-clock channel.
+//
+// The master leads a process group of its own, and the signals go to the group: a master
+// started through a wrapper (a shell script that does not exec) is reached itself, not only
+// its shell, and it has ended only when the whole group has (the shell dying of the SIGTERM
+// while the master ran on passed as a clean end; found in review). A Ctrl-C at the terminal
+// reaches the twin alone, which then ends the master as at the run's end.
 #pragma once
 
 #include <sys/types.h>
@@ -35,10 +41,14 @@ class MasterProcess {
   bool running();
   // Waits up to `timeout` for it to exit on its own; true when it did.
   bool wait(std::chrono::milliseconds timeout);
-  // SIGTERM, up to `grace` to exit, then SIGKILL. Returns once it is reaped.
+  // SIGTERM to its group, up to `grace` for the group to end, then SIGKILL to the group.
+  // Returns once the program is reaped.
   void stop(std::chrono::milliseconds grace);
-  // SIGTERM (and SIGCONT) and return at once: the caller serves it while it shuts down.
+  // SIGTERM (and SIGCONT) to its process group and return at once: the caller serves it while
+  // it shuts down.
   void terminate();
+  // Whether any process of its group is left (the program itself, or what it started).
+  bool group_alive() const;
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"

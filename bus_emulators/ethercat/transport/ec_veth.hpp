@@ -5,9 +5,11 @@
 // Names are unique per process and instance ("ot" + pid + counter + "a"/"b", at most 15
 // characters), so tests running in parallel (ctest -j: one process each) never share or delete
 // each other's interfaces; a leftover pair with the same names (a crashed earlier process with
-// the same pid) is deleted first. The first end carries the alias "omnitwin-pid-PID"; a pair
-// whose process is gone (SIGKILL, a crash: no destructor ran) is deleted by the next VethPair
-// made on the machine (sweep_stale()), so killed runs do not pile up interfaces. Both ends are brought up with IPv6 disabled on them (no router
+// the same pid) is deleted first. The first end carries the alias "omnitwin-pid-NS-PID" (NS:
+// the PID namespace's inode); a pair whose process is gone (SIGKILL, a crash: no destructor
+// ran) is deleted by the next VethPair made in the same PID namespace (sweep_stale()), so killed
+// runs do not pile up interfaces. A pair of another PID namespace (a container sharing the
+// host's network) is never judged: its pid means nothing here. Both ends are brought up with IPv6 disabled on them (no router
 // solicitations or DAD frames on the wire). The destructor deletes the pair (deleting one end
 // deletes both), also when the test fails, since a failed assertion returns from the test body
 // and unwinds the fixture.
@@ -18,6 +20,7 @@
 #pragma once
 
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -55,7 +58,7 @@ class VethPair {
     run(ip() + " link del " + a_);  // a leftover of a crashed process with the same pid
     if (const auto err = run(ip() + " link add " + a_ + " type veth peer name " + b_))
       throw std::runtime_error("cannot create veth pair " + a_ + "/" + b_ + ": " + *err);
-    run(ip() + " link set dev " + a_ + " alias " + kAliasPrefix + std::to_string(::getpid()));  // best effort
+    run(ip() + " link set dev " + a_ + " alias " + alias_prefix() + std::to_string(::getpid()));  // best effort
     for (const std::string& n : {a_, b_}) {
       std::ofstream(std::string("/proc/sys/net/ipv6/conf/") + n + "/disable_ipv6") << "1\n";  // best effort
       if (const auto err = run(ip() + " link set " + n + " up")) {
@@ -83,16 +86,18 @@ class VethPair {
     return ::access(("/sys/class/net/" + ifname).c_str(), F_OK) == 0;
   }
 
-  // Deletes every interface whose alias says a VethPair of a process that no longer exists
-  // made it; returns how many. Best effort (another process may delete it first).
+  // Deletes every interface whose alias says a VethPair of a process of this PID namespace that
+  // no longer exists made it; returns how many. Best effort (another process may delete it
+  // first).
   static int sweep_stale() {
     int deleted = 0;
+    const std::string prefix = alias_prefix();
     std::error_code ec;
     for (const auto& entry : std::filesystem::directory_iterator("/sys/class/net", ec)) {
       std::ifstream f(entry.path() / "ifalias");
       std::string alias;
-      if (!f || !std::getline(f, alias) || alias.rfind(kAliasPrefix, 0) != 0) continue;
-      const std::string digits = alias.substr(std::char_traits<char>::length(kAliasPrefix));
+      if (!f || !std::getline(f, alias) || alias.rfind(prefix, 0) != 0) continue;
+      const std::string digits = alias.substr(prefix.size());
       if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) continue;
       const long pid = std::stol(digits);
       if (pid <= 0 || ::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
@@ -137,7 +142,12 @@ class VethPair {
     return std::nullopt;
   }
 
-  static constexpr const char* kAliasPrefix = "omnitwin-pid-";
+  // "omnitwin-pid-NS-": NS the inode of this process's PID namespace ("0" if unreadable).
+  static std::string alias_prefix() {
+    struct stat st {};
+    const unsigned long long ns = ::stat("/proc/self/ns/pid", &st) == 0 ? static_cast<unsigned long long>(st.st_ino) : 0;
+    return "omnitwin-pid-" + std::to_string(ns) + "-";
+  }
   std::string a_;
   std::string b_;
 };
