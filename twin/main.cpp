@@ -701,7 +701,7 @@ int main(int argc, char** argv) {
   const CLI::Validator not_negative(
       [](std::string& v) { return v.starts_with('-') ? std::string("must not be negative") : std::string(); }, "");
   echo->add_option("--count", eo.count, "exit after N samples (0: never)")->check(not_negative);
-  echo->add_option("--timeout", eo.timeout_s, "exit 1 after S seconds without a sample (0: never)")
+  echo->add_option("--timeout", eo.timeout_s, "end after S seconds without a sample (0: never): exit 1 if none came or --count was not reached, else 0")
       ->check(not_negative)
       ->check(finite_number);
   echo->add_flag("--json", eo.json, "JSON lines instead of text");

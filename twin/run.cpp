@@ -1101,16 +1101,14 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
     ex.failures.push_back(fmt::format("MuJoCo reported {} warnings: the physics is not trustworthy", sim_.warning_count()));
   }
   const std::string end_kind = !error_.empty() ? "error" : (interrupted ? "interrupt" : "end");
-  if (o_.observer) {
-    for (const std::string& f : ex.failures)
-      o_.observer->on_event(RunEvent{sched_.now(), RunEventKind::expectation, "expectations", "failed: " + f});
-    o_.observer->on_event(RunEvent{sched_.now(), RunEventKind::expectation, "expectations",
-                                   ex.passed ? "passed" : "failed"});
-  }
-  log_event(sched_.now(), end_kind,
-            error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
-                                         ex.failures.size())
-                           : error_);
+  // events.log's last line now; the live observers (DDS, the web view) get the verdict only
+  // once the records are closed and metrics.json written, which can still fail the run (a full
+  // disk: DDS said "passed" for a run that ended with exit 3; found in review).
+  note(events_->log(ns_to_seconds(sched_.now()), end_kind,
+                    error_.empty() ? fmt::format("expectations {} ({} failures)", ex.passed ? "passed" : "failed",
+                                                 ex.failures.size())
+                                   : error_),
+       *events_);
   // A record is renamed only if everything reached it; otherwise the reason joins the metrics.
   const auto close_record = [this](auto* w) {
     try {
@@ -1148,7 +1146,22 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   r.partial_records = inv.partial;
   const bool records_whole = r.error.empty() && r.missing_records.empty() && r.partial_records.empty();
   if (!records_whole) r.passed = false;  // e.g. metrics.json itself could not be written
-  if (o_.observer) o_.observer->on_end(r.metrics);
+  if (o_.observer) {
+    std::vector<std::string> failures = ex.failures;
+    for (const std::string& f : r.missing_records) failures.push_back(f + " was not written");
+    for (const std::string& f : r.partial_records) failures.push_back(f + " is incomplete");
+    if (!r.error.empty() && ex.passed) failures.push_back("records not written whole: " + r.error);
+    for (const std::string& f : failures)
+      o_.observer->on_event(RunEvent{sched_.now(), RunEventKind::expectation, "expectations", "failed: " + f});
+    o_.observer->on_event(
+        RunEvent{sched_.now(), RunEventKind::expectation, "expectations", r.passed ? "passed" : "failed"});
+    const std::string kind = !r.error.empty() ? "error" : end_kind;
+    o_.observer->on_event(RunEvent{sched_.now(), run_event_kind(kind), kind,
+                                   !r.error.empty() ? r.error
+                                                    : fmt::format("expectations {} ({} failures)",
+                                                                  r.passed ? "passed" : "failed", failures.size())});
+    o_.observer->on_end(r.metrics);
+  }
   r.exit_code = cut_short || !records_whole ? 3 : (r.passed ? 0 : 1);
   return r;
 }

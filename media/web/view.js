@@ -87,7 +87,8 @@ function applyInfo(info) {
 }
 
 function setRunStatus(key) {
-  const text = key === 'passed' ? 'ended: passed' : key === 'failed' ? 'ended: failed' : key;
+  const text = key === 'passed' ? 'ended: passed' : key === 'failed' ? 'ended: failed'
+    : key === 'interrupted' ? 'ended: interrupted' : key;
   const el = $('#run-status');
   setText(el, text);
   el.dataset.status = key;
@@ -95,6 +96,9 @@ function setRunStatus(key) {
 }
 
 function endStatus(end) {
+  // An interrupted run does not pass, whatever its bounds said (a signal during its video or
+  // report left the verdict "passed" in metrics.json, and the page showed it).
+  if (end && end.metrics && end.metrics.interrupted === true) return 'interrupted';
   if (end && end.passed === true) return 'passed';
   if (end && end.passed === false) return 'failed';
   return 'ended';
@@ -377,7 +381,9 @@ function showVerdict(end) {
     dl.append(dt, dd);
   };
   const st = endStatus(end);
-  add('expectations', st === 'passed' ? 'passed' : st === 'failed' ? 'failed' : 'unknown', st === 'passed' ? 'good' : st === 'failed' ? 'bad' : '');
+  if (st === 'interrupted') add('run', 'interrupted', 'bad');
+  const ex = end && end.passed === true ? 'passed' : end && end.passed === false ? 'failed' : 'unknown';
+  add('expectations', ex, ex === 'passed' ? 'good' : ex === 'failed' ? 'bad' : '');
   if (end && end.exit_code != null) add('exit code', String(end.exit_code), end.exit_code === 0 ? 'good' : 'bad');
   const m = (end && end.metrics) || {};
   const rows = [

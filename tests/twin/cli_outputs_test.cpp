@@ -17,6 +17,7 @@
 #include <map>
 #include <sstream>
 
+#include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/twin/cli_support.hpp"
 
 namespace omnitwin::twin {
@@ -119,6 +120,36 @@ TEST_F(CliOutputs, EchoInAnotherProcessReceivesTheRunsStates) {
   ASSERT_FALSE(events.empty());
   EXPECT_EQ(events.front(), "start");
   EXPECT_EQ(events.back(), "end");
+}
+
+// A run whose records meet a full disk ends with exit 3; on DDS its verdict must say so. The
+// verdict and the end event went out before the records were closed and metrics.json written,
+// and a reader got "expectations passed" for that run (found in review).
+TEST_F(CliOutputs, TheVerdictOnDdsIsTheRunsFinalOneAfterItsRecords) {
+  omnitwin::testing::SmallTmpfs disk("16k");
+  if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
+  const std::string domain = std::to_string(own_domain(3));
+  Child echo(omnitwin_binary(), {"echo", "--json", "--domain", domain, "--interface", "lo", "--timeout", "4"}, work(),
+             io(), "echo-");
+  const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", (disk / "run").string(),
+                          "--no-progress", "--no-video", "--no-report", "--dds", "--set", "outputs.dds.domain=" + domain,
+                          "--set", "outputs.dds.interface=lo", "--set", "outputs.dds.wait_for_readers=1", "--set",
+                          "duration=0.3"});
+  ASSERT_EQ(f.code, 3) << f.out << f.err;
+  echo.wait(20s);
+  std::vector<nlohmann::json> events;
+  for (const std::string& line : lines_of(echo.out())) {
+    const nlohmann::json j = nlohmann::json::parse(line);
+    if (j["topic"] == "run_events") events.push_back(j);
+  }
+  ASSERT_FALSE(events.empty()) << echo.out();
+  bool said_failed = false;
+  for (const nlohmann::json& e : events) {
+    EXPECT_FALSE(e["kind"] == "expectation" && e["text"] == "passed") << e.dump();
+    said_failed = said_failed || (e["kind"] == "expectation" && e["text"] == "failed");
+  }
+  EXPECT_TRUE(said_failed) << echo.out();
+  EXPECT_NE(events.back()["text"].get<std::string>(), "expectations passed (0 failures)") << echo.out();
 }
 
 // A negative --count wrapped to 2^64 - 1 and a negative --timeout meant "never" (found in

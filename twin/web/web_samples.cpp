@@ -136,6 +136,12 @@ json end_json(const json& metrics, std::optional<int> exit_code) {
   return {{"passed", passed}, {"exit_code", exit_code ? json(*exit_code) : json(nullptr)}, {"metrics", metrics}};
 }
 
+std::optional<int> recorded_exit_code(const json& metrics) {
+  if (!metrics.is_object() || !metrics.contains("expectations")) return std::nullopt;
+  if (metrics.value("interrupted", false) || metrics.contains("error")) return 3;
+  return metrics["expectations"].value("passed", false) ? 0 : 1;
+}
+
 json recorded_run_json(const std::string& run_dir, double rate_hz) {
   const fs::path dir(run_dir);
   const json run = read_json_file(dir / "run.json");
@@ -164,10 +170,11 @@ json recorded_run_json(const std::string& run_dir, double rate_hz) {
     samples.push_back(recorded_sample(tr, r, bus, b, bus_kind != "direct", r));
   }
   json metrics = fs::exists(dir / "metrics.json") ? read_json_file(dir / "metrics.json") : json::object();
+  const std::optional<int> exit_code = recorded_exit_code(metrics);
   return {{"info", std::move(info)},
           {"samples", std::move(samples)},
           {"events", read_events(dir / "events.log")},
-          {"end", end_json(metrics, std::nullopt)}};
+          {"end", end_json(metrics, exit_code)}};
 }
 
 }  // namespace omnitwin::twin

@@ -27,6 +27,10 @@ nlohmann::json info_json(const RunInfo& info, bool started);
 // The `end` message: {"passed", "exit_code" (null when not known), "metrics"} from
 // metrics.json's content.
 nlohmann::json end_json(const nlohmann::json& metrics, std::optional<int> exit_code);
+// The exit code `omnitwin run` gave a recorded run, from its metrics.json: 3 when it was
+// interrupted (in the run or in its outputs) or failed, else 0 passed / 1 failed; none without
+// a verdict. (The view showed "passed" for a run interrupted during its outputs; found in review.)
+std::optional<int> recorded_exit_code(const nlohmann::json& metrics);
 
 // A recorded run directory as the view's /api/run: {"info", "samples" (taken every 1/rate_hz
 // of simulated time, as a live view would have had them), "events", "end"}. Reads run.json,

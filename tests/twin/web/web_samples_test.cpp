@@ -65,6 +65,18 @@ TEST(WebSamples, EventsAndTheEndMessage) {
   EXPECT_TRUE(end_json(json::object(), std::nullopt)["passed"].is_null());
 }
 
+// A recorded run's exit code from its metrics.json: an interruption during its outputs left
+// expectations.passed true, and the view said "passed" (found in review).
+TEST(WebSamples, ARecordedRunsExitCodeFollowsItsMetrics) {
+  EXPECT_EQ(recorded_exit_code({{"expectations", {{"passed", true}}}}), 0);
+  EXPECT_EQ(recorded_exit_code({{"expectations", {{"passed", false}}}}), 1);
+  EXPECT_EQ(recorded_exit_code({{"expectations", {{"passed", true}}}, {"interrupted", true},
+                                {"interrupted_phase", "outputs"}}),
+            3);
+  EXPECT_EQ(recorded_exit_code({{"expectations", {{"passed", true}}}, {"error", "disk full"}}), 3);
+  EXPECT_FALSE(recorded_exit_code(json::object()).has_value());
+}
+
 // A run directory of 1 s at a 10 ms control period (101 rows), the platform moving 0.1 m/s.
 void write_run(const std::filesystem::path& d, bool with_video) {
   std::ofstream(d / "run.json") << R"({"scenario": "s", "bus": "can", "clock": "lockstep", "control_period_s": 0.01,
@@ -113,6 +125,7 @@ TEST(WebSamples, RecordedRunDecimatedPairedAndNamed) {
   EXPECT_EQ(run["events"][1]["kind"], "fault");
   EXPECT_EQ(run["events"][1]["text"], "node 4 power loss");
   EXPECT_EQ(run["end"]["passed"], true);
+  EXPECT_EQ(run["end"]["exit_code"], 0);  // as `omnitwin run` ended it
 }
 
 TEST(WebSamples, RecordedRunWithoutVideoAndWithAMissingRecord) {
