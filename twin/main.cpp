@@ -312,7 +312,6 @@ int cmd_run(const RunArgs& a) {
     o.out_dir = a.out.empty() ? (fs::path("out") / s.name).string() : a.out;
     o.progress = !a.no_progress && stderr_is_terminal();
     o.interrupt = &g_interrupt;
-    o.signals = &g_signals;
     o.external_master = a.external_master;
     // The twin runs until stopped unless a length was asked for (--duration, --set duration=).
     const bool duration_set = std::any_of(a.sets.begin(), a.sets.end(), [](const std::string& v) {

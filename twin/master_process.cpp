@@ -58,15 +58,9 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
   std::vector<char*> envp;
   for (std::string& e : env_s) envp.push_back(e.data());
   envp.push_back(nullptr);
-  // A process group of its own (its pid): see the header.
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
-  posix_spawnattr_setpgroup(&attr, 0);
   const int rc = program.find('/') == std::string::npos
-                     ? posix_spawnp(&pid_, program.c_str(), &fa, &attr, argv.data(), envp.data())
-                     : posix_spawn(&pid_, program.c_str(), &fa, &attr, argv.data(), envp.data());
-  posix_spawnattr_destroy(&attr);
+                     ? posix_spawnp(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data())
+                     : posix_spawn(&pid_, program.c_str(), &fa, nullptr, argv.data(), envp.data());
   posix_spawn_file_actions_destroy(&fa);
   if (rc != 0) {
     pid_ = -1;
@@ -75,7 +69,7 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
 }
 
 MasterProcess::~MasterProcess() {
-  if (pid_ > 0 && (exit_code_ < 0 || group_alive())) stop(std::chrono::milliseconds(2000));
+  if (pid_ > 0 && (exit_code_ < 0 || descendants_alive())) stop(std::chrono::milliseconds(2000));
 }
 
 void MasterProcess::reap(int status) {
@@ -90,10 +84,15 @@ bool MasterProcess::running() {
   return exit_code_ < 0;
 }
 
-// A process of the group that is not a zombie: an orphan of it that has ended stays a zombie
-// until init reaps it, which in a container can take seconds.
-bool MasterProcess::group_alive() const {
-  if (pid_ <= 0 || (::kill(-pid_, 0) != 0 && errno != EPERM)) return false;
+namespace {
+
+// Each process's parent and state from /proc/PID/stat.
+struct ProcEntry {
+  pid_t pid = 0, ppid = 0;
+  char state = 0;
+};
+std::vector<ProcEntry> processes() {
+  std::vector<ProcEntry> all;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator("/proc", ec)) {
     const std::string name = e.path().filename().string();
@@ -104,12 +103,42 @@ bool MasterProcess::group_alive() const {
     const auto close = stat.rfind(')');
     if (close == std::string::npos || close + 2 >= stat.size()) continue;
     std::istringstream rest(stat.substr(close + 2));
-    char state = 0;
-    long ppid = 0, pgrp = 0;
-    rest >> state >> ppid >> pgrp;
-    if (pgrp == pid_ && state != 'Z') return true;
+    ProcEntry p;
+    p.pid = static_cast<pid_t>(std::stol(name));
+    rest >> p.state >> p.ppid;
+    all.push_back(p);
   }
-  return false;
+  return all;
+}
+
+// The descendants of `root` (not root itself), zombies left out.
+std::vector<pid_t> descendants_of(pid_t root, const std::vector<ProcEntry>& all) {
+  std::vector<pid_t> found{root};
+  for (std::size_t k = 0; k < found.size(); ++k)
+    for (const ProcEntry& p : all)
+      if (p.ppid == found[k] && p.state != 'Z') found.push_back(p.pid);
+  found.erase(found.begin());
+  return found;
+}
+
+}  // namespace
+
+bool MasterProcess::descendants_alive() const {
+  if (pid_ <= 0) return false;
+  const std::vector<ProcEntry> all = processes();
+  // A process it started that was orphaned (its parent ended first) is still one of them.
+  for (const ProcEntry& p : all)
+    if (p.state != 'Z' && std::find(signalled_.begin(), signalled_.end(), p.pid) != signalled_.end()) return true;
+  // Once it is reaped its pid may be another process's: only those signalled count then.
+  return exit_code_ < 0 && !descendants_of(pid_, all).empty();
+}
+
+void MasterProcess::signal_all(int sig) {
+  const std::vector<pid_t> now = exit_code_ < 0 ? descendants_of(pid_, processes()) : std::vector<pid_t>{};
+  for (const pid_t p : now)
+    if (std::find(signalled_.begin(), signalled_.end(), p) == signalled_.end()) signalled_.push_back(p);
+  if (exit_code_ < 0) ::kill(pid_, sig);
+  for (const pid_t p : signalled_) ::kill(p, sig);
 }
 
 bool MasterProcess::wait(std::chrono::milliseconds timeout) {
@@ -122,21 +151,21 @@ bool MasterProcess::wait(std::chrono::milliseconds timeout) {
 }
 
 void MasterProcess::terminate() {
-  if (!running() && !group_alive()) return;
-  kill(-pid_, SIGTERM);
-  kill(-pid_, SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
+  if (!running() && !descendants_alive()) return;
+  signal_all(SIGTERM);
+  signal_all(SIGCONT);  // a stopped master (SIGSTOP, a debugger) acts on SIGTERM only when continued
 }
 
 void MasterProcess::stop(std::chrono::milliseconds grace) {
-  if (!running() && !group_alive()) return;
+  if (!running() && !descendants_alive()) return;
   terminate();
-  // The program, then the rest of its group, within the grace.
+  // The program, then what it started, within the grace.
   const auto deadline = std::chrono::steady_clock::now() + grace;
   const bool program_ended = wait(grace);
-  while (group_alive() && std::chrono::steady_clock::now() < deadline)
+  while (descendants_alive() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  if (program_ended && !group_alive()) return;
-  kill(-pid_, SIGKILL);
+  if (program_ended && !descendants_alive()) return;
+  signal_all(SIGKILL);
   if (program_ended) return;
   int status = 0;
   while (waitpid(pid_, &status, 0) < 0 && errno == EINTR) {

@@ -7,11 +7,12 @@
 // SIGTERM, then SIGKILL after a grace period. The two programs share no memory and no code
 // at run time; they meet only on the CAN transport and the sim-clock channel.
 //
-// The master leads a process group of its own, and the signals go to the group: a master
-// started through a wrapper (a shell script that does not exec) is reached itself, not only
-// its shell, and it has ended only when the whole group has (the shell dying of the SIGTERM
-// while the master ran on passed as a clean end; found in review). A Ctrl-C at the terminal
-// reaches the twin alone, which then ends the master as at the run's end.
+// The signals go to the program and to every process it started (its descendants, found in
+// /proc when the SIGTERM goes out): a master started through a wrapper (a shell script that
+// does not exec) is reached itself, not only its shell, and it has ended only when all of
+// them have (the shell dying of the SIGTERM while the master ran on passed as a clean end;
+// found in review). The master stays in the twin's process group, so that a Ctrl-C at the
+// terminal or a SIGKILL to the group (a CI cancel) reaches it too.
 #pragma once
 
 #include <sys/types.h>
@@ -41,14 +42,15 @@ class MasterProcess {
   bool running();
   // Waits up to `timeout` for it to exit on its own; true when it did.
   bool wait(std::chrono::milliseconds timeout);
-  // SIGTERM to its group, up to `grace` for the group to end, then SIGKILL to the group.
-  // Returns once the program is reaped.
+  // SIGTERM to it and its descendants, up to `grace` for all of them to end, then SIGKILL to
+  // those left. Returns once the program is reaped.
   void stop(std::chrono::milliseconds grace);
-  // SIGTERM (and SIGCONT) to its process group and return at once: the caller serves it while
-  // it shuts down.
+  // SIGTERM (and SIGCONT) to the program and its descendants, and return at once: the caller
+  // serves it while it shuts down.
   void terminate();
-  // Whether any process of its group is left (the program itself, or what it started).
-  bool group_alive() const;
+  // Whether a process it started is left (one signalled by terminate(), or a descendant of the
+  // program now); zombies do not count. Scans /proc: not real-time safe.
+  bool descendants_alive() const;
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"
@@ -56,8 +58,10 @@ class MasterProcess {
 
  private:
   void reap(int status);
+  void signal_all(int sig);
   pid_t pid_ = -1;
   int exit_code_ = -1;
+  std::vector<pid_t> signalled_;  // its descendants when terminate() ran
 };
 
 // The last `max_lines` non-empty lines of a master's log file joined by " | " (a master that

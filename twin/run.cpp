@@ -479,36 +479,29 @@ double PlatformRun::master_grace_s() const { return s_.master.stop_grace; }
 // records end at the first control sample a control period or more after its exit. A lockstep
 // master of ours ends on End (stop_master); a lost, failed or interrupted run is not extended.
 void PlatformRun::serve_master_shutdown() {
-  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0) return;
+  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0 || signalled()) return;
   if (!master_->running()) return;
-  // An interrupted run (Ctrl-C, SIGTERM to the twin) serves it too, from the instant reached:
-  // the master is in a process group of its own, so the twin's SIGTERM is the only signal it
-  // gets. A further signal to the twin ends the serving at once.
-  const bool interrupted = signalled();
-  if (interrupted && !o_.signals) return;
-  const int signals = o_.signals ? o_.signals->load() : 0;
-  const auto more_signals = [this, signals] { return o_.signals ? o_.signals->load() > signals : signalled(); };
-  if (interrupted) end_ = std::min(end_, sched_.now());  // the figures and faults stop here
   sigterm_ns_ = sched_.now();
   master_->terminate();
   note(log_event(sigterm_ns_, "master",
-                 fmt::format("{}: SIGTERM; the bus is served until the master exits (at most {} s{})",
-                             interrupted ? "interrupted" : "end of the run", master_grace_s(),
-                             interrupted ? "; another signal ends it at once" : "")),
+                 fmt::format("end of the run: SIGTERM; the bus is served until the master exits (at most {} s)",
+                             master_grace_s())),
        *events_);
   if (vtime_pacer_) vtime_pacer_->expect_end();
-  sched_.run_until(sigterm_ns_ + seconds_to_ns(master_grace_s()) + 1, *pacer_, more_signals);
+  // A signal to the twin (Ctrl-C, SIGTERM) ends the serving at once, as it ends a run.
+  const auto signal_came = [this] { return signalled(); };
+  sched_.run_until(sigterm_ns_ + seconds_to_ns(master_grace_s()) + 1, *pacer_, signal_came);
   if (vtime_pacer_ && vtime_pacer_->ended()) master_exit_ns_ = vtime_pacer_->master_now();
   if (master_exit_ns_ < 0) return;
   // Its exit in time order in events.log (it has left the clock; reaped within a moment).
   master_->wait(std::chrono::milliseconds(std::llround(master_grace_s() * 1e3)));
   log_event(master_exit_ns_, "master", fmt::format("ended: {}", master_->describe_exit()));
-  if (more_signals() || !error_.empty()) return;
+  if (signal_came() || !error_.empty()) return;
   // To the first control sample a control period or more after it: the last record shows the
   // state the master left behind, and its last AL or NMT change is logged (the slaves' next
   // cycles log it).
   const SimTime tm = seconds_to_ns(s_.controller.period);
-  sched_.run_until((master_exit_ns_ + 2 * tm - 1) / tm * tm + 1, *pacer_, more_signals);
+  sched_.run_until((master_exit_ns_ + 2 * tm - 1) / tm * tm + 1, *pacer_, signal_came);
 }
 
 void PlatformRun::stop_master() {
@@ -522,7 +515,7 @@ void PlatformRun::stop_master() {
   const bool own = !s_.master.command.empty();
   const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 || sigterm_ns_ >= 0 ? 300
                                                                                    : std::llround(master_grace_s() * 1e3));
-  const bool was_running = master_->running() || master_->group_alive();
+  const bool was_running = master_->running() || master_->descendants_alive();
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   cpu_share_.release();  // the thread's own affinity again, the master gone
   if (master_exit_ns_ < 0) log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
@@ -605,17 +598,17 @@ simclock::Horizon PlatformRun::answer_sent(void* self, const simclock::Sent& sen
 // its first frame it has handshake_timeout to start. Real-time safe but for waitpid().
 void PlatformRun::supervise_master(SimTime t) {
   if (!master_ || master_lost_ns_ >= 0) return;
-  // Shutting down after the end's SIGTERM: it may fall silent, and it has ended when its whole
-  // process group has (a wrapper's shell may go first); the records end a period later.
+  // Shutting down after the end's SIGTERM: it may fall silent, and it has ended when it and all
+  // it started have (a wrapper's shell may go first); the records end a period later.
   if (sigterm_ns_ >= 0) {
-    if (master_exit_ns_ < 0 && !master_->running() && !master_->group_alive()) {
+    if (master_exit_ns_ < 0 && !master_->running() && !master_->descendants_alive()) {
       master_exit_ns_ = t;
       sched_.stop();
     }
     return;
   }
   if (!master_->running()) {
-    if (signalled()) return;  // a signal to the whole group ended it (see on_master_bus())
+    if (signalled()) return;  // the same Ctrl-C ended it (see on_master_bus())
     return master_lost(t, fmt::format("the master process ended ({})", master_->describe_exit()));
   }
   const std::uint64_t rx = net_->frames_from_transport();

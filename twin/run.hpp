@@ -69,9 +69,6 @@ struct RunOptions {
   std::string out_dir;                        // run directory (created if missing)
   bool progress = false;                      // terminal progress bar on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set by SIGINT/SIGTERM: end cleanly
-  // How many SIGINT/SIGTERM arrived (may be null): an interrupted run still serves its
-  // master's shutdown (on its own clock) until a further signal comes.
-  const std::atomic<int>* signals = nullptr;
   // A bus: the master is someone else's program on the transport (`omnitwin twin`); the twin
   // starts none and runs in realtime.
   bool external_master = false;

@@ -299,12 +299,14 @@ TEST_F(VtimeProbe, AForkedChildIsRefusedAndEnds) {
   EXPECT_EQ(twin.serve(), VtimeServer::Status::second_process);
   EXPECT_GT(twin.server.other_pid(), 0);
   EXPECT_NE(twin.server.other_pid(), p.pid());
-  p.stop(std::chrono::milliseconds(500));
-  // The child says so once the Refuse reaches it: give it up to 2 s.
+  // The child says so once the Refuse reaches it: give it up to 2 s (before the stop, which
+  // ends what the master started, the child with it).
   const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
   while (!contains(read_bytes(log), "the twin refused process") && std::chrono::steady_clock::now() < until)
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   EXPECT_TRUE(contains(read_bytes(log), "the twin refused process")) << read_bytes(log);
+  p.stop(std::chrono::milliseconds(500));
+  EXPECT_FALSE(p.descendants_alive());  // nothing the master started is left behind
 }
 
 // ---- regressions: each found in review, each failed on the library before its fix ----------
