@@ -86,11 +86,9 @@ bool MasterProcess::running() {
 
 namespace {
 
-// Each process's parent and state from /proc/PID/stat.
-struct ProcEntry {
-  pid_t pid = 0, ppid = 0;
-  char state = 0;
-};
+using ProcEntry = MasterProcess::ProcessEntry;
+
+// Every process as /proc/PID/stat has it.
 std::vector<ProcEntry> processes() {
   std::vector<ProcEntry> all;
   std::error_code ec;
@@ -106,20 +104,25 @@ std::vector<ProcEntry> processes() {
     ProcEntry p;
     p.pid = static_cast<pid_t>(std::stol(name));
     rest >> p.state >> p.ppid;
+    std::string skip;
+    for (int field = 5; field < 22 && rest; ++field) rest >> skip;  // pgrp … itrealvalue
+    rest >> p.start;
     all.push_back(p);
   }
   return all;
 }
 
 // The descendants of `root` (not root itself), zombies left out.
-std::vector<pid_t> descendants_of(pid_t root, const std::vector<ProcEntry>& all) {
-  std::vector<pid_t> found{root};
+std::vector<ProcEntry> descendants_of(pid_t root, const std::vector<ProcEntry>& all) {
+  std::vector<ProcEntry> found{ProcEntry{root, 0, 0, 0}};
   for (std::size_t k = 0; k < found.size(); ++k)
     for (const ProcEntry& p : all)
-      if (p.ppid == found[k] && p.state != 'Z') found.push_back(p.pid);
+      if (p.ppid == found[k].pid && p.state != 'Z') found.push_back(p);
   found.erase(found.begin());
   return found;
 }
+
+bool same_process(const ProcEntry& a, const ProcEntry& b) { return a.pid == b.pid && a.start == b.start; }
 
 }  // namespace
 
@@ -128,17 +131,22 @@ bool MasterProcess::descendants_alive() const {
   const std::vector<ProcEntry> all = processes();
   // A process it started that was orphaned (its parent ended first) is still one of them.
   for (const ProcEntry& p : all)
-    if (p.state != 'Z' && std::find(signalled_.begin(), signalled_.end(), p.pid) != signalled_.end()) return true;
+    for (const ProcEntry& s : signalled_)
+      if (p.state != 'Z' && same_process(p, s)) return true;
   // Once it is reaped its pid may be another process's: only those signalled count then.
   return exit_code_ < 0 && !descendants_of(pid_, all).empty();
 }
 
 void MasterProcess::signal_all(int sig) {
-  const std::vector<pid_t> now = exit_code_ < 0 ? descendants_of(pid_, processes()) : std::vector<pid_t>{};
-  for (const pid_t p : now)
-    if (std::find(signalled_.begin(), signalled_.end(), p) == signalled_.end()) signalled_.push_back(p);
+  const std::vector<ProcEntry> all = processes();
+  if (exit_code_ < 0)
+    for (const ProcEntry& p : descendants_of(pid_, all))
+      if (std::none_of(signalled_.begin(), signalled_.end(), [&](const ProcEntry& s) { return same_process(p, s); }))
+        signalled_.push_back(p);
   if (exit_code_ < 0) ::kill(pid_, sig);
-  for (const pid_t p : signalled_) ::kill(p, sig);
+  // Only a process that is still the one it started (its pid may have been taken again).
+  for (const ProcEntry& s : signalled_)
+    if (std::any_of(all.begin(), all.end(), [&](const ProcEntry& p) { return same_process(p, s); })) ::kill(s.pid, sig);
 }
 
 bool MasterProcess::wait(std::chrono::milliseconds timeout) {

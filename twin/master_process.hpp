@@ -51,6 +51,13 @@ class MasterProcess {
   // Whether a process it started is left (one signalled by terminate(), or a descendant of the
   // program now); zombies do not count. Scans /proc: not real-time safe.
   bool descendants_alive() const;
+  // A process as /proc/PID/stat has it: its parent, state and start time (clock ticks after
+  // boot: with the pid, who it is, so that a pid taken again is never mistaken for it).
+  struct ProcessEntry {
+    pid_t pid = 0, ppid = 0;
+    char state = 0;
+    unsigned long long start = 0;
+  };
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"
@@ -61,7 +68,7 @@ class MasterProcess {
   void signal_all(int sig);
   pid_t pid_ = -1;
   int exit_code_ = -1;
-  std::vector<pid_t> signalled_;  // its descendants when terminate() ran
+  std::vector<ProcessEntry> signalled_;  // its descendants when a signal went out
 };
 
 // The last `max_lines` non-empty lines of a master's log file joined by " | " (a master that
