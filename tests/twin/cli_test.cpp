@@ -654,11 +654,16 @@ TEST_F(CliInterrupt, ACtrlCToALockstepRunsProcessGroupIsAnInterruptNotALostMaste
   EXPECT_FALSE(contains(c.err(), "master lost")) << c.err();
 }
 
+// ---------------------------------------------------------------------------------------
+// The end of a run on the wall clock
+
+class CliRunEnd : public CliTest {};
+
 // Our CANopen master on the wall clock, at the run's end: the twin sends it SIGTERM and serves
 // its end sequence (quick stop, disable, NMT stop) until it exits, within master.stop_grace
 // (ours too: it was a fixed 3 s). The twin stopped serving first: no drive answered, and NMT
 // stop went out after 100 ms with a warning per drive (found in review).
-TEST_F(CliInterrupt, TheEndOfARealtimeRunServesOurMastersEndSequence) {
+TEST_F(CliRunEnd, TheEndOfARealtimeRunServesOurMastersEndSequence) {
   const fs::path out = dir_ / "out";
   const Finished f = run({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "canopen", "--clock",
                           "realtime", "--set", "bus.transport=udp:239.74.163.2:47311", "--set", "master.stop_grace=2",
