@@ -167,12 +167,13 @@ VtimeServer::Status VtimeServer::next_wait(Record& w, std::chrono::milliseconds 
   }
 }
 
-bool VtimeServer::wake(std::uint64_t seq, SimTime now, std::uint64_t frames) {
+bool VtimeServer::wake(std::uint64_t seq, SimTime now, std::uint64_t frames, int signal) {
   Record r;
   r.type = Type::wake;
   r.seq = seq;
   r.now = now;
   r.frames = frames;
+  r.code = static_cast<std::uint32_t>(signal);
   return send(r);
 }
 
@@ -235,11 +236,16 @@ bool VtimePacer::take_wait() {
   return true;
 }
 
-bool VtimePacer::wake_at(SimTime t) {
+void VtimePacer::expect_end(int signal) {
+  expect_end_ = true;
+  if (have_wait_ && !failed_ && !ended_) wake_at(std::max(sched_.now(), now_), signal);
+}
+
+bool VtimePacer::wake_at(SimTime t, int signal) {
   now_ = t;
   have_wait_ = false;
   ++wakes_;
-  if (!server_.wake(wait_.seq, now_, net_.frames_to_transport())) {
+  if (!server_.wake(wait_.seq, now_, net_.frames_to_transport(), signal)) {
     if (expect_end_) {
       ended_ = true;
       return false;

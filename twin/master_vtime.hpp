@@ -44,7 +44,9 @@ class VtimeServer {
   // place (same pid, new connection); any other process that connects is refused and ends the
   // wait with second_process (its pid in other_pid()).
   Status next_wait(vtime::Record& w, std::chrono::milliseconds timeout, SimTime now);
-  bool wake(std::uint64_t seq, SimTime now, std::uint64_t frames);
+  // `signal`: the signal the twin has just sent the master (0: none); its library then waits
+  // for the program's handler to run and ends the waits it interrupted (EINTR).
+  bool wake(std::uint64_t seq, SimTime now, std::uint64_t frames, int signal = 0);
   void end(SimTime now);  // best effort
 
   pid_t other_pid() const { return other_pid_; }
@@ -81,17 +83,19 @@ class VtimePacer : public Pacer {
 
   SimTime master_now() const { return now_; }
   bool failed() const { return failed_; }
-  // From the run's end on, the master was asked to stop (SIGTERM): its leaving the clock is
-  // its end, not a lost master. ended(): it has left; the scheduler was stopped then, and
-  // from then on time runs free (nothing is left to pace).
-  void expect_end() { expect_end_ = true; }
+  // From the run's end on, the master was asked to stop (`signal`, SIGTERM, just sent): its
+  // leaving the clock is its end, not a lost master. A wait it holds ends now, as the signal
+  // ends a wait on Linux: its handler's flag (or the signal's default action) acts at this
+  // instant, not at the wait's deadline. ended(): it has left; the scheduler was stopped then,
+  // and from then on time runs free (nothing is left to pace).
+  void expect_end(int signal);
   bool ended() const { return ended_; }
   std::uint64_t wakes() const { return wakes_; }
   std::uint64_t frame_wakes() const { return frame_wakes_; }
 
  private:
   bool take_wait();
-  bool wake_at(SimTime t);
+  bool wake_at(SimTime t, int signal = 0);
   void failure(std::string why, bool gone = false);
 
   VtimeServer& server_;

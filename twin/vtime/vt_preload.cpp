@@ -9,7 +9,8 @@
 //    descriptors the process itself made ready, or if there are none sends Wait{earliest deadline,
 //    wake on a frame?, bus frames sent} and the twin runs to the earlier of that deadline and
 //    the next frame reaching the master's socket, and answers Wake{now}. The leader then wakes
-//    every waiter whose deadline passed, whose descriptors became ready, or that was signalled.
+//    every waiter whose deadline passed, whose descriptors became ready, or whose thread ran a
+//    signal handler of the program's (EINTR, as the kernel; sigaction/signal are wrapped to see it).
 //  - Busy polling: a thread that makes kSpinLimit calls in a row that neither wait nor find
 //    anything (clock reads, empty non-blocking receives, zero-timeout polls, sleeps already
 //    over) waits one quantum (1 µs) of simulated time, woken early by a frame. So a spinning
@@ -141,7 +142,20 @@ struct Waiter {
   bool joining = false;
   bool satisfied = false;
   bool timed_out = false;
+  // A signal handler that ran on the waiting thread ends the wait (EINTR), as on Linux: the
+  // thread's count of such handlers, and its value when the wait began. Null: a wait that no
+  // signal ends (a condition variable, a join, the busy-poll quantum).
+  const std::uint32_t* sigs = nullptr;
+  std::uint32_t sigs_at = 0;
+  bool interrupted = false;
   Waiter* next = nullptr;
+};
+
+// A signal handler the program installed: the library installs its own in its place, which
+// runs it and counts it (on_signal), so that a virtual wait the signal interrupts ends.
+struct Handler {
+  void* fn = nullptr;  // the program's handler; null: the disposition is not a handler of its own
+  int flags = 0;       // its sa_flags (SA_SIGINFO, SA_RESTART, SA_RESETHAND …)
 };
 
 // A timerfd, simulated: an eventfd the leader writes expirations into. The eventfd carries the
@@ -182,9 +196,15 @@ struct State {
   int timers_end = 0;           // 1 + the highest descriptor that was a timerfd: the loops' bound
   bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
   int bus_port = -1;            // udp:HOST:PORT : datagrams to PORT carry the bus
+  Handler handlers[NSIG];       // the program's own signal handlers (written by sigaction only)
+  std::uint32_t sigs = 0;       // handlers run so far, all threads (atomic: written in handlers)
 };
 constinit State g;  // constant-initialised: ready before any constructor runs
 constinit thread_local int t_spin = 0;
+// Handlers the program's signals ran on this thread: all of them, and those without SA_RESTART
+// (which also end a blocking receive, as the kernel does).
+constinit thread_local std::uint32_t t_sigs = 0;
+constinit thread_local std::uint32_t t_sigs_norestart = 0;
 // Non-zero while this thread takes, holds or waits under g.mu (leading included): a signal
 // handler that runs meanwhile must not take the (non-recursive) lock. Its clock reads answer
 // without it and its waits go to the kernel.
@@ -383,6 +403,19 @@ void satisfy(Waiter* w) {
   ++g.running;
 }
 
+// The twin sent the process signal `sig` just before this Wake (the SIGTERM of the run's end).
+// A handler of the program's runs on a thread the kernel picks, perhaps still now: wait for it
+// (at most 1 s of wall time; none when the signal has no handler of the program's), so that the
+// waits it interrupts end at this wake, the same in every run.
+void await_handler(int sig, std::uint32_t before) {
+  if (sig >= NSIG || !__atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE)) return;
+  const ns_t until = wall_ns() + kNs;
+  while (__atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE) == before && wall_ns() < until) {
+    const timespec step{0, 20'000};
+    syscall(SYS_nanosleep, &step, nullptr);
+  }
+}
+
 // The leader's turn (lock held, every thread waiting): one Wait/Wake with the twin, then the
 // waiters it ends. Returns false when the twin is gone (time then runs on the wall clock).
 bool lead() {
@@ -413,9 +446,11 @@ bool lead() {
   r.frames = g.sent;
   r.wake_on_frame = frame ? 1 : 0;
   g.leading = true;
+  const std::uint32_t sigs_before = __atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE);
   pthread_mutex_unlock(&g.mu);  // t_held stays set: a signal handler meanwhile stays out of the library
   vt::Record a;
   const bool ok = send_record(r) && recv_record(a);
+  if (ok && a.type == vt::Type::wake && a.code > 0) await_handler(static_cast<int>(a.code), sigs_before);
   pthread_mutex_lock(&g.mu);
   g.leading = false;
   if (!ok || a.type == vt::Type::end || a.type != vt::Type::wake || a.seq != r.seq) {
@@ -438,6 +473,9 @@ bool lead() {
       satisfy(w);
     } else if (w->nfds > 0 && new_frames && has_socket(*w) && fds_ready(*w, kGraceNs)) {
       satisfy(w);  // the kernel was still delivering the frame
+    } else if (w->sigs && __atomic_load_n(w->sigs, __ATOMIC_ACQUIRE) != w->sigs_at) {
+      w->interrupted = true;  // a handler ran on its thread: EINTR, as the kernel ends the call
+      satisfy(w);
     }
   }
   ++g.generation;
@@ -492,29 +530,52 @@ void spun() {
 // A relative timeout as an absolute simulated deadline (negative: never).
 ns_t deadline_after(ns_t rel) { return rel < 0 ? vt::kNever : add_sat(g.now, rel); }
 
-// Waits for descriptors or a deadline; true when descriptors became ready.
-bool wait_fds(pollfd* fds, nfds_t n, ns_t deadline) {
+// How a virtual wait ended. `timeout` also stands for the run's end (the caller asks the kernel).
+enum class Woke { ready, timeout, interrupted };
+
+int eintr() {
+  errno = EINTR;
+  return -1;
+}
+
+// Makes `w` end when a handler counted in `sigs` (this thread's t_sigs or t_sigs_norestart)
+// runs from now on; null: no signal ends it. Lock held.
+void interruptible_by(Waiter& w, const std::uint32_t* sigs) {
+  w.sigs = sigs;
+  if (sigs) w.sigs_at = __atomic_load_n(sigs, __ATOMIC_ACQUIRE);
+}
+
+// Waits for descriptors or a deadline, or until a handler counted in `sigs` runs.
+Woke wait_fds(pollfd* fds, nfds_t n, ns_t deadline, const std::uint32_t* sigs) {
   Lock l;
   Waiter w;
   w.fds = fds;
   w.nfds = n;
   w.deadline = deadline;
+  interruptible_by(w, sigs);
   wait_virtual(w);
-  return w.satisfied && !w.timed_out;
+  if (w.interrupted) return Woke::interrupted;
+  return w.satisfied && !w.timed_out ? Woke::ready : Woke::timeout;
 }
 
-void sleep_until(ns_t deadline) {
+// A sleep, which any handler interrupts; true when one did (the time left is the deadline less
+// the simulated time now).
+bool sleep_until(ns_t deadline) {
   bool over;
+  bool interrupted = false;
   {
     Lock l;
     over = deadline <= g.now;
     if (!over) {
       Waiter w;
       w.deadline = deadline;
+      interruptible_by(w, &t_sigs);
       wait_virtual(w);
+      interrupted = w.interrupted;
     }
   }
   if (over) spun();  // already over (usleep(0) as a yield): a call that found nothing
+  return interrupted;
 }
 
 // ---- clocks -------------------------------------------------------------------------------
@@ -614,13 +675,19 @@ ssize_t receive(int fd, int flags, Attempt attempt, ns_t deadline = kNoDeadline)
     spun();
     return attempt(flags | MSG_DONTWAIT);  // a frame that came meanwhile, or EAGAIN again
   }
+  const ns_t timeo = rcvtimeo(fd);
   if (deadline == kNoDeadline) {
     Lock l;
-    deadline = deadline_after(rcvtimeo(fd));
+    deadline = deadline_after(timeo);
   }
+  // signal(7): a handler with SA_RESTART restarts a blocking receive, unless the socket has a
+  // receive timeout; any other handler ends it with EINTR.
+  const std::uint32_t* sigs = timeo >= 0 ? &t_sigs : &t_sigs_norestart;
   for (;;) {
     pollfd p{fd, POLLIN, 0};
-    if (!wait_fds(&p, 1, deadline)) {
+    const Woke k = wait_fds(&p, 1, deadline, sigs);
+    if (k == Woke::interrupted) return eintr();
+    if (k == Woke::timeout) {
       bool ended;
       {
         Lock l;
@@ -730,7 +797,10 @@ int clock_nanosleep(clockid_t c, int flags, const timespec* req, timespec* rem) 
     Lock l;
     deadline = (flags & TIMER_ABSTIME) ? minus_base(ts_ns(*req), base_of(c)) : add_sat(g.now, ts_ns(*req));
   }
-  sleep_until(deadline);
+  if (sleep_until(deadline)) {
+    if (rem && !(flags & TIMER_ABSTIME)) *rem = ns_ts(deadline > now_any() ? deadline - now_any() : 0);
+    return EINTR;
+  }
   if (rem && !(flags & TIMER_ABSTIME)) *rem = timespec{0, 0};
   return 0;
 }
@@ -754,8 +824,7 @@ int usleep(useconds_t us) {
     Lock l;
     d = add_sat(g.now, static_cast<ns_t>(us) * 1000);
   }
-  sleep_until(d);
-  return 0;
+  return sleep_until(d) ? eintr() : 0;
 }
 
 unsigned int sleep(unsigned int s) {
@@ -766,8 +835,9 @@ unsigned int sleep(unsigned int s) {
     Lock l;
     d = add_sat(g.now, static_cast<ns_t>(s) * kNs);
   }
-  sleep_until(d);
-  return 0;
+  if (!sleep_until(d)) return 0;
+  const ns_t left = d > now_any() ? d - now_any() : 0;  // interrupted: the seconds left, rounded as glibc does
+  return static_cast<unsigned int>(left / kNs + (left % kNs >= kNs / 2 ? 1 : 0));
 }
 
 // ---- descriptor waits ----
@@ -791,7 +861,9 @@ int poll(pollfd* fds, nfds_t n, int timeout_ms) {
   for (;;) {
     // The timeout (or the run's end): the kernel's answer now, so that a descriptor ready at
     // the timeout's instant is reported, not lost.
-    if (!wait_fds(fds, n, deadline)) return real_poll(fds, n, 0);
+    const Woke k = wait_fds(fds, n, deadline, &t_sigs);
+    if (k == Woke::interrupted) return eintr();
+    if (k == Woke::timeout) return real_poll(fds, n, 0);
     const int again = real_poll(fds, n, 0);
     if (again != 0) return again;
   }
@@ -820,7 +892,9 @@ int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
     deadline = deadline_after(tmo ? ts_ns(*tmo) : -1);
   }
   for (;;) {
-    if (!wait_fds(fds, n, deadline)) return real_ppoll(fds, n, &zero, mask);  // as in poll
+    const Woke k = wait_fds(fds, n, deadline, &t_sigs);
+    if (k == Woke::interrupted) return eintr();
+    if (k == Woke::timeout) return real_ppoll(fds, n, &zero, mask);  // as in poll
     const int again = real_ppoll(fds, n, &zero, mask);
     if (again != 0) return again;
   }
@@ -871,7 +945,12 @@ int select_common(int nfds, fd_set* r, fd_set* w, fd_set* e, ns_t rel, const sig
     *tv_out = timeval{static_cast<time_t>(v / kNs), static_cast<suseconds_t>((v % kNs) / 1000)};
   };
   for (;;) {
-    if (!wait_fds(fds, n, deadline)) {
+    const Woke k = wait_fds(fds, n, deadline, &t_sigs);
+    if (k == Woke::interrupted) {
+      left();
+      return eintr();
+    }
+    if (k == Woke::timeout) {
       const int last = attempt();  // as in poll: ready at the timeout's instant counts
       left();
       return last;
@@ -931,7 +1010,9 @@ int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms, const sigset
   }
   pollfd p{epfd, POLLIN, 0};  // an epoll descriptor is readable while an event is ready
   for (;;) {
-    if (!wait_fds(&p, 1, deadline)) return real_epoll_pwait(epfd, ev, max, 0, mask);  // as in poll
+    const Woke k = wait_fds(&p, 1, deadline, &t_sigs);
+    if (k == Woke::interrupted) return eintr();
+    if (k == Woke::timeout) return real_epoll_pwait(epfd, ev, max, 0, mask);  // as in poll
     const int again = real_epoll_pwait(epfd, ev, max, 0, mask);
     if (again != 0) return again;
   }
@@ -1007,7 +1088,9 @@ ssize_t read(int fd, void* buf, size_t len) {
         return -1;
       }
       pollfd p{fd, POLLIN, 0};
-      if (!wait_fds(&p, 1, vt::kNever)) {
+      const Woke k = wait_fds(&p, 1, vt::kNever, &t_sigs_norestart);  // a slow read: SA_RESTART restarts it
+      if (k == Woke::interrupted) return eintr();
+      if (k == Woke::timeout) {
         bool ended;
         {
           Lock l;
@@ -1147,6 +1230,90 @@ int close(int fd) {
     }
   }
   return real_close(fd);
+}
+
+// ---- signals ----
+}  // extern "C"
+
+namespace {
+using info_handler = void (*)(int, siginfo_t*, void*);
+
+// The library's handler in place of each of the program's: runs the program's, then counts it
+// for the thread it ran on (the virtual wait there ends with EINTR at the next wake, lead()).
+// Async-signal-safe: atomics and the program's own handler only.
+void on_signal(int sig, siginfo_t* si, void* uc) {
+  const int saved = errno;
+  Handler h;
+  h.fn = __atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE);
+  h.flags = __atomic_load_n(&g.handlers[sig].flags, __ATOMIC_ACQUIRE);
+  // SA_RESETHAND: the kernel has made the disposition SIG_DFL again on delivery.
+  if (h.flags & SA_RESETHAND) __atomic_store_n(&g.handlers[sig].fn, nullptr, __ATOMIC_RELEASE);
+  errno = saved;
+  if (h.fn && (h.flags & SA_SIGINFO)) reinterpret_cast<info_handler>(h.fn)(sig, si, uc);
+  else if (h.fn) reinterpret_cast<void (*)(int)>(h.fn)(sig);
+  ++t_sigs;
+  if (!(h.flags & SA_RESTART)) ++t_sigs_norestart;
+  __atomic_add_fetch(&g.sigs, 1, __ATOMIC_RELEASE);
+}
+
+bool is_handler(const struct sigaction& a) {
+  return (a.sa_flags & SA_SIGINFO) ? a.sa_sigaction != nullptr
+                                   : (a.sa_handler != SIG_DFL && a.sa_handler != SIG_IGN);
+}
+}  // namespace
+
+extern "C" {
+
+// The program's handlers are recorded and the library's installed in their place (same mask
+// and flags, SA_SIGINFO added); the old action reads as the program set it.
+int sigaction(int sig, const struct sigaction* act, struct sigaction* old) {
+  REAL(sigaction);
+  if (!g.active || sig <= 0 || sig >= NSIG || sig == SIGKILL || sig == SIGSTOP) return real_sigaction(sig, act, old);
+  const Handler was{__atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE), g.handlers[sig].flags};
+  struct sigaction mine;
+  const bool wrap = act && is_handler(*act);
+  if (wrap) {
+    mine = *act;
+    mine.sa_sigaction = on_signal;
+    mine.sa_flags = act->sa_flags | SA_SIGINFO;
+    // Recorded first: a signal between here and the kernel's change runs the new handler.
+    __atomic_store_n(&g.handlers[sig].flags, act->sa_flags, __ATOMIC_RELEASE);
+    __atomic_store_n(&g.handlers[sig].fn,
+                     (act->sa_flags & SA_SIGINFO) ? reinterpret_cast<void*>(act->sa_sigaction)
+                                                  : reinterpret_cast<void*>(act->sa_handler),
+                     __ATOMIC_RELEASE);
+  }
+  const int r = real_sigaction(sig, wrap ? &mine : act, old);
+  if (r != 0) {
+    if (wrap) {
+      __atomic_store_n(&g.handlers[sig].flags, was.flags, __ATOMIC_RELEASE);
+      __atomic_store_n(&g.handlers[sig].fn, was.fn, __ATOMIC_RELEASE);
+    }
+    return r;
+  }
+  if (act && !wrap) __atomic_store_n(&g.handlers[sig].fn, nullptr, __ATOMIC_RELEASE);
+  // The old action as the program knows it: its own handler, not the library's.
+  if (old && was.fn && (old->sa_flags & SA_SIGINFO) && old->sa_sigaction == on_signal) {
+    old->sa_flags = was.flags;
+    if (was.flags & SA_SIGINFO) old->sa_sigaction = reinterpret_cast<info_handler>(was.fn);
+    else old->sa_handler = reinterpret_cast<void (*)(int)>(was.fn);
+  }
+  return 0;
+}
+
+// signal() as glibc makes it (BSD semantics: SA_RESTART, the signal blocked in its handler),
+// through sigaction above.
+sighandler_t signal(int sig, sighandler_t h) {
+  REAL(signal);
+  if (!g.active) return real_signal(sig, h);
+  struct sigaction a, o;
+  memset(&a, 0, sizeof a);
+  a.sa_handler = h;
+  sigemptyset(&a.sa_mask);
+  if (sig > 0 && sig < NSIG) sigaddset(&a.sa_mask, sig);
+  a.sa_flags = SA_RESTART;
+  if (sigaction(sig, &a, &o) != 0) return SIG_ERR;
+  return o.sa_handler;
 }
 
 // ---- threads ----

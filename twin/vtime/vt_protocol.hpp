@@ -42,7 +42,7 @@ struct Record {
   Type type = Type::hello;
   std::uint32_t pid = 0;        // hello
   std::uint32_t ppid = 0;       // hello
-  std::uint32_t code = 0;       // refuse: 1 = a second process
+  std::uint32_t code = 0;       // refuse: 1 = a second process; wake: the signal the twin has just sent the process (0: none)
   std::uint64_t seq = 0;        // wait/wake: the wait's number (a wake answers the same)
   std::int64_t now = 0;         // welcome/wait/wake/end: simulated time [ns]
   std::int64_t deadline = kNever;  // wait: wake no later than this [ns]

@@ -568,6 +568,70 @@ static int many_fds(void) {
   return 0;
 }
 
+/* Waits for ever (or 100 s) in one call until the SIGTERM of the run's end. Its handler sets a
+ * flag; the call must end with EINTR at the SIGTERM's instant, as on Linux (it waited on, and
+ * the run served it for its whole grace). `how`: the call, and for "recv-restart" a handler with
+ * SA_RESTART (the receive goes on: Linux restarts it). A second thread waits on a pipe nobody
+ * writes: a signal ends only the wait of the thread that ran its handler. "default": no handler,
+ * nanosleep (the signal kills it in its wait). */
+static void* wait_on_pipe(void* arg) {
+  struct pollfd p = {(int)(intptr_t)arg, POLLIN, 0};
+  poll(&p, 1, -1);
+  return NULL;
+}
+static int term_in_wait(const char* how) {
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_term_flag;
+  sa.sa_flags = !strcmp(how, "recv-restart") ? SA_RESTART : 0;
+  if (!strcmp(how, "signal")) signal(SIGTERM, on_term_flag); /* BSD semantics; nanosleep still ends */
+  else if (strcmp(how, "default") != 0) sigaction(SIGTERM, &sa, NULL); /* default: the signal kills it */
+  struct sigaction back;
+  sigaction(SIGTERM, NULL, &back);
+  out("handler_reads_back", back.sa_handler == on_term_flag);
+  int pfd[2];
+  if (pipe(pfd) != 0) return 1;
+  pthread_t t;
+  pthread_create(&t, NULL, wait_on_pipe, (void*)(intptr_t)pfd[0]);
+  usleep(1000);
+  const long long t0 = mono();
+  struct timespec rel = {100, 0}, rem = {0, 0};
+  long long rc = 0;
+  if (!strcmp(how, "nanosleep") || !strcmp(how, "signal") || !strcmp(how, "default")) {
+    rc = nanosleep(&rel, &rem);
+  } else if (!strcmp(how, "sleep")) {
+    rc = sleep(100);
+  } else if (!strcmp(how, "poll")) {
+    struct pollfd p = {pfd[0], POLLIN, 0};
+    rc = poll(&p, 1, -1);
+  } else if (!strcmp(how, "select")) {
+    fd_set r;
+    FD_ZERO(&r);
+    FD_SET(pfd[0], &r);
+    rc = select(pfd[0] + 1, &r, NULL, NULL, NULL);
+  } else if (!strcmp(how, "epoll")) {
+    int ep = epoll_create1(0);
+    struct epoll_event ev = {EPOLLIN, {0}};
+    epoll_ctl(ep, EPOLL_CTL_ADD, pfd[0], &ev);
+    rc = epoll_wait(ep, &ev, 1, -1);
+  } else { /* recv, recv-restart: a UDP socket nobody sends to */
+    int s = socket(AF_INET, SOCK_DGRAM, 0);
+    struct sockaddr_in a;
+    memset(&a, 0, sizeof a);
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    bind(s, (struct sockaddr*)&a, sizeof a);
+    char b[16];
+    rc = recv(s, b, sizeof b, 0);
+  }
+  out("wait_rc", rc);
+  out("wait_errno", errno);
+  out("wait_flag", term_flag);
+  out("wait_ns", mono() - t0);
+  out("wait_rem_s", rem.tv_sec);
+  return term_flag ? 0 : 1;
+}
+
 int main(int argc, char** argv) {
   const char* mode = argc > 1 ? argv[1] : "calls";
   if (!strcmp(mode, "calls")) return calls();
@@ -583,6 +647,7 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "gtod-null")) return gtod_null();
   if (!strcmp(mode, "timerfd-flags")) return timerfd_flags();
   if (!strcmp(mode, "many-fds")) return many_fds();
+  if (!strcmp(mode, "term-in-wait")) return term_in_wait(argc > 2 ? argv[2] : "nanosleep");
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
