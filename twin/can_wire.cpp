@@ -36,6 +36,13 @@ can::BusConfig bus_config(const Scenario& s, int nodes) {
 CanWire::CanWire(const Scenario& s, int nodes, bool batch)
     : s_(s), bus_(bus_config(s, nodes)), rng_(s.bus.can.seed), batch_(batch) {
   for (int i = 0; i < nodes; ++i) bus_.attach();
+  // One twin per bus on this host (bus_claim.hpp): a named group and port, or a SocketCAN
+  // interface, that another twin serves is refused before this one joins it.
+  const can::TransportSpec t = can::parse_transport_spec(s.bus.can.transport);
+  if (t.kind == can::TransportSpec::Kind::udp && t.port != 0)
+    claim_ = std::make_unique<BusClaim>(t.ipv6 ? fmt::format("udp:[{}]:{}", t.name, t.port) : fmt::format("udp:{}:{}", t.name, t.port));
+  else if (t.kind == can::TransportSpec::Kind::socketcan)
+    claim_ = std::make_unique<BusClaim>("socketcan:" + t.name);
   transport_ = can::open_transport(s.bus.can.transport);
   pending_.reserve(kPendingCapacity);
 }

@@ -25,6 +25,7 @@
 #include "bus_emulators/can/can_bus.hpp"
 #include "bus_emulators/can/can_pcap.hpp"
 #include "bus_emulators/can/transport.hpp"
+#include "twin/bus_claim.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
@@ -108,6 +109,7 @@ class CanWire {
 
   const Scenario& s_;
   can::CanBus bus_;
+  std::unique_ptr<BusClaim> claim_;  // one twin per bus (before the transport: released after it)
   std::unique_ptr<can::Transport> transport_;
   std::unique_ptr<can::PcapWriter> pcap_;
   std::array<LossState, 6> loss_{};    // by FaultSpec node: 0..3 slaves, 4 master, 5 all

@@ -33,6 +33,7 @@
 #include "bus_emulators/ethercat/device/ec_esi.hpp"
 #include "bus_emulators/ethercat/ec_chain.hpp"
 #include "bus_emulators/ethercat/ec_frame.hpp"
+#include "twin/bus_claim.hpp"
 #include "twin/bus_network.hpp"
 #include "twin/scenario.hpp"
 #include "twin/scheduler.hpp"
@@ -136,6 +137,7 @@ class EthercatNetwork final : public BusNetwork {
   ethercat::DeviceDescription multi_device_;                   // seed 001's multi-axis slave
   std::vector<std::unique_ptr<ethercat::DriveSlave>> extra_;   // bus.ethercat.extra_axes, behind the wheels
   ethercat::EscChain chain_;
+  std::unique_ptr<BusClaim> claim_;  // raw:IFACE named by the scenario: one twin on it (bus_claim.hpp)
   std::shared_ptr<ethercat::VethPair> veth_;
   std::unique_ptr<ethercat::EcTransport> transport_;
   std::unique_ptr<ethercat::PcapWriter> pcap_;

@@ -63,6 +63,9 @@ void M3Network::open_transport(const Scenario& s) {
                                              "udp:127.0.0.1:34997");
   veth_ = line.veth;
   transport_spec_ = line.slaves_spec;
+  // An interface the scenario names is claimed (a pair made for the run is the run's own).
+  if (!veth_ && transport_spec_.starts_with("raw:"))
+    claim_ = std::make_unique<BusClaim>(transport_spec_.substr(0, transport_spec_.find('?')));
   transport_ = m3::open_transport(transport_spec_, m3::Role::slaves);
   transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
   // UDP on port 0: the master is told the port the slaves' socket was given.

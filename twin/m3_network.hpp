@@ -37,6 +37,7 @@
 
 #include "bus_emulators/drive/axis_model.hpp"
 #include "bus_emulators/mechatrolink3/transport/m3_segment.hpp"
+#include "twin/bus_claim.hpp"
 #include "twin/bus_network.hpp"
 
 namespace omnitwin::ethercat {
@@ -104,6 +105,7 @@ class M3Network final : public BusNetwork {
   ClockMode clock_;
   Scheduler& sched_;
   Hooks hooks_;
+  std::unique_ptr<BusClaim> claim_;  // raw:IFACE named by the scenario: one twin on it (bus_claim.hpp)
   std::shared_ptr<ethercat::VethPair> veth_;  // the pair made for the run (bus.transport veth)
   std::unique_ptr<m3::M3Transport> transport_;
   std::unique_ptr<m3::M3Segment> segment_;

@@ -261,6 +261,15 @@ void print_summary(const RunResult& r) {
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              b.value("dropouts", 0), 100.0 * b.value("dropout_rate", 0.0));
   }
+  // Frames from a sender other than the master (another program on a shared bus): said, as
+  // they change what the drives did (only a counter in metrics.json before; found in review).
+  if (m.contains("bus") && m["bus"].value("foreign_frames", std::uint64_t{0}) > 0) {
+    const auto& b = m["bus"];
+    std::cout << fmt::format("  bus: {} frames came from a sender other than the master ({} kept off the wire); "
+                             "another program is on {}\n",
+                             b.value("foreign_frames", std::uint64_t{0}), b.value("refused_frames", std::uint64_t{0}),
+                             b.value("transport", std::string("the bus")));
+  }
   // The end of a master on its own clock: the SIGTERM at `duration`, served until it exited.
   if (m.contains("master") && m["master"].value("sigterm_at_s", -1.0) >= 0) {
     const auto& ms = m["master"];

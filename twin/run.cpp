@@ -23,6 +23,7 @@
 #include "physics/drive_chain.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "physics/platform_sim.hpp"
+#include "twin/bus_claim.hpp"
 #include "twin/can_network.hpp"
 #include "twin/ethercat_network.hpp"
 #include "twin/m3_network.hpp"
@@ -1254,6 +1255,8 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const m3::TransportError& e) {
       throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
+    } catch (const BusInUse& e) {
+      throw RunSetupError(fmt::format("bus.transport: {}", e.what()));
     } catch (const canopen::EdsError& e) {
       throw RunSetupError(fmt::format("bus.eds: {}", e.what()));
     } catch (const std::exception& e) {
@@ -1263,7 +1266,9 @@ RunResult run_scenario(const Scenario& given, const RunOptions& options) {
   }
   // One run per directory: an earlier run's records are cleared, anyone else's are refused.
   if (std::string why = prepare_run_directory(options.out_dir); !why.empty()) throw RunSetupError(why);
-  return run->execute();
+  RunResult result = run->execute();
+  run.reset();  // its bus (and the claim on it) is let go before the next realtime run takes its turn
+  return result;
 }
 
 }  // namespace omnitwin::twin

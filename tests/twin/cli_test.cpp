@@ -319,6 +319,28 @@ TEST_F(CliCheck, RealtimeScenariosRunOneAtATimeWhateverTheJobs) {
   EXPECT_TRUE(contains(f.out, "2 passed, 0 failed")) << f.out;
 }
 
+// One twin per bus on this host: a second run on a bus another twin serves (a realtime CAN run
+// on the same group and port) is refused before it starts (exit 2, nothing written), naming the
+// holder. Two such runs went on side by side, each master hearing the other's drives: 1,779
+// frames from the other run, 91.67 % dropouts, and no word of it (found in review).
+TEST_F(CliTest, ASecondTwinOnABusAnotherTwinServesIsRefused) {
+  const std::string bus = "bus.transport=udp:239.74.163.2:47329";
+  const fs::path first = dir_ / "first";
+  Child c({"run", test_scenario("can_realtime_short.yaml"), "--set", bus, "--no-progress", "--out", first.string()},
+          work(), io());
+  ASSERT_GT(master_pid(first, c), 0) << c.out() << c.err();  // on the bus
+  const Finished f = run({"run", test_scenario("can_realtime_short.yaml"), "--set", bus, "--no-progress", "--out",
+                          (dir_ / "second").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "bus.transport: udp:239.74.163.2:47329 is in use by another twin (pid ")) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "second"));
+  // The first went on undisturbed, and the bus is free once it has ended.
+  EXPECT_EQ(c.wait(60s), 0) << c.out() << c.err();
+  const Finished again = run({"run", test_scenario("can_realtime_short.yaml"), "--set", bus, "--set", "duration=0.5",
+                              "--set", "expect={}", "--no-progress", "--out", (dir_ / "again").string()});
+  EXPECT_EQ(again.code, 0) << again.out << again.err;
+}
+
 // `check --video` says once which GL drew the videos, and check.json keeps it per run (CI
 // logs and artefacts showed no trace of it; found in review).
 TEST_F(CliCheck, VideoSaysWhichGlDrewIt) {
