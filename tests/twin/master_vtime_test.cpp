@@ -574,6 +574,7 @@ TEST_F(CliVtime, AForeignStyleMasterRunsFasterThanRealTimeAndRerunsByteIdentical
   const Finished b = run_master("fb", cmd, {"--set", "duration=2.5"});
   ASSERT_EQ(a.code, 0) << a.out << read_bytes(dir_ / "fa" / "master.log");
   ASSERT_EQ(b.code, 0) << b.out;
+  EXPECT_FALSE(contains(a.out, "drives: not all in operation")) << a.out;
   const std::string log = read_bytes(dir_ / "fa" / "master.log");
   EXPECT_TRUE(contains(log, "all drives Operation Enabled in CSV")) << log;
   // Every frame came back, its own shutdown's too: the twin serves the bus (and the virtual
@@ -702,6 +703,8 @@ TEST_F(CliVtime, TheEndsSigtermEndsTheWaitItFindsTheMasterInAsLinuxDoes) {
     // It never talks EtherCAT: "no master connected" fails the expectations (exit 1), nothing else.
     EXPECT_EQ(f.code, 1) << f.out;
     EXPECT_FALSE(contains(f.out, "did not end")) << f.out;
+    // Its drives never ran, and the summary says so (it did not, for a run that passed so).
+    EXPECT_TRUE(contains(f.out, "drives: not all in operation at any time of the run (0 running at its end")) << f.out;
     const nlohmann::json m = metrics("tw-" + how)["master"];
     EXPECT_NEAR(m["sigterm_at_s"].get<double>(), 1.0, 1e-9) << m.dump(2);
     EXPECT_NEAR(m["exited_at_s"].get<double>(), 1.0, 1e-9) << m.dump(2);
