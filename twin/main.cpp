@@ -61,9 +61,12 @@ std::atomic<bool> g_interrupt{false};
 std::atomic<bool> g_rendering{false};
 std::atomic<bool> g_render_stop{false};
 std::atomic<int> g_signals{0};  // how many arrived (outputs: a signal during video/report)
+// The first came from the terminal (Ctrl-C: the kernel sent it to the whole foreground process
+// group, the master the run started included).
+std::atomic<bool> g_terminal_signal{false};
 
-void on_signal(int) {
-  g_signals.fetch_add(1);
+void on_signal(int, siginfo_t* info, void*) {
+  if (g_signals.fetch_add(1) == 0 && info && info->si_code == SI_KERNEL) g_terminal_signal.store(true);
   if (g_rendering.load()) g_render_stop.store(true);
   g_interrupt.store(true);
 }
@@ -81,7 +84,8 @@ void mujoco_warning(const char* msg) { spdlog::warn("MuJoCo: {}", msg); }
 // blocked across exec, so one that came while the libraries loaded is delivered now.
 void install_signal_handlers() {
   struct sigaction sa {};
-  sa.sa_handler = on_signal;
+  sa.sa_sigaction = on_signal;
+  sa.sa_flags = SA_SIGINFO;
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
@@ -281,7 +285,10 @@ void print_summary(const RunResult& r) {
   if (m.contains("master") && m["master"].value("sigterm_at_s", -1.0) >= 0) {
     const auto& ms = m["master"];
     const double shutdown = ms.value("shutdown_s", -1.0);
-    std::cout << fmt::format("  end: SIGTERM to the master at {:.3f} s; ", ms.value("sigterm_at_s", -1.0))
+    const std::string sig = ms.value("stop_signal", std::string("SIGTERM"));
+    std::cout << (sig == "SIGTERM" ? fmt::format("  end: SIGTERM to the master at {:.3f} s; ", ms.value("sigterm_at_s", -1.0))
+                                   : fmt::format("  end: the master had the {} at {:.3f} s too; ", sig,
+                                                 ms.value("sigterm_at_s", -1.0)))
               << (shutdown >= 0 ? fmt::format("served until it ended {:.3f} s later ({})\n", shutdown, ms.value("exit", "?"))
                                 : fmt::format("it had not ended when the run did ({})\n", ms.value("exit", "?")));
   }
@@ -328,6 +335,8 @@ int cmd_run(const RunArgs& a) {
     o.out_dir = a.out.empty() ? (fs::path("out") / s.name).string() : a.out;
     o.progress = !a.no_progress && stderr_is_terminal();
     o.interrupt = &g_interrupt;
+    o.signals = &g_signals;
+    o.terminal_signal = &g_terminal_signal;
     o.external_master = a.external_master;
     // The twin runs until stopped unless a length was asked for (--duration, --set duration=).
     const bool duration_set = std::any_of(a.sets.begin(), a.sets.end(), [](const std::string& v) {

@@ -290,6 +290,7 @@ class PlatformRun {
   std::string master_lost_why_;
   // the run's end: SIGTERM to a master on its own clock, which is served until it exits
   SimTime sigterm_ns_ = -1;       // when it was sent (−1: not sent; a lockstep master ends on End)
+  std::string stop_signal_;       // what asked it to stop: "SIGTERM" (the twin's) or the terminal's SIGINT
   SimTime master_exit_ns_ = -1;   // when the master was seen to exit after it (−1: not seen)
   std::array<double, 4> bus_setpoint_{};  // what the network last asked of each wheel [rad/s]
   double handshake_timeout_s_ = 10;
@@ -478,19 +479,38 @@ double PlatformRun::master_grace_s() const { return s_.master.stop_grace; }
 // virtual clock) go on until it has exited, for at most its grace: the frames of its own
 // shutdown (drives disabled, slaves to INIT, NMT stop) are answered and recorded, and the
 // records end at the first control sample a control period or more after its exit. A lockstep
-// master of ours ends on End (stop_master); a lost, failed or interrupted run is not extended.
+// master of ours ends on End (stop_master); a lost or failed run is not extended.
+//
+// Interrupted (SIGINT/SIGTERM to the twin) with a master on the wall clock, the same: the
+// master is asked to stop (SIGTERM, unless the signal was the terminal's Ctrl-C, which the
+// master had too: a second signal would cut its shutdown short) and served until it has
+// exited; the run stays interrupted (exit 3) and its figures end at the interrupt. A second
+// signal to the twin ends the serving at once. (Before, the twin stopped answering at the
+// Ctrl-C and the master's shutdown ran on a bus no one served.)
 void PlatformRun::serve_master_shutdown() {
-  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0 || signalled()) return;
+  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0) return;
+  const bool interrupted = signalled();
+  if (interrupted && (vtime_pacer_ || !o_.signals || o_.until_stopped)) return;
   if (!master_->running()) return;
+  // A signal to the twin (Ctrl-C, SIGTERM) beyond those seen now ends the serving at once.
+  const int seen = o_.signals ? o_.signals->load() : 0;
+  const auto signal_came = [this, seen, interrupted] {
+    return o_.signals ? o_.signals->load() > seen : (!interrupted && signalled());
+  };
   sigterm_ns_ = sched_.now();
-  master_->terminate();
+  const bool terminal = interrupted && o_.terminal_signal && o_.terminal_signal->load();
+  stop_signal_ = terminal ? "SIGINT from the terminal" : "SIGTERM";
+  if (interrupted) end_ = std::min(end_, sigterm_ns_);  // the figures and faults end at the interrupt
+  if (!terminal) master_->terminate();
+  const std::string why = interrupted ? "interrupted" : "end of the run";
   note(log_event(sigterm_ns_, "master",
-                 fmt::format("end of the run: SIGTERM; the bus is served until the master exits (at most {} s)",
-                             master_grace_s())),
+                 terminal ? fmt::format("{}: the terminal's signal reached the master too; the bus is served until "
+                                        "it exits (at most {} s; another signal ends that)",
+                                        why, master_grace_s())
+                          : fmt::format("{}: SIGTERM; the bus is served until the master exits (at most {} s{})", why,
+                                        master_grace_s(), interrupted ? "; another signal ends that" : "")),
        *events_);
   if (vtime_pacer_) vtime_pacer_->expect_end(SIGTERM);  // a wait it holds ends now, as on Linux
-  // A signal to the twin (Ctrl-C, SIGTERM) ends the serving at once, as it ends a run.
-  const auto signal_came = [this] { return signalled(); };
   // (Under the virtual clock a master the signal killed in its wait has left already.)
   if (!vtime_pacer_ || !vtime_pacer_->ended())
     sched_.run_until(sigterm_ns_ + seconds_to_ns(master_grace_s()) + 1, *pacer_, signal_came);
@@ -957,6 +977,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
                    {"lost_reason", master_lost_why_},
                    {"sigterm_at_s", sigterm_ns_ < 0 ? -1.0 : ns_to_seconds(sigterm_ns_)},
+                   {"stop_signal", stop_signal_},  // "SIGTERM" (the twin's) or "SIGINT from the terminal"; "" none
                    {"exited_at_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_)},
                    {"shutdown_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_ - sigterm_ns_)}};
     if (vtime_pacer_)
@@ -1079,8 +1100,10 @@ RunResult PlatformRun::finish(double wall_s, const RealtimePacer* realtime) {
   if (cut_short) {
     // Bounds meant for the whole run say nothing about a part of it.
     ex.passed = false;
+    // (An interrupted run whose master's shutdown was served names the interrupt's instant.)
     ex.failures.assign({fmt::format("{} at t = {:.3f} s: expectations not evaluated",
-                                    interrupted ? "interrupted" : "failed", ns_to_seconds(sched_.now()))});
+                                    interrupted ? "interrupted" : "failed",
+                                    ns_to_seconds(interrupted ? std::min(sched_.now(), end_) : sched_.now()))});
   }
   // Any master, the user's own above all (`omnitwin twin` or master.command): one that never
   // sent a frame commanded nothing, whatever the bounds say (a master.command of `sleep 60`

@@ -69,6 +69,12 @@ struct RunOptions {
   std::string out_dir;                        // run directory (created if missing)
   bool progress = false;                      // terminal progress bar on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set by SIGINT/SIGTERM: end cleanly
+  // How many SIGINT/SIGTERM came, and whether the first came from the terminal (the kernel's
+  // Ctrl-C to the whole foreground process group, which holds the master too). With them, a
+  // realtime run interrupted while its master runs serves the master's own shutdown (a second
+  // signal ends that at once); null: the run ends at the signal.
+  const std::atomic<int>* signals = nullptr;
+  const std::atomic<bool>* terminal_signal = nullptr;
   // A bus: the master is someone else's program on the transport (`omnitwin twin`); the twin
   // starts none and runs in realtime.
   bool external_master = false;

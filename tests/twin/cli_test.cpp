@@ -13,6 +13,7 @@
 // path, rather than skipping it.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <fmt/format.h>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -702,6 +703,107 @@ TEST_F(CliRunEnd, TheEndOfARealtimeRunServesOurMastersEndSequence) {
     EXPECT_TRUE(contains(events, "node " + std::to_string(node) + " NMT stopped")) << events;
   const std::string log = read_bytes(out / "master.log");
   EXPECT_FALSE(contains(log, "no statusword")) << log;
+}
+
+// An interrupted realtime run serves its master's shutdown too, and the run stays interrupted
+// (exit 3) with its figures ending at the interrupt. The twin stopped answering at the signal:
+// the master's end sequence (quick stop, disable, NMT stop) ran on a bus no one served, and at
+// a Ctrl-C the twin's SIGTERM came as a second signal, which cuts that sequence short (noted in
+// the last closing note). `terminal`: the signal is a Ctrl-C typed at the run's terminal (a
+// pty), which the kernel sends to the twin and the master alike; else SIGINT to the twin alone.
+void expect_interrupt_serves_the_shutdown(const fs::path& out, const std::string& port, bool terminal,
+                                          const fs::path& work, const fs::path& io) {
+  const std::vector<std::string> args{"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "canopen",
+                                      "--clock", "realtime", "--set", "bus.transport=udp:239.74.163.2:" + port,
+                                      "--no-video", "--no-report", "--no-progress", "--out", out.string()};
+  int code = -1;
+  if (terminal) {
+    // The run on a terminal of its own: a session whose controlling tty is a pty; a Ctrl-C
+    // written to the pty's master side is the kernel's SIGINT to the foreground group.
+    const int pty = ::posix_openpt(O_RDWR | O_NOCTTY);
+    ASSERT_GE(pty, 0);
+    ASSERT_EQ(::grantpt(pty), 0);
+    ASSERT_EQ(::unlockpt(pty), 0);
+    const std::string slave = ::ptsname(pty);
+    const std::string stdout_file = (io / "pty.out").string();
+    std::vector<std::string> argv_s{omnitwin_binary()};
+    argv_s.insert(argv_s.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (auto& a : argv_s) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    fs::create_directories(work);
+    const pid_t pid = ::fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      ::setsid();
+      const int tty = ::open(slave.c_str(), O_RDWR);  // a session leader's first tty: its controlling one
+      const int o = ::open(stdout_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (tty < 0 || o < 0 || ::chdir(work.c_str()) != 0) ::_exit(120);
+      ::dup2(tty, 0);
+      ::dup2(o, 1);
+      ::dup2(o, 2);
+      sigset_t none;
+      sigemptyset(&none);
+      ::sigprocmask(SIG_SETMASK, &none, nullptr);
+      ::signal(SIGINT, SIG_DFL);
+      ::execv(argv[0], argv.data());
+      ::_exit(121);
+    }
+    // Until the master is on the bus and the run has gone a while.
+    bool started = false;
+    for (int i = 0; i < 3000 && !started; ++i) {
+      started = contains(read_bytes(out / ".events.log.part"), "drive operation enabled");
+      std::this_thread::sleep_for(10ms);
+    }
+    std::this_thread::sleep_for(1000ms);
+    EXPECT_TRUE(started) << read_bytes(io / "pty.out");
+    const char ctrl_c = 0x03;
+    EXPECT_EQ(::write(pty, &ctrl_c, 1), 1);
+    int status = 0;
+    for (int i = 0; i < 2000 && ::waitpid(pid, &status, WNOHANG) == 0; ++i) std::this_thread::sleep_for(10ms);
+    if (::waitpid(pid, &status, WNOHANG) == 0) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+    }
+    ::close(pty);
+    code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  } else {
+    Child c(args, work, io);
+    ASSERT_GT(master_pid(out, c), 0) << c.out() << c.err();
+    ASSERT_TRUE(wait_for_text(out / ".events.log.part", "drive operation enabled", c)) << c.err();
+    std::this_thread::sleep_for(1000ms);
+    c.signal(SIGINT);
+    code = c.wait(20s);
+  }
+  EXPECT_EQ(code, 3);
+  const std::string events = read_bytes(out / "events.log");
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_TRUE(m.at("interrupted").get<bool>());
+  EXPECT_EQ(ms.value("stop_signal", std::string()), terminal ? "SIGINT from the terminal" : "SIGTERM") << ms.dump(2);
+  EXPECT_TRUE(contains(events, terminal ? "interrupted: the terminal's signal reached the master too"
+                                        : "interrupted: SIGTERM; the bus is served"))
+      << events;
+  // Its whole end sequence was answered, and it ended by itself well inside its grace.
+  for (int node = 1; node <= 4; ++node)
+    EXPECT_TRUE(contains(events, "node " + std::to_string(node) + " NMT stopped")) << events;
+  EXPECT_EQ(ms.at("exit"), "exit 0") << ms.dump(2);
+  EXPECT_GT(ms.at("exited_at_s").get<double>(), ms.at("sigterm_at_s").get<double>());
+  EXPECT_LT(ms.at("shutdown_s").get<double>(), 1.0) << ms.dump(2);
+  EXPECT_FALSE(contains(read_bytes(out / "master.log"), "no statusword")) << read_bytes(out / "master.log");
+  // The figures end at the interrupt; the records go on to the master's exit and a period more.
+  EXPECT_GT(m.at("sim_time_s").get<double>(), ms.at("exited_at_s").get<double>());
+  const std::string failure = m.at("expectations").at("failures").at(0).get<std::string>();
+  EXPECT_TRUE(contains(failure, fmt::format("interrupted at t = {:.3f} s", ms.at("sigterm_at_s").get<double>())))
+      << failure;
+}
+
+TEST_F(CliRunEnd, AnInterruptToTheTwinAloneServesTheShutdownItsSigtermStarts) {
+  expect_interrupt_serves_the_shutdown(dir_ / "out", "47335", false, work(), io());
+}
+
+TEST_F(CliRunEnd, ACtrlCAtTheRunsTerminalServesTheShutdownTheMasterStartsItself) {
+  expect_interrupt_serves_the_shutdown(dir_ / "out", "47337", true, work(), io());
 }
 
 // ---------------------------------------------------------------------------------------
