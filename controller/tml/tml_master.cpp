@@ -227,6 +227,14 @@ void TmlMaster::on_tick(SimTime t) {
       query(t::reg::apos, true, t);
       if (stats_.ticks % kStatusTicks == 0) query(t::reg::srl, true, t);  // SR32: SRL and SRH
       return;
+    case TmlPhase::stopped:
+    case TmlPhase::finished:
+      // Holding still, the axes stay watched: a master on the wall clock that fell silent here
+      // read as lost to the twin's supervision (exit 3 after a path that ended early, or after
+      // the stop of a lost axis; found in review).
+      query(t::reg::apos, true, t);
+      if (stats_.ticks % kStatusTicks == 0) query(t::reg::srl, true, t);
+      return;
     default:
       return;
   }

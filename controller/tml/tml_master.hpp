@@ -46,8 +46,10 @@ inline constexpr int kSetupSends = 4;
 //  running   — each tick CSPD per axis, UPD, the APOS query; every kStatusTicks ticks the SR32
 //              query. Legal: axis_lost, axis_off (SRL.15 0 or SRH.15 fault), finish, shutdown.
 //  stopped   — an axis stopped answering, or went off or into fault: every axis gets CSPD 0
-//              and UPD, then holds.
-//  finished  — the application ended: CSPD 0 and UPD; shutdown sends AXISOFF.
+//              and UPD, then holds; each tick the APOS query (SR32 every kStatusTicks), so
+//              the axes stay watched and the master's silence never reads as its loss.
+//  finished  — the application ended: CSPD 0 and UPD, then the queries as in stopped;
+//              shutdown sends AXISOFF.
 //  failed    — start-up did not complete.
 enum class TmlPhase : std::uint8_t { detecting, starting, running, stopped, finished, failed };
 const char* to_string(TmlPhase p);
