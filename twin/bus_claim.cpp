@@ -26,9 +26,11 @@ socklen_t abstract_address(const std::string& name, sockaddr_un& a) {
   return static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + 1 + name.size());
 }
 
-// The pid of the process listening on `name`, or -1.
+// The pid of the process listening on `name`, or -1. Non-blocking: the holder never accepts,
+// so a full queue of earlier lookups answers EAGAIN instead of waiting for the holder's end
+// (a third refused run hung until the first ended; found in review).
 pid_t holder_of(const std::string& name) {
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
   if (fd < 0) return -1;
   sockaddr_un a;
   const socklen_t len = abstract_address(name, a);
@@ -57,7 +59,8 @@ BusClaim::BusClaim(const std::string& key) : key_(key) {
   const std::string name = bus_claim_name(key);
   sockaddr_un a;
   const socklen_t len = abstract_address(name, a);
-  if (::bind(fd_, reinterpret_cast<const sockaddr*>(&a), len) != 0 || ::listen(fd_, 1) != 0) {
+  // A long queue: every refused run's lookup stays in it (never accepted) until the holder ends.
+  if (::bind(fd_, reinterpret_cast<const sockaddr*>(&a), len) != 0 || ::listen(fd_, SOMAXCONN) != 0) {
     const int e = errno;
     ::close(fd_);
     fd_ = -1;
@@ -67,6 +70,16 @@ BusClaim::BusClaim(const std::string& key) : key_(key) {
                                "other's master; give this run a bus of its own (bus.transport)",
                                key, pid > 0 ? fmt::format("pid {}", pid) : std::string("its pid unknown")),
                    pid);
+  }
+}
+
+void claim_interfaces(std::vector<std::unique_ptr<BusClaim>>& claims, const std::vector<std::string>& specs) {
+  for (const std::string& spec : specs) {
+    if (!spec.starts_with("raw:")) continue;
+    const std::string key = spec.substr(0, spec.find('?'));
+    bool held = false;
+    for (const auto& c : claims) held = held || c->key() == key;
+    if (!held) claims.push_back(std::make_unique<BusClaim>(key));
   }
 }
 

@@ -12,8 +12,10 @@
 
 #include <sys/types.h>
 
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace omnitwin::twin {
 
@@ -42,5 +44,9 @@ class BusClaim {
 
 // The abstract socket name of a claim on `key` (at most 107 bytes; a long key is hashed).
 std::string bus_claim_name(const std::string& key);
+
+// Claims each `raw:IFACE` among `specs` (options after '?' dropped; others and repeats skipped)
+// into `claims`. Throws as BusClaim does.
+void claim_interfaces(std::vector<std::unique_ptr<BusClaim>>& claims, const std::vector<std::string>& specs);
 
 }  // namespace omnitwin::twin

@@ -1,13 +1,14 @@
 // twin layer — the simulated CAN wire and its transport side; see can_wire.hpp.
 #include "twin/can_wire.hpp"
 
-#include <fmt/format.h>
-
+#include <arpa/inet.h>
 #include <sched.h>
 
 #include <algorithm>
 #include <cmath>
 #include <span>
+
+#include <fmt/format.h>
 
 #include "twin/bus_network.hpp"
 
@@ -31,6 +32,15 @@ can::BusConfig bus_config(const Scenario& s, int nodes) {
   return c;
 }
 
+// A group address as the kernel holds it ("[ff15::7]" for "FF15:0::7"): one bus, one key.
+std::string canonical_address(const std::string& name, bool ipv6) {
+  unsigned char raw[sizeof(in6_addr)];
+  char text[INET6_ADDRSTRLEN];
+  const int af = ipv6 ? AF_INET6 : AF_INET;
+  if (::inet_pton(af, name.c_str(), raw) != 1 || !::inet_ntop(af, raw, text, sizeof text)) return name;
+  return ipv6 ? fmt::format("[{}]", text) : std::string(text);
+}
+
 }  // namespace
 
 CanWire::CanWire(const Scenario& s, int nodes, bool batch)
@@ -40,7 +50,7 @@ CanWire::CanWire(const Scenario& s, int nodes, bool batch)
   // interface, that another twin serves is refused before this one joins it.
   const can::TransportSpec t = can::parse_transport_spec(s.bus.can.transport);
   if (t.kind == can::TransportSpec::Kind::udp && t.port != 0)
-    claim_ = std::make_unique<BusClaim>(t.ipv6 ? fmt::format("udp:[{}]:{}", t.name, t.port) : fmt::format("udp:{}:{}", t.name, t.port));
+    claim_ = std::make_unique<BusClaim>(fmt::format("udp:{}:{}", canonical_address(t.name, t.ipv6), t.port));
   else if (t.kind == can::TransportSpec::Kind::socketcan)
     claim_ = std::make_unique<BusClaim>("socketcan:" + t.name);
   transport_ = can::open_transport(s.bus.can.transport);

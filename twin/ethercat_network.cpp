@@ -140,9 +140,10 @@ void EthercatNetwork::open_transport(const Scenario& s) {
   LineTransport line = choose_line_transport(spec, spec_.master_iface, lockstep, "udp:127.0.0.1:34980");
   veth_ = line.veth;
   transport_spec_ = line.slaves_spec;
-  // An interface the scenario names is claimed (a pair made for the run is the run's own).
-  if (!veth_ && transport_spec_.starts_with("raw:"))
-    claim_ = std::make_unique<BusClaim>(transport_spec_.substr(0, transport_spec_.find('?')));
+  // The interfaces the scenario names are claimed, the slaves' and the master's end alike (a
+  // second twin on the other end of the same link was let run; found in review). A pair made
+  // for the run is the run's own.
+  if (!veth_) claim_interfaces(claims_, {transport_spec_, line.master_iface});
   master_iface_ = line.master_iface.empty() ? line.slaves_spec : line.master_iface;
   transport_ = ethercat::open_transport(transport_spec_, ethercat::Role::slaves);
   transport_->set_refuse_foreign_senders(spec_.refuse_foreign);

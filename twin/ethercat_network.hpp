@@ -137,7 +137,7 @@ class EthercatNetwork final : public BusNetwork {
   ethercat::DeviceDescription multi_device_;                   // seed 001's multi-axis slave
   std::vector<std::unique_ptr<ethercat::DriveSlave>> extra_;   // bus.ethercat.extra_axes, behind the wheels
   ethercat::EscChain chain_;
-  std::unique_ptr<BusClaim> claim_;  // raw:IFACE named by the scenario: one twin on it (bus_claim.hpp)
+  std::vector<std::unique_ptr<BusClaim>> claims_;  // raw: interfaces the scenario names: one twin on each (bus_claim.hpp)
   std::shared_ptr<ethercat::VethPair> veth_;
   std::unique_ptr<ethercat::EcTransport> transport_;
   std::unique_ptr<ethercat::PcapWriter> pcap_;

@@ -63,9 +63,10 @@ void M3Network::open_transport(const Scenario& s) {
                                              "udp:127.0.0.1:34997");
   veth_ = line.veth;
   transport_spec_ = line.slaves_spec;
-  // An interface the scenario names is claimed (a pair made for the run is the run's own).
-  if (!veth_ && transport_spec_.starts_with("raw:"))
-    claim_ = std::make_unique<BusClaim>(transport_spec_.substr(0, transport_spec_.find('?')));
+  // The interfaces the scenario names are claimed, the slaves' and the master's end alike (a
+  // second twin on the other end of the same link was let run; found in review). A pair made
+  // for the run is the run's own.
+  if (!veth_) claim_interfaces(claims_, {transport_spec_, line.master_iface});
   transport_ = m3::open_transport(transport_spec_, m3::Role::slaves);
   transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
   // UDP on port 0: the master is told the port the slaves' socket was given.

@@ -105,7 +105,7 @@ class M3Network final : public BusNetwork {
   ClockMode clock_;
   Scheduler& sched_;
   Hooks hooks_;
-  std::unique_ptr<BusClaim> claim_;  // raw:IFACE named by the scenario: one twin on it (bus_claim.hpp)
+  std::vector<std::unique_ptr<BusClaim>> claims_;  // raw: interfaces the scenario names: one twin on each (bus_claim.hpp)
   std::shared_ptr<ethercat::VethPair> veth_;  // the pair made for the run (bus.transport veth)
   std::unique_ptr<m3::M3Transport> transport_;
   std::unique_ptr<m3::M3Segment> segment_;

@@ -276,8 +276,8 @@ void print_summary(const RunResult& r) {
   // they change what the drives did (only a counter in metrics.json before; found in review).
   if (m.contains("bus") && m["bus"].value("foreign_frames", std::uint64_t{0}) > 0) {
     const auto& b = m["bus"];
-    std::cout << fmt::format("  bus: {} frames came from a sender other than the master ({} kept off the wire); "
-                             "another program is on {}\n",
+    std::cout << fmt::format("  bus: {} frames came from a sender other than the first (taken for the master; {} "
+                             "kept off the wire): another program on {}, or a master started again\n",
                              b.value("foreign_frames", std::uint64_t{0}), b.value("refused_frames", std::uint64_t{0}),
                              b.value("transport", std::string("the bus")));
   }

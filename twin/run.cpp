@@ -498,7 +498,10 @@ void PlatformRun::serve_master_shutdown() {
     return o_.signals ? o_.signals->load() > seen : (!interrupted && signalled());
   };
   sigterm_ns_ = sched_.now();
-  const bool terminal = interrupted && o_.terminal_signal && o_.terminal_signal->load();
+  // The terminal's Ctrl-C went to its foreground group: the master had it only if it is still
+  // in the twin's group (a master that left it by setsid/setpgid gets SIGTERM; found in review).
+  const bool terminal = interrupted && o_.terminal_signal && o_.terminal_signal->load() &&
+                        ::getpgid(master_->pid()) == ::getpgrp();
   stop_signal_ = terminal ? "SIGINT from the terminal" : "SIGTERM";
   if (interrupted) end_ = std::min(end_, sigterm_ns_);  // the figures and faults end at the interrupt
   if (!terminal) master_->terminate();

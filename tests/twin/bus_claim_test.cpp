@@ -36,6 +36,33 @@ TEST(BusClaim, ASecondClaimOnTheSameBusIsRefusedNamingTheHolder) {
   EXPECT_NO_THROW(BusClaim other(key("b")));  // another bus
 }
 
+// Refusals do not pile up: each names the holder at once. The holder never accepts, and its
+// queue of one was full after two lookups: the third refused run hung until the holder ended
+// (found in review).
+TEST(BusClaim, ManyRefusalsInARowEachNameTheHolderAtOnce) {
+  const BusClaim first(key("many"));
+  for (int i = 0; i < 20; ++i) {
+    try {
+      BusClaim again(key("many"));
+      ADD_FAILURE() << "granted";
+    } catch (const BusInUse& e) {
+      EXPECT_EQ(e.pid, ::getpid()) << i << ": " << e.what();
+    }
+  }
+}
+
+// Both ends of a link the scenario names are claimed, each once; other specs are not.
+TEST(BusClaim, BothNamedInterfacesOfALinkAreClaimed) {
+  std::vector<std::unique_ptr<BusClaim>> claims;
+  const std::string a = fmt::format("raw:rvA{}", ::getpid()), b = fmt::format("raw:rvB{}", ::getpid());
+  claim_interfaces(claims, {a + "?x=1", b, a, "udp:127.0.0.1:5", ""});
+  ASSERT_EQ(claims.size(), 2u);
+  EXPECT_EQ(claims[0]->key(), a);
+  EXPECT_EQ(claims[1]->key(), b);
+  std::vector<std::unique_ptr<BusClaim>> swapped;
+  EXPECT_THROW(claim_interfaces(swapped, {b, a}), BusInUse);  // the other end of the same link
+}
+
 TEST(BusClaim, AClaimIsLetGoWithItsOwner) {
   { const BusClaim c(key("c")); }
   EXPECT_NO_THROW(BusClaim again(key("c")));

@@ -7,6 +7,8 @@
 // Over the in-process `mem:` transport unless a test says otherwise.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <atomic>
 
 #include "bus_emulators/can/transport_mem.hpp"
@@ -163,6 +165,30 @@ TEST(CanWire, ASecondUdpSenderIsCountedAndRefused) {
   EXPECT_EQ(m["foreign_frames"], 1);
   EXPECT_EQ(m["refused_frames"], 1);
   EXPECT_EQ(at_node.size(), 2u);
+}
+
+// One twin per bus (twin/bus_claim): a wire on a group and port another twin holds is refused
+// before it opens anything, however the group is written ("FF15:0::7" is ff15::7: two twins on
+// one IPv6 group ran side by side; found in review). Port 0 takes no claim (a port of its own).
+TEST(CanWire, AGroupAndPortAnotherTwinHoldsIsRefusedHoweverItIsWritten) {
+  const std::string port = std::to_string(40000 + ::getpid() % 20000);
+  const BusClaim other("udp:[ff15::7]:" + port);
+  for (const std::string group : {"[ff15::7]", "[FF15:0::7]", "[ff15:0:0:0:0:0:0:7]"}) {
+    Scenario s = scenario("unused");
+    s.bus.can.transport = "udp:" + group + ":" + port + "?ttl=0&iface=lo";
+    try {
+      CanWire wire(s, 2, false);
+      ADD_FAILURE() << group << " was not refused";
+    } catch (const BusInUse& e) {
+      EXPECT_EQ(e.pid, ::getpid()) << e.what();
+    }
+  }
+  const BusClaim v4("udp:239.74.164.9:" + port);
+  Scenario s4 = scenario("unused");
+  s4.bus.can.transport = "udp:239.74.164.9:" + port;
+  EXPECT_THROW(CanWire(s4, 2, false), BusInUse);
+  s4.bus.can.transport = "udp:239.74.164.9:0?ttl=0&iface=lo";
+  EXPECT_NO_THROW(CanWire(s4, 2, false));
 }
 
 }  // namespace

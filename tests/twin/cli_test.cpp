@@ -705,6 +705,57 @@ TEST_F(CliRunEnd, TheEndOfARealtimeRunServesOurMastersEndSequence) {
   EXPECT_FALSE(contains(log, "no statusword")) << log;
 }
 
+// Runs `omnitwin ARGS` on a terminal of its own (a session whose controlling tty is a pty) and,
+// once `ready` is in its events.log and a second has passed, types a Ctrl-C: the kernel's SIGINT
+// to the foreground group. Returns the exit code (128 + N: killed by N; -1: did not start).
+int run_and_ctrl_c_at_its_terminal(const std::vector<std::string>& args, const fs::path& out, const std::string& ready,
+                                   const fs::path& work, const fs::path& io) {
+  const int pty = ::posix_openpt(O_RDWR | O_NOCTTY);
+  if (pty < 0 || ::grantpt(pty) != 0 || ::unlockpt(pty) != 0) return -1;
+  const std::string slave = ::ptsname(pty);
+  const std::string stdout_file = (io / "pty.out").string();
+  std::vector<std::string> argv_s{omnitwin_binary()};
+  argv_s.insert(argv_s.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  fs::create_directories(work);
+  const pid_t pid = ::fork();
+  if (pid < 0) return -1;
+  if (pid == 0) {
+    ::setsid();
+    const int tty = ::open(slave.c_str(), O_RDWR);  // a session leader's first tty: its controlling one
+    const int o = ::open(stdout_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (tty < 0 || o < 0 || ::chdir(work.c_str()) != 0) ::_exit(120);
+    ::dup2(tty, 0);
+    ::dup2(o, 1);
+    ::dup2(o, 2);
+    sigset_t none;
+    sigemptyset(&none);
+    ::sigprocmask(SIG_SETMASK, &none, nullptr);
+    ::signal(SIGINT, SIG_DFL);
+    ::execv(argv[0], argv.data());
+    ::_exit(121);
+  }
+  bool started = false;
+  for (int i = 0; i < 3000 && !started; ++i) {
+    started = contains(read_bytes(out / ".events.log.part"), ready);
+    std::this_thread::sleep_for(10ms);
+  }
+  std::this_thread::sleep_for(1000ms);
+  EXPECT_TRUE(started) << read_bytes(io / "pty.out");
+  const char ctrl_c = 0x03;
+  EXPECT_EQ(::write(pty, &ctrl_c, 1), 1);
+  int status = 0;
+  for (int i = 0; i < 2000 && ::waitpid(pid, &status, WNOHANG) == 0; ++i) std::this_thread::sleep_for(10ms);
+  if (::waitpid(pid, &status, WNOHANG) == 0) {
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+  }
+  ::close(pty);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
 // An interrupted realtime run serves its master's shutdown too, and the run stays interrupted
 // (exit 3) with its figures ending at the interrupt. The twin stopped answering at the signal:
 // the master's end sequence (quick stop, disable, NMT stop) ran on a bus no one served, and at
@@ -718,55 +769,7 @@ void expect_interrupt_serves_the_shutdown(const fs::path& out, const std::string
                                       "--no-video", "--no-report", "--no-progress", "--out", out.string()};
   int code = -1;
   if (terminal) {
-    // The run on a terminal of its own: a session whose controlling tty is a pty; a Ctrl-C
-    // written to the pty's master side is the kernel's SIGINT to the foreground group.
-    const int pty = ::posix_openpt(O_RDWR | O_NOCTTY);
-    ASSERT_GE(pty, 0);
-    ASSERT_EQ(::grantpt(pty), 0);
-    ASSERT_EQ(::unlockpt(pty), 0);
-    const std::string slave = ::ptsname(pty);
-    const std::string stdout_file = (io / "pty.out").string();
-    std::vector<std::string> argv_s{omnitwin_binary()};
-    argv_s.insert(argv_s.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (auto& a : argv_s) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    fs::create_directories(work);
-    const pid_t pid = ::fork();
-    ASSERT_GE(pid, 0);
-    if (pid == 0) {
-      ::setsid();
-      const int tty = ::open(slave.c_str(), O_RDWR);  // a session leader's first tty: its controlling one
-      const int o = ::open(stdout_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (tty < 0 || o < 0 || ::chdir(work.c_str()) != 0) ::_exit(120);
-      ::dup2(tty, 0);
-      ::dup2(o, 1);
-      ::dup2(o, 2);
-      sigset_t none;
-      sigemptyset(&none);
-      ::sigprocmask(SIG_SETMASK, &none, nullptr);
-      ::signal(SIGINT, SIG_DFL);
-      ::execv(argv[0], argv.data());
-      ::_exit(121);
-    }
-    // Until the master is on the bus and the run has gone a while.
-    bool started = false;
-    for (int i = 0; i < 3000 && !started; ++i) {
-      started = contains(read_bytes(out / ".events.log.part"), "drive operation enabled");
-      std::this_thread::sleep_for(10ms);
-    }
-    std::this_thread::sleep_for(1000ms);
-    EXPECT_TRUE(started) << read_bytes(io / "pty.out");
-    const char ctrl_c = 0x03;
-    EXPECT_EQ(::write(pty, &ctrl_c, 1), 1);
-    int status = 0;
-    for (int i = 0; i < 2000 && ::waitpid(pid, &status, WNOHANG) == 0; ++i) std::this_thread::sleep_for(10ms);
-    if (::waitpid(pid, &status, WNOHANG) == 0) {
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, &status, 0);
-    }
-    ::close(pty);
-    code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    code = run_and_ctrl_c_at_its_terminal(args, out, "drive operation enabled", work, io);
   } else {
     Child c(args, work, io);
     ASSERT_GT(master_pid(out, c), 0) << c.out() << c.err();
@@ -804,6 +807,27 @@ TEST_F(CliRunEnd, AnInterruptToTheTwinAloneServesTheShutdownItsSigtermStarts) {
 
 TEST_F(CliRunEnd, ACtrlCAtTheRunsTerminalServesTheShutdownTheMasterStartsItself) {
   expect_interrupt_serves_the_shutdown(dir_ / "out", "47337", true, work(), io());
+}
+
+// A Ctrl-C at the terminal reaches only the twin's process group: a master of the user's that
+// left it (setsid) did not have it and gets the twin's SIGTERM, then is served. It got nothing:
+// it drove on for its whole grace and met an unserved bus when SIGTERM came at last (found in
+// review).
+TEST_F(CliRunEnd, ACtrlCAtTheTerminalSendsSigtermToAMasterThatLeftTheTwinsGroup) {
+  const fs::path out = dir_ / "out";
+  const int code = run_and_ctrl_c_at_its_terminal(
+      {"run", test_scenario("ethercat_short.yaml"), "--clock", "realtime", "--master-cmd",
+       "setsid " + std::string(OMNITWIN_BINARY_DIR "/tests/ec_foreign_master") + " {iface} 30", "--no-progress", "--out",
+       out.string()},
+      out, "drive operation enabled", work(), io());
+  EXPECT_EQ(code, 3) << read_bytes(io() / "pty.out");
+  const nlohmann::json ms = nlohmann::json::parse(read_bytes(out / "metrics.json")).at("master");
+  EXPECT_EQ(ms.value("stop_signal", std::string()), "SIGTERM") << ms.dump(2);
+  EXPECT_EQ(ms.at("exit"), "exit 0") << ms.dump(2);
+  EXPECT_LT(ms.at("shutdown_s").get<double>(), 1.0) << ms.dump(2);
+  const std::string log = read_bytes(out / "master.log");
+  EXPECT_TRUE(contains(log, "all 4 slaves in INIT")) << log;
+  EXPECT_TRUE(contains(log, "(stopped by signal)")) << log;
 }
 
 // ---------------------------------------------------------------------------------------
