@@ -696,7 +696,8 @@ TEST_F(CliVtime, AMasterThatIgnoresSigtermIsKilledAndSaidSo) {
 // deadline), and one killed in its wait was seen gone only at the grace's end (found in review).
 // A receive whose handler has SA_RESTART goes on, as the kernel restarts it.
 TEST_F(CliVtime, TheEndsSigtermEndsTheWaitItFindsTheMasterInAsLinuxDoes) {
-  for (const std::string how : {"nanosleep", "signal", "sleep", "poll", "select", "epoll", "recv", "default"}) {
+  for (const std::string how : {"nanosleep", "signal", "sleep", "poll", "select", "epoll", "recv", "default",
+                                 "siginterrupt", "oneshot", "ppoll-mask", "pselect-mask", "epoll-mask"}) {
     SCOPED_TRACE(how);
     const Finished f = run_master("tw-" + how, probe("term-in-wait " + how),
                                   {"--set", "duration=1", "--set", "master.stop_grace=0.5"});
@@ -717,7 +718,8 @@ TEST_F(CliVtime, TheEndsSigtermEndsTheWaitItFindsTheMasterInAsLinuxDoes) {
     EXPECT_EQ(m["exit"], "exit 0");
     const std::string log = read_bytes(dir_ / ("tw-" + how) / "master.log");
     EXPECT_TRUE(contains(log, "handler_reads_back 1\n")) << log;  // sigaction's old action is its own
-    EXPECT_TRUE(contains(log, how == "sleep" ? "wait_rc 99\n" : "wait_rc -1\n")) << log;  // sleep: seconds left
+    // sleep: the whole seconds left (glibc truncates: 99.001 s is 99)
+    EXPECT_TRUE(contains(log, how == "sleep" ? "wait_rc 99\n" : "wait_rc -1\n")) << log;
     if (how != "sleep") {
       EXPECT_TRUE(contains(log, "wait_errno 4\n")) << log;  // EINTR
     }
@@ -726,11 +728,45 @@ TEST_F(CliVtime, TheEndsSigtermEndsTheWaitItFindsTheMasterInAsLinuxDoes) {
     if (how == "nanosleep") {
       EXPECT_TRUE(contains(log, "wait_rem_s 99\n")) << log;
     }
+    if (how == "select" || how == "pselect-mask") {  // EINTR leaves the sets as given (they were emptied)
+      EXPECT_TRUE(contains(log, "wait_still_in_set 1\n")) << log;
+    }
+    if (how == "siginterrupt") {  // what siginterrupt(SIGTERM, 1) did reads back, and holds
+      EXPECT_TRUE(contains(log, "restart_reads_back 0\n")) << log;
+    }
   }
   const Finished r = run_master("tw-restart", probe("term-in-wait recv-restart"),
                                 {"--set", "duration=1", "--set", "master.stop_grace=0.5"});
   EXPECT_EQ(r.code, 3) << r.out;
   EXPECT_TRUE(contains(r.out, "did not end within 0.5 s of SIGTERM: killed")) << r.out;
+}
+
+// A signal the process sends itself (pthread_kill to a thread blocked in a receive) ends that
+// receive with EINTR at once, with no time passing, as on Linux: the library saw handlers only
+// at the twin's next Wake, which for a wait without a deadline never came (found in review).
+TEST_F(VtimeProbe, ASignalTheProcessSendsItselfEndsTheWaitAtOnce) {
+  const Run r = run_mode("self-signal");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("self_usr1_runs"), 1) << r.text;
+  EXPECT_EQ(r.v.at("self_rx_rc"), -1) << r.text;
+  EXPECT_EQ(r.v.at("self_rx_errno"), EINTR) << r.text;
+  EXPECT_EQ(r.v.at("self_rx_at"), 300'000) << r.text;  // the usleep(300) before it, nothing more
+  EXPECT_EQ(r.v.at("self_joined_at"), 300'000) << r.text;
+}
+
+// Dispositions through the library's sigaction read and act as the kernel's: SIG_IGN in a
+// struct that still has SA_SIGINFO is ignored (the library took it for a handler and the program
+// crashed), signal(SIG_ERR) is refused with EINVAL, and after an SA_RESETHAND handler fired the
+// action reads SIG_DFL without the SA_SIGINFO the library had added (found in review).
+TEST_F(VtimeProbe, SignalDispositionsReadAndActAsTheKernels) {
+  const Run r = run_mode("dispositions");
+  ASSERT_EQ(r.exit, 0) << r.text;
+  EXPECT_EQ(r.v.at("ignored_survived"), 1);
+  EXPECT_EQ(r.v.at("signal_sig_err_refused"), 1);
+  EXPECT_EQ(r.v.at("signal_sig_err_errno"), EINVAL);
+  EXPECT_EQ(r.v.at("reset_handler_ran"), 1);
+  EXPECT_EQ(r.v.at("reset_reads_dfl"), 1);
+  EXPECT_EQ(r.v.at("reset_reads_siginfo"), 0);
 }
 
 // Served for its whole grace, it ends by itself in the moment before SIGKILL (on the unserved

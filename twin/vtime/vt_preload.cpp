@@ -10,7 +10,9 @@
 //    wake on a frame?, bus frames sent} and the twin runs to the earlier of that deadline and
 //    the next frame reaching the master's socket, and answers Wake{now}. The leader then wakes
 //    every waiter whose deadline passed, whose descriptors became ready, or whose thread ran a
-//    signal handler of the program's (EINTR, as the kernel; sigaction/signal are wrapped to see it).
+//    signal handler of the program's (EINTR, as the kernel; sigaction, signal and siginterrupt
+//    are wrapped to see it, and a signal the process sends itself is waited for; see "Signals"
+//    in the docs).
 //  - Busy polling: a thread that makes kSpinLimit calls in a row that neither wait nor find
 //    anything (clock reads, empty non-blocking receives, zero-timeout polls, sleeps already
 //    over) waits one quantum (1 µs) of simulated time, woken early by a frame. So a spinning
@@ -155,7 +157,8 @@ struct Waiter {
 // runs it and counts it (on_signal), so that a virtual wait the signal interrupts ends.
 struct Handler {
   void* fn = nullptr;  // the program's handler; null: the disposition is not a handler of its own
-  int flags = 0;       // its sa_flags (SA_SIGINFO, SA_RESTART, SA_RESETHAND …)
+  int flags = 0;       // its sa_flags (SA_SIGINFO, SA_RESTART, SA_RESETHAND …), kept after a reset
+  bool reset = false;  // SA_RESETHAND fired: SIG_DFL again, the SA_SIGINFO the library added left
 };
 
 // A timerfd, simulated: an eventfd the leader writes expirations into. The eventfd carries the
@@ -197,6 +200,8 @@ struct State {
   bool bus_raw = false;         // OMNITWIN_VTIME_BUS raw:… : packet sockets carry the bus
   int bus_port = -1;            // udp:HOST:PORT : datagrams to PORT carry the bus
   Handler handlers[NSIG];       // the program's own signal handlers (written by sigaction only)
+  std::uint64_t handled = 0;    // bit sig−1: a handler of the program's is installed (atomic)
+  std::uint64_t no_restart = 0; // bit sig−1: siginterrupt(sig, 1): signal() installs without SA_RESTART
   std::uint32_t sigs = 0;       // handlers run so far, all threads (atomic: written in handlers)
 };
 constinit State g;  // constant-initialised: ready before any constructor runs
@@ -403,17 +408,56 @@ void satisfy(Waiter* w) {
   ++g.running;
 }
 
+// Whether `sig` is pending for the process as a whole (/proc/self/status ShdPnd): sent but not
+// yet taken by a thread, i.e. blocked in every thread. Raw system calls: the library's own.
+bool pending_for_process(int sig) {
+  const long fd = syscall(SYS_openat, AT_FDCWD, "/proc/self/status", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  char buf[4096];
+  const long n = syscall(SYS_read, fd, buf, sizeof buf - 1);
+  syscall(SYS_close, fd);
+  if (n <= 0) return false;
+  buf[n] = 0;
+  const char* at = strstr(buf, "ShdPnd:");
+  if (!at) return false;
+  const unsigned long long set = strtoull(at + 7, nullptr, 16);
+  return (set >> (sig - 1)) & 1ULL;
+}
+
 // The twin sent the process signal `sig` just before this Wake (the SIGTERM of the run's end).
-// A handler of the program's runs on a thread the kernel picks, perhaps still now: wait for it
-// (at most 1 s of wall time; none when the signal has no handler of the program's), so that the
-// waits it interrupts end at this wake, the same in every run.
-void await_handler(int sig, std::uint32_t before) {
-  if (sig >= NSIG || !__atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE)) return;
-  const ns_t until = wall_ns() + kNs;
+// `handled`: the signals the program had handlers for when the Wait went out (an SA_RESETHAND
+// handler clears its own on delivery). Its handler runs on a thread the kernel picks, perhaps
+// still now: wait for it to finish, so that the waits it interrupts end at this wake, the same
+// in every run; for as long as the library's watchdog while the signal has been taken (a slow
+// handler), but no more than 50 ms while the signal stays pending for the process (blocked in
+// every thread: it may never run).
+void await_handler(int sig, std::uint32_t before, std::uint64_t handled) {
+  if (sig >= NSIG || !((handled >> (sig - 1)) & 1ULL)) return;
+  const ns_t until = wall_ns() + g.watchdog;
+  ns_t pending_since = -1;
   while (__atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE) == before && wall_ns() < until) {
-    const timespec step{0, 20'000};
+    const timespec step{0, 200'000};
     syscall(SYS_nanosleep, &step, nullptr);
+    if (!pending_for_process(sig)) {
+      pending_since = -1;
+    } else if (pending_since < 0) {
+      pending_since = wall_ns();
+    } else if (wall_ns() - pending_since > 50'000'000) {
+      return;
+    }
   }
+}
+
+// Waiters whose thread ran a handler of the program's since they began end now (EINTR). Lock held.
+bool end_interrupted_waits() {
+  bool woke = false;
+  for (Waiter* w = g.waiters; w; w = w->next)
+    if (!w->satisfied && w->sigs && __atomic_load_n(w->sigs, __ATOMIC_ACQUIRE) != w->sigs_at) {
+      w->interrupted = true;  // a handler ran on its thread: EINTR, as the kernel ends the call
+      satisfy(w);
+      woke = true;
+    }
+  return woke;
 }
 
 // The leader's turn (lock held, every thread waiting): one Wait/Wake with the twin, then the
@@ -427,6 +471,9 @@ bool lead() {
       satisfy(w);
       woke = true;
     }
+  // A signal the process sent itself (pthread_kill, raise, kill of its own pid) ran its handler
+  // on a waiting thread: that wait ends now too, with no time passing (as the kernel's).
+  woke = end_interrupted_waits() || woke;
   if (woke) {
     ++g.generation;
     cv_broadcast(&g.cv);
@@ -447,10 +494,12 @@ bool lead() {
   r.wake_on_frame = frame ? 1 : 0;
   g.leading = true;
   const std::uint32_t sigs_before = __atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE);
+  const std::uint64_t handled_before = __atomic_load_n(&g.handled, __ATOMIC_ACQUIRE);
   pthread_mutex_unlock(&g.mu);  // t_held stays set: a signal handler meanwhile stays out of the library
   vt::Record a;
   const bool ok = send_record(r) && recv_record(a);
-  if (ok && a.type == vt::Type::wake && a.code > 0) await_handler(static_cast<int>(a.code), sigs_before);
+  if (ok && a.type == vt::Type::wake && a.code > 0)
+    await_handler(static_cast<int>(a.code), sigs_before, handled_before);
   pthread_mutex_lock(&g.mu);
   g.leading = false;
   if (!ok || a.type == vt::Type::end || a.type != vt::Type::wake || a.seq != r.seq) {
@@ -473,11 +522,9 @@ bool lead() {
       satisfy(w);
     } else if (w->nfds > 0 && new_frames && has_socket(*w) && fds_ready(*w, kGraceNs)) {
       satisfy(w);  // the kernel was still delivering the frame
-    } else if (w->sigs && __atomic_load_n(w->sigs, __ATOMIC_ACQUIRE) != w->sigs_at) {
-      w->interrupted = true;  // a handler ran on its thread: EINTR, as the kernel ends the call
-      satisfy(w);
     }
   }
+  end_interrupted_waits();  // after a deadline or a descriptor, which win as in the kernel
   ++g.generation;
   cv_broadcast(&g.cv);
   return true;
@@ -545,17 +592,27 @@ void interruptible_by(Waiter& w, const std::uint32_t* sigs) {
   if (sigs) w.sigs_at = __atomic_load_n(sigs, __ATOMIC_ACQUIRE);
 }
 
-// Waits for descriptors or a deadline, or until a handler counted in `sigs` runs.
-Woke wait_fds(pollfd* fds, nfds_t n, ns_t deadline, const std::uint32_t* sigs) {
-  Lock l;
-  Waiter w;
-  w.fds = fds;
-  w.nfds = n;
-  w.deadline = deadline;
-  interruptible_by(w, sigs);
-  wait_virtual(w);
-  if (w.interrupted) return Woke::interrupted;
-  return w.satisfied && !w.timed_out ? Woke::ready : Woke::timeout;
+// Waits for descriptors or a deadline, or until a handler counted in `sigs` runs. `mask`: the
+// thread's signal mask for the wait's length (ppoll, pselect, epoll_pwait), as the kernel sets
+// it: a signal it unblocks is taken then and ends the wait.
+Woke wait_fds(pollfd* fds, nfds_t n, ns_t deadline, const std::uint32_t* sigs, const sigset_t* mask = nullptr) {
+  const std::uint32_t at = sigs ? __atomic_load_n(sigs, __ATOMIC_ACQUIRE) : 0;  // before the mask lets one in
+  sigset_t old;
+  if (mask) pthread_sigmask(SIG_SETMASK, mask, &old);
+  Woke k;
+  {
+    Lock l;
+    Waiter w;
+    w.fds = fds;
+    w.nfds = n;
+    w.deadline = deadline;
+    w.sigs = sigs;
+    w.sigs_at = at;
+    wait_virtual(w);
+    k = w.interrupted ? Woke::interrupted : (w.satisfied && !w.timed_out ? Woke::ready : Woke::timeout);
+  }
+  if (mask) pthread_sigmask(SIG_SETMASK, &old, nullptr);
+  return k;
 }
 
 // A sleep, which any handler interrupts; true when one did (the time left is the deadline less
@@ -836,8 +893,8 @@ unsigned int sleep(unsigned int s) {
     d = add_sat(g.now, static_cast<ns_t>(s) * kNs);
   }
   if (!sleep_until(d)) return 0;
-  const ns_t left = d > now_any() ? d - now_any() : 0;  // interrupted: the seconds left, rounded as glibc does
-  return static_cast<unsigned int>(left / kNs + (left % kNs >= kNs / 2 ? 1 : 0));
+  const ns_t left = d > now_any() ? d - now_any() : 0;  // interrupted: the whole seconds left, as glibc
+  return static_cast<unsigned int>(left / kNs);
 }
 
 // ---- descriptor waits ----
@@ -892,7 +949,7 @@ int ppoll(pollfd* fds, nfds_t n, const timespec* tmo, const sigset_t* mask) {
     deadline = deadline_after(tmo ? ts_ns(*tmo) : -1);
   }
   for (;;) {
-    const Woke k = wait_fds(fds, n, deadline, &t_sigs);
+    const Woke k = wait_fds(fds, n, deadline, &t_sigs, mask);
     if (k == Woke::interrupted) return eintr();
     if (k == Woke::timeout) return real_ppoll(fds, n, &zero, mask);  // as in poll
     const int again = real_ppoll(fds, n, &zero, mask);
@@ -945,8 +1002,11 @@ int select_common(int nfds, fd_set* r, fd_set* w, fd_set* e, ns_t rel, const sig
     *tv_out = timeval{static_cast<time_t>(v / kNs), static_cast<suseconds_t>((v % kNs) / 1000)};
   };
   for (;;) {
-    const Woke k = wait_fds(fds, n, deadline, &t_sigs);
-    if (k == Woke::interrupted) {
+    const Woke k = wait_fds(fds, n, deadline, &t_sigs, mask);
+    if (k == Woke::interrupted) {  // the sets as the caller gave them (the kernel leaves them)
+      if (r) *r = r0;
+      if (w) *w = w0;
+      if (e) *e = e0;
       left();
       return eintr();
     }
@@ -1010,7 +1070,7 @@ int epoll_pwait(int epfd, epoll_event* ev, int max, int timeout_ms, const sigset
   }
   pollfd p{epfd, POLLIN, 0};  // an epoll descriptor is readable while an event is ready
   for (;;) {
-    const Woke k = wait_fds(&p, 1, deadline, &t_sigs);
+    const Woke k = wait_fds(&p, 1, deadline, &t_sigs, mask);
     if (k == Woke::interrupted) return eintr();
     if (k == Woke::timeout) return real_epoll_pwait(epfd, ev, max, 0, mask);  // as in poll
     const int again = real_epoll_pwait(epfd, ev, max, 0, mask);
@@ -1247,7 +1307,11 @@ void on_signal(int sig, siginfo_t* si, void* uc) {
   h.fn = __atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE);
   h.flags = __atomic_load_n(&g.handlers[sig].flags, __ATOMIC_ACQUIRE);
   // SA_RESETHAND: the kernel has made the disposition SIG_DFL again on delivery.
-  if (h.flags & SA_RESETHAND) __atomic_store_n(&g.handlers[sig].fn, nullptr, __ATOMIC_RELEASE);
+  if (h.flags & SA_RESETHAND) {
+    __atomic_store_n(&g.handlers[sig].fn, nullptr, __ATOMIC_RELEASE);
+    __atomic_store_n(&g.handlers[sig].reset, true, __ATOMIC_RELEASE);
+    __atomic_and_fetch(&g.handled, ~(1ULL << (sig - 1)), __ATOMIC_RELEASE);
+  }
   errno = saved;
   if (h.fn && (h.flags & SA_SIGINFO)) reinterpret_cast<info_handler>(h.fn)(sig, si, uc);
   else if (h.fn) reinterpret_cast<void (*)(int)>(h.fn)(sig);
@@ -1256,9 +1320,23 @@ void on_signal(int sig, siginfo_t* si, void* uc) {
   __atomic_add_fetch(&g.sigs, 1, __ATOMIC_RELEASE);
 }
 
+// A handler of the program's, not a disposition (SIG_DFL, SIG_IGN), whatever SA_SIGINFO says:
+// sa_handler and sa_sigaction share their storage.
 bool is_handler(const struct sigaction& a) {
-  return (a.sa_flags & SA_SIGINFO) ? a.sa_sigaction != nullptr
-                                   : (a.sa_handler != SIG_DFL && a.sa_handler != SIG_IGN);
+  return a.sa_handler != SIG_DFL && a.sa_handler != SIG_IGN;
+}
+
+void* handler_of(const struct sigaction& a) {
+  return (a.sa_flags & SA_SIGINFO) ? reinterpret_cast<void*>(a.sa_sigaction) : reinterpret_cast<void*>(a.sa_handler);
+}
+
+void record(int sig, void* fn, int flags) {
+  __atomic_store_n(&g.handlers[sig].flags, flags, __ATOMIC_RELEASE);
+  __atomic_store_n(&g.handlers[sig].reset, false, __ATOMIC_RELEASE);
+  __atomic_store_n(&g.handlers[sig].fn, fn, __ATOMIC_RELEASE);
+  const std::uint64_t bit = 1ULL << (sig - 1);
+  if (fn) __atomic_or_fetch(&g.handled, bit, __ATOMIC_RELEASE);
+  else __atomic_and_fetch(&g.handled, ~bit, __ATOMIC_RELEASE);
 }
 }  // namespace
 
@@ -1269,52 +1347,124 @@ extern "C" {
 int sigaction(int sig, const struct sigaction* act, struct sigaction* old) {
   REAL(sigaction);
   if (!g.active || sig <= 0 || sig >= NSIG || sig == SIGKILL || sig == SIGSTOP) return real_sigaction(sig, act, old);
-  const Handler was{__atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE), g.handlers[sig].flags};
+  const Handler was{__atomic_load_n(&g.handlers[sig].fn, __ATOMIC_ACQUIRE), g.handlers[sig].flags,
+                    __atomic_load_n(&g.handlers[sig].reset, __ATOMIC_ACQUIRE)};
   struct sigaction mine;
   const bool wrap = act && is_handler(*act);
   if (wrap) {
     mine = *act;
     mine.sa_sigaction = on_signal;
     mine.sa_flags = act->sa_flags | SA_SIGINFO;
-    // Recorded first: a signal between here and the kernel's change runs the new handler.
-    __atomic_store_n(&g.handlers[sig].flags, act->sa_flags, __ATOMIC_RELEASE);
-    __atomic_store_n(&g.handlers[sig].fn,
-                     (act->sa_flags & SA_SIGINFO) ? reinterpret_cast<void*>(act->sa_sigaction)
-                                                  : reinterpret_cast<void*>(act->sa_handler),
-                     __ATOMIC_RELEASE);
+    record(sig, handler_of(*act), act->sa_flags);  // first: a signal before the kernel's change runs the new one
   }
   const int r = real_sigaction(sig, wrap ? &mine : act, old);
   if (r != 0) {
     if (wrap) {
-      __atomic_store_n(&g.handlers[sig].flags, was.flags, __ATOMIC_RELEASE);
-      __atomic_store_n(&g.handlers[sig].fn, was.fn, __ATOMIC_RELEASE);
+      record(sig, was.fn, was.flags);
+      __atomic_store_n(&g.handlers[sig].reset, was.reset, __ATOMIC_RELEASE);
     }
     return r;
   }
-  if (act && !wrap) __atomic_store_n(&g.handlers[sig].fn, nullptr, __ATOMIC_RELEASE);
-  // The old action as the program knows it: its own handler, not the library's.
-  if (old && was.fn && (old->sa_flags & SA_SIGINFO) && old->sa_sigaction == on_signal) {
-    old->sa_flags = was.flags;
-    if (was.flags & SA_SIGINFO) old->sa_sigaction = reinterpret_cast<info_handler>(was.fn);
+  if (act && !wrap) record(sig, nullptr, act->sa_flags);
+  // The old action as the program knows it: its own handler and flags, not the library's
+  // (the kernel's own bits, such as SA_RESTORER, kept); after an SA_RESETHAND handler fired,
+  // SIG_DFL without the SA_SIGINFO the library had added.
+  if (old && ((was.fn && (old->sa_flags & SA_SIGINFO) && old->sa_sigaction == on_signal) || was.reset)) {
+    old->sa_flags = (old->sa_flags & ~SA_SIGINFO) | (was.flags & SA_SIGINFO);
+    if (was.reset) old->sa_handler = SIG_DFL;
+    else if (was.flags & SA_SIGINFO) old->sa_sigaction = reinterpret_cast<info_handler>(was.fn);
     else old->sa_handler = reinterpret_cast<void (*)(int)>(was.fn);
   }
   return 0;
 }
 
-// signal() as glibc makes it (BSD semantics: SA_RESTART, the signal blocked in its handler),
-// through sigaction above.
+// signal() as glibc makes it (BSD semantics: SA_RESTART unless siginterrupt(sig, 1) was called,
+// the signal blocked in its handler), through sigaction above.
 sighandler_t signal(int sig, sighandler_t h) {
   REAL(signal);
   if (!g.active) return real_signal(sig, h);
+  if (h == SIG_ERR || sig <= 0 || sig >= NSIG) {
+    errno = EINVAL;
+    return SIG_ERR;
+  }
   struct sigaction a, o;
   memset(&a, 0, sizeof a);
   a.sa_handler = h;
   sigemptyset(&a.sa_mask);
-  if (sig > 0 && sig < NSIG) sigaddset(&a.sa_mask, sig);
-  a.sa_flags = SA_RESTART;
+  sigaddset(&a.sa_mask, sig);
+  const bool intr = (__atomic_load_n(&g.no_restart, __ATOMIC_ACQUIRE) >> (sig - 1)) & 1ULL;
+  a.sa_flags = intr ? 0 : SA_RESTART;
   if (sigaction(sig, &a, &o) != 0) return SIG_ERR;
   return o.sa_handler;
 }
+
+// siginterrupt(): glibc changes the action through its internal sigaction, which the library
+// does not see; done here through the one above, so the recorded flags follow.
+}  // extern "C"
+
+namespace {
+// A signal the process sent itself runs its handler on the thread the kernel picks, perhaps a
+// waiting one, at once but asynchronously: the sender waits (at most 100 ms of wall time) until
+// a handler has run, so that the wait it interrupts is seen ended at the next lead, the same in
+// every run. None when the signal has no handler of the program's; a signal blocked where it
+// went costs the 100 ms and is then left to the kernel.
+void await_own_signal(int sig, std::uint32_t before) {
+  if (sig <= 0 || sig >= NSIG || !((__atomic_load_n(&g.handled, __ATOMIC_ACQUIRE) >> (sig - 1)) & 1ULL)) return;
+  const ns_t until = wall_ns() + 100'000'000;
+  while (__atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE) == before && wall_ns() < until) {
+    const timespec step{0, 20'000};
+    syscall(SYS_nanosleep, &step, nullptr);
+  }
+}
+
+bool to_self(pid_t pid) { return pid == 0 || pid == getpid() || pid == -getpgrp(); }
+}  // namespace
+
+extern "C" {
+
+int pthread_kill(pthread_t t, int sig) {
+  REAL(pthread_kill);
+  const std::uint32_t before = __atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE);
+  const int r = real_pthread_kill(t, sig);
+  if (r == 0 && on()) await_own_signal(sig, before);
+  return r;
+}
+
+int kill(pid_t pid, int sig) {
+  REAL(kill);
+  const std::uint32_t before = __atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE);
+  const int r = real_kill(pid, sig);
+  if (r == 0 && on() && to_self(pid)) await_own_signal(sig, before);
+  return r;
+}
+
+int sigqueue(pid_t pid, int sig, const union sigval value) {
+  REAL(sigqueue);
+  const std::uint32_t before = __atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE);
+  const int r = real_sigqueue(pid, sig, value);
+  if (r == 0 && on() && to_self(pid)) await_own_signal(sig, before);
+  return r;
+}
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations"  // intercepted as programs still call it
+int siginterrupt(int sig, int flag) {
+  REAL(siginterrupt);
+  if (!g.active) return real_siginterrupt(sig, flag);
+  if (sig <= 0 || sig >= NSIG) {
+    errno = EINVAL;
+    return -1;
+  }
+  const std::uint64_t bit = 1ULL << (sig - 1);
+  if (flag) __atomic_or_fetch(&g.no_restart, bit, __ATOMIC_RELEASE);
+  else __atomic_and_fetch(&g.no_restart, ~bit, __ATOMIC_RELEASE);
+  struct sigaction a;
+  if (sigaction(sig, nullptr, &a) != 0) return -1;
+  if (flag) a.sa_flags &= ~SA_RESTART;
+  else a.sa_flags |= SA_RESTART;
+  return sigaction(sig, &a, nullptr);
+}
+#pragma GCC diagnostic pop
 
 // ---- threads ----
 }  // extern "C"

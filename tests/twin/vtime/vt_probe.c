@@ -570,25 +570,55 @@ static int many_fds(void) {
 
 /* Waits for ever (or 100 s) in one call until the SIGTERM of the run's end. Its handler sets a
  * flag; the call must end with EINTR at the SIGTERM's instant, as on Linux (it waited on, and
- * the run served it for its whole grace). `how`: the call, and for "recv-restart" a handler with
- * SA_RESTART (the receive goes on: Linux restarts it). A second thread waits on a pipe nobody
- * writes: a signal ends only the wait of the thread that ran its handler. "default": no handler,
- * nanosleep (the signal kills it in its wait). */
+ * the run served it for its whole grace). `how`: the call; "recv-restart" has a handler with
+ * SA_RESTART (the receive goes on: Linux restarts it); "siginterrupt" installs with signal() and
+ * then siginterrupt(SIGTERM, 1) (the receive ends); "oneshot" has an SA_RESETHAND handler;
+ * "ppoll-mask", "pselect-mask" and "epoll-mask" block SIGTERM and wait with a mask that lets it
+ * in (the race-free pattern); "default": no handler, nanosleep (the signal kills it in its
+ * wait). A second thread waits last, on a pipe nobody writes, so that it, not the main thread
+ * that takes the signal, leads the waits; a signal ends only the wait of the thread that ran
+ * its handler. */
 static void* wait_on_pipe(void* arg) {
+  usleep(5000);
   struct pollfd p = {(int)(intptr_t)arg, POLLIN, 0};
   poll(&p, 1, -1);
   return NULL;
+}
+static int quiet_socket(void) { /* a UDP socket nobody sends to */
+  int s = socket(AF_INET, SOCK_DGRAM, 0);
+  struct sockaddr_in a;
+  memset(&a, 0, sizeof a);
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  bind(s, (struct sockaddr*)&a, sizeof a);
+  return s;
 }
 static int term_in_wait(const char* how) {
   struct sigaction sa;
   memset(&sa, 0, sizeof sa);
   sa.sa_handler = on_term_flag;
-  sa.sa_flags = !strcmp(how, "recv-restart") ? SA_RESTART : 0;
-  if (!strcmp(how, "signal")) signal(SIGTERM, on_term_flag); /* BSD semantics; nanosleep still ends */
-  else if (strcmp(how, "default") != 0) sigaction(SIGTERM, &sa, NULL); /* default: the signal kills it */
+  sa.sa_flags = !strcmp(how, "recv-restart") ? SA_RESTART : !strcmp(how, "oneshot") ? SA_RESETHAND : 0;
+  if (!strcmp(how, "signal")) {
+    signal(SIGTERM, on_term_flag); /* BSD semantics; nanosleep still ends */
+  } else if (!strcmp(how, "siginterrupt")) {
+    signal(SIGTERM, on_term_flag);
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdeprecated-declarations" /* what programs still call */
+    siginterrupt(SIGTERM, 1);
+#pragma GCC diagnostic pop
+  } else if (strcmp(how, "default") != 0) {
+    sigaction(SIGTERM, &sa, NULL); /* default: the signal kills it */
+  }
   struct sigaction back;
   sigaction(SIGTERM, NULL, &back);
   out("handler_reads_back", back.sa_handler == on_term_flag);
+  out("restart_reads_back", (back.sa_flags & SA_RESTART) != 0);
+  const int masked = strstr(how, "-mask") != NULL;
+  sigset_t term, open_set;
+  sigemptyset(&term);
+  sigaddset(&term, SIGTERM);
+  sigemptyset(&open_set);
+  if (masked) sigprocmask(SIG_BLOCK, &term, NULL); /* SIGTERM only inside the wait */
   int pfd[2];
   if (pipe(pfd) != 0) return 1;
   pthread_t t;
@@ -597,39 +627,109 @@ static int term_in_wait(const char* how) {
   const long long t0 = mono();
   struct timespec rel = {100, 0}, rem = {0, 0};
   long long rc = 0;
-  if (!strcmp(how, "nanosleep") || !strcmp(how, "signal") || !strcmp(how, "default")) {
+  int still_in_set = -1;
+  if (!strcmp(how, "nanosleep") || !strcmp(how, "signal") || !strcmp(how, "default") || !strcmp(how, "oneshot")) {
     rc = nanosleep(&rel, &rem);
   } else if (!strcmp(how, "sleep")) {
     rc = sleep(100);
   } else if (!strcmp(how, "poll")) {
     struct pollfd p = {pfd[0], POLLIN, 0};
     rc = poll(&p, 1, -1);
-  } else if (!strcmp(how, "select")) {
+  } else if (!strcmp(how, "ppoll-mask")) {
+    struct pollfd p = {pfd[0], POLLIN, 0};
+    rc = ppoll(&p, 1, NULL, &open_set);
+  } else if (!strcmp(how, "select") || !strcmp(how, "pselect-mask")) {
     fd_set r;
     FD_ZERO(&r);
     FD_SET(pfd[0], &r);
-    rc = select(pfd[0] + 1, &r, NULL, NULL, NULL);
-  } else if (!strcmp(how, "epoll")) {
+    rc = masked ? pselect(pfd[0] + 1, &r, NULL, NULL, NULL, &open_set) : select(pfd[0] + 1, &r, NULL, NULL, NULL);
+    still_in_set = FD_ISSET(pfd[0], &r) != 0; /* EINTR leaves the sets as they were */
+  } else if (!strcmp(how, "epoll") || !strcmp(how, "epoll-mask")) {
     int ep = epoll_create1(0);
     struct epoll_event ev = {EPOLLIN, {0}};
     epoll_ctl(ep, EPOLL_CTL_ADD, pfd[0], &ev);
-    rc = epoll_wait(ep, &ev, 1, -1);
-  } else { /* recv, recv-restart: a UDP socket nobody sends to */
-    int s = socket(AF_INET, SOCK_DGRAM, 0);
-    struct sockaddr_in a;
-    memset(&a, 0, sizeof a);
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    bind(s, (struct sockaddr*)&a, sizeof a);
+    rc = masked ? epoll_pwait(ep, &ev, 1, -1, &open_set) : epoll_wait(ep, &ev, 1, -1);
+  } else { /* recv, recv-restart, siginterrupt */
     char b[16];
-    rc = recv(s, b, sizeof b, 0);
+    rc = recv(quiet_socket(), b, sizeof b, 0);
   }
   out("wait_rc", rc);
   out("wait_errno", errno);
   out("wait_flag", term_flag);
   out("wait_ns", mono() - t0);
   out("wait_rem_s", rem.tv_sec);
+  out("wait_still_in_set", still_in_set);
   return term_flag ? 0 : 1;
+}
+
+/* A signal the process sends itself: at 300 µs the main thread interrupts a thread blocked in a
+ * receive (pthread_kill, a handler without SA_RESTART) and joins it. On Linux the receive ends
+ * with EINTR at once; no time passes. */
+static volatile sig_atomic_t usr1_runs;
+static void on_usr1(int sig) {
+  (void)sig;
+  ++usr1_runs;
+}
+static long long rx_rc, rx_errno, rx_at;
+static void* receive_until_signalled(void* arg) {
+  char b[16];
+  rx_rc = recv((int)(intptr_t)arg, b, sizeof b, 0);
+  rx_errno = errno;
+  rx_at = since();
+  return NULL;
+}
+static int self_signal(void) {
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_usr1;
+  sigaction(SIGUSR1, &sa, NULL);
+  t0 = mono();
+  pthread_t t;
+  pthread_create(&t, NULL, receive_until_signalled, (void*)(intptr_t)quiet_socket());
+  usleep(300);
+  pthread_kill(t, SIGUSR1);
+  pthread_join(t, NULL);
+  out("self_rx_rc", rx_rc);
+  out("self_rx_errno", rx_errno);
+  out("self_rx_at", rx_at);
+  out("self_joined_at", since());
+  out("self_usr1_runs", usr1_runs);
+  return 0;
+}
+
+/* Dispositions through the library's sigaction: SIG_IGN given in a struct that still says
+ * SA_SIGINFO is ignored (it was taken for a handler: a crash), signal() refuses SIG_ERR, and the
+ * action read back after an SA_RESETHAND handler fired is SIG_DFL without SA_SIGINFO. */
+static void on_info(int sig, siginfo_t* si, void* uc) {
+  (void)sig;
+  (void)si;
+  (void)uc;
+}
+static int dispositions(void) {
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_sigaction = on_info;
+  sa.sa_flags = SA_SIGINFO;
+  sigaction(SIGUSR2, &sa, NULL);
+  sa.sa_handler = SIG_IGN; /* SA_SIGINFO left in sa_flags */
+  sigaction(SIGUSR2, &sa, NULL);
+  raise(SIGUSR2);
+  out("ignored_survived", 1);
+  errno = 0;
+  out("signal_sig_err_refused", signal(SIGUSR1, SIG_ERR) == SIG_ERR);
+  out("signal_sig_err_errno", errno);
+  struct sigaction once;
+  memset(&once, 0, sizeof once);
+  once.sa_handler = on_usr1;
+  once.sa_flags = SA_RESETHAND;
+  sigaction(SIGUSR1, &once, NULL);
+  raise(SIGUSR1);
+  struct sigaction after;
+  sigaction(SIGUSR1, NULL, &after);
+  out("reset_reads_dfl", after.sa_handler == SIG_DFL);
+  out("reset_reads_siginfo", (after.sa_flags & SA_SIGINFO) != 0);
+  out("reset_handler_ran", usr1_runs);
+  return 0;
 }
 
 int main(int argc, char** argv) {
@@ -648,6 +748,8 @@ int main(int argc, char** argv) {
   if (!strcmp(mode, "timerfd-flags")) return timerfd_flags();
   if (!strcmp(mode, "many-fds")) return many_fds();
   if (!strcmp(mode, "term-in-wait")) return term_in_wait(argc > 2 ? argv[2] : "nanosleep");
+  if (!strcmp(mode, "self-signal")) return self_signal();
+  if (!strcmp(mode, "dispositions")) return dispositions();
   if (!strcmp(mode, "waits")) { /* N waits of 1 µs, for tests/bench/bench_vtime_wait.cpp */
     const long n = argc > 2 ? atol(argv[2]) : 1000;
     for (long i = 0; i < n; ++i) usleep(1);
