@@ -45,6 +45,16 @@ static void out(const char* name, long long v) {
   fflush(stdout);
 }
 
+static int quiet_socket(void) { /* a UDP socket nobody sends to */
+  int s = socket(AF_INET, SOCK_DGRAM, 0);
+  struct sockaddr_in a;
+  memset(&a, 0, sizeof a);
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  bind(s, (struct sockaddr*)&a, sizeof a);
+  return s;
+}
+
 static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t cv = PTHREAD_COND_INITIALIZER;
 
@@ -173,12 +183,7 @@ static int calls(void) {
   out("epoll_rc", epoll_wait(ep, &ev, 1, 2));
   out("after_epoll", mono());
   /* a UDP socket that nothing reaches: receive timeouts */
-  int s = socket(AF_INET, SOCK_DGRAM, 0);
-  struct sockaddr_in a;
-  memset(&a, 0, sizeof a);
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(s, (struct sockaddr*)&a, sizeof a);
+  int s = quiet_socket();
   struct timeval rt = {0, 5000};
   setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &rt, sizeof rt);
   socklen_t rl = sizeof rt;
@@ -198,6 +203,7 @@ static int calls(void) {
   out("dontwait_errno", errno);
   out("after_spin", mono());
   /* a datagram to itself is there at once: no time passes */
+  struct sockaddr_in a;
   socklen_t al = sizeof a;
   getsockname(s, (struct sockaddr*)&a, &al);
   sendto(s, "x", 1, 0, (struct sockaddr*)&a, sizeof a);
@@ -583,15 +589,6 @@ static void* wait_on_pipe(void* arg) {
   struct pollfd p = {(int)(intptr_t)arg, POLLIN, 0};
   poll(&p, 1, -1);
   return NULL;
-}
-static int quiet_socket(void) { /* a UDP socket nobody sends to */
-  int s = socket(AF_INET, SOCK_DGRAM, 0);
-  struct sockaddr_in a;
-  memset(&a, 0, sizeof a);
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  bind(s, (struct sockaddr*)&a, sizeof a);
-  return s;
 }
 static int term_in_wait(const char* how) {
   struct sigaction sa;
