@@ -324,7 +324,7 @@ TEST_F(CliCheck, RealtimeScenariosRunOneAtATimeWhateverTheJobs) {
 // on the same group and port) is refused before it starts (exit 2, nothing written), naming the
 // holder. Two such runs went on side by side, each master hearing the other's drives: 1,779
 // frames from the other run, 91.67 % dropouts, and no word of it (found in review).
-TEST_F(CliTest, ASecondTwinOnABusAnotherTwinServesIsRefused) {
+TEST_F(CliTest, ASecondRealtimeTwinOnABusAnotherTwinServesIsRefused) {
   const std::string bus = "bus.transport=udp:239.74.163.2:47329";
   const fs::path first = dir_ / "first";
   Child c({"run", test_scenario("can_realtime_short.yaml"), "--set", bus, "--no-progress", "--out", first.string()},
@@ -801,11 +801,11 @@ void expect_interrupt_serves_the_shutdown(const fs::path& out, const std::string
       << failure;
 }
 
-TEST_F(CliRunEnd, AnInterruptToTheTwinAloneServesTheShutdownItsSigtermStarts) {
+TEST_F(CliRunEnd, AnInterruptToARealtimeTwinAloneServesTheShutdownItsSigtermStarts) {
   expect_interrupt_serves_the_shutdown(dir_ / "out", "47335", false, work(), io());
 }
 
-TEST_F(CliRunEnd, ACtrlCAtTheRunsTerminalServesTheShutdownTheMasterStartsItself) {
+TEST_F(CliRunEnd, ACtrlCAtARealtimeRunsTerminalServesTheShutdownTheMasterStartsItself) {
   expect_interrupt_serves_the_shutdown(dir_ / "out", "47337", true, work(), io());
 }
 
@@ -813,7 +813,7 @@ TEST_F(CliRunEnd, ACtrlCAtTheRunsTerminalServesTheShutdownTheMasterStartsItself)
 // left it (setsid) did not have it and gets the twin's SIGTERM, then is served. It got nothing:
 // it drove on for its whole grace and met an unserved bus when SIGTERM came at last (found in
 // review).
-TEST_F(CliRunEnd, ACtrlCAtTheTerminalSendsSigtermToAMasterThatLeftTheTwinsGroup) {
+TEST_F(CliRunEnd, ACtrlCAtARealtimeRunsTerminalSendsSigtermToAMasterThatLeftTheTwinsGroup) {
   const fs::path out = dir_ / "out";
   const int code = run_and_ctrl_c_at_its_terminal(
       {"run", test_scenario("ethercat_short.yaml"), "--clock", "realtime", "--master-cmd",
