@@ -424,19 +424,20 @@ bool pending_for_process(int sig) {
   return (set >> (sig - 1)) & 1ULL;
 }
 
-// The twin sent the process signal `sig` just before this Wake (the SIGTERM of the run's end).
-// `handled`: the signals the program had handlers for when the Wait went out (an SA_RESETHAND
-// handler clears its own on delivery). Its handler runs on a thread the kernel picks, perhaps
-// still now: wait for it to finish, so that the waits it interrupts end at this wake, the same
-// in every run; for as long as the library's watchdog while the signal has been taken (a slow
-// handler), but no more than 50 ms while the signal stays pending for the process (blocked in
-// every thread: it may never run).
-void await_handler(int sig, std::uint32_t before, std::uint64_t handled) {
-  if (sig >= NSIG || !((handled >> (sig - 1)) & 1ULL)) return;
-  const ns_t until = wall_ns() + g.watchdog;
+// A signal was just sent to the process (`before`: g.sigs then; `handled`: the signals the
+// program had handlers for then, since an SA_RESETHAND handler clears its own on delivery). Its
+// handler runs on a thread the kernel picks, perhaps still now: wait for it to finish, so that
+// the waits it interrupts end at the next lead or wake, the same in every run; for at most
+// `limit` [wall ns] while a thread has taken the signal (a slow handler), but no more than 50 ms
+// while it stays pending for the process (blocked in every thread: it may never run). None when
+// the signal had no handler of the program's. Uses: the SIGTERM of the run's end, which the
+// twin names in its Wake (limit: the watchdog), and a signal the process sent itself (100 ms).
+void await_handler(int sig, std::uint32_t before, std::uint64_t handled, ns_t limit) {
+  if (sig <= 0 || sig >= NSIG || !((handled >> (sig - 1)) & 1ULL)) return;
+  const ns_t until = wall_ns() + limit;
   ns_t pending_since = -1;
   while (__atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE) == before && wall_ns() < until) {
-    const timespec step{0, 200'000};
+    const timespec step{0, 100'000};
     syscall(SYS_nanosleep, &step, nullptr);
     if (!pending_for_process(sig)) {
       pending_since = -1;
@@ -499,7 +500,7 @@ bool lead() {
   vt::Record a;
   const bool ok = send_record(r) && recv_record(a);
   if (ok && a.type == vt::Type::wake && a.code > 0)
-    await_handler(static_cast<int>(a.code), sigs_before, handled_before);
+    await_handler(static_cast<int>(a.code), sigs_before, handled_before, g.watchdog);
   pthread_mutex_lock(&g.mu);
   g.leading = false;
   if (!ok || a.type == vt::Type::end || a.type != vt::Type::wake || a.seq != r.seq) {
@@ -585,13 +586,6 @@ int eintr() {
   return -1;
 }
 
-// Makes `w` end when a handler counted in `sigs` (this thread's t_sigs or t_sigs_norestart)
-// runs from now on; null: no signal ends it. Lock held.
-void interruptible_by(Waiter& w, const std::uint32_t* sigs) {
-  w.sigs = sigs;
-  if (sigs) w.sigs_at = __atomic_load_n(sigs, __ATOMIC_ACQUIRE);
-}
-
 // Waits for descriptors or a deadline, or until a handler counted in `sigs` runs. `mask`: the
 // thread's signal mask for the wait's length (ppoll, pselect, epoll_pwait), as the kernel sets
 // it: a signal it unblocks is taken then and ends the wait.
@@ -626,7 +620,8 @@ bool sleep_until(ns_t deadline) {
     if (!over) {
       Waiter w;
       w.deadline = deadline;
-      interruptible_by(w, &t_sigs);
+      w.sigs = &t_sigs;  // any handler on this thread from now on ends it
+      w.sigs_at = __atomic_load_n(&t_sigs, __ATOMIC_ACQUIRE);
       wait_virtual(w);
       interrupted = w.interrupted;
     }
@@ -1405,16 +1400,10 @@ sighandler_t signal(int sig, sighandler_t h) {
 namespace {
 // A signal the process sent itself runs its handler on the thread the kernel picks, perhaps a
 // waiting one, at once but asynchronously: the sender waits (at most 100 ms of wall time) until
-// a handler has run, so that the wait it interrupts is seen ended at the next lead, the same in
-// every run. None when the signal has no handler of the program's; a signal blocked where it
-// went costs the 100 ms and is then left to the kernel.
+// the handler has run, so that the wait it interrupts is seen ended at the next lead, the same
+// in every run (await_handler).
 void await_own_signal(int sig, std::uint32_t before) {
-  if (sig <= 0 || sig >= NSIG || !((__atomic_load_n(&g.handled, __ATOMIC_ACQUIRE) >> (sig - 1)) & 1ULL)) return;
-  const ns_t until = wall_ns() + 100'000'000;
-  while (__atomic_load_n(&g.sigs, __ATOMIC_ACQUIRE) == before && wall_ns() < until) {
-    const timespec step{0, 20'000};
-    syscall(SYS_nanosleep, &step, nullptr);
-  }
+  await_handler(sig, before, __atomic_load_n(&g.handled, __ATOMIC_ACQUIRE), 100'000'000);
 }
 
 bool to_self(pid_t pid) { return pid == 0 || pid == getpid() || pid == -getpgrp(); }
