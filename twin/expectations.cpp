@@ -41,9 +41,10 @@ constexpr std::array<std::string_view, 25> kBusMetrics = {
 // The twin's view (lockstep report, realtime supervision: lost_at_s; a master on its own
 // clock: sigterm_at_s, exited_at_s, shutdown_s at the run's end) and the EtherCAT and
 // M-III masters' own counters (master-stats.json: segment losses and returns among them;
-// M-III: exchanges … int_offset_ns, summed over the slaves where per slave; CANopen: syncs …
+// M-III: exchanges … int_offset_ns, summed over the slaves where per slave, and on the wall
+// clock wakes_late and wake_late_max_ns, its deadlines reached half a cycle or more late; CANopen: syncs …
 // tpdo_rx, with recoveries = drives brought back to OPERATIONAL; TML: answers, axes_lost).
-constexpr std::array<std::string_view, 40> kMasterMetrics = {
+constexpr std::array<std::string_view, 42> kMasterMetrics = {
     "stopped_at_s", "stop_reason_code", "missing_node", "path_origin_s", "ticks",      "cycles",
     "wkc_errors",   "lost_frames",      "recoveries",   "slaves_lost",   "timeouts",   "sdo_failed",
     "last_wkc",     "segment_losses",   "segment_returns", "lost_at_s",
@@ -51,7 +52,7 @@ constexpr std::array<std::string_view, 40> kMasterMetrics = {
     "lost_axis",    "foreign_master_frames", "min_cycle_ns", "int_offset_ns",
     "syncs",        "sdo_done",         "sdo_aborts",   "emcy",          "heartbeat_timeouts", "boot_ups",
     "tpdo_rx",      "answers",          "axes_lost",    "emergencies",
-    "sigterm_at_s", "exited_at_s",      "shutdown_s",   "exit_code"};
+    "sigterm_at_s", "exited_at_s",      "shutdown_s",   "exit_code",     "wakes_late", "wake_late_max_ns"};
 // Per slave: CAN's first nine, EtherCAT's next three, M-III's next nine, CANopen's last nine
 // (tec, bus_off_events and error_code serve CANopen too), then TML's three; then the drive
 // core's mode of operation (0x6061; every bus with CiA 402 drives) and EtherCAT's SYNC0.

@@ -242,6 +242,11 @@ void print_summary(const RunResult& r) {
                              ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
                              counter(ms, "cycles"), sum(retries), sum(missed), sum(late), b.value("frames_rx", 0),
                              b.value("frames_tx", 0), b.value("lost_frames", 0), b.value("corrupted_frames", 0));
+    // A master on the wall clock that the host stalled: its late SYNCs explain the servos' alarms.
+    if (ms.value("wakes_late", std::uint64_t{0}) > 0)
+      std::cout << fmt::format("  master stalled by the host: {} deadlines reached half a cycle or more late, at worst "
+                               "{:.3f} ms\n",
+                               ms.value("wakes_late", std::uint64_t{0}), ms.value("wake_late_max_ns", 0.0) * 1e-6);
   } else if (m.contains("master") && m["bus"].value("name", "") == "canopen") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];

@@ -366,12 +366,28 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
   }
 }
 
+// Wall clock: how late the program reached the core's deadlines in cyclic communication (a
+// host that stalls the master: its SYNC then goes out late and the servos may raise COMM_ALM).
+// late: deadlines reached half a cycle or more after they were due. Real-time safe.
+// add() says whether this one was late; the first kLogged are logged with their instant.
+struct WallLateness {
+  static constexpr std::uint64_t kLogged = 20;
+  SimTime max_ns = 0;
+  std::uint64_t late = 0;
+  bool add(SimTime late_ns, SimTime cycle_ns) {
+    max_ns = std::max(max_ns, late_ns);
+    if (2 * late_ns < cycle_ns) return false;
+    ++late;
+    return true;
+  }
+};
+
 // Wall clock: the core's next deadline is waited for on the transport; frames are handed over
 // as they arrive. A driver that failed detection (the twin not up yet) starts again. At the end
 // (--duration, SIGINT/SIGTERM) every servo to zero speed, SV_OFF and DISCONNECT, the exchanges
 // going on until every servo answered or kShutdownNs is over.
 int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::function<std::unique_ptr<Runner>()>& make,
-             std::unique_ptr<Runner>& r, M3Transport& tr, int sigfd, std::uint64_t& rx) {
+             std::unique_ptr<Runner>& r, M3Transport& tr, int sigfd, std::uint64_t& rx, WallLateness& lateness) {
   controller::try_realtime(kRtPriority);
   const std::int64_t start = controller::monotonic_ns();
   const std::int64_t end = o.duration >= 0 ? std::llround(o.duration * 1e9) : std::numeric_limits<std::int64_t>::max();
@@ -393,6 +409,11 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
     now = controller::monotonic_ns() - start;
     if (n > 0) ++rx;
     if (n > 0) r->master().on_frame(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), now);
+    const SimTime due = r->master().next_wakeup();
+    if (due >= 0 && due <= now && r->master().state() == DriverState::cyclic && lateness.add(now - due, tick) &&
+        lateness.late <= WallLateness::kLogged)
+      spdlog::warn("{} deadline reached {} µs late{}", stamp(now), (now - due) / 1000,
+                   lateness.late == WallLateness::kLogged ? " (later ones are only counted)" : "");
     r->master().advance(now);
   };
   for (;;) {
@@ -418,10 +439,16 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
   return r->failed() ? kExitRuntime : kExitOk;
 }
 
-bool write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std::uint64_t rx) {
+// lateness: the wall clock's, nullptr in lockstep (simulated time is never late).
+bool write_stats(const std::string& path, const Runner& r, std::uint64_t tx, std::uint64_t rx,
+                 const WallLateness* lateness) {
   nlohmann::json j = r.stats();
   j["frames_tx"] = tx;
   j["frames_rx"] = rx;
+  if (lateness) {
+    j["wakes_late"] = lateness->late;
+    j["wake_late_max_ns"] = lateness->max_ns;
+  }
   return controller::write_stats_file(path, j.dump());
 }
 
@@ -478,6 +505,7 @@ int run_m3_program(const ProgramOptions& o) {
   int code = kExitOk;
   std::unique_ptr<Runner> runner;
   std::uint64_t tx = 0, rx = 0;
+  WallLateness lateness;
   try {
     if (o.clock == "sim") {
       simclock::Client client(o.sim_clock, kConnectTimeout, sigfd);
@@ -499,7 +527,11 @@ int run_m3_program(const ProgramOptions& o) {
         });
       };
       runner = make();
-      code = run_wall(o, pc, make, runner, *tr, sigfd, rx);
+      code = run_wall(o, pc, make, runner, *tr, sigfd, rx, lateness);
+      if (lateness.late > 0)
+        spdlog::warn("{} of the master's deadlines were reached half a cycle or more late (at worst {} µs): the "
+                     "host stalled this process, so SYNC and commands went out late",
+                     lateness.late, lateness.max_ns / 1000);
     }
   } catch (const RuntimeFailure& f) {
     spdlog::error("{}", f.message);
@@ -511,7 +543,7 @@ int run_m3_program(const ProgramOptions& o) {
   if (runner) {
     if (runner->failed()) code = kExitRuntime;
     log_end(*runner);
-    if (!o.stats.empty() && !write_stats(o.stats, *runner, tx, rx)) code = kExitRuntime;
+    if (!o.stats.empty() && !write_stats(o.stats, *runner, tx, rx, o.clock == "sim" ? nullptr : &lateness)) code = kExitRuntime;
   }
   if (sigfd >= 0) ::close(sigfd);
   return code;

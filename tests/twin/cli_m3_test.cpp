@@ -44,6 +44,7 @@ void expect_clean_run(const Finished& f, const nlohmann::json& m) {
   EXPECT_EQ(ms.at("retries"), 0);
   EXPECT_GT(ms.at("cycles").get<int>(), 4000);
   EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
+  EXPECT_FALSE(ms.contains("wakes_late")) << "simulated time is never late: " << ms.dump(2);
   for (const auto& s : m.at("slaves")) {
     EXPECT_EQ(s.at("phase"), 3);
     EXPECT_EQ(s.at("comm_alarms"), 0);
@@ -177,10 +178,40 @@ TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   EXPECT_EQ(s.at("driver_state"), "cyclic communication") << s.dump(2);
   EXPECT_GT(s.at("cycles").get<int>(), 800);  // 2 s at servos_only.yaml's 2 ms cycle, less the start-up
   EXPECT_EQ(s.at("state"), "running") << "every servo in operation, none lost: " << s.dump(2);
+  EXPECT_LE(s.at("wakes_late").get<std::uint64_t>(), s.at("cycles").get<std::uint64_t>()) << s.dump(2);
   for (const auto& sl : s.at("slaves")) {
     EXPECT_EQ(sl.at("axis_step"), "released") << s.dump(2);
     EXPECT_GT(sl.at("tr_dly_ns").get<int>(), 1000) << "across processes the round trip is microseconds";
   }
+}
+
+// A master the host stalls (here SIGSTOP for 50 ms) says so: its statistics count the deadlines
+// it reached half a cycle or more late and the worst lateness, and its log names the instant.
+TEST_F(CliM3, AMasterStalledOnTheWallClockCountsItsLateDeadlines) {
+  const std::string iface = "udp:127.0.0.1:47713";
+  Child twin({"twin", test_scenario("m3_short.yaml"), "--bus", "m3", "--set", "bus.transport=" + iface, "--set",
+              "duration=30", "--out", (dir_ / "twin").string(), "--no-progress"},
+             work(), io());
+  ASSERT_TRUE(twin.wait_for_output("a C1 master connects on")) << twin.out() << twin.err();
+  const fs::path stats = dir_ / "master-stats.json";
+  Child master(binary_path("controller/omni-master"),
+               {"--bus", "m3", "--iface", iface, "--config", source_path("tests/data/m3/servos_only.yaml"), "--duration",
+                "2", "--stats", stats.string()},
+               work(), io(), "master-");
+  for (int i = 0; i < 1000 && !contains(master.err(), "(06h): running") && master.running(); ++i)
+    std::this_thread::sleep_for(10ms);
+  ASSERT_TRUE(contains(master.err(), "(06h): running")) << master.err();
+  master.signal(SIGSTOP);
+  std::this_thread::sleep_for(50ms);
+  master.signal(SIGCONT);
+  EXPECT_NE(master.wait(30s), -1) << master.err();
+  twin.signal(SIGINT);
+  EXPECT_NE(twin.wait(30s), -1);
+  const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
+  EXPECT_GE(s.at("wakes_late").get<int>(), 1) << s.dump(2);
+  EXPECT_GE(s.at("wake_late_max_ns").get<std::int64_t>(), 40'000'000) << s.dump(2);
+  EXPECT_TRUE(contains(master.err(), "deadline reached")) << master.err();
+  EXPECT_TRUE(contains(master.err(), "the host stalled this process")) << master.err();
 }
 
 }  // namespace
