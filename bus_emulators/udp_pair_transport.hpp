@@ -114,7 +114,11 @@ class UdpPairTransport final : public Traits::Base {
       }
       if (role_ == Role::slaves) {
         const std::span<const std::uint8_t> sender(reinterpret_cast<const std::uint8_t*>(&from), msg.msg_namelen);
-        if (!gate_.admit(sender, stats_.foreign_sender, stats_.refused_sender)) continue;
+        const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                     std::chrono::steady_clock::now().time_since_epoch())
+                                     .count();
+        if (!gate_.admit(sender, now, stats_.foreign_sender, stats_.refused_sender)) continue;
+        stats_.master_changes = gate_.changes();
         remember_sender(from, msg.msg_namelen);
       }
       ++stats_.received;
@@ -141,6 +145,7 @@ class UdpPairTransport final : public Traits::Base {
   // set of them virtual (spec() and last_age_ns() only M-III's), so `override` cannot be
   // written on all, and clang warns when only some carry it.
   void set_refuse_foreign_senders(bool refuse) { gate_.set_refuse(refuse); }
+  void set_master_handover(std::int64_t silent_ns) { gate_.set_handover(silent_ns); }
 
  private:
   // Fills peer_ from spec_; returns the address family.

@@ -30,6 +30,12 @@
 
 namespace omnitwin::twin {
 
+// On the wall clock (realtime runs, `omnitwin twin`) a sender the bus hears after its master
+// has been silent this long is taken for the master: a master started again on UDP sends from
+// a new port (it was counted foreign, and refused with bus.refuse_foreign). A second program
+// sending while the master is active stays foreign. [ns]
+inline constexpr std::int64_t kMasterHandoverNs = 500'000'000;
+
 // One wheel's drive for trajectory.csv (docs/run-directory.md gives each bus's meaning). The
 // motor setpoint is not here: the run records what the network last asked of the physics.
 struct WheelRecord {

@@ -54,6 +54,7 @@ CanWire::CanWire(const Scenario& s, int nodes, bool batch)
   else if (t.kind == can::TransportSpec::Kind::socketcan)
     claim_ = std::make_unique<BusClaim>("socketcan:" + t.name);
   transport_ = can::open_transport(s.bus.can.transport);
+  handover_ = s.clock != ClockMode::lockstep;
   pending_.reserve(kPendingCapacity);
 }
 
@@ -79,6 +80,12 @@ void CanWire::submit_from_far(const can::Frame& f, SimTime t) {
 void CanWire::take_from_far(const can::TimedFrame& r, SimTime t) {
   if (r.sender != 0) {
     if (master_sender_ == 0) master_sender_ = r.sender;  // the first sender is the master
+    // A master started again (a new UDP port) once the old one has been silent long enough.
+    if (r.sender != master_sender_ && handover_ && t - master_last_ >= kMasterHandoverNs) {
+      master_sender_ = r.sender;
+      ++master_changes_;
+    }
+    if (r.sender == master_sender_) master_last_ = t;
     if (r.sender != master_sender_) {
       ++foreign_frames_;
       if (s_.bus.can.refuse_foreign) {
@@ -217,6 +224,7 @@ nlohmann::json CanWire::metrics(const char* name, SimTime now) const {
           {"refused_from_transport", refused_from_far_},
           {"foreign_frames", foreign_frames_},   // from a transport sender other than the master
           {"refused_frames", refused_foreign_},  // … of which kept off the wire (bus.refuse_foreign)
+          {"master_changes", master_changes_},   // senders taken for the master from a silent one
           {"transport_rx_malformed", malformed_rx()},
           {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)
           {"pcap_frames", pcap_ ? pcap_->written() : 0}};

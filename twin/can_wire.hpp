@@ -123,6 +123,10 @@ class CanWire {
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
   std::uint64_t master_sender_ = 0;                  // the first sender seen (0: none yet)
   std::uint64_t foreign_frames_ = 0, refused_foreign_ = 0;
+  // Realtime: a sender heard after the master's kMasterHandoverNs of silence is the master.
+  bool handover_ = false;
+  SimTime master_last_ = 0;  // the master's last frame
+  std::uint64_t master_changes_ = 0;
 };
 
 }  // namespace omnitwin::twin

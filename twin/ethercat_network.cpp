@@ -147,6 +147,7 @@ void EthercatNetwork::open_transport(const Scenario& s) {
   master_iface_ = line.master_iface.empty() ? line.slaves_spec : line.master_iface;
   transport_ = ethercat::open_transport(transport_spec_, ethercat::Role::slaves);
   transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
+  if (!(lockstep)) transport_->set_master_handover(kMasterHandoverNs);
   // A UDP segment on port 0: the master is told the port the slaves' socket was given.
   if (const auto* udp = dynamic_cast<const ethercat::UdpTransport*>(transport_.get()); udp) {
     ethercat::TransportSpec t = ethercat::parse_transport_spec(transport_spec_);
@@ -494,6 +495,7 @@ nlohmann::json EthercatNetwork::bus_metrics(SimTime now) const {
           {"lost_frames", lost_frames_},
           {"foreign_frames", transport_->stats().foreign_sender},  // from a second sender
           {"refused_frames", transport_->stats().refused_sender},
+          {"master_changes", transport_->stats().master_changes},  // senders taken for the master from a silent one
           // EtherCAT frames of another header type than 1 (network variables, mailbox gateway)
           {"other_pdu_types", transport_->stats().dropped_foreign},
           {"not_returned", not_returned_},

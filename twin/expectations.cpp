@@ -28,14 +28,14 @@ constexpr std::array<std::string_view, 4> kDriveMetrics = {"all_running_at_s", "
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
-// M-III's, the next three CANopen's; foreign_frames and refused_frames EtherCAT's and the
-// CAN family's over UDP; extended_frames the CAN family's: frames with a 29-bit identifier).
-constexpr std::array<std::string_view, 25> kBusMetrics = {
+// M-III's, the next three CANopen's; foreign_frames, refused_frames and master_changes
+// EtherCAT's, M-III's and the CAN family's over UDP; extended_frames the CAN family's: frames with a 29-bit identifier).
+constexpr std::array<std::string_view, 26> kBusMetrics = {
     "frames_tx",    "frames_rx",   "dropouts",       "dropout_rate", "errors",       "frames",
     "error_frames", "lost_frames", "bus_off_events", "load",         "transport_rx_malformed",
     "not_returned", "malformed",   "send_failures",  "overflow",     "op_since_s",
     "corrupted_frames", "servos_on_since_s", "emcy", "sdo_aborts", "power_cycles",
-    "foreign_frames", "refused_frames", "extended_frames", "other_pdu_types"};
+    "foreign_frames", "refused_frames", "extended_frames", "other_pdu_types", "master_changes"};
 // The master's reaction: when it stopped, why (simclock::StopReason code), which node; for
 // bus ethercat also its own counters (from the master's statistics file).
 // The twin's view (lockstep report, realtime supervision: lost_at_s; a master on its own

@@ -69,6 +69,7 @@ void M3Network::open_transport(const Scenario& s) {
   if (!veth_) claim_interfaces(claims_, {transport_spec_, line.master_iface});
   transport_ = m3::open_transport(transport_spec_, m3::Role::slaves);
   transport_->set_refuse_foreign_senders(spec_.refuse_foreign);
+  if (!(s.clock == ClockMode::lockstep)) transport_->set_master_handover(kMasterHandoverNs);
   // UDP on port 0: the master is told the port the slaves' socket was given.
   master_iface_ = line.master_iface.empty() ? transport_->spec() : line.master_iface;
 }
@@ -362,6 +363,7 @@ nlohmann::json M3Network::bus_metrics(SimTime now) const {
           {"malformed", ts.dropped_malformed},
           {"foreign_frames", ts.foreign_sender},  // from a sender other than the first (the master)
           {"refused_frames", ts.refused_sender},  // … of which dropped (bus.refuse_foreign)
+          {"master_changes", ts.master_changes},  // senders taken for the master from a silent one
           {"send_failures", segment_->send_failures()},
           {"overflow", segment_->line().overflow()},
           {"load", sim_s > 0 ? static_cast<double>(segment_->busy_ns()) * 1e-9 / sim_s : 0.0},

@@ -26,6 +26,7 @@
 
 #include "media/run_video.hpp"
 #include "physics/platform_mjcf.hpp"
+#include "twin/bus_network.hpp"
 #include "twin/check.hpp"
 #include "twin/clock.hpp"
 #include "twin/dds/dds_echo.hpp"
@@ -286,6 +287,11 @@ void print_summary(const RunResult& r) {
                              b.value("foreign_frames", std::uint64_t{0}), b.value("refused_frames", std::uint64_t{0}),
                              b.value("transport", std::string("the bus")));
   }
+  // A master started again on UDP: its new address taken over from the silent old one.
+  if (m.contains("bus") && m["bus"].value("master_changes", std::uint64_t{0}) > 0)
+    std::cout << fmt::format("  bus: a new sender was taken for the master {} time(s), each after the master before it "
+                             "had been silent {:.1f} s (a master started again)\n",
+                             m["bus"].value("master_changes", std::uint64_t{0}), kMasterHandoverNs * 1e-9);
   // The end of a master on its own clock: the SIGTERM at `duration`, served until it exited.
   if (m.contains("master") && m["master"].value("sigterm_at_s", -1.0) >= 0) {
     const auto& ms = m["master"];

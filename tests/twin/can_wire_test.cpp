@@ -3,7 +3,8 @@
 // a frame from the far side does not go back and is handed to the protocol, frames from the
 // transport enter the wire at t + T_pre, frame loss and delay act and are counted, the
 // metrics count what happened; frames from a second transport sender are counted and, when the
-// scenario refuses foreign senders, kept off the wire (over mem: and over real UDP multicast).
+// scenario refuses foreign senders, kept off the wire (over mem: and over real UDP multicast);
+// on the wall clock a new sender takes over from a master silent for the handover time.
 // Over the in-process `mem:` transport unless a test says otherwise.
 #include <gtest/gtest.h>
 
@@ -12,6 +13,7 @@
 #include <atomic>
 
 #include "bus_emulators/can/transport_mem.hpp"
+#include "twin/bus_network.hpp"
 #include "twin/can_wire.hpp"
 
 namespace {
@@ -137,6 +139,34 @@ TEST(CanWire, ASecondSenderIsCountedAndRefusedWhenAsked) {
     EXPECT_EQ(m["foreign_frames"], 2) << refuse;
     EXPECT_EQ(m["refused_frames"], refuse ? 2 : 0);
     EXPECT_EQ(w.at_node.size(), refuse ? 2u : 4u) << "what reached node 1";
+  }
+}
+
+// On the wall clock a sender heard after the master's kMasterHandoverNs of silence is the master
+// (a master started again on UDP has a new port): taken even when foreign senders are refused,
+// and the old one is foreign from then on. In lockstep the first sender stays the master.
+TEST(CanWire, OnTheWallClockANewSenderTakesOverFromASilentMaster) {
+  for (ClockMode clock : {ClockMode::realtime, ClockMode::lockstep}) {
+    const bool wall = clock == ClockMode::realtime;
+    const std::string name = unique_bus();
+    Scenario s = with_refuse(scenario(name), true);
+    s.clock = clock;
+    can::MemTransport first(name), again(name);
+    CanWire wire(s, 2, false);
+    const SimTime h = kMasterHandoverNs;
+    ASSERT_TRUE(first.send(frame(0x000)));
+    ASSERT_TRUE(wire.drain_transport(1, 0, std::chrono::milliseconds(1000)));
+    ASSERT_TRUE(again.send(frame(0x000)));  // the master still within its handover time
+    ASSERT_TRUE(wire.drain_transport(2, h - 1, std::chrono::milliseconds(1000)));
+    ASSERT_TRUE(again.send(frame(0x000)));  // silent for the handover time
+    ASSERT_TRUE(wire.drain_transport(3, h, std::chrono::milliseconds(1000)));
+    ASSERT_TRUE(first.send(frame(0x000)));
+    ASSERT_TRUE(wire.drain_transport(4, h + 1, std::chrono::milliseconds(1000)));
+    const auto m = wire.metrics("can", h + 2);
+    EXPECT_EQ(m["master_changes"], wall ? 1 : 0) << wall;
+    // wall: again's first and first's last; lockstep: both of again's
+    EXPECT_EQ(m["foreign_frames"], 2) << wall;
+    EXPECT_EQ(m["refused_frames"], 2) << wall;
   }
 }
 

@@ -24,6 +24,7 @@
 #include "bus_emulators/ethercat/ec_frame.hpp"
 #include "tests/support/veth.hpp"
 #include "tests/twin/cli_support.hpp"
+#include "twin/bus_network.hpp"
 
 namespace omnitwin::twin::cli {
 namespace {
@@ -304,6 +305,37 @@ TEST_F(CliEthercat, ExternalMasterNoticesTheTwinVanishing) {
   EXPECT_GT(m.at("lost_frames").get<int>(), 500);
   EXPECT_TRUE(contains(m.at("stop_reason").get<std::string>(), "segment lost")) << m.dump(2);
   EXPECT_TRUE(contains(master.out() + master.err(), "segment lost")) << master.err();
+}
+
+// A master started again against `omnitwin twin` on UDP sends from a new port. Once the first
+// has been silent for the handover time the new one is the twin's master: answered even with
+// bus.refuse_foreign, none of its frames foreign, and the change counted and said.
+TEST_F(CliEthercat, AMasterStartedAgainOnTheWallClockIsTheTwinsMaster) {
+  const std::string iface = "udp:127.0.0.1:47614";
+  Child twin({"twin", test_scenario("ethercat_short.yaml"), "--bus", "ethercat", "--set", "bus.transport=" + iface,
+              "--set", "bus.refuse_foreign=true", "--set", "duration=60", "--out", (dir_ / "twin").string(),
+              "--no-progress"},
+             work(), io());
+  ASSERT_TRUE(twin.wait_for_output("a master connects on")) << twin.out() << twin.err();
+  for (const char* name : {"first", "again"}) {
+    const fs::path stats = dir_ / (std::string(name) + ".json");
+    Child master(binary_path("controller/omni-master"),
+                 {"--bus", "ethercat", "--iface", iface, "--config", source_path("tests/data/ethercat/drives_only.yaml"),
+                  "--duration", "1", "--stats", stats.string()},
+                 work(), io(), std::string(name) + "-");
+    EXPECT_EQ(master.wait(30s), 0) << master.out() << master.err();
+    const nlohmann::json m = nlohmann::json::parse(read_bytes(stats));
+    EXPECT_TRUE(m.at("operational").get<bool>()) << name << ": " << m.dump(2);
+    EXPECT_EQ(m.at("wkc_errors"), 0) << name << ": " << m.dump(2);
+    std::this_thread::sleep_for(std::chrono::nanoseconds(kMasterHandoverNs) + 100ms);
+  }
+  twin.signal(SIGINT);
+  EXPECT_NE(twin.wait(30s), -1);
+  const nlohmann::json b = nlohmann::json::parse(read_bytes(dir_ / "twin" / "metrics.json")).at("bus");
+  EXPECT_EQ(b.at("master_changes"), 1) << b.dump(2);
+  EXPECT_EQ(b.at("foreign_frames"), 0) << b.dump(2);
+  EXPECT_EQ(b.at("refused_frames"), 0) << b.dump(2);
+  EXPECT_TRUE(contains(twin.out(), "a new sender was taken for the master 1 time(s)")) << twin.out();
 }
 
 // Issue 16 item 7: the twin takes the first sender as the master. Frames from a second one (a

@@ -70,6 +70,11 @@ class EcTransport {
   // another address on udp) are counted (Stats::foreign_sender) and, when refuse is true,
   // dropped before they are answered or become the reply's address. mem has no senders.
   virtual void set_refuse_foreign_senders(bool /*refuse*/) {}
+  // slaves: a sender heard after the master has been silent for silent_ns becomes the master
+  // (Stats::master_changes): a master started again on udp sends from a new port. < 0 (the
+  // default): never. raw keeps the first MAC (a master started again has the same one); mem
+  // has no senders. Set before the first receive.
+  virtual void set_master_handover(std::int64_t /*silent_ns*/) {}
   // A descriptor that polls readable (POLLIN) while a PDU may be waiting, for event loops.
   virtual int fd() const = 0;
   // The canonical spec and the role, e.g. "raw:eth1 (master, 00:1b:21:0a:0b:0c)".
@@ -87,6 +92,7 @@ class EcTransport {
     std::uint64_t receive_errors = 0;     // the OS reported a receive error
     std::uint64_t foreign_sender = 0;     // slaves: frames from a sender other than the first (the master)
     std::uint64_t refused_sender = 0;     // … of which refused (set_refuse_foreign_senders)
+    std::uint64_t master_changes = 0;     // slaves: senders taken for the master from a silent one
   };
   virtual Stats stats() const = 0;
 };

@@ -122,7 +122,7 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     }
     if (role_ == Role::slaves) {
       // The first source MAC is the master's; another one is a foreign sender.
-      if (!gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), stats_.foreign_sender, stats_.refused_sender))
+      if (!gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), 0, stats_.foreign_sender, stats_.refused_sender))
         continue;
       reply_hdr_ = rx_hdr_;
       reply_hdr_[6] |= 0x02;  // bit 1 of the first source-MAC byte: "passed a slave"

@@ -97,10 +97,13 @@ class M3Transport {
     std::uint64_t receive_errors = 0;     // the OS reported a receive error
     std::uint64_t foreign_sender = 0;     // slaves: frames from a sender other than the first (the master)
     std::uint64_t refused_sender = 0;     // … of which refused (set_refuse_foreign_senders)
+    std::uint64_t master_changes = 0;     // slaves: senders taken for the master from a silent one
   };
   virtual Stats stats() const = 0;
   // slaves: see EcTransport::set_refuse_foreign_senders.
   virtual void set_refuse_foreign_senders(bool /*refuse*/) {}
+  // slaves: see EcTransport::set_master_handover.
+  virtual void set_master_handover(std::int64_t /*silent_ns*/) {}
 };
 
 // Set-up errors: a bad spec, a missing interface or privilege, a port in use. The message names

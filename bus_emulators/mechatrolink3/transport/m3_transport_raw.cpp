@@ -138,7 +138,7 @@ int RawTransport::receive(std::span<std::uint8_t> buf, std::chrono::nanoseconds 
     }
     // Slaves: the first source MAC is the master's; another one is a foreign sender.
     if (role_ == Role::slaves &&
-        !gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), stats_.foreign_sender, stats_.refused_sender))
+        !gate_.admit(std::span<const std::uint8_t>(rx_hdr_.data() + 6, 6), 0, stats_.foreign_sender, stats_.refused_sender))
       continue;
     ++stats_.received;
     last_age_ns_ = detail::ReceiveStamp::age_ns(msg);
