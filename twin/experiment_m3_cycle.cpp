@@ -3,7 +3,7 @@
 // against the cyclic mode's is experiment_m3_latency.cpp, written into the same README).
 //
 // Two halves, kept apart so the second can check the first:
-//   1. computed: m3::plan_cycle for 1 … 62 slaves × 16/32/48/64 bytes × cascade/star (10 m
+//   1. computed: m3::plan_cycle for 1 … 62 slaves × 8/16/32/48/64 bytes × cascade/star (10 m
 //      cables, the wire model's default delays) × 0/1/2 retry slots → shortest_cycle.csv and
 //      m3_cycle.png (media/plots/plot_experiment.py, as the other experiments);
 //   2. run: for a few configurations, our C1 master, the in-process line and emulated servo
@@ -43,7 +43,7 @@ using m3::SimTime;
 constexpr double kCableM = 10.0;
 constexpr SimTime kUsNs = 1'000, kMsNs = 1'000'000;
 constexpr SimTime kGapNs = m3::kInterFrameGapNs;
-constexpr std::array<int, 4> kDataBytes{16, 32, 48, 64};
+constexpr std::array<int, 5> kDataBytes{8, 16, 32, 48, 64};
 constexpr std::array<int, 3> kRetrySlots{0, 1, 2};
 constexpr std::array<SimTime, 4> kBudgetsNs{125'000, 250'000, 500'000, 1'000'000};
 constexpr double kCountsPerRev = 10'000;
@@ -359,7 +359,7 @@ std::vector<M3CycleTrial> verification_set(bool quick) {
   std::vector<M3CycleTrial> set;
   const std::vector<int> slaves = quick ? std::vector<int>{1, 16} : std::vector<int>{1, 4, 16, 62};
   for (const bool star : {false, true})
-    for (const int bytes : {32, 64})
+    for (const int bytes : {8, 32, 64})
       for (const int n : slaves) set.push_back(M3CycleTrial{.star = star, .slaves = n, .data_bytes = bytes});
   return set;
 }
@@ -483,7 +483,7 @@ std::string verified_section(const std::vector<M3CycleVerified>& rows, bool ok) 
       "## Verified by running it\n\n"
       "Each configuration (1 retry slot) ran on our C1 master over the in-process line with emulated servo "
       "slaves: at the planned shortest cycle rounded up to whole µs (32 bytes: the servo start-up of fig. 8 to "
-      "phase 3 and VELCTRL at 1 rev/s; 64 bytes, which the servo profile does not take: NOP in phase 1), then "
+      "phase 3 and VELCTRL at 1 rev/s; 8 and 64 bytes, which the servo profile does not take: NOP in phase 1), then "
       "{} cycles more; and 1 µs below, which the master must refuse naming the shortest cycle. The last "
       "response of each cycle must arrive exactly INT_OFFSET − retry room − n × margin − one gap after the "
       "cycle's SYNC (the line's delays and the plan are the same arithmetic; the margins and the last gap are "

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <map>
 #include <sstream>
 #include <string>
@@ -49,7 +51,7 @@ TEST(M3CycleExperiment, QuickRunPlansGrowingCyclesAndVerifiesThemToTheNanosecond
   omnitwin::testing::TempDir dir("omnitwin-m3cycle");
   ASSERT_EQ(run_experiment("m3-cycle", {dir.path().string(), true}), kExperimentOk);
   const auto plan = read_csv(dir / "shortest_cycle.csv");
-  ASSERT_EQ(plan.size(), 2u * 4u * 3u * 7u) << "topologies × data lengths × retry slots × slave counts";
+  ASSERT_EQ(plan.size(), 2u * 5u * 3u * 7u) << "topologies × data lengths × retry slots × slave counts";
   std::map<Config, std::map<int, long long>> curves;  // config → slaves → min cycle
   for (const CsvRow& r : plan) {
     EXPECT_GT(num(r, "min_cycle_ns"), num(r, "int_offset_ns"));
@@ -67,7 +69,9 @@ TEST(M3CycleExperiment, QuickRunPlansGrowingCyclesAndVerifiesThemToTheNanosecond
     }
   }
   const auto verified = read_csv(dir / "verified.csv");
-  ASSERT_EQ(verified.size(), 8u);
+  ASSERT_EQ(verified.size(), 12u);  // 2 topologies × 8/32/64 bytes × 1 and 16 slaves
+  EXPECT_EQ(std::count_if(verified.begin(), verified.end(), [](const CsvRow& r) { return r.at("data_bytes") == "8"; }), 4)
+      << "the shortest data length the seed names is run too";
   for (const CsvRow& r : verified) {
     EXPECT_EQ(r.at("ok"), "1") << r.at("why");
     EXPECT_EQ(r.at("shorter_refused"), "1");
