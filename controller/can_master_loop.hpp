@@ -186,8 +186,9 @@ bool drain_until(can::Transport& tr, Runner& r, std::uint64_t target, std::int64
 
 // Lockstep with the twin until it ends the run (End), a signal, or a failure (throws
 // LoopFailure / simclock::ChannelError). The bus is read while the grant is awaited
-// (HeldFrames); the frames a grant counts may take `frames_timeout` to arrive. After a signal
-// the next tick the twin grants runs r.shutdown() instead of r.tick(), and the ticks after it
+// (HeldFrames); the frames a grant counts may take `frames_timeout` to arrive. After a signal,
+// or from the first grant with `stop` (the run's end: the same every run), the next tick the
+// twin grants runs r.shutdown() instead of r.tick(), and the ticks after it
 // r.end_tick() until r.shut_down() (the end sequence the wall clock's end sends, counted in
 // each tick's Done so the twin delivers it; the core bounds its length); without such grants
 // (End, the twin gone, nothing in 1 s) the end sequence cannot reach the simulated bus and is
@@ -218,6 +219,7 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
     if (w == simclock::WaitStatus::closed && end.t_ns != kNoEnd) return 0;
     if (w == simclock::WaitStatus::closed) throw LoopFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw LoopFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
+    stopping = stopping || g.stop;  // the run's end, in simulated time (as a signal here)
     held.hand_to(r, g.t_ns);
     if (!drain_until(tr, r, g.frames[0], g.t_ns, frames_timeout))
       throw LoopFailure{drain_failure(g.tick, r.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};

@@ -71,7 +71,7 @@ const char* to_string(WaitStatus s) {
 //   0 u32 magic, 4 u16 version, 6 u8 type (1 Hello, 2 Grant, 3 Done, 4 End, 5 Sent,
 //   6 Horizon), 7 u8 reserved = 0
 //   Hello  8 u32 pid
-//   Grant  8 u64 tick, 16 i64 t_ns, 24 4×u64 frames
+//   Grant  8 u64 tick, 16 i64 t_ns, 24 4×u64 frames, 56 u8 stop (0/1)
 //   Done   8 u64 tick, 16 4×u64 frames, 48 u8 state, 49 u8 reason, 50 u8 node, 51 u8 pad = 0,
 //          52 i64 path_origin_ns, 60 3×f32 reference, 72 3×f32 odometry
 //   End    8 i64 t_ns
@@ -163,6 +163,7 @@ void write_body(Writer& w, const Grant& g) {
   w.u64(g.tick);
   w.i64(g.t_ns);
   for (std::uint64_t f : g.frames) w.u64(f);
+  w.u8(g.stop ? 1 : 0);
 }
 
 void write_body(Writer& w, const Done& d) {
@@ -229,6 +230,9 @@ Decoded read_body(Reader& r, std::uint8_t type) {
       g.tick = r.u64();
       g.t_ns = r.i64();
       for (std::uint64_t& f : g.frames) f = r.u64();
+      const std::uint8_t stop = r.u8();
+      if (stop > 1) return DecodeError::bad_value;
+      g.stop = stop == 1;
       return Message{g};
     }
     case Type::done: return read_done(r);

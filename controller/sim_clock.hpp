@@ -35,7 +35,7 @@
 namespace omnitwin::simclock {
 
 inline constexpr std::uint32_t kMagic = 0x4353544fu;  // "OTSC" little-endian
-inline constexpr std::uint16_t kVersion = 1;
+inline constexpr std::uint16_t kVersion = 2;  // 2: Grant.stop
 inline constexpr std::size_t kMaxBuses = 4;           // per-bus counts carried per message
 inline constexpr std::size_t kMessageSize = 96;       // bytes on the wire, every message
 
@@ -84,6 +84,10 @@ struct Grant {  // twin → master: run tick `tick` at `t_ns`
   std::uint64_t tick = 0;
   std::int64_t t_ns = 0;                       // simulated time of the tick [ns]
   std::array<std::uint64_t, kMaxBuses> frames{};  // frames the twin has sent per bus, cumulative
+  // The run has reached its end: the master runs its end sequence from this tick on, as at a
+  // SIGTERM on the wall clock, and exits when it is done (the twin keeps granting; every later
+  // grant has it too). In simulated time, so the shutdown is the same every run.
+  bool stop = false;
   bool operator==(const Grant&) const = default;
 };
 struct Done {  // master → twin: tick `tick` ran

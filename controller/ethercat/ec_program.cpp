@@ -387,8 +387,9 @@ void log_shutdown(const EcMaster& m) {
   else spdlog::warn("shutdown: not every slave confirmed INIT within {} ms", kShutdownNs / 1'000'000);
 }
 
-// Lockstep until the twin ends the run (End), the script ends, or a failure (throws). SIGINT/
-// SIGTERM ends it as the end of a wall-clock run does, in the ticks the twin still grants
+// Lockstep until the twin ends the run (End), the script ends, or a failure (throws). A grant
+// with `stop` (the run's end) or SIGINT/SIGTERM ends it as the end of a wall-clock run does,
+// in the ticks the twin still grants
 // (kShutdownNs of simulated time at most): the drives stopped, the slaves taken to INIT; an End
 // or the twin gone meanwhile ends it at once (no simulated time is left to send in), as does
 // a second signal.
@@ -425,6 +426,11 @@ int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
     if (!r.drain_until(g.frames[0], g.t_ns)) {
       throw RuntimeFailure{fmt::format("tick {}: only {} of the {} frames the twin sent arrived within 5 s", g.tick,
                                        r.frames_rx, g.frames[0])};
+    }
+    if (g.stop && !stopping) {  // the run's end, in simulated time: as a signal
+      stopping = true;
+      r.stop_drives();
+      spdlog::info("end of the run: stopping the drives and taking the slaves to INIT");
     }
     bool go_on = true;
     if (stopping) {

@@ -318,8 +318,8 @@ void log_shutdown(const Runner& r) {
 }
 
 // Lockstep: one Grant per transmission cycle, every frame met with Sent/Horizon, until the
-// twin ends the run (End) or a failure (throws). SIGINT/SIGTERM ends it as the end of a
-// wall-clock run does, in the ticks the twin still grants (kShutdownNs of simulated time at
+// twin ends the run (End) or a failure (throws). A grant with `stop` (the run's end) or
+// SIGINT/SIGTERM ends it as the end of a wall-clock run does, in the ticks the twin still grants (kShutdownNs of simulated time at
 // most): every servo to zero speed, SV_OFF and DISCONNECT; an End or the twin gone meanwhile
 // ends it at once (no simulated time is left to send in), as does a second signal.
 int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
@@ -351,6 +351,10 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
     if (w == simclock::WaitStatus::closed) throw RuntimeFailure{"sim clock: the twin went away (channel closed without End)"};
     if (w != simclock::WaitStatus::ok) throw RuntimeFailure{fmt::format("sim clock: {} while waiting for a grant", simclock::to_string(w))};
     if (!started) r.start(g.t_ns), started = true;
+    if (g.stop && !stopping) {  // the run's end, in simulated time: as a signal
+      stopping = true;
+      spdlog::info("end of the run: SV_OFF and DISCONNECT to every servo");
+    }
     if (stopping && stop_from < 0) r.shutdown(stop_from = g.t_ns);
     ls.begin_tick(g);
     r.master().advance(g.t_ns);

@@ -201,8 +201,8 @@ struct HeldSink {
   }
 };
 
-// Lockstep until the twin ends the run (End) or a signal. A signal's end (NMT stop all) goes
-// out in the next tick the twin grants, in place of that tick and counted in its Done, as the
+// Lockstep until the twin ends the run (End or a grant with `stop`) or a signal. The end (NMT
+// stop all) goes out in the grant with `stop`, or after a signal in the next tick the twin grants, in place of that tick and counted in its Done, as the
 // other CAN masters' loop does (can_master_loop.hpp); without such a grant (End, the twin gone,
 // nothing in 1 s) it cannot reach the simulated bus and is not sent.
 int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& stamp_ns, int sigfd,
@@ -238,13 +238,14 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
     held.hand_to(sink, g.t_ns);
     if (!drain_until(tr, m, g.frames[0], g.t_ns, ls, frames_timeout))
       throw RuntimeFailure{controller::drain_failure(g.tick, ls.frames_rx, g.frames[0], frames_timeout, tr, rcvbuf_errors0)};
-    if (ls.interrupted) m.shutdown();
+    const bool stop = ls.interrupted || g.stop;  // a signal, or the run's end in simulated time
+    if (stop) m.shutdown();
     else m.on_tick(g.t_ns);
     flush(tr, ob, m, ls);
     log.check(m);
     const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
-    if (ls.interrupted) return kExitOk;
+    if (stop) return kExitOk;
   }
 }
 

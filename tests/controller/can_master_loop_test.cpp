@@ -4,7 +4,7 @@
 // frames that arrived meanwhile, stamped no later than that tick. Found by the CAN soak: the
 // Omni master (which keeps its own loop in omni_master_main, fixed the same way) read a 3 ms
 // stall as "none of the four slaves answered". Over the in-process `mem:` transport. And a
-// signal in lockstep: the end sequence (shutdown, then end ticks until the runner says it is
+// signal or a grant with stop in lockstep: the end sequence (shutdown, then end ticks until the runner says it is
 // over) goes out in the ticks the twin grants next; the wall clock's end runs it on its period. And
 // a lockstep burst larger than the receive buffer: the master reads its bus while it waits.
 #include "controller/can_master_loop.hpp"
@@ -131,8 +131,8 @@ struct LockstepRig {
     const signalfd_siginfo info{};  // what signalled() reads: one siginfo
     ASSERT_EQ(::write(sig[1], &info, sizeof info), static_cast<ssize_t>(sizeof info));
   }
-  simclock::WaitStatus grant(std::uint64_t tick, simclock::Done& d) {
-    return server.grant(simclock::Grant{tick, static_cast<std::int64_t>(tick) * 2'000'000, {}}, d,
+  simclock::WaitStatus grant(std::uint64_t tick, simclock::Done& d, bool stop = false) {
+    return server.grant(simclock::Grant{tick, static_cast<std::int64_t>(tick) * 2'000'000, {}, stop}, d,
                         std::chrono::seconds(2));
   }
   std::string order() const {
@@ -186,6 +186,27 @@ TEST(CanMasterLoop, AnEndSequenceOfSeveralTicksRunsInTheTicksTheTwinStillGrants)
   rig.master.join();
   EXPECT_EQ(rig.code, 0);
   EXPECT_EQ(rig.order(), "tsee");
+}
+
+// The run's end in lockstep: the first grant with stop runs the end sequence in place of a
+// tick, the following ones its end ticks, and the master leaves when it is over (the twin sees
+// the channel closed at the next grant). No signal is involved: the same in every run.
+TEST(CanMasterLoop, AGrantWithStopRunsTheEndSequenceAndTheMasterLeavesWhenItIsOver) {
+  LockstepRig rig("can-master-loop-stop");
+  rig.r.end_ticks = 1;
+  rig.start();
+  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
+  simclock::Done d;
+  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  ASSERT_EQ(rig.grant(2, d, true), simclock::WaitStatus::ok);
+  EXPECT_EQ(d.frames[0], 1u) << "the end sequence's first frame, counted in the Done";
+  ASSERT_EQ(rig.grant(3, d, true), simclock::WaitStatus::ok);
+  EXPECT_EQ(d.frames[0], 2u);
+  rig.master.join();
+  EXPECT_EQ(rig.grant(4, d, true), simclock::WaitStatus::closed) << "it left after its end sequence";
+  EXPECT_EQ(rig.code, 0);
+  EXPECT_EQ(rig.order(), "tse");
+  EXPECT_EQ(rig.r.calls[1].t, 4'000'000);
 }
 
 // The wall clock's end runs the end sequence's ticks on its period too.

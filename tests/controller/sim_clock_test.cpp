@@ -79,12 +79,12 @@ TEST(SimClockCodec, EveryMasterStateAndStopReasonRoundTrips) {
 }
 
 TEST(SimClockCodec, GrantGoldenBytes) {
-  // Hand-computed little-endian layout: magic "OTSC", version 1, type 2, reserved 0, tick,
-  // t_ns = 10 ms, four cumulative counts, then zeros to byte 96.
+  // Hand-computed little-endian layout: magic "OTSC", version 2, type 2, reserved 0, tick,
+  // t_ns = 10 ms, four cumulative counts, stop, then zeros to byte 96.
   const Grant g{0x0102030405060708u, 10'000'000, {1, 0x100, 0, 0xffffffffffffffffu}};
   Bytes want{};
   const std::uint8_t head[56] = {
-      0x4f, 0x54, 0x53, 0x43, 0x01, 0x00, 0x02, 0x00,  // magic, version, type, reserved
+      0x4f, 0x54, 0x53, 0x43, 0x02, 0x00, 0x02, 0x00,  // magic, version, type, reserved
       0x08, 0x07, 0x06, 0x05, 0x04, 0x03, 0x02, 0x01,  // tick
       0x80, 0x96, 0x98, 0x00, 0x00, 0x00, 0x00, 0x00,  // t_ns = 0x989680
       0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,  // frames[0]
@@ -94,20 +94,30 @@ TEST(SimClockCodec, GrantGoldenBytes) {
   };
   std::memcpy(want.data(), head, sizeof head);
   EXPECT_EQ(encode(g), want);
+  // The end of the run: byte 56 is 1; any other value there does not decode.
+  Grant stop = g;
+  stop.stop = true;
+  want[56] = 1;
+  EXPECT_EQ(encode(stop), want);
+  const auto back = decode(want.data(), want.size());
+  ASSERT_TRUE(std::holds_alternative<Message>(back));
+  EXPECT_EQ(std::get<Grant>(std::get<Message>(back)), stop);
+  want[56] = 2;
+  EXPECT_EQ(error_of(want), DecodeError::bad_value);
 }
 
 TEST(SimClockCodec, SentAndHorizonGoldenBytes) {
   // Sent: type 5, tick 2, t_ns 1000 (0x3e8), frames {3, 0, 0, 0}.
   Bytes want{};
   const std::uint8_t sent[32] = {
-      0x4f, 0x54, 0x53, 0x43, 0x01, 0x00, 0x05, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
+      0x4f, 0x54, 0x53, 0x43, 0x02, 0x00, 0x05, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
       0xe8, 0x03, 0, 0, 0, 0, 0, 0, 0x03, 0, 0, 0, 0, 0, 0, 0};
   std::memcpy(want.data(), sent, sizeof sent);
   EXPECT_EQ(encode(Sent{2, 1'000, {3, 0, 0, 0}}), want);
   // Horizon: type 6, tick 2, arrival −1, frames {4, 0, 0, 0}, quiet_until at byte 56.
   want = {};
   const std::uint8_t horizon[32] = {
-      0x4f, 0x54, 0x53, 0x43, 0x01, 0x00, 0x06, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
+      0x4f, 0x54, 0x53, 0x43, 0x02, 0x00, 0x06, 0x00, 0x02, 0, 0, 0, 0, 0, 0, 0,
       0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x04, 0, 0, 0, 0, 0, 0, 0};
   std::memcpy(want.data(), horizon, sizeof horizon);
   for (int i = 0; i < 7; ++i) want[56 + static_cast<std::size_t>(i)] = 0xff;
@@ -183,7 +193,7 @@ TEST(SimClockCodec, BadMagicAndVersion) {
   Bytes b = encode(End{5});
   b[3] ^= 0x01;
   EXPECT_EQ(error_of(b), DecodeError::bad_magic);
-  for (std::uint8_t v : {0, 2, 255}) {
+  for (std::uint8_t v : {0, 1, 3, 255}) {  // 1: before Grant.stop
     b = encode(End{5});
     b[4] = v;
     EXPECT_EQ(error_of(b), DecodeError::bad_version) << int(v);
@@ -211,7 +221,7 @@ TEST(SimClockCodec, BadValueForEnumsAndReservedBytes) {
   EXPECT_EQ(error_of(with(7, 1)), DecodeError::bad_value);     // reserved header byte
   EXPECT_EQ(error_of(with(95, 1)), DecodeError::bad_value);    // an unused trailing byte
   // The first unused byte of every other type.
-  const std::pair<Message, std::size_t> firsts[] = {{Hello{9}, 12}, {Grant{}, 56}, {End{}, 16}};
+  const std::pair<Message, std::size_t> firsts[] = {{Hello{9}, 12}, {Grant{}, 57}, {End{}, 16}};
   for (const auto& [m, at] : firsts) {
     Bytes b = encode(m);
     b[at] = 0x80;
