@@ -23,8 +23,8 @@ constexpr std::array<std::string_view, 12> kPoseMetrics = {
 // error against a plan still on its way.
 constexpr std::array<std::string_view, 4> kFinalPose = {"final_x_m", "final_y_m", "final_phi_deg", "path_done_s"};
 // What the drives did (DriveHistory): how a master commissioning them is judged.
-constexpr std::array<std::string_view, 4> kDriveMetrics = {"all_running_at_s", "stopped_at_s", "faults",
-                                                           "running_at_end"};
+constexpr std::array<std::string_view, 5> kDriveMetrics = {"all_running_at_s", "stopped_at_s", "faults",
+                                                           "running_at_end", "running_at_duration"};
 constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
                                                           "std_velocity_pulse"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two

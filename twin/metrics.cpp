@@ -86,7 +86,7 @@ nlohmann::json VelocityErrorStats::to_json() const {
   };
 }
 
-void DriveHistory::add(double t_s, const std::array<DriveStateCode, 4>& states) {
+void DriveHistory::add(double t_s, const std::array<DriveStateCode, 4>& states, bool in_run) {
   int running = 0;
   for (std::size_t i = 0; i < states.size(); ++i) {
     const DriveStateCode st = states[i];
@@ -95,6 +95,7 @@ void DriveHistory::add(double t_s, const std::array<DriveStateCode, 4>& states) 
     last_[i] = st;
   }
   running_now_ = running;
+  if (in_run) running_in_run_ = running;
   if (all_running_at_ < 0 && running == static_cast<int>(states.size())) all_running_at_ = t_s;
   if (all_running_at_ >= 0 && stopped_at_ < 0 && running == 0) stopped_at_ = t_s;
 }
@@ -103,7 +104,8 @@ nlohmann::json DriveHistory::to_json() const {
   return {{"all_running_at_s", all_running_at_},
           {"stopped_at_s", stopped_at_},
           {"faults", faults_},
-          {"running_at_end", running_now_}};
+          {"running_at_end", running_now_},
+          {"running_at_duration", running_in_run_}};
 }
 
 void merge_master_stats(nlohmann::json& master, const nlohmann::json& stats) {

@@ -58,17 +58,19 @@ class VelocityErrorStats {
 // running when its state is running or syncing.
 class DriveHistory {
  public:
-  // One control sample at t [s] with the four drives' states. Real-time safe.
-  void add(double t_s, const std::array<DriveStateCode, 4>& states);
+  // One control sample at t [s] with the four drives' states; in_run: at or before the run's
+  // end (its duration, or the interrupt), not in the master's shutdown after it. Real-time safe.
+  void add(double t_s, const std::array<DriveStateCode, 4>& states, bool in_run = true);
   // all_running_at_s: the first sample with every drive running (-1: never);
   // stopped_at_s: the first sample after that with none running (-1: never);
   // faults: transitions of a drive into fault; running_at_end: drives running at the last
-  // sample. Not real-time safe.
+  // sample (what the master's shutdown left); running_at_duration: at the last sample in the
+  // run (what the run left, before the shutdown). Not real-time safe.
   nlohmann::json to_json() const;
 
  private:
   double all_running_at_ = -1, stopped_at_ = -1;
-  int faults_ = 0, running_now_ = 0;
+  int faults_ = 0, running_now_ = 0, running_in_run_ = 0;
   std::array<DriveStateCode, 4> last_{};
 };
 

@@ -288,10 +288,12 @@ class PlatformRun {
   int silent_periods_ = 0;           // control periods without one since
   SimTime master_lost_ns_ = -1;
   std::string master_lost_why_;
-  // the run's end: SIGTERM to a master on its own clock, which is served until it exits
-  SimTime sigterm_ns_ = -1;       // when it was sent (−1: not sent; a lockstep master ends on End)
-  std::string stop_signal_;       // what asked it to stop: "SIGTERM" (the twin's) or the terminal's SIGINT
+  // the run's end: SIGTERM to a master on its own clock, `stop` in the grants of a lockstep
+  // master of ours; either is served until the master exits
+  SimTime sigterm_ns_ = -1;       // when it was asked (−1: not asked)
+  std::string stop_signal_;       // what asked it: "SIGTERM" (the twin's), the terminal's SIGINT, or the grants
   SimTime master_exit_ns_ = -1;   // when the master was seen to exit after it (−1: not seen)
+  SimTime last_done_ns_ = -1;     // lockstep: the tick of the master's last Done
   std::array<double, 4> bus_setpoint_{};  // what the network last asked of each wheel [rad/s]
   double handshake_timeout_s_ = 10;
 };
@@ -479,16 +481,19 @@ double PlatformRun::master_grace_s() const { return s_.master.stop_grace; }
 // virtual clock) go on until it has exited, for at most its grace: the frames of its own
 // shutdown (drives disabled, slaves to INIT, NMT stop) are answered and recorded, and the
 // records end at the first control sample a control period or more after its exit. A lockstep
-// master of ours ends on End (stop_master); a lost or failed run is not extended.
+// master of ours is asked in simulated time instead: every grant from then on carries `stop`
+// (docs/protocols/sim-clock.md), so its shutdown is recorded the same every run; it has ended
+// when the grant after its last Done finds it gone. A lost or failed run is not extended.
 //
-// Interrupted (SIGINT/SIGTERM to the twin) with a master on the wall clock, the same: the
-// master is asked to stop (SIGTERM, unless the signal was the terminal's Ctrl-C, which the
-// master had too: a second signal would cut its shutdown short) and served until it has
+// Interrupted (SIGINT/SIGTERM to the twin) with a master on the wall clock or a lockstep master
+// of ours, the same: the master is asked to stop (SIGTERM, unless the signal was the terminal's
+// Ctrl-C, which the master had too: a second signal would cut its shutdown short; in lockstep
+// the grants' `stop`) and served until it has
 // exited; the run stays interrupted (exit 3) and its figures end at the interrupt. A second
 // signal to the twin ends the serving at once. (Before, the twin stopped answering at the
 // Ctrl-C and the master's shutdown ran on a bus no one served.)
 void PlatformRun::serve_master_shutdown() {
-  if (!master_ || clock_server_ || !error_.empty() || master_lost_ns_ >= 0) return;
+  if (!master_ || !error_.empty() || master_lost_ns_ >= 0) return;
   const bool interrupted = signalled();
   if (interrupted && (vtime_pacer_ || !o_.signals || o_.until_stopped)) return;
   if (!master_->running()) return;
@@ -502,16 +507,23 @@ void PlatformRun::serve_master_shutdown() {
   // in the twin's group (a master that left it by setsid/setpgid gets SIGTERM; found in review).
   const bool terminal = interrupted && o_.terminal_signal && o_.terminal_signal->load() &&
                         ::getpgid(master_->pid()) == ::getpgrp();
-  stop_signal_ = terminal ? "SIGINT from the terminal" : "SIGTERM";
+  // A lockstep master of ours is asked in simulated time (Grant.stop), so its shutdown is the
+  // same every run; a terminal's Ctrl-C reached it too, and it ends as at either.
+  const bool grants = clock_server_ != nullptr;
+  stop_signal_ = grants ? "stop in the grants" : terminal ? "SIGINT from the terminal" : "SIGTERM";
   if (interrupted) end_ = std::min(end_, sigterm_ns_);  // the figures and faults end at the interrupt
-  if (!terminal) master_->terminate();
+  if (!terminal && !grants) master_->terminate();
   const std::string why = interrupted ? "interrupted" : "end of the run";
+  const std::string more = interrupted ? "; another signal ends that" : "";
   note(log_event(sigterm_ns_, "master",
-                 terminal ? fmt::format("{}: the terminal's signal reached the master too; the bus is served until "
-                                        "it exits (at most {} s; another signal ends that)",
-                                        why, master_grace_s())
-                          : fmt::format("{}: SIGTERM; the bus is served until the master exits (at most {} s{})", why,
-                                        master_grace_s(), interrupted ? "; another signal ends that" : "")),
+                 grants     ? fmt::format("{}: stop in every grant from now on; the bus is served until the master "
+                                          "exits (at most {} s{})",
+                                          why, master_grace_s(), more)
+                 : terminal ? fmt::format("{}: the terminal's signal reached the master too; the bus is served until "
+                                          "it exits (at most {} s; another signal ends that)",
+                                          why, master_grace_s())
+                            : fmt::format("{}: SIGTERM; the bus is served until the master exits (at most {} s{})", why,
+                                          master_grace_s(), more)),
        *events_);
   if (vtime_pacer_) vtime_pacer_->expect_end(SIGTERM);  // a wait it holds ends now, as on Linux
   // (Under the virtual clock a master the signal killed in its wait has left already.)
@@ -551,7 +563,8 @@ void PlatformRun::stop_master() {
   // after (a master failing on the unserved bus in the last 0.3 s passed; found in review).
   const bool outlived = sigterm_ns_ >= 0 && master_exit_ns_ < 0 && was_running;
   if (outlived || (own && was_running && code == 128 + SIGKILL))
-    error_ = fmt::format("master: {} did not end within {:.1f} s of SIGTERM: {}", master_program_, master_grace_s(),
+    error_ = fmt::format("master: {} did not end within {:.1f} s of {}: {}", master_program_, master_grace_s(),
+                         stop_signal_ == "stop in the grants" ? "the stop in its grants" : "SIGTERM",
                          code == 128 + SIGKILL ? std::string("killed") : "it ended after (" + master_->describe_exit() + ")");
   // Exited while served, but not cleanly: its shutdown failed (exit 0, or killed by the SIGTERM
   // itself for a program without a handler, are clean).
@@ -580,16 +593,24 @@ void PlatformRun::on_master_bus(SimTime t) {
   if (std::string why = net_->pcap_error(); !why.empty()) return fail(why);  // a full disk
   if (vtime_pacer_) return;  // the master's waits pace the run (VtimePacer)
   if (!clock_server_) return supervise_master(t);  // realtime: the master keeps its own time
+  if (master_exit_ns_ >= 0) return;  // it ended its shutdown: nothing left to grant
   const auto timeout = std::chrono::milliseconds(std::llround(handshake_timeout_s_ * 1e3));
   simclock::Grant g;
   g.tick = tick_++;
   g.t_ns = t;
   g.frames[0] = net_->frames_to_transport();
+  g.stop = sigterm_ns_ >= 0;  // the run's end (serve_master_shutdown)
   simclock::Done d;
   // A polling bus (M-III) meets each of the master's frames inside the tick.
   const simclock::WaitStatus st = net_->answers_inside_tick()
                                       ? clock_server_->grant(g, d, timeout, &PlatformRun::answer_sent, this)
                                       : clock_server_->grant(g, d, timeout);
+  // Asked to stop, it ran its end sequence and left after its last Done: it ended then.
+  if (st == simclock::WaitStatus::closed && g.stop && master_->wait(std::chrono::milliseconds(500))) {
+    master_exit_ns_ = last_done_ns_ >= 0 ? last_done_ns_ : t;
+    sched_.stop();
+    return;
+  }
   if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
     // A Ctrl-C at a terminal reaches the master too (one process group): its end is then the
     // interruption's, and the run ends as interrupted, not with a lost master.
@@ -608,6 +629,7 @@ void PlatformRun::on_master_bus(SimTime t) {
   if (!net_->drain_transport(d.frames[0], t, timeout))
     return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
                             net_->frames_from_transport(), net_->master_iface()));
+  last_done_ns_ = t;
   note_report(d.report, t);
 }
 
@@ -670,7 +692,8 @@ void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
     if (r.reason != simclock::StopReason::none)
       text += fmt::format(" ({}{})", simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
     note(log_event(t, "master", text), *events_);
-    if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0) master_stop_ns_ = t;
+    // Stopped at the run's end as asked is its shutdown, not a reaction (master.stopped_at_s).
+    if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0 && sigterm_ns_ < 0) master_stop_ns_ = t;
   }
   report_ = r;
 }
@@ -826,7 +849,8 @@ void PlatformRun::record_bus_and_state(SimTime t) {
                    static_cast<double>(st.bus.dropouts), static_cast<double>(st.bus.errors), st.bus.load,
                    static_cast<double>(st.active_faults)});
   for (const DriveSample& d : st.drives) bus_row_.push_back(static_cast<double>(d.state));
-  drive_history_.add(ns_to_seconds(t), {st.drives[0].state, st.drives[1].state, st.drives[2].state, st.drives[3].state});
+  drive_history_.add(ns_to_seconds(t), {st.drives[0].state, st.drives[1].state, st.drives[2].state, st.drives[3].state},
+                     t <= end_);
   if (t <= end_) final_pose_ = {st.x, st.y, st.phi};  // the platform at the run's end (as its figures)
   note(bus_csv_->row(bus_row_), *bus_csv_);
   if (o_.observer) o_.observer->on_state(st);
@@ -980,7 +1004,7 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},
                    {"lost_reason", master_lost_why_},
                    {"sigterm_at_s", sigterm_ns_ < 0 ? -1.0 : ns_to_seconds(sigterm_ns_)},
-                   {"stop_signal", stop_signal_},  // "SIGTERM" (the twin's) or "SIGINT from the terminal"; "" none
+                   {"stop_signal", stop_signal_},  // "SIGTERM" (the twin's), "SIGINT from the terminal", "stop in the grants"; "" none
                    {"exited_at_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_)},
                    {"shutdown_s", master_exit_ns_ < 0 ? -1.0 : ns_to_seconds(master_exit_ns_ - sigterm_ns_)}};
     if (vtime_pacer_)

@@ -39,8 +39,10 @@ void expect_clean_run(const Finished& f, const nlohmann::json& m) {
   EXPECT_GT(ms.at("syncs").get<int>(), 3000);
   EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
   EXPECT_LT(ms.at("path_origin_s").get<double>(), 0.2);
+  // Operational through the run; the master's shutdown after its end stops every node (NMT).
+  EXPECT_GE(m.at("drives").at("all_running_at_s").get<double>(), 0.0) << m.at("drives").dump();
   for (const auto& s : m.at("slaves")) {
-    EXPECT_EQ(s.at("nmt_state"), "operational");
+    EXPECT_EQ(s.at("nmt_state"), "stopped");
     EXPECT_EQ(s.at("emcy"), 0);
     EXPECT_EQ(s.at("sdo_aborts"), 0);
     EXPECT_GT(s.at("rpdo_rx").get<int>(), 3000);
@@ -131,8 +133,14 @@ TEST_F(CliCanopen, ADriveLosingPowerStopsThePlatformAndComesBack) {
   EXPECT_GT(ms.at("stopped_at_s").get<double>(), 1.0);   // within the heartbeat consumer time (150 ms)
   EXPECT_LT(ms.at("stopped_at_s").get<double>(), 1.2);
   EXPECT_EQ(ms.at("recoveries"), 1);
-  EXPECT_EQ(m.at("slaves")[1].at("nmt_state"), "operational");
   EXPECT_NE(read_bytes(a / "master.log").find("node 2 back in OPERATIONAL"), std::string::npos);
+  // Back in OPERATIONAL by the run's end; then the master's shutdown stops it (NMT stop).
+  const std::string events = read_bytes(a / "events.log");
+  const std::size_t end = events.find("end of the run: stop in every grant");
+  ASSERT_NE(end, std::string::npos) << events;
+  EXPECT_NE(events.rfind("node 2 NMT operational", end), std::string::npos) << events;
+  EXPECT_EQ(events.find("node 2 NMT stopped"), events.find("node 2 NMT stopped", end)) << "stopped only by the shutdown";
+  EXPECT_EQ(m.at("slaves")[1].at("nmt_state"), "stopped");
 }
 
 // `omnitwin twin --bus canopen` for a master started by hand: our master on its own wall clock

@@ -45,8 +45,15 @@ void expect_clean_run(const Finished& f, const nlohmann::json& m) {
   EXPECT_GT(ms.at("cycles").get<int>(), 4000);
   EXPECT_GT(ms.at("path_origin_s").get<double>(), 0.0);
   EXPECT_FALSE(ms.contains("wakes_late")) << "simulated time is never late: " << ms.dump(2);
+  // Every servo on to the run's end; the master's shutdown after it switches each off and
+  // disconnects it (fig. 8's end: phase 1), as on the wall clock.
+  EXPECT_EQ(m.at("drives").at("running_at_duration"), 4) << m.at("drives").dump();
+  EXPECT_EQ(m.at("drives").at("running_at_end"), 0) << m.at("drives").dump();
+  EXPECT_EQ(ms.at("stop_signal"), "stop in the grants");
+  EXPECT_GE(ms.at("shutdown_s").get<double>(), 0.0) << ms.dump(2);
+  EXPECT_LT(ms.at("shutdown_s").get<double>(), 0.1) << ms.dump(2);
   for (const auto& s : m.at("slaves")) {
-    EXPECT_EQ(s.at("phase"), 3);
+    EXPECT_EQ(s.at("phase"), 1);
     EXPECT_EQ(s.at("comm_alarms"), 0);
     EXPECT_EQ(s.at("wdt_errors"), 0);
   }
@@ -127,7 +134,8 @@ TEST_F(CliM3, ACycleTheLineCannotFitIsRefusedNamingTheShortestThatFits) {
 }
 
 // Event-driven communication: no SYNC, the servos connected asynchronously and left in phase
-// 2, one exchange per axis every millisecond driving the platform to its goal.
+// 2, one exchange per axis every millisecond driving the platform to its goal; at the end the
+// master's shutdown disconnects them (phase 1).
 TEST_F(CliM3, EventDrivenCommunicationDrivesThePlatform) {
   const fs::path out = dir_ / "event";
   const Finished f = run_short(out, {"bus.communication=event", "bus.transport=udp:127.0.0.1:0"});
@@ -138,12 +146,13 @@ TEST_F(CliM3, EventDrivenCommunicationDrivesThePlatform) {
   EXPECT_EQ(m.at("master").at("missed"), 0);
   EXPECT_GT(m.at("master").at("exchanges").get<int>(), 4 * 4000);
   for (const auto& s : m.at("slaves")) {
-    EXPECT_EQ(s.at("phase"), 2) << "event-driven: never phase 3";
+    EXPECT_EQ(s.at("phase"), 1) << "disconnected by the shutdown";
     EXPECT_EQ(s.at("missed_syncs"), 0);
   }
   EXPECT_GE(m.at("bus").at("servos_on_since_s").get<double>(), 0.0);
   EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
   EXPECT_TRUE(contains(read_bytes(out / "master.log"), "communication start: event-driven"));
+  EXPECT_FALSE(contains(read_bytes(out / "events.log"), "phase 3")) << "event-driven: never phase 3";
 }
 
 // A transport that cannot be opened is bad input named by its key; nothing is written.

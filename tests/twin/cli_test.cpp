@@ -705,6 +705,61 @@ TEST_F(CliRunEnd, TheEndOfARealtimeRunServesOurMastersEndSequence) {
   EXPECT_FALSE(contains(log, "no statusword")) << log;
 }
 
+// A lockstep master of ours ends as on the wall clock, in simulated time: from `duration` on its
+// grants carry stop, its end sequence (CANopen: quick stop, disable, NMT stop) is answered and
+// recorded, and it exits by itself; two runs record the same shutdown. It ended on End with no
+// shutdown at all: the nodes stayed operational in the records.
+TEST_F(CliRunEnd, TheEndOfALockstepRunServesOurMastersEndSequenceInSimulatedTime) {
+  std::string first;
+  for (const char* name : {"a", "b"}) {
+    const fs::path out = dir_ / name;
+    const Finished f = run({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "canopen", "--set",
+                            "duration=2", "--set", "expect={}", "--no-video", "--no-report", "--out", out.string(),
+                            "--no-progress"});
+    ASSERT_EQ(f.code, 0) << f.out << f.err;
+    EXPECT_TRUE(contains(f.out, "end: stop in the master's grants from 2.000 s; served until it ended")) << f.out;
+    const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+    const nlohmann::json& ms = m.at("master");
+    EXPECT_EQ(ms.at("stop_signal"), "stop in the grants") << ms.dump(2);
+    EXPECT_EQ(ms.at("exit"), "exit 0") << ms.dump(2);
+    EXPECT_DOUBLE_EQ(ms.at("sigterm_at_s").get<double>(), 2.0);
+    EXPECT_GT(ms.at("shutdown_s").get<double>(), 0.0) << ms.dump(2);
+    EXPECT_LT(ms.at("shutdown_s").get<double>(), 0.1) << ms.dump(2);
+    EXPECT_EQ(ms.at("stopped_at_s"), -1.0) << "stopping as asked is not a reaction: " << ms.dump(2);
+    EXPECT_EQ(m.at("drives").at("running_at_duration"), 4) << m.at("drives").dump();
+    EXPECT_EQ(m.at("drives").at("running_at_end"), 0) << m.at("drives").dump();
+    const std::string events = read_bytes(out / "events.log");
+    EXPECT_TRUE(contains(events, "end of the run: stop in every grant from now on")) << events;
+    for (int node = 1; node <= 4; ++node)
+      EXPECT_TRUE(contains(events, "node " + std::to_string(node) + " NMT stopped")) << events;
+    const std::string records = read_bytes(out / "trajectory.csv") + read_bytes(out / "bus-can.pcap");
+    if (first.empty()) first = records;
+    else EXPECT_TRUE(records == first) << "the shutdown is recorded the same every run";
+  }
+}
+
+// Interrupted, a lockstep run with a master of ours serves its shutdown the same way (a second
+// signal would end that); the run stays interrupted (exit 3). It ended at the signal.
+TEST_F(CliRunEnd, AnInterruptedLockstepRunServesOurMastersEndSequence) {
+  const fs::path out = dir_ / "out";
+  Child c({"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", "m3", "--set", "duration=600", "--set",
+           "expect={}", "--no-video", "--no-report", "--no-progress", "--out", out.string()},
+          work(), io());
+  ASSERT_TRUE(wait_for_text(out / ".events.log.part", "servo operation enabled", c)) << c.err();
+  std::this_thread::sleep_for(500ms);
+  c.signal(SIGINT);
+  EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  const nlohmann::json& ms = m.at("master");
+  EXPECT_TRUE(m.at("interrupted").get<bool>());
+  EXPECT_EQ(ms.at("stop_signal"), "stop in the grants") << ms.dump(2);
+  EXPECT_EQ(ms.at("exit"), "exit 0") << ms.dump(2);
+  EXPECT_GE(ms.at("shutdown_s").get<double>(), 0.0) << ms.dump(2);
+  const std::string events = read_bytes(out / "events.log");
+  EXPECT_TRUE(contains(events, "interrupted: stop in every grant from now on")) << events;
+  for (const auto& s : m.at("slaves")) EXPECT_EQ(s.at("phase"), 1) << "DISCONNECT served: " << s.dump(2);
+}
+
 // Runs `omnitwin ARGS` on a terminal of its own (a session whose controlling tty is a pty) and,
 // once `ready` is in its events.log and a second has passed, types a Ctrl-C: the kernel's SIGINT
 // to the foreground group. Returns the exit code (128 + N: killed by N; -1: did not start).

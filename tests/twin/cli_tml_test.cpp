@@ -44,8 +44,10 @@ void expect_clean_run(const Finished& f, const nlohmann::json& m) {
   for (const auto& s : m.at("slaves")) {
     EXPECT_EQ(s.at("unknown_opcodes"), 0);
     EXPECT_EQ(s.at("bad_frames"), 0);
-    EXPECT_EQ(s.at("drive_state"), "operation enabled");
+    EXPECT_EQ(s.at("drive_state"), "ready to switch on") << "the master's shutdown after the run's end: AXISOFF";
   }
+  EXPECT_GE(m.at("drives").at("all_running_at_s").get<double>(), 0.0) << m.at("drives").dump();
+  EXPECT_EQ(m.at("master").at("stop_signal"), "stop in the grants");
   EXPECT_EQ(m.at("bus").at("error_frames"), 0);
   EXPECT_LT(m.at("platform").at("final_error_cm").get<double>(), 1.0);
 }

@@ -35,6 +35,7 @@ TEST(KnownMetrics, AcceptsTheDocumentedPaths) {
                         // issue 18 (what the master did) and issue 20 (emergencies)
                         "platform.final_x_m", "platform.final_phi_deg", "drives.all_running_at_s",
                         "drives.stopped_at_s", "drives.faults", "drives.running_at_end", "master.emergencies",
+                        "drives.running_at_duration", "bus.master_changes", "master.wakes_late",
                         // whether the plan reached the path's end within the run
                         "platform.path_done_s"}) {
     EXPECT_TRUE(is_known_metric(m)) << m;

@@ -119,6 +119,21 @@ TEST(DriveHistory, FirstAllRunningStopsAndFaults) {
   EXPECT_DOUBLE_EQ(j.at("stopped_at_s").get<double>(), 0.9);
   EXPECT_EQ(j.at("faults"), 2);
   EXPECT_EQ(j.at("running_at_end"), 2);
+  EXPECT_EQ(j.at("running_at_duration"), 2) << "every sample was in the run";
+}
+
+// The master's shutdown after the run's end: running_at_end is what it left, running_at_duration
+// what the run left before it.
+TEST(DriveHistory, TheShutdownAfterTheRunsEndIsKeptApart) {
+  using D = DriveStateCode;
+  DriveHistory h;
+  h.add(0.1, {D::running, D::running, D::running, D::running});
+  h.add(0.2, {D::running, D::running, D::running, D::waiting});
+  h.add(0.3, {D::waiting, D::waiting, D::waiting, D::waiting}, false);
+  const auto j = h.to_json();
+  EXPECT_EQ(j.at("running_at_end"), 0);
+  EXPECT_EQ(j.at("running_at_duration"), 3);
+  EXPECT_DOUBLE_EQ(j.at("stopped_at_s").get<double>(), 0.3);
 }
 
 }  // namespace
