@@ -280,6 +280,7 @@ class PlatformRun {
   CpuShare cpu_share_;  // lockstep: the run's thread and its master on one CPU, until stop_master()
   std::string master_program_;
   simclock::MasterReport report_{};
+  simclock::MasterReport run_report_{};  // the last report before the run's end (metrics: not the shutdown's)
   std::uint64_t tick_ = 0;
   SimTime master_stop_ns_ = -1;
   // realtime supervision of the master process we started
@@ -696,6 +697,7 @@ void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
     if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0 && sigterm_ns_ < 0) master_stop_ns_ = t;
   }
   report_ = r;
+  if (sigterm_ns_ < 0) run_report_ = r;
 }
 
 void PlatformRun::on_physics_bus(SimTime t) {
@@ -989,12 +991,14 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
     m["slaves"] = net_->slave_metrics();
     // Only a lockstep master reports (on the sim clock); one on its own wall clock does not.
     const bool reports = clock_server_ != nullptr;
-    m["master"] = {{"state", reports ? simclock::to_string(report_.state) : "unreported"},
-                   {"stop_reason", reports ? simclock::to_string(report_.reason) : "unreported"},
-                   {"stop_reason_code", static_cast<int>(report_.reason)},
-                   {"missing_node", report_.node},
+    // As the run left it: a state its shutdown reports after the end ("stopped") is in events.log.
+    const simclock::MasterReport& rr = run_report_;
+    m["master"] = {{"state", reports ? simclock::to_string(rr.state) : "unreported"},
+                   {"stop_reason", reports ? simclock::to_string(rr.reason) : "unreported"},
+                   {"stop_reason_code", static_cast<int>(rr.reason)},
+                   {"missing_node", rr.node},
                    {"stopped_at_s", master_stop_ns_ < 0 ? -1.0 : ns_to_seconds(master_stop_ns_)},
-                   {"path_origin_s", report_.path_origin_ns < 0 ? -1.0 : ns_to_seconds(report_.path_origin_ns)},
+                   {"path_origin_s", rr.path_origin_ns < 0 ? -1.0 : ns_to_seconds(rr.path_origin_ns)},
                    {"ticks", tick_},
                    {"clock", clock_server_ ? "sim" : vtime_server_ ? "virtual" : "wall"},
                    {"command", master_command_},

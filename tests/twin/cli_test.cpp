@@ -726,6 +726,7 @@ TEST_F(CliRunEnd, TheEndOfALockstepRunServesOurMastersEndSequenceInSimulatedTime
     EXPECT_GT(ms.at("shutdown_s").get<double>(), 0.0) << ms.dump(2);
     EXPECT_LT(ms.at("shutdown_s").get<double>(), 0.1) << ms.dump(2);
     EXPECT_EQ(ms.at("stopped_at_s"), -1.0) << "stopping as asked is not a reaction: " << ms.dump(2);
+    EXPECT_EQ(ms.at("state"), "running") << "the state the run left (2 s of the 20 s path): " << ms.dump(2);
     EXPECT_EQ(m.at("drives").at("running_at_duration"), 4) << m.at("drives").dump();
     EXPECT_EQ(m.at("drives").at("running_at_end"), 0) << m.at("drives").dump();
     const std::string events = read_bytes(out / "events.log");
