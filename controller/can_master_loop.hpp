@@ -227,9 +227,10 @@ int run_lockstep(const std::string& sim_clock, Runner& r, can::Transport& tr, in
     else if (ending) r.end_tick(g.t_ns);
     else r.shutdown(g.t_ns), ending = true;
     r.flush();
-    const simclock::Done done{g.tick, {r.frames_tx(), 0, 0, 0}, r.report()};
+    const bool last = ending && r.shut_down();  // the end sequence is over: say so, then leave
+    const simclock::Done done{g.tick, {r.frames_tx(), 0, 0, 0}, r.report(), last};
     if (!client.done(done)) throw LoopFailure{"sim clock: the twin is gone"};
-    if (ending && r.shut_down()) return 0;
+    if (last) return 0;
   }
 }
 

@@ -72,7 +72,7 @@ const char* to_string(WaitStatus s) {
 //   6 Horizon), 7 u8 reserved = 0
 //   Hello  8 u32 pid
 //   Grant  8 u64 tick, 16 i64 t_ns, 24 4×u64 frames, 56 u8 stop (0/1)
-//   Done   8 u64 tick, 16 4×u64 frames, 48 u8 state, 49 u8 reason, 50 u8 node, 51 u8 pad = 0,
+//   Done   8 u64 tick, 16 4×u64 frames, 48 u8 state, 49 u8 reason, 50 u8 node, 51 u8 last (0/1),
 //          52 i64 path_origin_ns, 60 3×f32 reference, 72 3×f32 odometry
 //   End    8 i64 t_ns
 //   Sent   8 u64 tick, 16 i64 t_ns, 24 4×u64 frames
@@ -173,7 +173,7 @@ void write_body(Writer& w, const Done& d) {
   w.u8(static_cast<std::uint8_t>(d.report.state));
   w.u8(static_cast<std::uint8_t>(d.report.reason));
   w.u8(d.report.node);
-  w.u8(0);  // pad
+  w.u8(d.last ? 1 : 0);
   w.i64(d.report.path_origin_ns);
   for (double v : d.report.reference) w.f32(v);
   for (double v : d.report.odometry) w.f32(v);
@@ -201,23 +201,24 @@ void write_body(Writer& w, const Horizon& h) {
 
 using Decoded = std::variant<Message, DecodeError>;
 
-// The fields of a Done after its header; bad_value for out-of-range enums, pad or NaNs.
+// The fields of a Done after its header; bad_value for out-of-range enums or `last`, or NaNs.
 Decoded read_done(Reader& r) {
   Done d;
   d.tick = r.u64();
   for (std::uint64_t& f : d.frames) f = r.u64();
   const std::uint8_t state = r.u8(), reason = r.u8();
   d.report.node = r.u8();
-  const std::uint8_t pad = r.u8();
+  const std::uint8_t last = r.u8();
   d.report.path_origin_ns = r.i64();
   bool floats_ok = true;
   for (double& v : d.report.reference) floats_ok = r.f32(v) && floats_ok;
   for (double& v : d.report.odometry) floats_ok = r.f32(v) && floats_ok;
   if (state > static_cast<std::uint8_t>(MasterState::finished) ||
-      reason > static_cast<std::uint8_t>(StopReason::config_failed) || pad != 0 || !floats_ok)
+      reason > static_cast<std::uint8_t>(StopReason::config_failed) || last > 1 || !floats_ok)
     return DecodeError::bad_value;
   d.report.state = static_cast<MasterState>(state);
   d.report.reason = static_cast<StopReason>(reason);
+  d.last = last == 1;
   return Message{d};
 }
 

@@ -94,6 +94,9 @@ struct Done {  // master → twin: tick `tick` ran
   std::uint64_t tick = 0;
   std::array<std::uint64_t, kMaxBuses> frames{};  // frames the master has sent per bus, cumulative
   MasterReport report;
+  // This tick ended the master's end sequence (after a Grant with stop, or a signal): it leaves
+  // now, so the twin knows its end at this tick, not one grant later.
+  bool last = false;
   bool operator==(const Done&) const = default;
 };
 struct End {  // twin → master: the run is over; exit

@@ -211,7 +211,7 @@ class PlatformRun {
     return seconds_to_ns(s_.controller.period);
   }
   void on_physics_bus(SimTime t);
-  void note_report(const simclock::MasterReport& r, SimTime t);
+  void note_report(const simclock::MasterReport& r, SimTime t, bool last = false);
   void fail(std::string why);
   void supervise_master(SimTime t);
   // always_fail: the run ends whatever on_master_loss says (lockstep: nobody answers ticks).
@@ -497,20 +497,23 @@ void PlatformRun::serve_master_shutdown() {
   if (!master_ || !error_.empty() || master_lost_ns_ >= 0) return;
   const bool interrupted = signalled();
   if (interrupted && (vtime_pacer_ || !o_.signals || o_.until_stopped)) return;
-  if (!master_->running()) return;
+  // Lockstep: the terminal's Ctrl-C reached a master of ours too, and it ran its end sequence
+  // in the ticks already granted and left (on_master_bus saw it end); that was its shutdown.
+  const bool ended_itself = clock_server_ && interrupted && master_exit_ns_ >= 0;
+  if (!ended_itself && !master_->running()) return;
   // A signal to the twin (Ctrl-C, SIGTERM) beyond those seen now ends the serving at once.
   const int seen = o_.signals ? o_.signals->load() : 0;
   const auto signal_came = [this, seen, interrupted] {
     return o_.signals ? o_.signals->load() > seen : (!interrupted && signalled());
   };
-  sigterm_ns_ = sched_.now();
+  sigterm_ns_ = ended_itself ? master_exit_ns_ : sched_.now();
   // The terminal's Ctrl-C went to its foreground group: the master had it only if it is still
   // in the twin's group (a master that left it by setsid/setpgid gets SIGTERM; found in review).
-  const bool terminal = interrupted && o_.terminal_signal && o_.terminal_signal->load() &&
-                        ::getpgid(master_->pid()) == ::getpgrp();
+  const bool terminal = ended_itself || (interrupted && o_.terminal_signal && o_.terminal_signal->load() &&
+                                         ::getpgid(master_->pid()) == ::getpgrp());
   // A lockstep master of ours is asked in simulated time (Grant.stop), so its shutdown is the
   // same every run; a terminal's Ctrl-C reached it too, and it ends as at either.
-  const bool grants = clock_server_ != nullptr;
+  const bool grants = clock_server_ != nullptr && !ended_itself;
   stop_signal_ = grants ? "stop in the grants" : terminal ? "SIGINT from the terminal" : "SIGTERM";
   if (interrupted) end_ = std::min(end_, sigterm_ns_);  // the figures and faults end at the interrupt
   if (!terminal && !grants) master_->terminate();
@@ -520,6 +523,9 @@ void PlatformRun::serve_master_shutdown() {
                  grants     ? fmt::format("{}: stop in every grant from now on; the bus is served until the master "
                                           "exits (at most {} s{})",
                                           why, master_grace_s(), more)
+                 : ended_itself ? fmt::format("{}: the terminal's signal reached the master too; it ran its end "
+                                              "sequence in the ticks it had and left",
+                                              why)
                  : terminal ? fmt::format("{}: the terminal's signal reached the master too; the bus is served until "
                                           "it exits (at most {} s; another signal ends that)",
                                           why, master_grace_s())
@@ -528,7 +534,7 @@ void PlatformRun::serve_master_shutdown() {
        *events_);
   if (vtime_pacer_) vtime_pacer_->expect_end(SIGTERM);  // a wait it holds ends now, as on Linux
   // (Under the virtual clock a master the signal killed in its wait has left already.)
-  if (!vtime_pacer_ || !vtime_pacer_->ended())
+  if (!ended_itself && (!vtime_pacer_ || !vtime_pacer_->ended()))
     sched_.run_until(sigterm_ns_ + seconds_to_ns(master_grace_s()) + 1, *pacer_, signal_came);
   if (vtime_pacer_ && vtime_pacer_->ended()) master_exit_ns_ = vtime_pacer_->master_now();
   if (master_exit_ns_ < 0) return;
@@ -545,6 +551,9 @@ void PlatformRun::serve_master_shutdown() {
 
 void PlatformRun::stop_master() {
   if (!master_) return;
+  // Whether it was still there when its grace ran out: asked before End, which a lockstep
+  // master obeys at once (it then looked gone, and a master of ours not yet asked passed).
+  const bool was_running = master_->running() || master_->descendants_alive();
   if (clock_server_) clock_server_->end(sched_.now());
   if (vtime_server_) vtime_server_->end(vtime_pacer_ ? vtime_pacer_->master_now() : sched_.now());
   // The master exits on End (lockstep); in realtime, and a master of the user's, by SIGTERM,
@@ -554,7 +563,6 @@ void PlatformRun::stop_master() {
   const bool own = !s_.master.command.empty();
   const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 || sigterm_ns_ >= 0 ? 300
                                                                                    : std::llround(master_grace_s() * 1e3));
-  const bool was_running = master_->running() || master_->descendants_alive();
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   cpu_share_.release();  // the thread's own affinity again, the master gone
   if (master_exit_ns_ < 0) log_event(sched_.now(), "master", fmt::format("ended: {}", master_->describe_exit()));
@@ -564,7 +572,7 @@ void PlatformRun::stop_master() {
   // after (a master failing on the unserved bus in the last 0.3 s passed; found in review).
   const bool outlived = sigterm_ns_ >= 0 && master_exit_ns_ < 0 && was_running;
   if (outlived || (own && was_running && code == 128 + SIGKILL))
-    error_ = fmt::format("master: {} did not end within {:.1f} s of {}: {}", master_program_, master_grace_s(),
+    error_ = fmt::format("master: {} did not end within {:g} s of {}: {}", master_program_, master_grace_s(),
                          stop_signal_ == "stop in the grants" ? "the stop in its grants" : "SIGTERM",
                          code == 128 + SIGKILL ? std::string("killed") : "it ended after (" + master_->describe_exit() + ")");
   // Exited while served, but not cleanly: its shutdown failed (exit 0, or killed by the SIGTERM
@@ -614,8 +622,12 @@ void PlatformRun::on_master_bus(SimTime t) {
   }
   if (st == simclock::WaitStatus::closed && master_->wait(std::chrono::milliseconds(500))) {
     // A Ctrl-C at a terminal reaches the master too (one process group): its end is then the
-    // interruption's, and the run ends as interrupted, not with a lost master.
-    if (signalled()) return;
+    // interruption's, and the run ends as interrupted, not with a lost master (seen gone now:
+    // its shutdown, if it ran one, is served as the interruption's; serve_master_shutdown).
+    if (signalled()) {
+      master_exit_ns_ = t;
+      return sched_.stop();
+    }
     // The master ended mid-run (crash, kill): a lost master, as realtime supervision says it,
     // but always the run's end: in lockstep nothing else answers the ticks.
     const std::string why = last_error_line(fs::path(o_.out_dir) / ".master.log.part");
@@ -631,7 +643,14 @@ void PlatformRun::on_master_bus(SimTime t) {
     return fail(fmt::format("master: tick {} said {} frames sent, {} arrived on {}", g.tick, d.frames[0],
                             net_->frames_from_transport(), net_->master_iface()));
   last_done_ns_ = t;
-  note_report(d.report, t);
+  // Its end sequence asked for (stop, or the interrupt that reached it too) and over: it leaves
+  // now, so it ended at this tick and nothing later is recorded before its end.
+  const bool ended = d.last && (g.stop || signalled());
+  note_report(d.report, t, ended);
+  if (ended) {
+    master_exit_ns_ = t;
+    sched_.stop();
+  }
 }
 
 // The Sent handler of a polling bus: the network answers; a transport that did not deliver
@@ -687,17 +706,20 @@ void PlatformRun::master_lost(SimTime t, std::string why, bool always_fail) {
   if (always_fail || s_.bus.supervision.on_master_loss == SupervisionSpec::OnLoss::fail) fail("master lost: " + why);
 }
 
-void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t) {
+// last: the Done that ended its end sequence. A report in the end sequence (asked, or an
+// interrupt that reached the master too) is not what the run left: stopping then is no reaction.
+void PlatformRun::note_report(const simclock::MasterReport& r, SimTime t, bool last) {
+  const bool ending = sigterm_ns_ >= 0 || last || signalled();
   if (r.state != report_.state || r.reason != report_.reason) {
     std::string text = fmt::format("state {}", simclock::to_string(r.state));
     if (r.reason != simclock::StopReason::none)
       text += fmt::format(" ({}{})", simclock::to_string(r.reason), r.node ? fmt::format(", node 0x{:02X}", r.node) : "");
     note(log_event(t, "master", text), *events_);
     // Stopped at the run's end as asked is its shutdown, not a reaction (master.stopped_at_s).
-    if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0 && sigterm_ns_ < 0) master_stop_ns_ = t;
+    if (r.state == simclock::MasterState::stopped && master_stop_ns_ < 0 && !ending) master_stop_ns_ = t;
   }
   report_ = r;
-  if (sigterm_ns_ < 0) run_report_ = r;
+  if (!ending) run_report_ = r;
 }
 
 void PlatformRun::on_physics_bus(SimTime t) {

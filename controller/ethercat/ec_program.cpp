@@ -440,7 +440,8 @@ int run_sim(const ProgramOptions& o, Runner& r, int sigfd, Botnana& bn) {
       r.cycle(g.t_ns, bn.interp.get());
       go_on = bn.after_cycle(r);
     }
-    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report()};
+    // The end sequence's last tick says so (the script's end leaves too, but was not asked).
+    const simclock::Done done{g.tick, {r.frames_tx, 0, 0, 0}, r.report(), stopping && !go_on};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
     if (stopping && !go_on) log_shutdown(r.master());
     if (!go_on) return bn.error ? kExitRuntime : kExitOk;

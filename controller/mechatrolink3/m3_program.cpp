@@ -361,9 +361,10 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
     r.event_tick(g.t_ns);
     if (const auto st = ls.run_tick(r.master(), g, cycle_ns); st != simclock::WaitStatus::ok)
       throw RuntimeFailure{fmt::format("tick {}: the twin stopped answering inside the tick ({})", g.tick, simclock::to_string(st))};
-    simclock::Done done{g.tick, {ls.frames_sent(), 0, 0, 0}, r.report()};
+    const bool last = stopping && (r.shut_down() || g.t_ns + cycle_ns - stop_from >= kShutdownNs);
+    simclock::Done done{g.tick, {ls.frames_sent(), 0, 0, 0}, r.report(), last};
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
-    if (stopping && (r.shut_down() || g.t_ns + cycle_ns - stop_from >= kShutdownNs)) {
+    if (last) {
       if (r.communicating()) log_shutdown(r);
       return kExitOk;
     }

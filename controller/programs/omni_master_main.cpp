@@ -243,7 +243,7 @@ int run_sim(const Options& o, OmniMaster& m, can::Transport& tr, std::int64_t& s
     else m.on_tick(g.t_ns);
     flush(tr, ob, m, ls);
     log.check(m);
-    const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report()};
+    const simclock::Done done{g.tick, {ls.frames_tx, 0, 0, 0}, m.report(), stop};  // its end: one tick
     if (!client.done(done)) throw RuntimeFailure{"sim clock: the twin is gone"};
     if (stop) return kExitOk;
   }

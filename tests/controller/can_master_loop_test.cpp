@@ -200,8 +200,10 @@ TEST(CanMasterLoop, AGrantWithStopRunsTheEndSequenceAndTheMasterLeavesWhenItIsOv
   ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
   ASSERT_EQ(rig.grant(2, d, true), simclock::WaitStatus::ok);
   EXPECT_EQ(d.frames[0], 1u) << "the end sequence's first frame, counted in the Done";
+  EXPECT_FALSE(d.last);
   ASSERT_EQ(rig.grant(3, d, true), simclock::WaitStatus::ok);
   EXPECT_EQ(d.frames[0], 2u);
+  EXPECT_TRUE(d.last) << "the Done of the end sequence's last tick says it leaves";
   rig.master.join();
   EXPECT_EQ(rig.grant(4, d, true), simclock::WaitStatus::closed) << "it left after its end sequence";
   EXPECT_EQ(rig.code, 0);

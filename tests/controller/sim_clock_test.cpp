@@ -130,7 +130,7 @@ TEST(SimClockCodec, SentAndHorizonGoldenBytes) {
 }
 
 TEST(SimClockCodec, DoneFieldOffsets) {
-  // The documented offsets: tick 8, frames 16, state 48, reason 49, node 50, pad 51,
+  // The documented offsets: tick 8, frames 16, state 48, reason 49, node 50, last 51,
   // path_origin_ns 52, reference 60 (3 × f32), odometry 72 (3 × f32), zeros from 84.
   const Done d = full_done();
   const Bytes b = encode(d);
@@ -143,6 +143,9 @@ TEST(SimClockCodec, DoneFieldOffsets) {
   EXPECT_EQ(b[49], static_cast<std::uint8_t>(StopReason::feedback_missing));
   EXPECT_EQ(b[50], 3);
   EXPECT_EQ(b[51], 0);
+  Done last = d;
+  last.last = true;
+  EXPECT_EQ(encode(last)[51], 1);
   std::int64_t origin;
   std::memcpy(&origin, &b[52], 8);
   EXPECT_EQ(origin, -123456789);
@@ -217,7 +220,7 @@ TEST(SimClockCodec, BadValueForEnumsAndReservedBytes) {
   EXPECT_EQ(error_of(with(48, 5)), DecodeError::bad_value);    // state past finished
   EXPECT_EQ(error_of(with(48, 255)), DecodeError::bad_value);
   EXPECT_EQ(error_of(with(49, 8)), DecodeError::bad_value);    // reason past config_failed
-  EXPECT_EQ(error_of(with(51, 1)), DecodeError::bad_value);    // pad
+  EXPECT_EQ(error_of(with(51, 2)), DecodeError::bad_value);    // last past 1
   EXPECT_EQ(error_of(with(7, 1)), DecodeError::bad_value);     // reserved header byte
   EXPECT_EQ(error_of(with(95, 1)), DecodeError::bad_value);    // an unused trailing byte
   // The first unused byte of every other type.
