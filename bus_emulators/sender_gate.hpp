@@ -21,7 +21,8 @@ namespace omnitwin::bus_emulators {
 // A master started again sends from a new address where the address is a UDP socket's (a new
 // ephemeral port). With a handover time set, a sender heard after the master has been silent
 // that long becomes the master (counted in changes()); a second program sending while the
-// master is active stays foreign. Times are the caller's [ns], any monotonic clock.
+// master is active stays foreign, and a master that was only stalled takes the bus back when it
+// is heard again. Times are the caller's [ns], any monotonic clock.
 class SenderGate {
  public:
   static constexpr std::size_t kMaxAddress = 128;
@@ -36,22 +37,38 @@ class SenderGate {
   // A frame from `sender` at now_ns: true to take it, false when it is a foreign sender's and
   // refused. The first sender becomes the master, as does a new one once the master has been
   // silent for the handover time; a foreign one adds to `foreign` (and to `refused` when
-  // refused). An address longer than kMaxAddress is compared on its first kMaxAddress bytes.
+  // refused). A former master heard again was only stalled: it is the master again, the
+  // handover undone and the frames taken from the other sender since counted foreign. An
+  // address longer than kMaxAddress is compared on its first kMaxAddress bytes.
   bool admit(std::span<const std::uint8_t> sender, std::int64_t now_ns, std::uint64_t& foreign,
              std::uint64_t& refused) {
     const std::size_t n = std::min(sender.size(), kMaxAddress);
-    const bool same = have_master_ && n == master_len_ &&
-                      std::equal(sender.begin(), sender.begin() + static_cast<std::ptrdiff_t>(n), master_.begin());
-    const bool handover = have_master_ && !same && handover_ns_ >= 0 && now_ns - last_ns_ >= handover_ns_;
     const bool first = !have_master_;
+    const bool same = !first && is(master_, master_len_, sender, n);
+    if (!first && !same && former_len_ > 0 && is(former_, former_len_, sender, n)) {  // it was stalled
+      std::swap(master_, former_);
+      master_len_ = former_len_;
+      former_len_ = 0;
+      --changes_;
+      foreign += taken_;
+      last_ns_ = now_ns;
+      return true;
+    }
+    const bool handover = !first && !same && handover_ns_ >= 0 && now_ns - last_ns_ >= handover_ns_;
+    if (handover) {
+      former_ = master_;
+      former_len_ = master_len_;
+      taken_ = 0;
+      ++changes_;
+    }
     if (first || handover) {
       std::copy_n(sender.begin(), n, master_.begin());
       master_len_ = n;
-      changes_ += handover ? 1 : 0;
       have_master_ = true;
     }
     if (first || same || handover) {
       last_ns_ = now_ns;
+      ++taken_;
       return true;
     }
     ++foreign;
@@ -61,13 +78,18 @@ class SenderGate {
   }
 
  private:
-  std::array<std::uint8_t, kMaxAddress> master_{};
-  std::size_t master_len_ = 0;
+  using Address = std::array<std::uint8_t, kMaxAddress>;
+  static bool is(const Address& a, std::size_t len, std::span<const std::uint8_t> sender, std::size_t n) {
+    return n == len && std::equal(sender.begin(), sender.begin() + static_cast<std::ptrdiff_t>(n), a.begin());
+  }
+  Address master_{}, former_{};  // former: the master before the last handover (0 long: none)
+  std::size_t master_len_ = 0, former_len_ = 0;
   bool have_master_ = false;
   bool refuse_ = false;
   std::int64_t handover_ns_ = -1;
   std::int64_t last_ns_ = 0;  // the master's last frame
   std::uint64_t changes_ = 0;
+  std::uint64_t taken_ = 0;   // frames taken from the master since the last handover
 };
 
 }  // namespace omnitwin::bus_emulators

@@ -80,12 +80,21 @@ void CanWire::submit_from_far(const can::Frame& f, SimTime t) {
 void CanWire::take_from_far(const can::TimedFrame& r, SimTime t) {
   if (r.sender != 0) {
     if (master_sender_ == 0) master_sender_ = r.sender;  // the first sender is the master
-    // A master started again (a new UDP port) once the old one has been silent long enough.
-    if (r.sender != master_sender_ && handover_ && t - master_last_ >= kMasterHandoverNs) {
+    if (r.sender != master_sender_ && r.sender == former_sender_) {
+      // The former master heard again was only stalled: the bus is its again, and the frames
+      // taken from the other sender meanwhile were foreign.
+      std::swap(master_sender_, former_sender_);
+      former_sender_ = 0;
+      --master_changes_;
+      foreign_frames_ += taken_;
+    } else if (r.sender != master_sender_ && handover_ && t - master_last_ >= kMasterHandoverNs) {
+      // A master started again (a new UDP port) once the old one has been silent long enough.
+      former_sender_ = master_sender_;
       master_sender_ = r.sender;
+      taken_ = 0;
       ++master_changes_;
     }
-    if (r.sender == master_sender_) master_last_ = t;
+    if (r.sender == master_sender_) master_last_ = t, ++taken_;
     if (r.sender != master_sender_) {
       ++foreign_frames_;
       if (s_.bus.can.refuse_foreign) {

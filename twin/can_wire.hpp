@@ -127,6 +127,8 @@ class CanWire {
   bool handover_ = false;
   SimTime master_last_ = 0;  // the master's last frame
   std::uint64_t master_changes_ = 0;
+  std::uint64_t former_sender_ = 0;  // the master before the last handover (0: none)
+  std::uint64_t taken_ = 0;          // frames taken from the master since the last handover
 };
 
 }  // namespace omnitwin::twin

@@ -290,7 +290,8 @@ void print_summary(const RunResult& r) {
   // A master started again on UDP: its new address taken over from the silent old one.
   if (m.contains("bus") && m["bus"].value("master_changes", std::uint64_t{0}) > 0)
     std::cout << fmt::format("  bus: a new sender was taken for the master {} time(s), each after the master before it "
-                             "had been silent {:.1f} s (a master started again)\n",
+                             "had been silent {:.1f} s and was not heard again (a master started again, or it "
+                             "ended and another program took the bus)\n",
                              m["bus"].value("master_changes", std::uint64_t{0}), kMasterHandoverNs * 1e-9);
   // The end of a master on its own clock: the SIGTERM at `duration`, served until it exited.
   if (m.contains("master") && m["master"].value("sigterm_at_s", -1.0) >= 0) {

@@ -373,16 +373,18 @@ int run_sim(Runner& r, MasterLockstep& ls, int sigfd, SimTime cycle_ns) {
 
 // Wall clock: how late the program reached the core's deadlines in cyclic communication (a
 // host that stalls the master: its SYNC then goes out late and the servos may raise COMM_ALM).
-// late: deadlines reached half a cycle or more after they were due. Real-time safe.
+// late: cycles whose deadlines it reached half a cycle or more after they were due (a stall of
+// N cycles counts N: each of them is run late, in a burst). Real-time safe.
 // add() says whether this one was late; the first kLogged are logged with their instant.
 struct WallLateness {
   static constexpr std::uint64_t kLogged = 20;
   SimTime max_ns = 0;
   std::uint64_t late = 0;
+  std::uint64_t logged = 0;  // stalls logged so far
   bool add(SimTime late_ns, SimTime cycle_ns) {
     max_ns = std::max(max_ns, late_ns);
     if (2 * late_ns < cycle_ns) return false;
-    ++late;
+    late += static_cast<std::uint64_t>(std::max<SimTime>(1, (late_ns + cycle_ns / 2) / cycle_ns));
     return true;
   }
 };
@@ -416,9 +418,9 @@ int run_wall(const ProgramOptions& o, const M3ProgramConfig& pc, const std::func
     if (n > 0) r->master().on_frame(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)), now);
     const SimTime due = r->master().next_wakeup();
     if (due >= 0 && due <= now && r->master().state() == DriverState::cyclic && lateness.add(now - due, tick) &&
-        lateness.late <= WallLateness::kLogged)
+        ++lateness.logged <= WallLateness::kLogged)
       spdlog::warn("{} deadline reached {} µs late{}", stamp(now), (now - due) / 1000,
-                   lateness.late == WallLateness::kLogged ? " (later ones are only counted)" : "");
+                   lateness.logged == WallLateness::kLogged ? " (later ones are only counted)" : "");
     r->master().advance(now);
   };
   for (;;) {
@@ -534,7 +536,7 @@ int run_m3_program(const ProgramOptions& o) {
       runner = make();
       code = run_wall(o, pc, make, runner, *tr, sigfd, rx, lateness);
       if (lateness.late > 0)
-        spdlog::warn("{} of the master's deadlines were reached half a cycle or more late (at worst {} µs): the "
+        spdlog::warn("{} of the master's cycles ran half a cycle or more late (at worst {} µs): the "
                      "host stalled this process, so SYNC and commands went out late",
                      lateness.late, lateness.max_ns / 1000);
     }

@@ -70,16 +70,16 @@ TEST(SenderGate, ANewSenderTakesOverFromAMasterSilentForTheHandoverTime) {
   g.set_refuse(true);
   g.set_handover(500'000'000);
   std::uint64_t foreign = 0, refused = 0;
-  const std::array<std::uint8_t, 6> first{2, 0, 0, 0, 0, 1}, again{2, 0, 0, 0, 0, 2};
+  const std::array<std::uint8_t, 6> first{2, 0, 0, 0, 0, 1}, again{2, 0, 0, 0, 0, 2}, third{2, 0, 0, 0, 0, 3};
   ASSERT_TRUE(g.admit(first, 1'000'000'000, foreign, refused));
   // 0.4 s after the master's last frame: still its bus.
   EXPECT_FALSE(g.admit(again, 1'400'000'000, foreign, refused));
   EXPECT_EQ(g.changes(), 0u);
-  // 0.5 s: the new sender is the master, the old one foreign from now on.
+  // 0.5 s: the new sender is the master; a third program is foreign.
   EXPECT_TRUE(g.admit(again, 1'500'000'000, foreign, refused));
   EXPECT_EQ(g.changes(), 1u);
   EXPECT_TRUE(g.admit(again, 1'600'000'000, foreign, refused));
-  EXPECT_FALSE(g.admit(first, 1'700'000'000, foreign, refused));
+  EXPECT_FALSE(g.admit(third, 1'700'000'000, foreign, refused));
   EXPECT_EQ(foreign, 2u);
   EXPECT_EQ(refused, 2u);
 }
@@ -101,6 +101,29 @@ TEST(SenderGate, AnActiveMasterKeepsTheBusAndWithoutAHandoverTimeASilentOneToo) 
   never.admit(other, 3'600'000'000'000, foreign, refused);
   EXPECT_EQ(never.changes(), 0u);
   EXPECT_EQ(foreign, 21u);
+}
+
+// A master only stalled (SIGSTOP, a host stall) while another program sends: the other takes
+// over after the handover time, but the master heard again takes the bus back, and the frames
+// taken from the other meanwhile count as foreign. It stayed locked out for good, every frame
+// of its own refused (found in review).
+TEST(SenderGate, AStalledMasterHeardAgainTakesTheBusBack) {
+  SenderGate g;
+  g.set_refuse(true);
+  g.set_handover(500'000'000);
+  std::uint64_t foreign = 0, refused = 0;
+  const std::array<std::uint8_t, 6> master{2, 0, 0, 0, 0, 1}, other{2, 0, 0, 0, 0, 2};
+  ASSERT_TRUE(g.admit(master, 0, foreign, refused));
+  EXPECT_TRUE(g.admit(other, 600'000'000, foreign, refused));  // the master stalled: taken over
+  EXPECT_TRUE(g.admit(other, 800'000'000, foreign, refused));
+  EXPECT_EQ(g.changes(), 1u);
+  EXPECT_TRUE(g.admit(master, 1'000'000'000, foreign, refused));  // back
+  EXPECT_EQ(g.changes(), 0u);
+  EXPECT_EQ(foreign, 2u) << "the other's two frames while it held the bus";
+  EXPECT_FALSE(g.admit(other, 1'100'000'000, foreign, refused));
+  EXPECT_TRUE(g.admit(master, 1'200'000'000, foreign, refused));
+  EXPECT_EQ(foreign, 3u);
+  EXPECT_EQ(refused, 1u);
 }
 
 }  // namespace

@@ -143,15 +143,15 @@ TEST(CanWire, ASecondSenderIsCountedAndRefusedWhenAsked) {
 }
 
 // On the wall clock a sender heard after the master's kMasterHandoverNs of silence is the master
-// (a master started again on UDP has a new port): taken even when foreign senders are refused,
-// and the old one is foreign from then on. In lockstep the first sender stays the master.
+// (a master started again on UDP has a new port): taken even when foreign senders are refused;
+// a third program is foreign. In lockstep the first sender stays the master.
 TEST(CanWire, OnTheWallClockANewSenderTakesOverFromASilentMaster) {
   for (ClockMode clock : {ClockMode::realtime, ClockMode::lockstep}) {
     const bool wall = clock == ClockMode::realtime;
     const std::string name = unique_bus();
     Scenario s = with_refuse(scenario(name), true);
     s.clock = clock;
-    can::MemTransport first(name), again(name);
+    can::MemTransport first(name), again(name), third(name);
     CanWire wire(s, 2, false);
     const SimTime h = kMasterHandoverNs;
     ASSERT_TRUE(first.send(frame(0x000)));
@@ -160,14 +160,35 @@ TEST(CanWire, OnTheWallClockANewSenderTakesOverFromASilentMaster) {
     ASSERT_TRUE(wire.drain_transport(2, h - 1, std::chrono::milliseconds(1000)));
     ASSERT_TRUE(again.send(frame(0x000)));  // silent for the handover time
     ASSERT_TRUE(wire.drain_transport(3, h, std::chrono::milliseconds(1000)));
-    ASSERT_TRUE(first.send(frame(0x000)));
+    ASSERT_TRUE(third.send(frame(0x000)));
     ASSERT_TRUE(wire.drain_transport(4, h + 1, std::chrono::milliseconds(1000)));
     const auto m = wire.metrics("can", h + 2);
     EXPECT_EQ(m["master_changes"], wall ? 1 : 0) << wall;
-    // wall: again's first and first's last; lockstep: both of again's
-    EXPECT_EQ(m["foreign_frames"], 2) << wall;
-    EXPECT_EQ(m["refused_frames"], 2) << wall;
+    // wall: again's first and the third's; lockstep: both of again's and the third's
+    EXPECT_EQ(m["foreign_frames"], wall ? 2 : 3) << wall;
+    EXPECT_EQ(m["refused_frames"], wall ? 2 : 3) << wall;
   }
+}
+
+// A master only stalled while another sender spoke takes the bus back when heard again.
+TEST(CanWire, OnTheWallClockAStalledMasterHeardAgainTakesTheBusBack) {
+  const std::string name = unique_bus();
+  Scenario s = with_refuse(scenario(name), true);
+  s.clock = ClockMode::realtime;
+  can::MemTransport master(name), other(name);
+  CanWire wire(s, 2, false);
+  const SimTime h = kMasterHandoverNs;
+  ASSERT_TRUE(master.send(frame(0x000)));
+  ASSERT_TRUE(wire.drain_transport(1, 0, std::chrono::milliseconds(1000)));
+  ASSERT_TRUE(other.send(frame(0x001)));  // taken over: the master was silent
+  ASSERT_TRUE(wire.drain_transport(2, h, std::chrono::milliseconds(1000)));
+  ASSERT_TRUE(master.send(frame(0x000)));  // heard again
+  ASSERT_TRUE(other.send(frame(0x001)));
+  ASSERT_TRUE(wire.drain_transport(4, h + 1, std::chrono::milliseconds(1000)));
+  const auto m = wire.metrics("can", h + 2);
+  EXPECT_EQ(m["master_changes"], 0);
+  EXPECT_EQ(m["foreign_frames"], 2) << "the other's frame while it held the bus, and its next";
+  EXPECT_EQ(m["refused_frames"], 1);
 }
 
 // The same over UDP multicast, where the sender is the datagram's source address and port.
