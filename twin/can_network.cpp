@@ -81,6 +81,7 @@ void OmniCanNetwork::make_slave(int i) {
   c.missing_command = s_.bus.can.hold_missing_command ? omni::MissingCommand::hold : omni::MissingCommand::skip;
   c.sync_interval = s_.bus.can.sync_interval;
   c.t_post_ns = std::llround(s_.bus.can.t_post_us * 1e3);
+  c.isr_ns = std::llround(s_.bus.can.isr_us * 1e3);
   c.start_phase_ns = std::llround(start_phase_[static_cast<std::size_t>(i)] * static_cast<double>(c.timer_period_ns));
   auto send = [this, i](const can::Frame& f, std::int64_t at) {
     wire_.bus().submit(bus_node(i), f, at + wire_.extra_delay(i));
@@ -113,9 +114,41 @@ void OmniCanNetwork::on_deliver(can::BusNode receiver, const can::Frame& f, cons
 }
 
 void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
-  if (!wire_.completed(sender, f, timing)) return;  // a slave's frame: on to the master
+  bool reached_master = false;
+  if (!wire_.completed(sender, f, timing, &reached_master)) {  // a slave's frame: on to the master
+    if (!reached_master) return;
+    const omni::DecodeResult d = omni::decode(f);
+    if (const auto* m = std::get_if<omni::Message>(&d))
+      if (const auto* fb = std::get_if<omni::SpeedFeedback>(m)) on_feedback_at_master(*fb);
+    return;
+  }
   if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
-  if (is_nmt_all(f)) bus_stopped_ = f.data[1] == kNmtStop;
+  if (is_nmt_all(f)) {
+    bus_stopped_ = f.data[1] == kNmtStop;
+    at_master_.open = false;  // a new run of the nodes: no period is open
+  }
+  const omni::DecodeResult d = omni::decode(f);
+  if (const auto* m = std::get_if<omni::Message>(&d))
+    if (const auto* c = std::get_if<omni::SpeedCommand>(m)) on_command_at_master(*c);
+}
+
+// A speed command on the wire ends the master's control period: each axis's error for it is
+// the command sent at its start minus the feedback received during it.
+void OmniCanNetwork::on_command_at_master(const omni::SpeedCommand& c) {
+  if (c.sender != omni::node::master) return;
+  for (std::size_t a = 0; a < 4; ++a) {
+    if (at_master_.open && hooks_.axis_sample_at_master)
+      hooks_.axis_sample_at_master(static_cast<int>(a), static_cast<double>(at_master_.command[a] - at_master_.feedback[a]));
+    at_master_.command[a] = c.axis[a];
+    at_master_.feedback[a] = 0;
+  }
+  at_master_.open = true;
+}
+
+void OmniCanNetwork::on_feedback_at_master(const omni::SpeedFeedback& f) {
+  const int axis = omni::axis_of_slave(f.sender);
+  if (!at_master_.open || axis < 1 || f.data_type != omni::data_type::speed) return;
+  at_master_.feedback[static_cast<std::size_t>(axis - 1)] += f.value;
 }
 
 void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {
@@ -245,6 +278,7 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
           {"stale_samples", st.stale_samples},
           {"held_samples", st.held_samples},
           {"missing_command", omni::to_string(sl.config().missing_command)},
+          {"isr_us", static_cast<double>(sl.config().isr_ns) * 1e-3},
           {"start_phase", start_phase_[n]},
           {"frames_received", st.frames_received},
           {"frames_sent", st.frames_sent},

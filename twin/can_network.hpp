@@ -43,7 +43,10 @@ namespace omnitwin::twin {
 class OmniCanNetwork final : public BusNetwork {
  public:
   // Hooks: wheel_angle feeds the counters, set_setpoint the drivers; axis_sample gets
-  // command − measured [pulses] each slave sample (wheel_speed is not used).
+  // command − measured [pulses] each slave sample; axis_sample_at_master the same per master
+  // period as the master sees it: at each speed command on the wire, the command before it
+  // minus the feedback that reached the master since (0 if none), for each axis (wheel_speed
+  // is not used).
 
   // Builds the bus and the slaves and opens the transport (throws can::TransportError for a
   // bad spec or a socket that cannot be opened). Timers are added to `sched` (all off: the
@@ -117,6 +120,8 @@ class OmniCanNetwork final : public BusNetwork {
   void on_tx_done(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing);
   void on_bus_event(const can::BusEvent& e);
   void on_slave_timer(int axis0, SimTime t);
+  void on_command_at_master(const omni::SpeedCommand& c);
+  void on_feedback_at_master(const omni::SpeedFeedback& f);
   void after_slave_input(int axis0, std::uint64_t steps_before, const omni::TimerAction& a);
   void make_slave(int axis0);
   nlohmann::json slave_json(int axis0) const;
@@ -130,6 +135,14 @@ class OmniCanNetwork final : public BusNetwork {
   std::array<bool, 4> powered_{true, true, true, true};
   std::array<double, 4> start_phase_{};  // each slave's timer phase at NMT start [fraction of a period]
   bool bus_stopped_ = false;  // the last NMT command to all nodes was stop
+  // The axes as the master sees them (hooks.axis_sample_at_master): the speed command it sent
+  // for the current control period and the feedback it has received since it sent it.
+  struct AtMaster {
+    bool open = false;                          // a command was sent since the last NMT
+    std::array<int, 4> command{};               // [counts/period]
+    std::array<std::int64_t, 4> feedback{};     // Σ feedback values received [counts]
+  };
+  AtMaster at_master_;
   SimTime master_start_ns_ = -1;
 };
 

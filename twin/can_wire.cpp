@@ -150,12 +150,15 @@ int CanWire::poll_transport(SimTime t) {
   return n;
 }
 
-bool CanWire::completed(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing) {
+bool CanWire::completed(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing,
+                        bool* reached_master) {
   if (pcap_) pcap_->write(f, timing.end_ns, sender == kFar ? can::Direction::rx : can::Direction::tx);
   if (f.extended) ++extended_frames_;
+  if (reached_master) *reached_master = false;
   if (sender == kFar) return true;
   // A node's frame reaches the master (and anyone else on the transport) when it completes.
   if (!arrives(FaultSpec::kMaster)) return false;
+  if (reached_master) *reached_master = true;
   if (batch_) {
     pending_.push_back(can::TimedFrame{f, timing.end_ns});
     if (pending_.size() >= kPendingCapacity) flush_transport();

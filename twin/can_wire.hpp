@@ -68,7 +68,9 @@ class CanWire {
   // A frame completed on the wire: into the capture; a node's frame on to the master unless
   // the master's frame loss takes it. Returns true for a frame from the far side (the
   // protocol looks at those). Real-time safe.
-  bool completed(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing);
+  // *reached_master (if given) says whether a node's frame went on to the master.
+  bool completed(can::BusNode sender, const can::Frame& f, const can::FrameTiming& timing,
+                 bool* reached_master = nullptr);
   // A frame reached node `target` (FaultSpec numbering): false when frame loss takes it.
   bool arrives(int target);
   // The delay fault's extra time for frames node `node` sends [ns].

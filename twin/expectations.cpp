@@ -25,8 +25,10 @@ constexpr std::array<std::string_view, 4> kFinalPose = {"final_x_m", "final_y_m"
 // What the drives did (DriveHistory): how a master commissioning them is judged.
 constexpr std::array<std::string_view, 5> kDriveMetrics = {"all_running_at_s", "stopped_at_s", "faults",
                                                            "running_at_end", "running_at_duration"};
-constexpr std::array<std::string_view, 2> kAxisMetrics = {"iae_velocity_pulse",
-                                                          "std_velocity_pulse"};
+// (the _at_master pair: bus can, per master period as the master sees it)
+constexpr std::array<std::string_view, 4> kAxisMetrics = {"iae_velocity_pulse", "std_velocity_pulse",
+                                                          "iae_velocity_pulse_at_master",
+                                                          "std_velocity_pulse_at_master"};
 // bus can, ethercat, m3 and canopen (not_returned … op_since_s are EtherCAT's, the next two
 // M-III's, the next three CANopen's; foreign_frames, refused_frames and master_changes
 // EtherCAT's, M-III's and the CAN family's over UDP; extended_frames the CAN family's: frames with a 29-bit identifier).

@@ -77,12 +77,19 @@ void VelocityErrorStats::add(double err_pulses) {
   ++n_;
 }
 
-nlohmann::json VelocityErrorStats::to_json() const {
-  if (n_ == 0) return without_samples({"iae_velocity_pulse", "std_velocity_pulse"});
+nlohmann::json VelocityErrorStats::to_json(const std::string& suffix) const {
+  if (n_ == 0) {
+    nlohmann::json j = without_samples({});
+    j["iae_velocity_pulse" + suffix] = nullptr;
+    j["std_velocity_pulse" + suffix] = nullptr;
+    if (!suffix.empty()) j["samples" + suffix] = j.at("samples");
+    if (!suffix.empty()) j.erase("samples");
+    return j;
+  }
   return nlohmann::json{
-      {"iae_velocity_pulse", abs_},
-      {"std_velocity_pulse", rms(sq_, n_)},
-      {"samples", n_},
+      {"iae_velocity_pulse" + suffix, abs_},
+      {"std_velocity_pulse" + suffix, rms(sq_, n_)},
+      {"samples" + suffix, n_},
   };
 }
 

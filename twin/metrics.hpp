@@ -45,8 +45,9 @@ class VelocityErrorStats {
 
   std::size_t samples() const { return n_; }
 
-  // iae_velocity_pulse, std_velocity_pulse (null with no samples), samples. Not real-time safe.
-  nlohmann::json to_json() const;
+  // iae_velocity_pulse, std_velocity_pulse (null with no samples), samples; with a suffix
+  // (e.g. "_at_master") the same keys carry it. Not real-time safe.
+  nlohmann::json to_json(const std::string& suffix = "") const;
 
  private:
   std::size_t n_ = 0;

@@ -267,6 +267,7 @@ class PlatformRun {
   std::array<double, 3> final_pose_{};  // x, y [m], phi [rad] at the last control sample
   SimTime path_done_ns_ = -1;           // when the plan reached the path's end (−1: not in this run)
   std::array<VelocityErrorStats, 4> axis_stats_;
+  std::array<VelocityErrorStats, 4> axis_master_stats_;  // the same per control period, as the master sees it
   std::vector<double> row_;
 
   // a bus network (`can`, `ethercat`)
@@ -318,6 +319,9 @@ void PlatformRun::build_network() {
   };
   h.axis_sample = [this](int i, double e) {
     if (sched_.now() <= end_) axis_stats_[static_cast<std::size_t>(i)].add(e);  // not the master's shutdown
+  };
+  h.axis_sample_at_master = [this](int i, double e) {
+    if (sched_.now() <= end_) axis_master_stats_[static_cast<std::size_t>(i)].add(e);
   };
   h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
     if (events_) note(log_event(t, kind, text), *events_);
@@ -1058,7 +1062,11 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
   m["drives"] = drive_history_.to_json();
   m["platform_odometry"] = odom_stats_.to_json();
   m["axes"] = nlohmann::json::array();
-  for (const auto& a : axis_stats_) m["axes"].push_back(a.to_json());
+  for (std::size_t i = 0; i < axis_stats_.size(); ++i) {
+    nlohmann::json a = axis_stats_[i].to_json();
+    if (axis_master_stats_[i].samples() > 0) a.update(axis_master_stats_[i].to_json("_at_master"));
+    m["axes"].push_back(std::move(a));
+  }
   m["physics"] = {{"model", model_name(s_.platform)}, {"timestep_s", s_.platform.sim.timestep},
                   {"steps", physics_steps_}, {"warnings", sim_.warning_count()}};
   return m;

@@ -433,6 +433,7 @@ void read_can_wire(const YamlField& f, CanSpec& c) {
 void read_can(const YamlField& f, CanSpec& c) {
   read_can_wire(f, c);
   read_number(f, "t_post_us", c.t_post_us, Bounds::non_negative());
+  read_number(f, "isr_us", c.isr_us, Bounds::non_negative());
   if (const YamlField d = f["drift"]; d.exists()) {
     // One drift for every slave, or one per axis.
     const Bounds b{-0.5, 0.5};
@@ -606,7 +607,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   }
   if (!settings) return bus;
   if (bus.kind == BusKind::can) {
-    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "drift", "sync", "sync_interval", "missing_command",
+    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "isr_us", "drift", "sync", "sync_interval", "missing_command",
                   "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_can(f, bus.can);
     read_supervision(f["supervision"], bus.supervision);
@@ -943,6 +944,9 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
                                                                            : ClockMode::lockstep;
   }
   s.controller = read_controller(root["controller"]);
+  if (s.bus.kind == BusKind::can && !(s.bus.can.isr_us * 1e-6 < s.platform.velocity_loop.period))
+    root["bus"]["isr_us"].fail(fmt::format("the slaves' interrupt routine must end within their period ({:g} µs)",
+                                           s.platform.velocity_loop.period * 1e6));
   s.path = read_path(root["path"]);
   read_number(root, "settle", s.settle, Bounds::closed(0, kMaxRunSeconds));
   s.duration = path_duration(s.path) + s.settle;

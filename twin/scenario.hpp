@@ -87,6 +87,9 @@ struct CanSpec {
   std::string transport = "udp:239.74.163.2:43113";
   double t_pre_us = 0.604;                    // master processing before a frame [µs] (table 2-1)
   double t_post_us = 88.8;                    // slave processing before a frame [µs] (table 2-1)
+  // Run time of the slaves' control-step interrupt [µs] (OmniSlaveConfig::isr_ns): 0 = a
+  // hardware-reloaded timer; > 0 = reloaded at the routine's end, feedback sent then.
+  double isr_us = 0.0;
   std::array<double, 4> drift{3.62e-3, 3.62e-3, 3.62e-3, 3.62e-3};  // slave oscillators [-]
   bool sync = false;                          // synchronisation of 3-2-2
   bool hold_missing_command = false;          // slaves: hold (true) or skip (fig. 4-16) a missing command

@@ -55,6 +55,7 @@ const char* to_string(SlaveConfigError e) {
     case SlaveConfigError::bad_drift: return "bad_drift";
     case SlaveConfigError::bad_sync: return "bad_sync";
     case SlaveConfigError::bad_t_post: return "bad_t_post";
+    case SlaveConfigError::bad_isr: return "bad_isr";
     case SlaveConfigError::bad_start_phase: return "bad_start_phase";
   }
   return "unknown";
@@ -72,6 +73,7 @@ SlaveConfigError validate_slave_config(const OmniSlaveConfig& c) {
   if (!valid_drift(c.drift)) return SlaveConfigError::bad_drift;
   if (c.sync_enabled && c.sync_interval < 1) return SlaveConfigError::bad_sync;
   if (c.t_post_ns < 0) return SlaveConfigError::bad_t_post;
+  if (c.isr_ns < 0 || c.isr_ns >= c.timer_period_ns) return SlaveConfigError::bad_isr;
   if (c.start_phase_ns < 0) return SlaveConfigError::bad_start_phase;
   return SlaveConfigError::ok;
 }
@@ -268,11 +270,14 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       state_ = SlaveState::stopped;
       return {TimerRequest::stop, 0};
 
-    case SlaveTransition::timer_sample:
+    case SlaveTransition::timer_sample: {
       if (state_ != SlaveState::running) break;
       ++stats_.timer_samples;
-      control_step(now_ns, shaft_angle_rad);
-      return {};
+      const bool ran = control_step(now_ns, shaft_angle_rad);
+      if (config_.isr_ns == 0) return {};
+      // Reloaded at the routine's end: the next interrupt a period after that.
+      return {TimerRequest::restart, now_ns + (ran ? config_.isr_ns : config_.t_post_ns) + actual_period_ns_};
+    }
 
     case SlaveTransition::enter_sync:
       if (state_ != SlaveState::running) break;
@@ -291,13 +296,13 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       control_step(now_ns, shaft_angle_rad);
       timer_since_restart_ = 0;
       state_ = SlaveState::running;
-      return {TimerRequest::restart, now_ns + config_.t_post_ns + actual_period_ns_};
+      return {TimerRequest::restart, now_ns + step_delay_ns() + actual_period_ns_};
   }
   ++stats_.illegal_transitions;
   return {};
 }
 
-void OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
+bool OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
   ++run_samples_;
   if (run_commands_ != run_samples_) {  // the held command is not this sample's (2-2-1)
     if (stats_.first_dropout_sample < 0) {
@@ -310,7 +315,7 @@ void OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
     // fig. 4-16: no velocity loop and no feedback; hold: run on with the old command.
     if (config_.missing_command == MissingCommand::skip) {
       ++stats_.stale_samples;
-      return;
+      return false;
     }
     ++stats_.held_samples;
   }
@@ -321,10 +326,14 @@ void OmniSlave::control_step(std::int64_t now_ns, double shaft_angle_rad) {
   const EncodeResult e =
       encode(SpeedFeedback{config_.node_id, data_type::speed, chain_.last().delta_counts});
   if (const auto* f = std::get_if<can::Frame>(&e)) {
-    send(*f, now_ns);
+    ++stats_.frames_sent;
     ++stats_.feedback_sent;
+    if (send_) send_(*f, now_ns + step_delay_ns());  // at the end of the routine
   }
+  return true;
 }
+
+std::int64_t OmniSlave::step_delay_ns() const { return config_.isr_ns > 0 ? config_.isr_ns : config_.t_post_ns; }
 
 void OmniSlave::send(const can::Frame& f, std::int64_t now_ns) {
   ++stats_.frames_sent;

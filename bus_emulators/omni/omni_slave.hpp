@@ -69,6 +69,16 @@ struct OmniSlaveConfig {
   bool sync_enabled = false;  // synchronisation of 3-2-2
   int sync_interval = 20;     // timer interrupts between forced resyncs, >= 1 when enabled
   std::int64_t t_post_ns = 88'800;  // processing delay before a frame is sent [ns], table 2-1, >= 0
+  // Run time of the interrupt routine that runs the control step [ns], >= 0 and below the
+  // timer period. 0: the timer reloads in hardware, so its period does not depend on the
+  // routine, and the feedback leaves T_post after the interrupt. > 0: the firmware reloads
+  // the timer in software at the routine's end (an 8051 in 16-bit timer mode has no
+  // auto-reload), so a sample that ran the control step is followed by the next interrupt
+  // this much more than a period later, and the feedback leaves at the routine's end; an
+  // interrupt that skips the step ends after T_post. The resync restarts the timer at the end
+  // of its routine as well. Seed 002 gives no value: fig. 4-20 shows the four feedback frames
+  // 3.1 … 3.5 ms after the command.
+  std::int64_t isr_ns = 0;
   // Where the node's timer stands when NMT start enables it [ns], >= 0: the first interrupt
   // comes start_phase_ns later than one period after the start frame's receive interrupt.
   // The thesis's slave handles NMT in its main loop (fig. 4-16), so each node's phase against
@@ -90,6 +100,7 @@ enum class SlaveConfigError : std::uint8_t {
   bad_sync,      // sync_enabled with sync_interval < 1
   bad_t_post,    // t_post_ns < 0
   bad_start_phase,  // start_phase_ns < 0
+  bad_isr,       // isr_ns < 0 or not below timer_period_ns
 };
 const char* to_string(SlaveConfigError e);  // stable lowercase name, never nullptr
 SlaveConfigError validate_slave_config(const OmniSlaveConfig& c);
@@ -264,7 +275,10 @@ class OmniSlave {
  private:
   TimerAction transition(SlaveTransition t, std::int64_t now_ns, double shaft_angle_rad);
   TimerAction handle(const Message& m, std::int64_t now_ns);
-  void control_step(std::int64_t now_ns, double shaft_angle_rad);
+  // One sample; false when it was skipped (no new command, MissingCommand::skip).
+  bool control_step(std::int64_t now_ns, double shaft_angle_rad);
+  // From the interrupt to the end of a control step's routine [ns]: isr_ns, else T_post.
+  std::int64_t step_delay_ns() const;
   void send(const can::Frame& f, std::int64_t now_ns);
   void rebuild_chain();
 

@@ -448,6 +448,49 @@ TEST(OmniSlave, HoldPolicyRunsTheLoopAgainWithTheOldCommand) {
   EXPECT_STREQ(to_string(MissingCommand::skip), "skip");
 }
 
+TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsAtItsEnd) {
+  // isr_ns > 0: the firmware reloads its timer when the control routine ends, so the next
+  // interrupt comes a period after that; the feedback leaves at the routine's end; an
+  // interrupt that skips the step (no new command) ends after T_post; the resync restarts
+  // the timer at its routine's end as well. isr_ns = 0 keeps the hardware-reloaded timer.
+  Wire wire;
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  cfg.drift = 0.0;
+  cfg.isr_ns = 3'300'000;
+  cfg.sync_interval = 1;
+  OmniSlave slave(cfg, wire.fn());
+  slave.on_frame(start_all(), 0);
+  slave.on_frame(command({7, 0, 0, 0}), 100);
+  EXPECT_EQ(slave.on_timer(10'000'000, 0.0), (TimerAction{TimerRequest::restart, 10'000'000 + 3'300'000 + 10'000'000}));
+  ASSERT_EQ(wire.sent.size(), 1u);
+  EXPECT_EQ(wire.sent[0].t, 10'000'000 + 3'300'000);
+  // No new command: skipped, short routine.
+  EXPECT_EQ(slave.on_timer(23'300'000, 0.0), (TimerAction{TimerRequest::restart, 23'300'000 + cfg.t_post_ns + 10'000'000}));
+  EXPECT_EQ(wire.sent.size(), 1u);
+  // The resync: timer off at the interrupt, the command's arrival runs the routine.
+  OmniSlave synced([&] { auto c = cfg; c.sync_enabled = true; return c; }(), wire.fn());
+  synced.on_frame(start_all(), 0);
+  EXPECT_EQ(synced.on_timer(10'000'000, 0.0).request, TimerRequest::stop);
+  EXPECT_EQ(synced.on_frame(command({7, 0, 0, 0}), 10'200'000),
+            (TimerAction{TimerRequest::restart, 10'200'000 + 3'300'000 + 10'000'000}));
+  EXPECT_EQ(wire.sent.back().t, 10'200'000 + 3'300'000);
+  // The hardware-reloaded timer asks for nothing.
+  auto hw = cfg;
+  hw.isr_ns = 0;
+  OmniSlave plain(hw, wire.fn());
+  plain.on_frame(start_all(), 0);
+  plain.on_frame(command({7, 0, 0, 0}), 100);
+  EXPECT_EQ(plain.on_timer(10'000'000, 0.0).request, TimerRequest::none);
+  EXPECT_EQ(wire.sent.back().t, 10'000'000 + cfg.t_post_ns);
+  // A routine as long as the period is refused.
+  auto bad = cfg;
+  bad.isr_ns = bad.timer_period_ns;
+  EXPECT_EQ(validate_slave_config(bad), SlaveConfigError::bad_isr);
+  bad.isr_ns = -1;
+  EXPECT_EQ(validate_slave_config(bad), SlaveConfigError::bad_isr);
+  EXPECT_STREQ(to_string(SlaveConfigError::bad_isr), "bad_isr");
+}
+
 TEST(OmniSlave, SyncSwitchesToEventDrivenAndRestartsTimerFromCommand) {
   Wire wire;
   auto cfg = make_slave_config(node::axis1, params_with_period(5e-3));

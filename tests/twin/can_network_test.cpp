@@ -113,6 +113,7 @@ class Rig {
       setpoint_calls[static_cast<std::size_t>(i)].push_back({sched.now(), w});
     };
     h.axis_sample = [this](int i, double e) { samples[static_cast<std::size_t>(i)].push_back({sched.now(), e}); };
+    h.axis_sample_at_master = [this](int i, double e) { at_master[static_cast<std::size_t>(i)].push_back({sched.now(), e}); };
     h.log = [this](SimTime t, std::string_view kind, const std::string& text) {
       logs.push_back({t, std::string(kind), text});
     };
@@ -199,6 +200,7 @@ class Rig {
   std::array<double, 4> da_volts{};  // the nodes' DA outputs [V]
   std::array<std::vector<std::pair<SimTime, double>>, 4> setpoint_calls;
   std::array<std::vector<Sample>, 4> samples;
+  std::array<std::vector<Sample>, 4> at_master;  // hooks.axis_sample_at_master
   std::vector<LogLine> logs;
   can::MemTransport master;
   std::unique_ptr<OmniCanNetwork> net;
@@ -600,6 +602,27 @@ TEST(OmniCanNetwork, FrameLossToTheMasterDropsFeedbackOnTheWayToTheTransport) {
   }
   // The slaves themselves heard the master's commands throughout.
   EXPECT_EQ(r.net->slave(0).stats().commands, 4u);
+}
+
+TEST(OmniCanNetwork, TheAxesAsTheMasterSeesThemPairEachCommandWithTheFeedbackOfItsPeriod) {
+  // axis_sample_at_master: at each speed command on the wire, the command before it minus the
+  // feedback that reached the master since; a period whose feedback the master lost counts
+  // the whole command as error (the slaves' own view is not affected).
+  Rig r(can_scenario(unique_bus()), {300, 200, 100, 0});  // 3, 2, 1, 0 counts per period
+  FaultSpec f = can_fault(FaultSpec::Kind::frame_loss, FaultSpec::kMaster, 0.030, 0.010);
+  f.rate = 1.0;
+  r.schedule_fault(f);
+  r.tick(0, {nmt_start_all()});
+  for (SimTime t = 10 * kMs; t <= 60 * kMs; t += kPeriod) r.tick(t, {speed_command({3, 2, 1, 0})});
+  r.finish(61 * kMs);
+  const std::array<double, 4> cmd{3, 2, 1, 0};
+  for (std::size_t a = 0; a < 4; ++a) {
+    // Six commands close five periods: 10–20, 20–30, 30–40 (feedback lost), 40–50, 50–60 ms.
+    ASSERT_EQ(r.at_master[a].size(), 5u) << a;
+    for (std::size_t k = 0; k < 5; ++k)
+      EXPECT_EQ(r.at_master[a][k].err, k == 2 ? cmd[a] : 0.0) << "axis " << a << " period " << k;
+    for (const Sample& e : r.samples[a]) EXPECT_EQ(e.err, 0.0) << a;  // the slaves met every command
+  }
 }
 
 TEST(OmniCanNetwork, DelayOnTheMasterQueuesItsFramesLater) {

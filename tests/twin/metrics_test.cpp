@@ -94,6 +94,19 @@ TEST(VelocityErrorStats, ThreeSamplesByHand) {
   EXPECT_NEAR(j["std_velocity_pulse"].get<double>(), std::sqrt(25.0 / 3.0), kTol);
 }
 
+TEST(VelocityErrorStats, ASuffixNamesTheSameFigures) {
+  VelocityErrorStats v;
+  v.add(-2);
+  const auto j = v.to_json("_at_master");
+  EXPECT_EQ(j["samples_at_master"], 1);
+  EXPECT_NEAR(j["iae_velocity_pulse_at_master"].get<double>(), 2.0, kTol);
+  EXPECT_FALSE(j.contains("iae_velocity_pulse"));
+  const auto e = VelocityErrorStats{}.to_json("_at_master");
+  EXPECT_TRUE(e["iae_velocity_pulse_at_master"].is_null());
+  EXPECT_EQ(e["samples_at_master"], 0);
+  EXPECT_FALSE(e.contains("samples"));
+}
+
 TEST(VelocityErrorStats, EmptyIsNull) {
   const auto j = VelocityErrorStats{}.to_json();
   EXPECT_TRUE(j["iae_velocity_pulse"].is_null());

@@ -555,6 +555,22 @@ TEST(ScenarioCan, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
 }
 
+// isr_us: the slaves' control routine [µs], read as written; it must end within the slaves'
+// period (the velocity loop's), else the scenario is refused at that key.
+TEST(ScenarioCan, TheInterruptRoutineIsReadAndMustEndWithinThePeriod) {
+  const std::string m = scenario("minimal.yaml");
+  EXPECT_DOUBLE_EQ(load_scenario(m, {{"bus", "can"}}).bus.can.isr_us, 0.0);
+  EXPECT_DOUBLE_EQ(load_scenario(m, {{"bus", "can"}, {"bus.isr_us", "3300"}}).bus.can.isr_us, 3300.0);
+  EXPECT_THROW(load_scenario(m, {{"bus", "can"}, {"bus.isr_us", "10000"}}), ScenarioError);
+  EXPECT_THROW(load_scenario(m, {{"bus", "can"}, {"bus.isr_us", "-1"}}), ScenarioError);
+  try {
+    load_scenario(m, {{"bus", "can"}, {"bus.isr_us", "3300"}, {"platform.velocity_loop.period", "0.002"}});
+    ADD_FAILURE() << "a routine longer than the period was taken";
+  } catch (const ScenarioError& e) {
+    EXPECT_NE(std::string(e.what()).find("bus.isr_us"), std::string::npos) << e.what();
+  }
+}
+
 // start_phase: `random`, one fraction for all, or one per axis, each in [0, 1).
 TEST(ScenarioCan, StartPhaseIsRandomOneFractionOrOnePerAxis) {
   const std::string m = scenario("minimal.yaml");
