@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <span>
 
 #include <fmt/format.h>
@@ -54,7 +55,9 @@ CanWire::CanWire(const Scenario& s, int nodes, bool batch)
   else if (t.kind == can::TransportSpec::Kind::socketcan)
     claim_ = std::make_unique<BusClaim>("socketcan:" + t.name);
   transport_ = can::open_transport(s.bus.can.transport);
-  handover_ = s.clock != ClockMode::lockstep;
+  // Lockstep keeps the first sender; on the wall clock a master started again takes over.
+  gate_.set_handover(s.clock != ClockMode::lockstep ? kMasterHandoverNs : -1);
+  gate_.set_refuse(s.bus.can.refuse_foreign);
   pending_.reserve(kPendingCapacity);
 }
 
@@ -78,30 +81,12 @@ void CanWire::submit_from_far(const can::Frame& f, SimTime t) {
 }
 
 void CanWire::take_from_far(const can::TimedFrame& r, SimTime t) {
+  // Who the master is: the first sender, a new one after the master's silence (a master
+  // started again), a stalled one back (bus_emulators/sender_gate.hpp).
   if (r.sender != 0) {
-    if (master_sender_ == 0) master_sender_ = r.sender;  // the first sender is the master
-    if (r.sender != master_sender_ && r.sender == former_sender_) {
-      // The former master heard again was only stalled: the bus is its again, and the frames
-      // taken from the other sender meanwhile were foreign.
-      std::swap(master_sender_, former_sender_);
-      former_sender_ = 0;
-      --master_changes_;
-      foreign_frames_ += taken_;
-    } else if (r.sender != master_sender_ && handover_ && t - master_last_ >= kMasterHandoverNs) {
-      // A master started again (a new UDP port) once the old one has been silent long enough.
-      former_sender_ = master_sender_;
-      master_sender_ = r.sender;
-      taken_ = 0;
-      ++master_changes_;
-    }
-    if (r.sender == master_sender_) master_last_ = t, ++taken_;
-    if (r.sender != master_sender_) {
-      ++foreign_frames_;
-      if (s_.bus.can.refuse_foreign) {
-        ++refused_foreign_;
-        return;
-      }
-    }
+    std::array<std::uint8_t, sizeof r.sender> address{};
+    std::memcpy(address.data(), &r.sender, sizeof r.sender);
+    if (!gate_.admit(address, t, foreign_frames_, refused_foreign_)) return;
   }
   submit_from_far(r.frame, t);
 }
@@ -236,7 +221,7 @@ nlohmann::json CanWire::metrics(const char* name, SimTime now) const {
           {"refused_from_transport", refused_from_far_},
           {"foreign_frames", foreign_frames_},   // from a transport sender other than the master
           {"refused_frames", refused_foreign_},  // … of which kept off the wire (bus.refuse_foreign)
-          {"master_changes", master_changes_},   // senders taken for the master from a silent one
+          {"master_changes", gate_.changes()},   // senders taken for the master from a silent one
           {"transport_rx_malformed", malformed_rx()},
           {"transport_send_failures", send_failures_},  // already counts the OS refusals (send_errors)
           {"pcap_frames", pcap_ ? pcap_->written() : 0}};

@@ -25,6 +25,7 @@
 #include "bus_emulators/can/can_bus.hpp"
 #include "bus_emulators/can/can_pcap.hpp"
 #include "bus_emulators/can/transport.hpp"
+#include "bus_emulators/sender_gate.hpp"
 #include "twin/bus_claim.hpp"
 #include "twin/run_state.hpp"
 #include "twin/scenario.hpp"
@@ -123,14 +124,10 @@ class CanWire {
   std::uint64_t to_transport_ = 0, from_transport_ = 0;
   std::uint64_t extended_frames_ = 0;  // completed on the wire with a 29-bit identifier
   std::uint64_t lost_frames_ = 0, send_failures_ = 0, refused_from_far_ = 0, bus_off_events_ = 0;
-  std::uint64_t master_sender_ = 0;                  // the first sender seen (0: none yet)
+  // Who the master is among the transport's senders (the sender id's bytes as the address);
+  // on the wall clock one heard after the master's kMasterHandoverNs of silence takes over.
+  bus_emulators::SenderGate gate_;
   std::uint64_t foreign_frames_ = 0, refused_foreign_ = 0;
-  // Realtime: a sender heard after the master's kMasterHandoverNs of silence is the master.
-  bool handover_ = false;
-  SimTime master_last_ = 0;  // the master's last frame
-  std::uint64_t master_changes_ = 0;
-  std::uint64_t former_sender_ = 0;  // the master before the last handover (0: none)
-  std::uint64_t taken_ = 0;          // frames taken from the master since the last handover
 };
 
 }  // namespace omnitwin::twin

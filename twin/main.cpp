@@ -300,7 +300,7 @@ void print_summary(const RunResult& r) {
     const std::string sig = ms.value("stop_signal", std::string("SIGTERM"));
     const double at = ms.value("sigterm_at_s", -1.0);
     std::cout << (sig == "SIGTERM"              ? fmt::format("  end: SIGTERM to the master at {:.3f} s; ", at)
-                  : sig == "stop in the grants" ? fmt::format("  end: stop in the master's grants from {:.3f} s; ", at)
+                  : sig == kStopInTheGrants ? fmt::format("  end: stop in the master's grants from {:.3f} s; ", at)
                                                 : fmt::format("  end: the master had the {} at {:.3f} s too; ", sig, at))
               << (shutdown >= 0 ? fmt::format("served until it ended {:.3f} s later ({})\n", shutdown, ms.value("exit", "?"))
                                 : fmt::format("it had not ended when the run did ({})\n", ms.value("exit", "?")));

@@ -78,14 +78,9 @@ void VelocityErrorStats::add(double err_pulses) {
 }
 
 nlohmann::json VelocityErrorStats::to_json(const std::string& suffix) const {
-  if (n_ == 0) {
-    nlohmann::json j = without_samples({});
-    j["iae_velocity_pulse" + suffix] = nullptr;
-    j["std_velocity_pulse" + suffix] = nullptr;
-    if (!suffix.empty()) j["samples" + suffix] = j.at("samples");
-    if (!suffix.empty()) j.erase("samples");
-    return j;
-  }
+  if (n_ == 0)
+    return nlohmann::json{
+        {"iae_velocity_pulse" + suffix, nullptr}, {"std_velocity_pulse" + suffix, nullptr}, {"samples" + suffix, 0}};
   return nlohmann::json{
       {"iae_velocity_pulse" + suffix, abs_},
       {"std_velocity_pulse" + suffix, rms(sq_, n_)},

@@ -518,7 +518,7 @@ void PlatformRun::serve_master_shutdown() {
   // A lockstep master of ours is asked in simulated time (Grant.stop), so its shutdown is the
   // same every run; a terminal's Ctrl-C reached it too, and it ends as at either.
   const bool grants = clock_server_ != nullptr && !ended_itself;
-  stop_signal_ = grants ? "stop in the grants" : terminal ? "SIGINT from the terminal" : "SIGTERM";
+  stop_signal_ = grants ? kStopInTheGrants : terminal ? "SIGINT from the terminal" : "SIGTERM";
   if (interrupted) end_ = std::min(end_, sigterm_ns_);  // the figures and faults end at the interrupt
   if (!terminal && !grants) master_->terminate();
   const std::string why = interrupted ? "interrupted" : "end of the run";
@@ -577,7 +577,7 @@ void PlatformRun::stop_master() {
   const bool outlived = sigterm_ns_ >= 0 && master_exit_ns_ < 0 && was_running;
   if (outlived || (own && was_running && code == 128 + SIGKILL))
     error_ = fmt::format("master: {} did not end within {:g} s of {}: {}", master_program_, master_grace_s(),
-                         stop_signal_ == "stop in the grants" ? "the stop in its grants" : "SIGTERM",
+                         stop_signal_ == kStopInTheGrants ? "the stop in its grants" : "SIGTERM",
                          code == 128 + SIGKILL ? std::string("killed") : "it ended after (" + master_->describe_exit() + ")");
   // Exited while served, but not cleanly: its shutdown failed (exit 0, or killed by the SIGTERM
   // itself for a program without a handler, are clean).

@@ -28,6 +28,10 @@
 
 namespace omnitwin::twin {
 
+// metrics.json master.stop_signal of a lockstep master of ours asked to end in simulated time
+// (Grant.stop), beside "SIGTERM" and "SIGINT from the terminal".
+inline constexpr const char* kStopInTheGrants = "stop in the grants";
+
 // A live consumer of the run (DDS, the web view). Called on the run's own thread: on_state at every
 // control sample from the cyclic path, so it must be real-time safe (copy and return; never
 // block, never allocate); the others are called rarely and may allocate.

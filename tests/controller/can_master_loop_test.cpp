@@ -135,6 +135,11 @@ struct LockstepRig {
     return server.grant(simclock::Grant{tick, static_cast<std::int64_t>(tick) * 2'000'000, {}, stop}, d,
                         std::chrono::seconds(2));
   }
+  // Starts the master, accepts its channel and grants tick 1: true when each went well.
+  bool run_first_tick(simclock::Done& d) {
+    start();
+    return server.accept(std::chrono::seconds(2)) == simclock::WaitStatus::ok && grant(1, d) == simclock::WaitStatus::ok;
+  }
   std::string order() const {
     std::string o;
     for (const auto& c : r.calls) o += c.what;
@@ -153,10 +158,8 @@ struct LockstepRig {
 // CSPD 0, UPD, AXISOFF; CANopen: NMT stop all) that the wall clock's end sends.
 TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
   LockstepRig rig("can-master-loop-signal");
-  rig.start();
-  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
   simclock::Done d;
-  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  ASSERT_TRUE(rig.run_first_tick(d));
   rig.signal();
   EXPECT_EQ(rig.grant(2, d), simclock::WaitStatus::ok) << "the master left without an end tick";
   EXPECT_EQ(d.tick, 2u);
@@ -174,10 +177,8 @@ TEST(CanMasterLoop, ASignalInLockstepSendsTheEndSequenceInTheNextGrantedTick) {
 TEST(CanMasterLoop, AnEndSequenceOfSeveralTicksRunsInTheTicksTheTwinStillGrants) {
   LockstepRig rig("can-master-loop-long-end");
   rig.r.end_ticks = 2;
-  rig.start();
-  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
   simclock::Done d;
-  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  ASSERT_TRUE(rig.run_first_tick(d));
   rig.signal();
   for (std::uint64_t k = 2; k <= 4; ++k) {
     ASSERT_EQ(rig.grant(k, d), simclock::WaitStatus::ok) << "tick " << k << ": the master left before its end sequence was over";
@@ -194,10 +195,8 @@ TEST(CanMasterLoop, AnEndSequenceOfSeveralTicksRunsInTheTicksTheTwinStillGrants)
 TEST(CanMasterLoop, AGrantWithStopRunsTheEndSequenceAndTheMasterLeavesWhenItIsOver) {
   LockstepRig rig("can-master-loop-stop");
   rig.r.end_ticks = 1;
-  rig.start();
-  ASSERT_EQ(rig.server.accept(std::chrono::seconds(2)), simclock::WaitStatus::ok);
   simclock::Done d;
-  ASSERT_EQ(rig.grant(1, d), simclock::WaitStatus::ok);
+  ASSERT_TRUE(rig.run_first_tick(d));
   ASSERT_EQ(rig.grant(2, d, true), simclock::WaitStatus::ok);
   EXPECT_EQ(d.frames[0], 1u) << "the end sequence's first frame, counted in the Done";
   EXPECT_FALSE(d.last);
