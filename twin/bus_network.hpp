@@ -65,8 +65,9 @@ struct NetworkHooks {
   // used by networks whose samples_axes() is true.
   std::function<void(int wheel, double err)> axis_sample;
   // The same error as the master sees it each control period [encoder pulses per period]:
-  // the command it sent for the period minus the feedback it received in it (none = 0), read
-  // off the wire; may be empty. Bus `can` only (the thesis's master logged its axes so).
+  // the command it sent for the period minus the latest feedback it holds at the period's end
+  // (stored per axis, kept when none came), read off the wire; may be empty. Bus `can` only
+  // (the thesis's master logged its axes so).
   std::function<void(int wheel, double err)> axis_sample_at_master;
   std::function<void(SimTime t, std::string_view kind, const std::string& text)> log;
 };

@@ -125,7 +125,7 @@ void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const 
   if (master_start_ns_ < 0 && is_start_all(f)) master_start_ns_ = timing.end_ns;
   if (is_nmt_all(f)) {
     bus_stopped_ = f.data[1] == kNmtStop;
-    at_master_.open = false;  // a new run of the nodes: no period is open
+    at_master_ = AtMaster{};  // a new run of the nodes: no period is open, nothing stored
   }
   const omni::DecodeResult d = omni::decode(f);
   if (const auto* m = std::get_if<omni::Message>(&d))
@@ -133,22 +133,22 @@ void OmniCanNetwork::on_tx_done(can::BusNode sender, const can::Frame& f, const 
 }
 
 // A speed command on the wire ends the master's control period: each axis's error for it is
-// the command sent at its start minus the feedback received during it.
+// the command sent at its start minus the feedback the master holds at its end (the master
+// stores each axis's latest feedback, l.1339: a period without one keeps the one before).
 void OmniCanNetwork::on_command_at_master(const omni::SpeedCommand& c) {
   if (c.sender != omni::node::master) return;
   for (std::size_t a = 0; a < 4; ++a) {
     if (at_master_.open && hooks_.axis_sample_at_master)
       hooks_.axis_sample_at_master(static_cast<int>(a), static_cast<double>(at_master_.command[a] - at_master_.feedback[a]));
     at_master_.command[a] = c.axis[a];
-    at_master_.feedback[a] = 0;
   }
   at_master_.open = true;
 }
 
 void OmniCanNetwork::on_feedback_at_master(const omni::SpeedFeedback& f) {
   const int axis = omni::axis_of_slave(f.sender);
-  if (!at_master_.open || axis < 1 || f.data_type != omni::data_type::speed) return;
-  at_master_.feedback[static_cast<std::size_t>(axis - 1)] += f.value;
+  if (axis < 1 || f.data_type != omni::data_type::speed) return;
+  at_master_.feedback[static_cast<std::size_t>(axis - 1)] = f.value;
 }
 
 void OmniCanNetwork::on_bus_event(const can::BusEvent& e) {

@@ -45,8 +45,8 @@ class OmniCanNetwork final : public BusNetwork {
   // Hooks: wheel_angle feeds the counters, set_setpoint the drivers; axis_sample gets
   // command − measured [pulses] each slave sample; axis_sample_at_master the same per master
   // period as the master sees it: at each speed command on the wire, the command before it
-  // minus the feedback that reached the master since (0 if none), for each axis (wheel_speed
-  // is not used).
+  // minus the latest feedback that reached the master (the one before when none came in the
+  // period), for each axis (wheel_speed is not used).
 
   // Builds the bus and the slaves and opens the transport (throws can::TransportError for a
   // bad spec or a socket that cannot be opened). Timers are added to `sched` (all off: the
@@ -136,11 +136,11 @@ class OmniCanNetwork final : public BusNetwork {
   std::array<double, 4> start_phase_{};  // each slave's timer phase at NMT start [fraction of a period]
   bool bus_stopped_ = false;  // the last NMT command to all nodes was stop
   // The axes as the master sees them (hooks.axis_sample_at_master): the speed command it sent
-  // for the current control period and the feedback it has received since it sent it.
+  // for the current control period and each axis's latest feedback it has stored.
   struct AtMaster {
-    bool open = false;                          // a command was sent since the last NMT
-    std::array<int, 4> command{};               // [counts/period]
-    std::array<std::int64_t, 4> feedback{};     // Σ feedback values received [counts]
+    bool open = false;                      // a command was sent since the last NMT
+    std::array<int, 4> command{};           // [counts/period]
+    std::array<std::int32_t, 4> feedback{}; // the latest feedback value received [counts]
   };
   AtMaster at_master_;
   SimTime master_start_ns_ = -1;

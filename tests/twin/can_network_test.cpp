@@ -604,23 +604,27 @@ TEST(OmniCanNetwork, FrameLossToTheMasterDropsFeedbackOnTheWayToTheTransport) {
   EXPECT_EQ(r.net->slave(0).stats().commands, 4u);
 }
 
-TEST(OmniCanNetwork, TheAxesAsTheMasterSeesThemPairEachCommandWithTheFeedbackOfItsPeriod) {
+TEST(OmniCanNetwork, TheAxesAsTheMasterSeesThemPairEachCommandWithTheFeedbackItHolds) {
   // axis_sample_at_master: at each speed command on the wire, the command before it minus the
-  // feedback that reached the master since; a period whose feedback the master lost counts
-  // the whole command as error (the slaves' own view is not affected).
+  // latest feedback the master has stored for the axis. Before any feedback came the master
+  // holds 0 (the whole command is error); a period whose feedback it lost keeps the value
+  // before (here the same speed: no error). The slaves' own view is not affected.
   Rig r(can_scenario(unique_bus()), {300, 200, 100, 0});  // 3, 2, 1, 0 counts per period
-  FaultSpec f = can_fault(FaultSpec::Kind::frame_loss, FaultSpec::kMaster, 0.030, 0.010);
-  f.rate = 1.0;
-  r.schedule_fault(f);
+  for (const double at : {0.005, 0.030}) {  // the first sample's feedback (10–20 ms), then 30–40 ms
+    FaultSpec f = can_fault(FaultSpec::Kind::frame_loss, FaultSpec::kMaster, at, at == 0.005 ? 0.015 : 0.010);
+    f.rate = 1.0;
+    r.schedule_fault(f);
+  }
   r.tick(0, {nmt_start_all()});
   for (SimTime t = 10 * kMs; t <= 60 * kMs; t += kPeriod) r.tick(t, {speed_command({3, 2, 1, 0})});
   r.finish(61 * kMs);
   const std::array<double, 4> cmd{3, 2, 1, 0};
   for (std::size_t a = 0; a < 4; ++a) {
-    // Six commands close five periods: 10–20, 20–30, 30–40 (feedback lost), 40–50, 50–60 ms.
+    // Six commands close five periods: 10–20 (nothing stored yet), 20–30, 30–40 (lost: the
+    // 20–30 value held), 40–50, 50–60 ms.
     ASSERT_EQ(r.at_master[a].size(), 5u) << a;
     for (std::size_t k = 0; k < 5; ++k)
-      EXPECT_EQ(r.at_master[a][k].err, k == 2 ? cmd[a] : 0.0) << "axis " << a << " period " << k;
+      EXPECT_EQ(r.at_master[a][k].err, k == 0 ? cmd[a] : 0.0) << "axis " << a << " period " << k;
     for (const Sample& e : r.samples[a]) EXPECT_EQ(e.err, 0.0) << a;  // the slaves met every command
   }
 }
