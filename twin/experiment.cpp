@@ -86,6 +86,8 @@ int run_experiment(const std::string& name, const ExperimentOptions& options) {
     if (name != r.name) continue;
     // Any exception is a runtime failure (exit 3), never a crash of the CLI.
     try {
+      if (!options.sets.empty() && name != "thesis-platform" && name != "thesis-calibrate")
+        throw experiment::BadInput("--set is for thesis-platform and thesis-calibrate only");
       return r.run(options);
     } catch (const ScenarioError& e) {
       // A bad scenario (--model, a key) is bad input, as for run (found in review: it was 3).

@@ -33,6 +33,10 @@ struct ExperimentOptions {
   // write the fitted scenario (default: that fitted file; in quick mode: the output folder).
   std::string model;
   int budget = 0;       // thesis-calibrate: objective evaluations (0: its default; else >= 9)
+  // thesis-platform and thesis-calibrate: scenario overrides (--set KEY=VALUE) applied to every
+  // run after the experiment's own, e.g. a model option to try; named in the outputs. The other
+  // experiments refuse them (bad input).
+  std::vector<Override> sets;
   // Set by SIGINT/SIGTERM: checked between runs and passed to each run; an interrupted
   // experiment exits 3 and writes no summary files.
   const std::atomic<bool>* interrupt = nullptr;

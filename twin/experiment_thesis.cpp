@@ -104,9 +104,13 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
   x.std_x = od.at("std_x_cm"), x.std_y = od.at("std_y_cm"), x.std_c = od.at("std_contour_cm");
   x.true_iae_c = m.at("platform").at("iae_contour_cm");
   x.true_final = m.at("platform").at("final_error_cm");
+  // The axes as the thesis's master logged them: per control period, the command it sent minus
+  // the feedback it received (reading_sync.md, H9); a run without that view gives the slaves'.
   for (std::size_t k = 0; k < 4; ++k) {
-    x.axes_iae[k] = m.at("axes").at(k).at("iae_velocity_pulse").get<double>();
-    x.axes_std[k] = m.at("axes").at(k).at("std_velocity_pulse").get<double>();
+    const nlohmann::json& a = m.at("axes").at(k);
+    const bool at_master = a.contains("iae_velocity_pulse_at_master") && !a.at("iae_velocity_pulse_at_master").is_null();
+    x.axes_iae[k] = a.at(at_master ? "iae_velocity_pulse_at_master" : "iae_velocity_pulse").get<double>();
+    x.axes_std[k] = a.at(at_master ? "std_velocity_pulse_at_master" : "std_velocity_pulse").get<double>();
   }
   x.axis_iae = mean(x.axes_iae), x.axis_std = mean(x.axes_std);
   x.dropout_pct = 100.0 * m.at("bus").at("dropout_rate").get<double>();
@@ -143,6 +147,24 @@ Result average(const std::vector<Result>& ts) {
     if (t.master_state != m.master_state) m.master_state = "mixed";
   }
   return m;
+}
+
+std::string sets_text(const std::vector<Override>& sets) {
+  std::string t;
+  for (const Override& o : sets) t += fmt::format("{}--set {}={}", t.empty() ? "" : " ", o.key, o.value);
+  return t;
+}
+
+std::string note_sets(std::string text, const std::vector<Override>& sets, bool yaml) {
+  if (sets.empty()) return text;
+  if (yaml) {
+    const std::size_t at = text.find("\nname:");
+    return text.insert(at == std::string::npos ? 0 : at + 1,
+                       fmt::format("# Every run of the fit had {}: give thesis-platform the same.\n", sets_text(sets)));
+  }
+  const std::size_t at = text.find("\n\n");
+  return text.insert(at == std::string::npos ? text.size() : at + 2,
+                     fmt::format("Every run also had `{}` (the experiment's --set).\n\n", sets_text(sets)));
 }
 
 std::string plain_scenario() { return std::string(OMNITWIN_SOURCE_DIR) + "/models/scenarios/thesis_line.yaml"; }

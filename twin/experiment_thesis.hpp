@@ -84,6 +84,12 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
 // The mean of a configuration's trials, with the spread of contour and axis IAE.
 Result average(const std::vector<Result>& trials);
 
+// The experiment's --set overrides as a reader can repeat them ("--set K=V --set …"; "" none).
+std::string sets_text(const std::vector<Override>& sets);
+// `text` with a paragraph saying which --set every run had, after its first paragraph (the
+// reports) or before its `name:` line (a scenario file, as a comment); unchanged without sets.
+std::string note_sets(std::string text, const std::vector<Override>& sets, bool yaml);
+
 // The default scenario: the fitted thesis line when it exists, else the plain one.
 std::string default_scenario();
 std::string plain_scenario();   // models/scenarios/thesis_line.yaml

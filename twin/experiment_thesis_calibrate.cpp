@@ -205,8 +205,9 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
       << "## Method\n\n"
       << fmt::format(
              "- **Objective**: J = mean over eight figures of (ln(ours / thesis))²: IAE and σ of X, Y and "
-             "contour (odometry, tables 4-3, 4-5) and of the axes' velocity error (the four axes' mean, "
-             "tables 4-4, 4-6). A log ratio weighs a figure twice too big as badly as one half too small. "
+             "contour (odometry, tables 4-3, 4-5) and of the axes' velocity error as the master sees it each "
+             "control period (command minus the latest feedback it holds; the four axes' mean, tables 4-4, 4-6). "
+             "A log ratio weighs a figure twice too big as badly as one half too small. "
              "Each figure is the mean of {} runs, the slaves' start phases drawn from seeds 1 … {}.\n"
              "- **Y is weighed** since the diagonal pairs' gain mismatch is a free parameter (over this search's {} "
              "evaluations our odometric Y IAE ranged over {:.0f} … {:.0f} cm; the thesis: 1308 … 2673 cm). Without "
@@ -279,7 +280,9 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     throw experiment::BadInput("--budget must be 0 (the default) or at least 9 (the simplex's first points)");
   if (!options.model.empty()) check_writable(options.model);
   const fs::path dir = experiment::output_dir("thesis-calibrate", options);
-  const Scenario base = load_scenario(thesis::plain_scenario(), {{"bus", "can"}});
+  std::vector<Override> checked{{"bus", "can"}};
+  checked.insert(checked.end(), options.sets.begin(), options.sets.end());  // a bad --set: refused here
+  const Scenario base = load_scenario(thesis::plain_scenario(), checked);
   const thesis::ClockReading fast = thesis::clock_readings(base)[0];
   const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
   const int trials = options.quick ? 1 : 2;
@@ -292,6 +295,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     Evaluation e;
     e.values = values_at(u);
     setup.overrides = overrides_of(e.values, phi_kp, phi_ki);
+    setup.overrides.insert(setup.overrides.end(), options.sets.begin(), options.sets.end());
     std::vector<thesis::Result> ts;
     for (int t = 0; t < trials; ++t) {
       ts.push_back(thesis::run_one(setup, fast, thesis::kFitRateKbps, false, t, 46200 + runs++ % 600));
@@ -325,9 +329,10 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   experiment::stop_if_interrupted(options);
   // The trace and report first: should the fit file still fail, the search is not lost.
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
-  experiment::write_text(dir / "thesis_calibrate.md", report_md(evals, r, *best, model, trials, options.quick));
+  experiment::write_text(dir / "thesis_calibrate.md", thesis::note_sets(report_md(evals, r, *best, model, trials, options.quick), options.sets, false));
   experiment::write_text(model,
-                         fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params));
+                         thesis::note_sets(fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params),
+                                           options.sets, true));
   std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
                            r.evaluations, evals.front().j, best->j, model, dir.string());
   return kExperimentOk;

@@ -367,8 +367,9 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
       << ") with `--bus can`: the master program and the twin as two processes over UDP multicast in lockstep, "
          "four emulated 8051 slaves whose oscillators drift 0.362 % against the master's. IAE = Σ|e| and "
          "σ = sqrt(Σe²/N) over the 10 ms control samples (eq. 4-14, 4-15), position errors from the master's "
-         "odometry as the thesis measured them [cm], axis velocity errors (command − measured) at the slaves "
-         "[pulses/sample]. \"loops skipped\": timer interrupts of the four slaves that found no new command and so "
+         "odometry as the thesis measured them [cm], axis velocity errors as the master sees them each control "
+         "period: the command it sent minus the latest feedback it holds at the next, stored per axis "
+         "(`axes.N.iae_velocity_pulse_at_master`) [pulses/sample]. \"loops skipped\": timer interrupts of the four slaves that found no new command and so "
          "ran no velocity loop (fig. 4-16).\n\n"
       << fmt::format("Each configuration ran {} times, each time with the four slaves' timers at their own random "
                      "phase when NMT start enabled them (the thesis's slaves handle NMT in their main loop, fig. "
@@ -465,12 +466,14 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
 int run_thesis_platform(const ExperimentOptions& options) {
   // The scenario first: a bad --model is refused before any folder is made (found in review).
   const std::string scenario = options.model.empty() ? thesis::default_scenario() : options.model;
-  const Scenario sc = load_scenario(scenario, {{"bus", "can"}});
+  std::vector<Override> checked{{"bus", "can"}};
+  checked.insert(checked.end(), options.sets.begin(), options.sets.end());  // a bad --set: refused here
+  const Scenario sc = load_scenario(scenario, checked);
   const fs::path dir = experiment::output_dir("thesis-platform", options);
   const std::vector<int> rates = options.quick ? std::vector<int>{250, 1000} : std::vector<int>{125, 250, 500, 1000};
   const std::array<ClockReading, 2> clocks = thesis::clock_readings(sc);
   const int trials = options.quick ? 2 : kTrials;
-  const thesis::RunSetup setup{scenario, {}, dir / "runs", options.quick, false, options.interrupt};
+  const thesis::RunSetup setup{scenario, options.sets, dir / "runs", options.quick, false, options.interrupt};
   std::vector<Result> rs;  // one per configuration: the mean of its trials
   int port = 46000, runs = 0;  // 46000 … 46079: no test or scenario uses them
   for (const ClockReading& clock : clocks) {
@@ -498,7 +501,7 @@ int run_thesis_platform(const ExperimentOptions& options) {
   experiment::stop_if_interrupted(options);
   const int differ = failed(effects(rs, clocks[0].name));
   experiment::write_text(dir / "thesis_platform.csv", to_csv(rs));
-  experiment::write_text(dir / "thesis_platform.md", to_markdown(rs, clocks, options.quick, scenario, sc));
+  experiment::write_text(dir / "thesis_platform.md", thesis::note_sets(to_markdown(rs, clocks, options.quick, scenario, sc), options.sets, false));
   experiment::plot("thesis-platform", dir / "thesis_platform.csv", dir);
   // The pose error over time at 250 kbit/s, fast clocks (a quick run has 250 too).
   experiment::write_text(dir / "thesis_platform_time.csv", time_csv(rs, clocks[0].name, 250));

@@ -1,14 +1,18 @@
 // Tests twin/experiment_thesis_platform in quick mode (250 and 1000 kbit/s, two trials, 40 cm
 // in 4 s): it runs the scenario it is given, marks the fast no-sync 1000 kbit/s row as the
 // fitted one and every other as held out, counts the acceptance checks, and writes the pose
-// error over time without and with sync at 250 kbit/s from the runs' own trajectories.
+// error over time without and with sync at 250 kbit/s from the runs' own trajectories; --set
+// reaches every run and is named in the report, and only the thesis experiments take it.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <filesystem>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "tests/support/temp_dir.hpp"
 #include "twin/experiment.hpp"
@@ -71,6 +75,32 @@ TEST(ThesisPlatform, AQuickRunOfTheFittedScenarioReportsTheFitRowAndPredictions)
   EXPECT_EQ(with, without);
   EXPECT_NEAR(t_max, 6.0, 0.05);
   EXPECT_GT(ex_max, 0.5);  // the fitted P loop lags the planned pose by centimetres
+}
+
+TEST(ThesisPlatform, SetReachesEveryRunAndTheReportNamesIt) {
+  omnitwin::testing::TempDir dir("omnitwin-tp-set");
+  ExperimentOptions o{dir.path().string(), true};
+  o.model = thesis::fitted_scenario();
+  o.sets = {{"bus.isr_us", "3300"}};
+  const int rc = run_experiment("thesis-platform", o);
+  ASSERT_TRUE(rc == kExperimentOk || rc == kExperimentCheckFailed) << rc;
+  const std::string md = omnitwin::testing::read_bytes(dir.path() / "thesis_platform.md");
+  EXPECT_NE(md.find("Every run also had `--set bus.isr_us=3300`"), std::string::npos);
+  int runs = 0;
+  for (const auto& e : fs::directory_iterator(dir.path() / "runs")) {
+    const nlohmann::json m = nlohmann::json::parse(std::ifstream(e.path() / "metrics.json"));
+    for (const auto& sl : m.at("slaves")) EXPECT_EQ(sl.at("isr_us").get<double>(), 3300.0) << e.path();
+    ++runs;
+  }
+  EXPECT_GT(runs, 0);
+  // A key the scenario does not have is bad input before anything runs; other experiments refuse --set.
+  ExperimentOptions bad{(dir.path() / "bad").string(), true};
+  bad.sets = {{"bus.no_such_key", "1"}};
+  EXPECT_EQ(run_experiment("thesis-platform", bad), kExperimentUnknown);
+  EXPECT_FALSE(fs::exists(dir.path() / "bad"));
+  ExperimentOptions other{(dir.path() / "other").string(), true};
+  other.sets = {{"bus.isr_us", "3300"}};
+  EXPECT_EQ(run_experiment("can-timing", other), kExperimentUnknown);
 }
 
 }  // namespace
