@@ -317,6 +317,7 @@ DriveStateCode OmniCanNetwork::drive_state(int axis0) const {
   switch (slaves_[i]->state()) {
     case omni::SlaveState::stopped: return DriveStateCode::waiting;
     case omni::SlaveState::running: return DriveStateCode::running;
+    case omni::SlaveState::sync_pending:
     case omni::SlaveState::awaiting_sync: return DriveStateCode::syncing;
   }
   return DriveStateCode::waiting;

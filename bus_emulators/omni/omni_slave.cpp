@@ -90,6 +90,7 @@ const char* to_string(SlaveState s) {
   switch (s) {
     case SlaveState::stopped: return "stopped";
     case SlaveState::running: return "running";
+    case SlaveState::sync_pending: return "sync_pending";
     case SlaveState::awaiting_sync: return "awaiting_sync";
   }
   return "unknown";
@@ -101,6 +102,7 @@ const char* to_string(SlaveTransition t) {
     case SlaveTransition::stop: return "stop";
     case SlaveTransition::timer_sample: return "timer_sample";
     case SlaveTransition::enter_sync: return "enter_sync";
+    case SlaveTransition::routine_end: return "routine_end";
     case SlaveTransition::event_sample: return "event_sample";
   }
   return "unknown";
@@ -238,6 +240,7 @@ TimerAction OmniSlave::handle(const Message& m, std::int64_t now_ns) {
 }
 
 TimerAction OmniSlave::on_timer(std::int64_t now_ns, double shaft_angle_rad) {
+  if (state_ == SlaveState::sync_pending) return transition(SlaveTransition::routine_end, now_ns, shaft_angle_rad);
   if (state_ != SlaveState::running) {
     ++stats_.spurious_timer_interrupts;
     return {TimerRequest::stop, 0};
@@ -279,11 +282,23 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       return {TimerRequest::restart, now_ns + (ran ? config_.isr_ns : config_.t_post_ns) + actual_period_ns_};
     }
 
-    case SlaveTransition::enter_sync:
+    case SlaveTransition::enter_sync: {
       if (state_ != SlaveState::running) break;
       ++stats_.timer_samples;
-      control_step(now_ns, shaft_angle_rad);
+      const bool ran = control_step(now_ns, shaft_angle_rad);
+      if (ran && config_.isr_ns > 0) {  // the receive interrupt is switched on at the routine's end
+        state_ = SlaveState::sync_pending;
+        return {TimerRequest::restart, now_ns + config_.isr_ns};
+      }
       state_ = SlaveState::awaiting_sync;
+      return {TimerRequest::stop, 0};
+    }
+
+    case SlaveTransition::routine_end:
+      if (state_ != SlaveState::sync_pending) break;
+      state_ = SlaveState::awaiting_sync;
+      // A command stored during the routine holds the receive interrupt pending: it runs now.
+      if (command_new_) return transition(SlaveTransition::event_sample, now_ns, shaft_angle_rad);
       return {TimerRequest::stop, 0};
 
     case SlaveTransition::event_sample:

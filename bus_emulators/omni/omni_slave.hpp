@@ -124,12 +124,18 @@ struct TimerAction {
 //                  command runs one control step with it and sends the feedback (one that
 //                  finds none skips the step); commands are stored for the next interrupt;
 //                  parameter frames are refused (counted); detection answered.
-//  awaiting_sync — sync enabled, after the sync_interval-th timer interrupt: the timer is off;
-//                  the next speed command runs the control step in the receive interrupt and
-//                  restarts the timer (→ running). Detection answered, parameters refused.
-// NMT stop is legal in running and awaiting_sync; NMT start only in stopped (a start to a
-// started node changes nothing).
-enum class SlaveState : std::uint8_t { stopped, running, awaiting_sync };
+//  sync_pending  — isr_ns > 0 only: the sync_interval-th timer interrupt's routine is still
+//                  running; the firmware switches to the receive interrupt when it ends (l.1366:
+//                  "after the control flow"), so a speed command arriving now is only stored;
+//                  the timer fires once more at the routine's end (routine_end). Detection
+//                  answered, parameters refused.
+//  awaiting_sync — sync enabled, after the sync_interval-th timer interrupt (and its routine):
+//                  the timer is off; the next speed command runs the control step in the
+//                  receive interrupt and restarts the timer (→ running). Detection answered,
+//                  parameters refused.
+// NMT stop is legal in running, sync_pending and awaiting_sync; NMT start only in stopped (a
+// start to a started node changes nothing).
+enum class SlaveState : std::uint8_t { stopped, running, sync_pending, awaiting_sync };
 const char* to_string(SlaveState s);
 
 // The named transitions of the state machine (see SlaveState). One flat switch executes them.
@@ -139,9 +145,13 @@ enum class SlaveTransition : std::uint8_t {
   stop,          // running | awaiting_sync → stopped: timer stop, chain reset (zero setpoint)
   timer_sample,  // running → running: control step + feedback in the timer interrupt (skipped
                  // without a new command)
-  enter_sync,    // running → awaiting_sync: as timer_sample, then timer stop
+  enter_sync,    // running → awaiting_sync: as timer_sample, then timer stop; with isr_ns > 0
+                 // and a step that ran: → sync_pending, the timer restarted for the routine's
+                 // end (now + isr_ns)
+  routine_end,   // sync_pending → awaiting_sync (timer stop), or, when a command arrived
+                 // during the routine, its pending receive interrupt runs event_sample at once
   event_sample,  // awaiting_sync → running: control step + feedback in the receive interrupt,
-                 // timer restart when it ends: now + T_post + period (resync)
+                 // timer restart when it ends: now + T_post (isr_ns when > 0) + period (resync)
 };
 const char* to_string(SlaveTransition t);
 
@@ -236,7 +246,8 @@ class OmniSlave {
   // of the run differs from the sample's number in the run. With a new command since the last
   // step it runs the control step and sends the speed feedback (counts since the last step) at
   // now + T_post; without one it skips both (stale_samples), the DA holding its output.
-  // stopped / awaiting_sync: no step, returns stop. Real-time safe.
+  // sync_pending: the routine's end (routine_end). stopped / awaiting_sync: no step, returns
+  // stop. Real-time safe.
   TimerAction on_timer(std::int64_t now_ns, double shaft_angle_rad);
 
   // Feeds the shaft angle [rad] to the quadrature counter between samples (call it every

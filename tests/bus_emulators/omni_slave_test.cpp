@@ -491,6 +491,55 @@ TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsA
   EXPECT_STREQ(to_string(SlaveConfigError::bad_isr), "bad_isr");
 }
 
+TEST(OmniSlave, ACommandDuringTheResyncsTimerRoutineRunsTheEventStepWhenTheRoutineEnds) {
+  // isr_ns > 0, sync due: the firmware switches to the receive interrupt only after its
+  // control flow (l.1366), so a command arriving while the timer routine still runs is stored
+  // and its pending interrupt runs the event step at the routine's end, never a second routine
+  // inside the first. Without a command by then the node waits with the timer off.
+  Wire wire;
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  cfg.drift = 0.0;
+  cfg.isr_ns = 3'300'000;
+  cfg.sync_enabled = true;
+  cfg.sync_interval = 1;
+  OmniSlave slave(cfg, wire.fn());
+  slave.on_frame(start_all(), 0);
+  slave.on_frame(command({7, 0, 0, 0}), 100);
+  // The resync's timer interrupt runs its routine; the timer fires again at its end.
+  EXPECT_EQ(slave.on_timer(10'000'000, 0.0), (TimerAction{TimerRequest::restart, 13'300'000}));
+  EXPECT_EQ(slave.state(), SlaveState::sync_pending);
+  EXPECT_STREQ(to_string(slave.state()), "sync_pending");
+  // A command 1 ms into the routine: stored, no step, no timer request.
+  EXPECT_EQ(slave.on_frame(command({8, 0, 0, 0}), 11'000'000), TimerAction{});
+  EXPECT_EQ(slave.stats().samples, 1u);
+  EXPECT_EQ(wire.sent.size(), 1u);
+  // The routine ends: the stored command's step runs now and restarts the timer after its own.
+  EXPECT_EQ(slave.on_timer(13'300'000, 0.0), (TimerAction{TimerRequest::restart, 13'300'000 + 3'300'000 + 10'000'000}));
+  EXPECT_EQ(slave.state(), SlaveState::running);
+  EXPECT_EQ(slave.stats().event_samples, 1u);
+  ASSERT_EQ(wire.sent.size(), 2u);
+  EXPECT_EQ(wire.sent[0].t, 13'300'000);  // the timer routine's feedback …
+  EXPECT_EQ(wire.sent[1].t, 16'600'000);  // … then the event routine's, one routine later
+  EXPECT_EQ(slave.stats().dropouts, 0u);  // the event step realigns to the command count
+  // No command during the routine: at its end the node waits for one, timer off.
+  OmniSlave idle(cfg, wire.fn());
+  idle.on_frame(start_all(), 0);
+  idle.on_frame(command({7, 0, 0, 0}), 100);
+  idle.on_timer(10'000'000, 0.0);
+  EXPECT_EQ(idle.on_timer(13'300'000, 0.0).request, TimerRequest::stop);
+  EXPECT_TRUE(idle.waiting_for_sync());
+  EXPECT_EQ(idle.on_frame(command({9, 0, 0, 0}), 20'000'000).request, TimerRequest::restart);
+  EXPECT_EQ(idle.stats().event_samples, 1u);
+  // NMT stop during the routine stops the node.
+  OmniSlave stopped(cfg, wire.fn());
+  stopped.on_frame(start_all(), 0);
+  stopped.on_frame(command({7, 0, 0, 0}), 100);
+  stopped.on_timer(10'000'000, 0.0);
+  EXPECT_EQ(stopped.on_frame(stop_all(), 11'000'000).request, TimerRequest::stop);
+  EXPECT_EQ(stopped.state(), SlaveState::stopped);
+  EXPECT_EQ(stopped.stats().illegal_transitions, 0u);
+}
+
 TEST(OmniSlave, SyncSwitchesToEventDrivenAndRestartsTimerFromCommand) {
   Wire wire;
   auto cfg = make_slave_config(node::axis1, params_with_period(5e-3));
