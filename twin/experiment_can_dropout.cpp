@@ -384,9 +384,13 @@ const DropoutResult& find(const std::vector<Row>& rows, const DropoutTrial& want
 
 template <typename... Args>
 std::string fmt(const char* format, Args... args) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, format, args...);
-  return buf;
+  // Sized first: a fixed buffer cut the longer "why" texts of the report at 255 characters.
+  const int n = std::snprintf(nullptr, 0, format, args...);
+  if (n <= 0) return {};
+  std::string out(static_cast<std::size_t>(n) + 1, '\0');
+  std::snprintf(out.data(), out.size(), format, args...);
+  out.resize(static_cast<std::size_t>(n));
+  return out;
 }
 
 std::string to_csv(const std::vector<Row>& rows) {

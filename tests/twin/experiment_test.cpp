@@ -183,6 +183,10 @@ TEST(Experiment, CanDropoutShowsTheThesisDirections) {
   omnitwin::testing::TempDir dir("omnitwin-exp");
   ASSERT_EQ(run_experiment("can-dropout", {dir.path().string(), true}), kExperimentOk);
   EXPECT_TRUE(std::filesystem::exists(dir / "can_dropout.md"));
+  // Found in review: the findings' texts went through a 256-byte buffer and the longest was cut
+  // mid-sentence in the published report.
+  const std::string md = omnitwin::testing::read_bytes(dir / "can_dropout.md");
+  EXPECT_NE(md.find("the thesis's 10 ms run must have been shorter or its slave steadier."), std::string::npos);
   if (matplotlib_available()) {
     EXPECT_TRUE(std::filesystem::exists(dir / "can_dropout_size.png"));
   }
