@@ -387,7 +387,8 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
       << run_table(rs)
       << "\n## Fitted and predicted (issue 15)\n\n"
       << fmt::format("Scenario: `{}`. ", fs::path(scenario).filename().string())
-      << (fs::path(scenario).filename() == "thesis_line_fitted.yaml"
+      // thesis-calibrate names what it writes thesis_line_fitted, whatever the file is called.
+      << (sc.name == "thesis_line_fitted"
               ? "Its free parameters (the position-loop and velocity-PI gains, the driver's dead band, the gearbox "
                 "friction and backlash, the diagonal wheel pairs' driver gain mismatch) were fitted by `omnitwin experiment thesis-calibrate` to ONE configuration, fast clocks at "
                 "1000 kbit/s without sync (docs/results/thesis-calibrate/); every other row is a prediction. "
