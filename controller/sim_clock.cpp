@@ -365,13 +365,30 @@ WaitStatus receive_message(int fd, Clock::time_point deadline, Message& out) {
 // recv() itself, bounded by SO_RCVTIMEO (set only when the bound changes, cached in
 // *timeout_us), so a tick costs one system call instead of a poll and a recv. The descriptor
 // must be blocking.
-WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message& out, std::int64_t* timeout_us) {
+// With `stop` given and not yet set, the wait is cut into slices of kStopSlice (a signal may land
+// on another thread and interrupt nothing here), and once *stop is set the deadline comes at
+// most kStopGrace later: a master that does not answer then is not waited for (found in review:
+// a Ctrl-C to a twin whose lockstep master hung waited the whole handshake timeout, 10 s). A
+// wait that starts with *stop set already (the shutdown served after an interrupt) keeps its
+// deadline.
+constexpr std::chrono::milliseconds kStopSlice{100};
+constexpr std::chrono::milliseconds kStopGrace{1000};
+
+WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message& out, std::int64_t* timeout_us,
+                                    const std::atomic<bool>* stop = nullptr) {
   std::array<std::uint8_t, kMessageSize + 1> buf;
+  if (stop != nullptr && stop->load()) stop = nullptr;
+  bool stop_seen = false;
   for (;;) {
+    if (stop != nullptr && !stop_seen && stop->load()) {
+      stop_seen = true;
+      deadline = std::min(deadline, Clock::now() + kStopGrace);
+    }
     const auto left = deadline - Clock::now();
     if (left <= Clock::duration::zero()) return receive_message(fd, deadline, out);  // one look, no wait
     // Whole milliseconds (as poll() would wait), so the option is set once per distinct bound.
-    const std::int64_t us = std::chrono::ceil<std::chrono::milliseconds>(left).count() * 1000;
+    const auto slice = stop != nullptr && !stop_seen ? std::min<Clock::duration>(left, kStopSlice) : left;
+    const std::int64_t us = std::chrono::ceil<std::chrono::milliseconds>(slice).count() * 1000;
     if (us != *timeout_us) {
       const timeval tv{static_cast<time_t>(us / 1'000'000), static_cast<suseconds_t>(us % 1'000'000)};
       if (::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv) != 0) return receive_message(fd, deadline, out);
@@ -381,7 +398,11 @@ WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message&
     if (n == 0) return WaitStatus::closed;
     if (n > 0) return decode_into(buf.data(), n, out);
     if (errno == EINTR) continue;
-    if (errno == EAGAIN || errno == EWOULDBLOCK) return Clock::now() >= deadline ? WaitStatus::timeout : receive_message(fd, deadline, out);
+    if (errno == EAGAIN || errno == EWOULDBLOCK) {
+      if (Clock::now() >= deadline) return WaitStatus::timeout;
+      if (stop != nullptr) continue;  // the end of a slice: look at the flag, wait on
+      return receive_message(fd, deadline, out);
+    }
     return WaitStatus::closed;
   }
 }
@@ -525,7 +546,7 @@ WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds t
   const Clock::time_point deadline = deadline_after(timeout);
   if (!send_message(conn_fd_, g)) return WaitStatus::closed;
   Message m;
-  const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_);
+  const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop_);
   if (w != WaitStatus::ok) return w;
   const Done* d = std::get_if<Done>(&m);
   if (d == nullptr || d->tick != g.tick) return WaitStatus::protocol;
@@ -541,7 +562,7 @@ WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds t
   if (!send_message(conn_fd_, g)) return WaitStatus::closed;
   for (;;) {
     Message m;
-    const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_);
+    const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop_);
     if (w != WaitStatus::ok) return w;
     if (const Sent* s = std::get_if<Sent>(&m)) {
       if (s->tick != g.tick || on_sent == nullptr) return WaitStatus::protocol;

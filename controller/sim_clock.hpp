@@ -22,6 +22,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -171,6 +172,10 @@ class Server {
   // a protocol error). The handler runs on the calling thread; real-time safe if it is.
   using OnSent = Horizon (*)(void* context, const Sent& sent);
   WaitStatus grant(const Grant& g, Done& done, std::chrono::milliseconds timeout, OnSent on_sent, void* context);
+  // The twin's interrupt flag (SIGINT/SIGTERM), or nullptr: when it is set while a grant waits
+  // for its Done, the wait lasts at most 1 s more (then timeout), whatever its own timeout; a
+  // grant sent with it set already waits its whole timeout. Set-up only.
+  void set_stop_flag(const std::atomic<bool>* stop) { stop_ = stop; }
   // Tells the master the run is over (best effort; a closed peer is fine).
   void end(std::int64_t t_ns);
   const std::string& address() const { return address_; }
@@ -182,6 +187,7 @@ class Server {
   int listen_fd_ = -1;
   int conn_fd_ = -1;
   std::int64_t rcvtimeo_us_ = 0;  // SO_RCVTIMEO now set on conn_fd_ [µs]; 0 = none
+  const std::atomic<bool>* stop_ = nullptr;  // set_stop_flag()
 };
 
 // Master end.

@@ -290,6 +290,7 @@ class PlatformRun {
   int silent_periods_ = 0;           // control periods without one since
   SimTime master_lost_ns_ = -1;
   std::string master_lost_why_;
+  bool master_hung_ = false;  // a lockstep master left a grant unanswered after an interrupt
   // the run's end: SIGTERM to a master on its own clock, `stop` in the grants of a lockstep
   // master of ours; either is served until the master exits
   SimTime sigterm_ns_ = -1;       // when it was asked (−1: not asked)
@@ -400,6 +401,7 @@ void PlatformRun::start_master() {
     static std::atomic<int> serial{0};
     const std::string addr = fmt::format("unix:@omnitwin-{}-{}.clock", ::getpid(), serial++);
     clock_server_ = std::make_unique<simclock::Server>(addr);
+    clock_server_->set_stop_flag(o_.interrupt);  // a Ctrl-C does not wait out a hung master's timeout
     args.insert(args.end(), {"--clock", "sim", "--sim-clock", addr});
     // A CAN master waits for the frames a grant counts as long as the twin waits for its Done.
     if (s_.bus.kind == BusKind::can || s_.bus.kind == BusKind::canopen || s_.bus.kind == BusKind::tml)
@@ -565,7 +567,7 @@ void PlatformRun::stop_master() {
   // or one that had its grace while it was served, gets a short one: the end is not kept
   // waiting on it.
   const bool own = !s_.master.command.empty();
-  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 || sigterm_ns_ >= 0 ? 300
+  const auto grace = std::chrono::milliseconds(master_lost_ns_ >= 0 || sigterm_ns_ >= 0 || master_hung_ ? 300
                                                                                    : std::llround(master_grace_s() * 1e3));
   if (!clock_server_ || !master_->wait(grace)) master_->stop(grace);
   cpu_share_.release();  // the thread's own affinity again, the master gone
@@ -639,6 +641,11 @@ void PlatformRun::on_master_bus(SimTime t) {
                        fmt::format("the master process ended ({}) before answering tick {}{}", master_->describe_exit(),
                                    g.tick, why.empty() ? "" : ": " + why),
                        true);
+  }
+  if (st == simclock::WaitStatus::timeout && signalled() && !g.stop) {
+    master_hung_ = true;  // it gets the short grace at the end (stop_master)
+    return fail(fmt::format("master: no answer to tick {} within 1 s of the interrupt ({})", g.tick,
+                            master_->running() ? "still running" : master_->describe_exit()));
   }
   if (st != simclock::WaitStatus::ok)
     return fail(fmt::format("master: no answer to tick {} ({}; {})", g.tick, simclock::to_string(st),

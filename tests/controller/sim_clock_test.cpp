@@ -465,6 +465,39 @@ TEST(SimClockChannel, SilentMasterTimesOut) {
   release.set_value();
 }
 
+// The twin's interrupt flag set while a grant waits: at most 1 s more, not the grant's 30 s;
+// a grant sent with the flag set already waits its own timeout (the shutdown after an interrupt
+// is served at the usual pace); an answer in time is still ok.
+TEST(SimClockChannel, AnInterruptCutsTheWaitForASilentMasterToASecond) {
+  Fixture f;
+  Server server(f.address);
+  std::atomic<bool> stop{false};
+  server.set_stop_flag(&stop);
+  std::promise<void> release;
+  MasterThread master(f.address, [gate = release.get_future().share()](Client& c) {
+    Grant g;
+    c.next(g, 2s);
+    c.next(g, 2s);
+    gate.wait_for(10s);  // holds the connection open without answering
+  });
+  ASSERT_EQ(server.accept(2s), WaitStatus::ok);
+  std::thread signal([&stop] {
+    std::this_thread::sleep_for(200ms);
+    stop = true;
+  });
+  Done d;
+  auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(server.grant(Grant{0, 0, {}}, d, 30s), WaitStatus::timeout);
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  signal.join();
+  EXPECT_GE(waited, 1100ms);
+  EXPECT_LT(waited, 5s);
+  t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(server.grant(Grant{1, 0, {}}, d, 1500ms), WaitStatus::timeout);
+  EXPECT_GE(std::chrono::steady_clock::now() - t0, 1500ms);
+  release.set_value();
+}
+
 TEST(SimClockChannel, GrantWithoutMasterIsClosed) {
   Fixture f;
   Server server(f.address);

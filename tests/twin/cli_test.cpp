@@ -677,6 +677,34 @@ TEST_F(CliInterrupt, ACtrlCToALockstepRunsProcessGroupIsAnInterruptNotALostMaste
   EXPECT_FALSE(contains(c.err(), "master lost")) << c.err();
 }
 
+// A Ctrl-C to the twin alone while its lockstep master hangs (SIGSTOP) inside a tick: the twin
+// waits at most 1 s more for that tick's answer, not the handshake timeout (30 s here; it
+// waited the whole of it, found in review), ends interrupted with the master named, and kills
+// the master on a short grace.
+TEST_F(CliInterrupt, ACtrlCToTheTwinWhileItsLockstepMasterHangsEndsWithinSeconds) {
+  const fs::path out = dir_ / "out";
+  Child c(omnitwin_binary(),
+          {"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", "bus.handshake_timeout=30", "--out",
+           out.string(), "--no-progress"},
+          work(), io(), "", true);
+  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, c)) << c.err();
+  const int master = process_in_group(c.pid(), "omni-master");
+  ASSERT_GT(master, 0);
+  ::kill(master, SIGSTOP);
+  std::this_thread::sleep_for(300ms);
+  const auto t0 = std::chrono::steady_clock::now();
+  c.signal(SIGINT);
+  const int code = c.wait(60s);
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ::kill(master, SIGCONT);  // harmless if it is gone
+  EXPECT_EQ(code, 3) << c.out() << c.err();
+  EXPECT_LT(waited, 10.0) << "the twin waited out its master's handshake timeout";
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
+  EXPECT_EQ(m.at("interrupted"), true);
+  EXPECT_TRUE(contains(m.at("error").get<std::string>(), "within 1 s of the interrupt")) << m.dump(2);
+  EXPECT_NE(::kill(master, 0), 0) << "the hung master outlived the twin";
+}
+
 // ---------------------------------------------------------------------------------------
 // The end of a run on the wall clock
 
