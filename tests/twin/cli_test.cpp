@@ -26,6 +26,7 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <cctype>
 #include <fstream>
 #include <sstream>
@@ -556,6 +557,9 @@ int process_in_group(int pgid, const std::string& comm) {
 class CliInterrupt : public CliTest {
  protected:
   void expect_clean_stop(int sig);
+  // A lockstep run of run_long_line on bus can (own process group) with `sets`, once rows are
+  // being written, and its master held by SIGSTOP: the master's pid (0 when it was not found).
+  int lockstep_run_with_master_held(std::unique_ptr<Child>& c, const fs::path& out, std::vector<std::string> sets);
 };
 
 // Waits until the run's temp CSV holds more than `bytes` (rows are being produced).
@@ -651,20 +655,30 @@ TEST_F(CliInterrupt, ARealtimeMasterEndsWhenItsTwinIsKilled) {
   EXPECT_TRUE(contains(log, "end:")) << log;
 }
 
+int CliInterrupt::lockstep_run_with_master_held(std::unique_ptr<Child>& c, const fs::path& out,
+                                                std::vector<std::string> sets) {
+  std::vector<std::string> args{"run", test_scenario("run_long_line.yaml"), "--bus", "can"};
+  for (std::string& s : sets) args.insert(args.end(), {"--set", std::move(s)});
+  args.insert(args.end(), {"--out", out.string(), "--no-progress"});
+  c = std::make_unique<Child>(omnitwin_binary(), args, work(), io(), "", true);
+  if (!wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, *c)) return 0;
+  const int master = process_in_group(c->pid(), "omni-master");
+  if (master > 0) ::kill(master, SIGSTOP);
+  return master;
+}
+
 // A Ctrl-C at a terminal goes to the whole foreground process group: the twin and the master it
 // started. The master's end is then the interruption's: the run ends interrupted, without the
 // "master lost" error its end used to add (found in review: a lockstep run's metrics.json said
 // both).
 TEST_F(CliInterrupt, ACtrlCToALockstepRunsProcessGroupIsAnInterruptNotALostMaster) {
   const fs::path out = dir_ / "out";
-  Child c(omnitwin_binary(), {"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--out", out.string(), "--no-progress"},
-          work(), io(), "", true);
-  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, c)) << c.err();
   // The race made certain: the master held (SIGSTOP) so that the twin waits inside a tick's
   // handshake when the Ctrl-C comes, then let go to take its SIGINT and end without answering.
-  const int master = process_in_group(c.pid(), "omni-master");
-  ASSERT_GT(master, 0);
-  ::kill(master, SIGSTOP);
+  std::unique_ptr<Child> child;
+  const int master = lockstep_run_with_master_held(child, out, {});
+  Child& c = *child;
+  ASSERT_GT(master, 0) << c.err();
   std::this_thread::sleep_for(300ms);
   c.signal_group(SIGINT);
   std::this_thread::sleep_for(100ms);
@@ -683,14 +697,10 @@ TEST_F(CliInterrupt, ACtrlCToALockstepRunsProcessGroupIsAnInterruptNotALostMaste
 // the master on a short grace.
 TEST_F(CliInterrupt, ACtrlCToTheTwinWhileItsLockstepMasterHangsEndsWithinSeconds) {
   const fs::path out = dir_ / "out";
-  Child c(omnitwin_binary(),
-          {"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", "bus.handshake_timeout=30", "--out",
-           out.string(), "--no-progress"},
-          work(), io(), "", true);
-  ASSERT_TRUE(wait_for_rows(out / ".trajectory.csv.part", 64 * 1024, c)) << c.err();
-  const int master = process_in_group(c.pid(), "omni-master");
-  ASSERT_GT(master, 0);
-  ::kill(master, SIGSTOP);
+  std::unique_ptr<Child> child;
+  const int master = lockstep_run_with_master_held(child, out, {"bus.handshake_timeout=30"});
+  Child& c = *child;
+  ASSERT_GT(master, 0) << c.err();
   std::this_thread::sleep_for(300ms);
   const auto t0 = std::chrono::steady_clock::now();
   c.signal(SIGINT);
