@@ -232,7 +232,8 @@ class OmniSlave {
   //  - NMT (0x000 data) with target 0 or this node: start / stop (see SlaveTransition);
   //  - detection request (0x000 remote): answers a remote frame with ID = node_id, DLC 0;
   //  - speed command (0x102): takes axis[axis-1] [counts/sample] (in awaiting_sync: runs the
-  //    event-driven step now, using the last observe()d shaft angle, and asks for a restart);
+  //    event-driven step now, using the last observe()d shaft angle, and asks for a restart; in
+  //    sync_pending: stored, its step runs at the routine's end);
   //  - parameter set-up to this node, stopped only: type 0x01 (axis_controller_setting) sets
   //    the velocity PI's kp = value / 100 [DA codes per count/sample] (fig. 4-19's 100 →
   //    kp 1.00); the drive chain is rebuilt with it (counter restarts at 0);
