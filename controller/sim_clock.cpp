@@ -365,19 +365,16 @@ WaitStatus receive_message(int fd, Clock::time_point deadline, Message& out) {
 // recv() itself, bounded by SO_RCVTIMEO (set only when the bound changes, cached in
 // *timeout_us), so a tick costs one system call instead of a poll and a recv. The descriptor
 // must be blocking.
-// With `stop` given and not yet set, the wait is cut into slices of kStopSlice (a signal may land
-// on another thread and interrupt nothing here), and once *stop is set the deadline comes at
-// most kStopGrace later: a master that does not answer then is not waited for (found in review:
-// a Ctrl-C to a twin whose lockstep master hung waited the whole handshake timeout, 10 s). A
-// wait that starts with *stop set already (the shutdown served after an interrupt) keeps its
-// deadline.
+// With `stop` given, the wait is cut into slices of kStopSlice (a signal may land on another
+// thread and interrupt nothing here), and once *stop is set the deadline comes at most
+// kStopGrace later: a master that does not answer then is not waited for (found in review: a
+// Ctrl-C to a twin whose lockstep master hung waited the whole handshake timeout, 10 s).
 constexpr std::chrono::milliseconds kStopSlice{100};
 constexpr std::chrono::milliseconds kStopGrace{1000};
 
 WaitStatus receive_message_blocking(int fd, Clock::time_point deadline, Message& out, std::int64_t* timeout_us,
                                     const std::atomic<bool>* stop = nullptr) {
   std::array<std::uint8_t, kMessageSize + 1> buf;
-  if (stop != nullptr && stop->load()) stop = nullptr;
   bool stop_seen = false;
   for (;;) {
     if (stop != nullptr && !stop_seen && stop->load()) {
@@ -540,13 +537,18 @@ WaitStatus Server::accept(std::chrono::milliseconds timeout, Hello* hello) {
   return WaitStatus::ok;
 }
 
+// The interrupt flag a grant's waits watch: none when it was set before the grant (the shutdown
+// served after an interrupt keeps the whole timeout).
+const std::atomic<bool>* Server::stop_for_grant() const { return stop_ != nullptr && !stop_->load() ? stop_ : nullptr; }
+
 WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds timeout) {
   // Send the grant, then wait for the Done of this very tick.
   if (conn_fd_ < 0) return WaitStatus::closed;
+  const std::atomic<bool>* stop = stop_for_grant();
   const Clock::time_point deadline = deadline_after(timeout);
   if (!send_message(conn_fd_, g)) return WaitStatus::closed;
   Message m;
-  const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop_);
+  const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop);
   if (w != WaitStatus::ok) return w;
   const Done* d = std::get_if<Done>(&m);
   if (d == nullptr || d->tick != g.tick) return WaitStatus::protocol;
@@ -558,11 +560,12 @@ WaitStatus Server::grant(const Grant& g, Done& done, std::chrono::milliseconds t
                          void* context) {
   // Send the grant; answer every SENT of this tick until the Done of this very tick.
   if (conn_fd_ < 0) return WaitStatus::closed;
+  const std::atomic<bool>* stop = stop_for_grant();
   const Clock::time_point deadline = deadline_after(timeout);
   if (!send_message(conn_fd_, g)) return WaitStatus::closed;
   for (;;) {
     Message m;
-    const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop_);
+    const WaitStatus w = receive_message_blocking(conn_fd_, deadline, m, &rcvtimeo_us_, stop);
     if (w != WaitStatus::ok) return w;
     if (const Sent* s = std::get_if<Sent>(&m)) {
       if (s->tick != g.tick || on_sent == nullptr) return WaitStatus::protocol;

@@ -188,6 +188,7 @@ class Server {
   int conn_fd_ = -1;
   std::int64_t rcvtimeo_us_ = 0;  // SO_RCVTIMEO now set on conn_fd_ [µs]; 0 = none
   const std::atomic<bool>* stop_ = nullptr;  // set_stop_flag()
+  const std::atomic<bool>* stop_for_grant() const;
 };
 
 // Master end.
