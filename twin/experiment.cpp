@@ -23,15 +23,16 @@ namespace {
 struct Registered {
   const char* name;
   int (*run)(const ExperimentOptions&);
+  bool takes_sets = false;  // runs scenarios of the user's and applies --set to each
 };
 
 // The registry: one row per `omnitwin experiment NAME`.
 std::array<Registered, 6> registry() {
   return {{{"can-timing", run_can_timing},
            {"can-dropout", run_can_dropout},
-           {"thesis-platform", run_thesis_platform},
+           {"thesis-platform", run_thesis_platform, true},
            {"m3-cycle", run_m3_cycle},
-           {"thesis-calibrate", run_thesis_calibrate},
+           {"thesis-calibrate", run_thesis_calibrate, true},
            {"fast-model", run_fast_model}}};
 }
 
@@ -86,7 +87,7 @@ int run_experiment(const std::string& name, const ExperimentOptions& options) {
     if (name != r.name) continue;
     // Any exception is a runtime failure (exit 3), never a crash of the CLI.
     try {
-      if (!options.sets.empty() && name != "thesis-platform" && name != "thesis-calibrate")
+      if (!options.sets.empty() && !r.takes_sets)
         throw experiment::BadInput("--set is for thesis-platform and thesis-calibrate only");
       return r.run(options);
     } catch (const ScenarioError& e) {

@@ -30,7 +30,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <functional>
 #include <iostream>
 #include <sstream>
@@ -38,6 +37,8 @@
 #include <string>
 #include <tuple>
 #include <vector>
+
+#include <fmt/printf.h>
 
 #include "bus_emulators/can/can_bus.hpp"
 #include "bus_emulators/can/can_timing.hpp"
@@ -382,15 +383,10 @@ const DropoutResult& find(const std::vector<Row>& rows, const DropoutTrial& want
   throw std::logic_error("can-dropout: configuration missing from the plan");
 }
 
+// printf-style, any length (a 256-byte buffer here once cut the longer "why" texts).
 template <typename... Args>
 std::string fmt(const char* format, Args... args) {
-  // Sized first: a fixed buffer cut the longer "why" texts of the report at 255 characters.
-  const int n = std::snprintf(nullptr, 0, format, args...);
-  if (n <= 0) return {};
-  std::string out(static_cast<std::size_t>(n) + 1, '\0');
-  std::snprintf(out.data(), out.size(), format, args...);
-  out.resize(static_cast<std::size_t>(n));
-  return out;
+  return ::fmt::sprintf(format, args...);
 }
 
 std::string to_csv(const std::vector<Row>& rows) {

@@ -149,6 +149,12 @@ Result average(const std::vector<Result>& ts) {
   return m;
 }
 
+Scenario load_with_sets(const std::string& path, const std::vector<Override>& sets) {
+  std::vector<Override> o{{"bus", "can"}};
+  o.insert(o.end(), sets.begin(), sets.end());
+  return load_scenario(path, o);
+}
+
 std::string sets_text(const std::vector<Override>& sets) {
   std::string t;
   for (const Override& o : sets) t += fmt::format("{}--set {}={}", t.empty() ? "" : " ", o.key, o.value);

@@ -84,6 +84,9 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
 // The mean of a configuration's trials, with the spread of contour and axis IAE.
 Result average(const std::vector<Result>& trials);
 
+// `path` on bus can with the experiment's --set applied: a bad key or value throws
+// ScenarioError here, before any folder is made.
+Scenario load_with_sets(const std::string& path, const std::vector<Override>& sets);
 // The experiment's --set overrides as a reader can repeat them ("--set K=V --set …"; "" none).
 std::string sets_text(const std::vector<Override>& sets);
 // `text` with a paragraph saying which --set every run had, after its first paragraph (the

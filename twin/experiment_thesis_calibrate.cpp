@@ -280,9 +280,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     throw experiment::BadInput("--budget must be 0 (the default) or at least 9 (the simplex's first points)");
   if (!options.model.empty()) check_writable(options.model);
   const fs::path dir = experiment::output_dir("thesis-calibrate", options);
-  std::vector<Override> checked{{"bus", "can"}};
-  checked.insert(checked.end(), options.sets.begin(), options.sets.end());  // a bad --set: refused here
-  const Scenario base = load_scenario(thesis::plain_scenario(), checked);
+  const Scenario base = thesis::load_with_sets(thesis::plain_scenario(), options.sets);  // a bad --set: refused here
   const thesis::ClockReading fast = thesis::clock_readings(base)[0];
   const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
   const int trials = options.quick ? 1 : 2;

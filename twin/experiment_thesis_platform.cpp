@@ -467,9 +467,7 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
 int run_thesis_platform(const ExperimentOptions& options) {
   // The scenario first: a bad --model is refused before any folder is made (found in review).
   const std::string scenario = options.model.empty() ? thesis::default_scenario() : options.model;
-  std::vector<Override> checked{{"bus", "can"}};
-  checked.insert(checked.end(), options.sets.begin(), options.sets.end());  // a bad --set: refused here
-  const Scenario sc = load_scenario(scenario, checked);
+  const Scenario sc = thesis::load_with_sets(scenario, options.sets);  // a bad --set: refused here
   const fs::path dir = experiment::output_dir("thesis-platform", options);
   const std::vector<int> rates = options.quick ? std::vector<int>{250, 1000} : std::vector<int>{125, 250, 500, 1000};
   const std::array<ClockReading, 2> clocks = thesis::clock_readings(sc);

@@ -142,7 +142,7 @@ const char* to_string(SlaveState s);
 enum class SlaveTransition : std::uint8_t {
   start,         // stopped → running: chain reset, run indices cleared, timer restart when the
                  // receive interrupt ends, at its start phase: now + T_post + phase + period
-  stop,          // running | awaiting_sync → stopped: timer stop, chain reset (zero setpoint)
+  stop,          // running | sync_pending | awaiting_sync → stopped: timer stop, chain reset (zero setpoint)
   timer_sample,  // running → running: control step + feedback in the timer interrupt (skipped
                  // without a new command)
   enter_sync,    // running → awaiting_sync: as timer_sample, then timer stop; with isr_ns > 0
