@@ -311,7 +311,8 @@ TimerAction OmniSlave::transition(SlaveTransition t, std::int64_t now_ns, double
       control_step(now_ns, shaft_angle_rad);
       timer_since_restart_ = 0;
       state_ = SlaveState::running;
-      return {TimerRequest::restart, now_ns + step_delay_ns() + actual_period_ns_};
+      // The count was zeroed as the frame was taken (l.962), T_post in, whatever the routine's length.
+      return {TimerRequest::restart, now_ns + config_.t_post_ns + actual_period_ns_};
   }
   ++stats_.illegal_transitions;
   return {};

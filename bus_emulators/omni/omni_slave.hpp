@@ -10,9 +10,9 @@
 // finds none skips the loop: the DA holds its output, no feedback goes out, and the next step's
 // counter reading spans both periods), and the optional synchronisation of 3-2-2 switches every
 // N timer interrupts to event-driven reception (timer off, next command's receive interrupt
-// runs the step and restarts the timer count from zero when it ends, T_post later — the timing
-// the can-dropout experiment's TestSlave uses). Frames are decoded/encoded only through the
-// Omni codec.
+// zeroes the timer count as it takes the frame, T_post after the arrival — seed 002 l.962, the
+// timing the can-dropout experiment's TestSlave uses — and runs the step). Frames are
+// decoded/encoded only through the Omni codec.
 //
 // Protocol core: no sockets, no wall clock, no globals. Time comes in as integer ns; frames
 // go out through a callback with their send time (now + T_post); the timer is owned by the
@@ -75,9 +75,11 @@ struct OmniSlaveConfig {
   // the timer in software at the routine's end (an 8051 in 16-bit timer mode has no
   // auto-reload), so a sample that ran the control step is followed by the next interrupt
   // this much more than a period later, and the feedback leaves at the routine's end; an
-  // interrupt that skips the step ends after T_post. The resync restarts the timer at the end
-  // of its routine as well. Seed 002 gives no value: fig. 4-20 shows the four feedback frames
-  // 3.1 … 3.5 ms after the command.
+  // interrupt that skips the step ends after T_post. The resync's receive interrupt zeroes the
+  // count as it takes the command, T_post after the arrival, before its routine (l.962: "zeroes
+  // the timer count on reception"), so the next interrupt comes a period after that, not after
+  // the routine. Seed 002 gives no value: fig. 4-20 shows the four feedback frames 3.1 … 3.5 ms
+  // after the command.
   std::int64_t isr_ns = 0;
   // Where the node's timer stands when NMT start enables it [ns], >= 0: the first interrupt
   // comes start_phase_ns later than one period after the start frame's receive interrupt.
@@ -130,9 +132,9 @@ struct TimerAction {
 //                  the timer fires once more at the routine's end (routine_end). Detection
 //                  answered, parameters refused.
 //  awaiting_sync — sync enabled, after the sync_interval-th timer interrupt (and its routine):
-//                  the timer is off; the next speed command runs the control step in the
-//                  receive interrupt and restarts the timer (→ running). Detection answered,
-//                  parameters refused.
+//                  the timer is off; the next speed command zeroes the timer count T_post after
+//                  its arrival and runs the control step in the receive interrupt (→ running).
+//                  Detection answered, parameters refused.
 // NMT stop is legal in running, sync_pending and awaiting_sync; NMT start only in stopped (a
 // start to a started node changes nothing).
 enum class SlaveState : std::uint8_t { stopped, running, sync_pending, awaiting_sync };

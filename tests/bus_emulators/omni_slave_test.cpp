@@ -253,6 +253,7 @@ struct TwoClockRun {
   std::vector<std::uint64_t> dropouts_after_sample;  // cumulative, one entry per sample
   std::int64_t max_offset_ns = 0;  // sample time − arrival of the last command before it
   std::uint64_t feedback = 0;
+  std::vector<std::int64_t> feedback_at;  // send time of each feedback frame [ns]
   OmniSlaveStats stats;
 };
 
@@ -264,8 +265,8 @@ struct TwoClockRun {
 TwoClockRun run_two_clocks(OmniSlaveConfig cfg, int n_commands, std::int64_t t_tx, int lost_command = -1) {
   const std::int64_t P = cfg.timer_period_ns;
   TwoClockRun out;
-  OmniSlave slave(cfg, [&](const can::Frame& f, std::int64_t) {
-    if (f.kind == can::FrameKind::data) ++out.feedback;
+  OmniSlave slave(cfg, [&](const can::Frame& f, std::int64_t t) {
+    if (f.kind == can::FrameKind::data) ++out.feedback, out.feedback_at.push_back(t);
   });
   SlaveTimer timer{P, cfg.drift};
   std::int64_t last_arrival = -1;
@@ -451,8 +452,9 @@ TEST(OmniSlave, HoldPolicyRunsTheLoopAgainWithTheOldCommand) {
 TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsAtItsEnd) {
   // isr_ns > 0: the firmware reloads its timer when the control routine ends, so the next
   // interrupt comes a period after that; the feedback leaves at the routine's end; an
-  // interrupt that skips the step (no new command) ends after T_post; the resync restarts
-  // the timer at its routine's end as well. isr_ns = 0 keeps the hardware-reloaded timer.
+  // interrupt that skips the step (no new command) ends after T_post; the resync's receive
+  // interrupt zeroes the count as it takes the command (l.962), T_post in, not at its routine's
+  // end. isr_ns = 0 keeps the hardware-reloaded timer.
   Wire wire;
   auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
   cfg.drift = 0.0;
@@ -472,7 +474,7 @@ TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsA
   synced.on_frame(start_all(), 0);
   EXPECT_EQ(synced.on_timer(10'000'000, 0.0).request, TimerRequest::stop);
   EXPECT_EQ(synced.on_frame(command({7, 0, 0, 0}), 10'200'000),
-            (TimerAction{TimerRequest::restart, 10'200'000 + 3'300'000 + 10'000'000}));
+            (TimerAction{TimerRequest::restart, 10'200'000 + cfg.t_post_ns + 10'000'000}));
   EXPECT_EQ(wire.sent.back().t, 10'200'000 + 3'300'000);
   // The hardware-reloaded timer asks for nothing.
   auto hw = cfg;
@@ -489,6 +491,34 @@ TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsA
   bad.isr_ns = -1;
   EXPECT_EQ(validate_slave_config(bad), SlaveConfigError::bad_isr);
   EXPECT_STREQ(to_string(SlaveConfigError::bad_isr), "bad_isr");
+}
+
+TEST(OmniSlave, AResyncEveryInterruptWithALongRoutineKeepsEachWindowAtTheCommandPeriod) {
+  // isr_ns > 0 (a timer that loses its 3.3 ms routine each interrupt) and a resync after every
+  // interrupt: the receive interrupt zeroes the count as it takes the command (l.962), so the
+  // timer's interrupt that follows comes a period after the command, not a period after the
+  // routine, and the counter windows stay at the master's period to within T_post: the slave
+  // runs one step per command and none is lost. (Restarted at the routine's end instead, the
+  // windows alternate 13.3 and 6.7 ms and every short one under-reads its command.)
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  cfg.drift = 0.0;
+  cfg.isr_ns = 3'300'000;
+  cfg.sync_enabled = true;
+  cfg.sync_interval = 1;
+  const TwoClockRun r = run_two_clocks(cfg, 60, 200'000);
+  ASSERT_GE(r.feedback_at.size(), 59u);
+  for (std::size_t i = 2; i < r.feedback_at.size(); ++i) {
+    const std::int64_t window = r.feedback_at[i] - r.feedback_at[i - 1];
+    EXPECT_NEAR(static_cast<double>(window), 10e6, 2.0 * static_cast<double>(cfg.t_post_ns)) << "window " << i;
+  }
+  EXPECT_EQ(r.stats.stale_samples, 0u);
+  EXPECT_GT(r.stats.event_samples, 25u);  // every second step is a resync
+  // Without sync the same slave samples every 13.3 ms: it runs fewer steps than commands.
+  auto plain = cfg;
+  plain.sync_enabled = false;
+  const TwoClockRun p = run_two_clocks(plain, 60, 200'000);
+  EXPECT_LT(p.feedback, 50u);
+  EXPECT_GT(p.feedback, 40u);
 }
 
 TEST(OmniSlave, ACommandDuringTheResyncsTimerRoutineRunsTheEventStepWhenTheRoutineEnds) {
@@ -513,8 +543,8 @@ TEST(OmniSlave, ACommandDuringTheResyncsTimerRoutineRunsTheEventStepWhenTheRouti
   EXPECT_EQ(slave.on_frame(command({8, 0, 0, 0}), 11'000'000), TimerAction{});
   EXPECT_EQ(slave.stats().samples, 1u);
   EXPECT_EQ(wire.sent.size(), 1u);
-  // The routine ends: the stored command's step runs now and restarts the timer after its own.
-  EXPECT_EQ(slave.on_timer(13'300'000, 0.0), (TimerAction{TimerRequest::restart, 13'300'000 + 3'300'000 + 10'000'000}));
+  // The routine ends: the stored command's receive interrupt runs now, zeroes the count and steps.
+  EXPECT_EQ(slave.on_timer(13'300'000, 0.0), (TimerAction{TimerRequest::restart, 13'300'000 + cfg.t_post_ns + 10'000'000}));
   EXPECT_EQ(slave.state(), SlaveState::running);
   EXPECT_EQ(slave.stats().event_samples, 1u);
   ASSERT_EQ(wire.sent.size(), 2u);
