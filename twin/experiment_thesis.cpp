@@ -64,11 +64,18 @@ const Row& row(int rate_kbps) {
 
 std::array<ClockReading, 2> clock_readings(const Scenario& s) {
   const double d = std::fabs(s.bus.can.drift[0]);
-  // Resync before the drift eats the T_post margin the resync leaves (can-dropout's rule).
-  const double per_interrupt_us = d * s.controller.period * 1e6;
-  const int k_fast = std::max(1, static_cast<int>(std::floor(s.bus.can.t_post_us / per_interrupt_us)));
-  return {ClockReading{"fast", -d, k_fast}, ClockReading{"slow", d, s.bus.can.sync_interval}};
+  const double drift_us = d * s.controller.period * 1e6;  // what the oscillator gains or loses per interrupt
+  const double isr_us = s.bus.can.isr_us;                 // what a software reload loses per interrupt
+  // Resync before the slip eats the T_post margin the resync leaves (can-dropout's rule).
+  const auto k_for = [&](double slip_us) {
+    return std::max(1, static_cast<int>(std::floor(s.bus.can.t_post_us / std::fabs(slip_us))));
+  };
+  const int k_fast = k_for(isr_us - drift_us);
+  const int k_slow = isr_us > 0 ? k_for(isr_us + drift_us) : s.bus.can.sync_interval;
+  return {ClockReading{"fast", -d, k_fast}, ClockReading{"slow", d, k_slow}};
 }
+
+std::vector<Override> firmware_overrides() { return {{"bus.isr_us", "3300"}}; }
 
 namespace {
 
@@ -85,6 +92,7 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
                           {"bus.start_phase", "random"},
                           {"bus.seed", std::to_string(trial + 1)},
                           {"bus.transport", fmt::format("udp:239.74.163.2:{}", port)}};
+  for (const auto& f : firmware_overrides()) o.push_back(f);
   if (setup.quick) o.push_back({"path.segments.0.line.duration", "4"}), o.push_back({"path.segments.0.line.dx", "0.4"});
   o.insert(o.end(), setup.overrides.begin(), setup.overrides.end());
   Scenario s = load_scenario(setup.scenario, o);
@@ -151,6 +159,7 @@ Result average(const std::vector<Result>& ts) {
 
 Scenario load_with_sets(const std::string& path, const std::vector<Override>& sets) {
   std::vector<Override> o{{"bus", "can"}};
+  for (const auto& f : firmware_overrides()) o.push_back(f);
   o.insert(o.end(), sets.begin(), sets.end());
   return load_scenario(path, o);
 }

@@ -44,9 +44,20 @@ struct ClockReading {
   int sync_interval = 0;  // K: timer interrupts between resyncs
 };
 
-// The two readings for scenario `s` (its T_post, period and drift size): fast (the slave's
-// timer gains; K from can-dropout's rule) first, slow (the scenario's K) second.
+// The two readings for scenario `s` (its T_post, routine, period and drift size): fast (the
+// slave's timer gains) first, slow second. K follows can-dropout's rule (resync before the
+// slave's slip per interrupt eats the T_post margin) for the fast reading, and for both when
+// the slaves reload their timer at the routine's end (bus.isr_us > 0: each interrupt then
+// slips by the routine, and l.962 asks for the resync before the clocks part by a period);
+// a hardware-reloaded slow reading keeps the scenario's K.
 std::array<ClockReading, 2> clock_readings(const Scenario& s);
+
+// The thesis's node firmware as these experiments run it, applied before the experiment's
+// --set (which may change it): the timer routine's run time (bus.isr_us, seed 002 fig. 4-20:
+// the four feedback frames leave 3.1 … 3.5 ms after the command; the 8051's 16-bit timer
+// reloads in software at the routine's end). A bus setting, so it is not in the scenario
+// file, as the drift is not.
+std::vector<Override> firmware_overrides();
 
 // One run's figures, or the mean of a configuration's trials.
 struct Result {

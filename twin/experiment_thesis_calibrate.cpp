@@ -141,7 +141,7 @@ std::vector<double> values_at(const std::vector<double>& u) {
 }
 
 // The fitted scenario: the thesis line with the fitted values.
-std::string fitted_yaml(const std::vector<double>& v, double phi_kp, double phi_ki, double j, int evals,
+std::string fitted_yaml(const std::vector<double>& v, double phi_kp, double phi_ki, double kff, double j, int evals,
                         const Figures& f, const std::string& params_path) {
   std::ostringstream out;
   out << "# The thesis line (seed 002, 4-4-2) with the parameters the thesis does not give, fitted by\n"
@@ -160,7 +160,7 @@ std::string fitted_yaml(const std::vector<double>& v, double phi_kp, double phi_
       << "description: \"200 cm along world X in 20 s (seed 002, 4-4-2), parameters fitted to the no-sync 1000 kbit/s "
          "row\"\n"
       << "platform:\n  params: " << params_path << "\n"
-      << fmt::format("  velocity_loop: {{kp: {:.4g}, ki: {:.4g}}}\n", v[2], v[3])
+      << fmt::format("  velocity_loop: {{kp: {:.4g}, ki: {:.4g}, kff: {:.4g}}}\n", v[2], v[3], kff)
       << fmt::format("  driver: {{dead_band: {:.4g}, gain_error: {}}}\n", v[4], diagonal_pairs(v[7]))
       << fmt::format("  motor: {{friction_torque: {:.4g}, backlash: {:.4g}}}\n", v[5], v[6])
       << "bus: direct\nclock: lockstep\ncontroller:\n  period: 0.010\n"
@@ -201,7 +201,10 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
       << "`omnitwin experiment thesis-calibrate` runs the thesis line (models/scenarios/thesis_line.yaml) on bus "
          "`can` exactly as thesis-platform does (master process, four Omni slaves, UDP multicast, lockstep), at "
          "the ONE configuration it fits: 1000 kbit/s, no synchronisation, the slaves' timers gaining 0.362 % "
-         "(the fast reading, docs/experiments.md).\n\n"
+         "(the fast reading, docs/experiments.md), with the thesis's node firmware as thesis-platform runs it: "
+         "a velocity PI without feed-forward (fig. 4-16; `platform.velocity_loop.kff: 0`, written into the fit) "
+         "and a 3.3 ms timer routine that reloads the timer at its end (fig. 4-20; `bus.isr_us: 3300`, which "
+         "thesis-platform applies itself, as it does the drift).\n\n"
       << "## Method\n\n"
       << fmt::format(
              "- **Objective**: J = mean over eight figures of (ln(ours / thesis))²: IAE and σ of X, Y and "
@@ -238,7 +241,7 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
     out << fmt::format("| {} | {} | {:g} … {:g} | {:g} | **{:.4g}** | {} |\n", p.name, p.unit, p.lo, p.hi, p.start,
                        best.values[i], p.why);
   }
-  out << "\nEverything else stays the platform file's (models/platform/omni4.yaml): mass, motor, encoder, DA, the "
+  out << "\nEverything else stays the platform file's (models/platform/omni4.yaml), but for the feed-forward above: mass, motor, encoder, DA, the "
          "PI's arithmetic (`real`: the fitted ki is fractional, which int16 refuses). The master's heading gains "
          "stay the scenario's.\n\n"
       << "## The fitted row, ours against the thesis\n\n| figure | start | fitted | thesis | fitted / thesis |\n"
@@ -280,7 +283,11 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     throw experiment::BadInput("--budget must be 0 (the default) or at least 9 (the simplex's first points)");
   if (!options.model.empty()) check_writable(options.model);
   const fs::path dir = experiment::output_dir("thesis-calibrate", options);
-  const Scenario base = thesis::load_with_sets(thesis::plain_scenario(), options.sets);  // a bad --set: refused here
+  // The thesis's velocity loop is a PI (fig. 4-16) with no feed-forward: fixed, not fitted
+  // (a --set may change it).
+  std::vector<Override> sets{{"platform.velocity_loop.kff", "0"}};
+  sets.insert(sets.end(), options.sets.begin(), options.sets.end());
+  const Scenario base = thesis::load_with_sets(thesis::plain_scenario(), sets);  // a bad --set: refused here
   const thesis::ClockReading fast = thesis::clock_readings(base)[0];
   const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
   const int trials = options.quick ? 1 : 2;
@@ -293,7 +300,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
     Evaluation e;
     e.values = values_at(u);
     setup.overrides = overrides_of(e.values, phi_kp, phi_ki);
-    setup.overrides.insert(setup.overrides.end(), options.sets.begin(), options.sets.end());
+    setup.overrides.insert(setup.overrides.end(), sets.begin(), sets.end());
     std::vector<thesis::Result> ts;
     for (int t = 0; t < trials; ++t) {
       ts.push_back(thesis::run_one(setup, fast, thesis::kFitRateKbps, false, t, 46200 + runs++ % 600));
@@ -329,7 +336,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
   experiment::write_text(dir / "thesis_calibrate.md", thesis::note_sets(report_md(evals, r, *best, model, trials, options.quick), options.sets, false));
   experiment::write_text(model,
-                         thesis::note_sets(fitted_yaml(best->values, phi_kp, phi_ki, best->j, r.evaluations, best->figures, params),
+                         thesis::note_sets(fitted_yaml(best->values, phi_kp, phi_ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params),
                                            options.sets, true));
   std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
                            r.evaluations, evals.front().j, best->j, model, dir.string());

@@ -65,6 +65,18 @@ TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAnd
   EXPECT_EQ(g[0], -g[1]);
   EXPECT_EQ(g[2], g[0]);
   EXPECT_EQ(g[3], g[1]);
+  // The thesis's velocity loop is a PI without feed-forward (fig. 4-16): fixed, written into the
+  // fit; the platform file's default (the plain line's) has one.
+  EXPECT_EQ(fitted.platform.velocity_loop.kff, 0.0);
+  EXPECT_EQ(defaults.platform.velocity_loop.kff, 1.0);
+  // Every run had the thesis's 3.3 ms timer routine (fig. 4-20), a bus setting the file lacks.
+  int runs = 0;
+  for (const auto& e : fs::directory_iterator(dir.path() / "runs")) {
+    const std::string m = omnitwin::testing::read_bytes(e.path() / "metrics.json");
+    EXPECT_NE(m.find("\"isr_us\": 3300"), std::string::npos) << e.path();
+    ++runs;
+  }
+  EXPECT_GT(runs, 0);
   // It is still the thesis line.
   ASSERT_EQ(fitted.path.segments.size(), 1u);
   EXPECT_EQ(fitted.path.segments[0].dx, 2.0);
@@ -93,6 +105,28 @@ TEST(ThesisCalibrate, TheCommittedFitLoadsInsideItsBoundsAndSaysWhatItWasFittedT
   const std::string text = omnitwin::testing::read_bytes(thesis::fitted_scenario());
   EXPECT_NE(text.find("no sync, 1000 kbit/s"), std::string::npos);
   EXPECT_NE(text.find("Objective"), std::string::npos);
+  EXPECT_EQ(s.platform.velocity_loop.kff, 0.0);
+}
+
+TEST(ThesisRig, TheResyncIntervalKeepsTheSlipPerInterruptWithinTPostCountingASoftwareReloadsRoutine) {
+  // can-dropout's rule: resync before the slave's slip eats the T_post margin (88.8 µs). A
+  // hardware-reloaded timer slips by the drift only (36.2 µs per 10 ms interrupt: K = 2 for the
+  // fast reading; the slow one keeps the scenario's K = 20); one reloaded at the end of its
+  // 3.3 ms routine slips by the routine too, so both readings resync every interrupt (l.962:
+  // before the clocks part by a period).
+  const Scenario hw = thesis::load_with_sets(thesis::plain_scenario(), {{"bus.isr_us", "0"}});
+  const auto a = thesis::clock_readings(hw);
+  EXPECT_EQ(a[0].name, "fast");
+  EXPECT_DOUBLE_EQ(a[0].drift, -0.00362);
+  EXPECT_EQ(a[0].sync_interval, 2);
+  EXPECT_EQ(a[1].name, "slow");
+  EXPECT_EQ(a[1].sync_interval, 20);
+  // The experiments' default firmware: the 3.3 ms routine.
+  const Scenario sw = thesis::load_with_sets(thesis::plain_scenario(), {});
+  EXPECT_DOUBLE_EQ(sw.bus.can.isr_us, 3300.0);
+  const auto b = thesis::clock_readings(sw);
+  EXPECT_EQ(b[0].sync_interval, 1);
+  EXPECT_EQ(b[1].sync_interval, 1);
 }
 
 }  // namespace
