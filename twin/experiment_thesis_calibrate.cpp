@@ -291,7 +291,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   const thesis::ClockReading fast = thesis::clock_readings(base)[0];
   const double phi_kp = base.controller.kp[2], phi_ki = base.controller.ki[2];
   const int trials = options.quick ? 1 : 2;
-  const int budget = options.budget > 0 ? options.budget : (options.quick ? 10 : 130);
+  const int budget = options.budget > 0 ? options.budget : (options.quick ? 10 : 220);
   thesis::RunSetup setup{thesis::plain_scenario(), {}, dir / "runs", options.quick, false, options.interrupt};
   std::vector<Evaluation> evals;
   int runs = 0;  // each run its own UDP port, 46200 … 46799 (no test or scenario uses them)

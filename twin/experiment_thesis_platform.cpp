@@ -319,8 +319,9 @@ std::string prediction_section(const std::vector<Result>& rs, const std::vector<
                             "by more than 1 point: **{}** (contour {:+.1f} %, axis {:+.1f} %; the thesis: -5.2 %, "
                             "+10.6 %){}.\n",
                             weakest ? "yes" : "no", low->ours[2], low->ours[3],
-                            es.size() > 1 ? fmt::format("; the nearest other bit rate leads it by {:+.1f} points", margin)
-                                          : std::string())
+                            es.size() < 2 ? std::string()
+                            : margin < 0  ? fmt::format("; another bit rate gains {:.1f} points less", -margin)
+                                          : fmt::format("; the nearest other bit rate gains {:.1f} points more", margin))
               : std::string("- 125 kbit/s was not run.\n"))
       << fmt::format("- Overall axis-IAE improvement (mean over the bit rates): **{:+.2f} %** against the thesis's "
                      "16.31 % ({} the ±5 points asked).\n",

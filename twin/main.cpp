@@ -759,7 +759,7 @@ int main(int argc, char** argv) {
   experiment->add_option("--set", exp_sets,
                          "thesis-platform, thesis-calibrate: override a scenario key in every run, e.g. --set bus.isr_us=3300")
       ->type_name("KEY=VALUE");
-  experiment->add_option("--budget", exp_budget, "thesis-calibrate: objective evaluations (0: default 130; else >= 9)")
+  experiment->add_option("--budget", exp_budget, "thesis-calibrate: objective evaluations (0: default 220; else >= 9)")
       ->check(CLI::Range(0, 100000))
       ->check(CLI::Validator(
           [](std::string& v) {
