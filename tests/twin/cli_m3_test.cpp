@@ -167,7 +167,9 @@ TEST_F(CliM3, AnUnopenableTransportIsRefused) {
 // `omnitwin twin --bus m3` and `omni-master --bus m3` started by hand, both on the wall clock:
 // the master finds the four servos, measures the line (the transport's round trip included)
 // and brings every servo into operation; at the end of --duration it switches each off and
-// disconnects it (SV_OFF, DISCONNECT).
+// disconnects it (SV_OFF, DISCONNECT). At an 8 ms cycle: at 2 ms the 2-core CI machine's host
+// stalls (up to 5.8 ms measured) lost an axis in three fresh-clone runs; a short cycle across
+// processes on the wall clock is CliM3Slow's (1 ms, slow label).
 TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   const std::string iface = "udp:127.0.0.1:47711";
   Child twin({"twin", test_scenario("m3_short.yaml"), "--bus", "m3", "--set", "bus.transport=" + iface, "--set",
@@ -177,24 +179,32 @@ TEST_F(CliM3, AnExternalMasterOnTheWallClockStartsTheTwinsServos) {
   ASSERT_TRUE(contains(twin.out(), "a C1 master connects on " + iface)) << twin.out() << twin.err();
   const fs::path stats = dir_ / "master-stats.json";
   Child master(binary_path("controller/omni-master"),
-               {"--bus", "m3", "--iface", iface, "--config", source_path("tests/data/m3/servos_only.yaml"), "--duration",
-                "2", "--stats", stats.string()},
+               {"--bus", "m3", "--iface", iface, "--config", source_path("tests/data/m3/servos_only_8ms.yaml"),
+                "--duration", "2", "--stats", stats.string()},
                work(), io(), "master-");
   EXPECT_EQ(master.wait(30s), 0) << master.out() << master.err();
   twin.signal(SIGINT);
   EXPECT_NE(twin.wait(30s), -1);
   const nlohmann::json s = nlohmann::json::parse(read_bytes(stats));
   EXPECT_EQ(s.at("driver_state"), "cyclic communication") << s.dump(2);
-  EXPECT_GT(s.at("cycles").get<int>(), 800);  // 2 s at servos_only.yaml's 2 ms cycle, less the start-up
-  // A master the host held for two cycles or more misses two in a row at every servo, and each
-  // raises its communication alarm as the protocol requires: then the stop is the right answer
-  // (as CliM3Slow judges; two fresh-clone CI runs had the master woken 4.0 and 5.8 ms late).
+  EXPECT_EQ(s.at("cycle_ns"), 8'000'000) << s.dump(2);
+  EXPECT_GT(s.at("cycles").get<int>(), 200);  // 2 s at an 8 ms cycle, less the start-up
+  // Where the host held the master and the twin for two cycles or more between them, a servo
+  // misses two in a row and raises its communication alarm as the protocol requires: then the
+  // stop is the right answer (as CliM3Slow judges). Both sides measure their own worst wake:
+  // the master's statistics and the twin's realtime pacer (three fresh-clone CI runs had the
+  // master alone 4.0, 5.8 and 3.7 ms late at the 2 ms cycle this test used; the twin's pacer
+  // woke 3 ms late as the master started, on an idle machine).
   const auto cycle_ns = s.at("cycle_ns").get<std::int64_t>();
-  if (s.at("wake_late_max_ns").get<std::int64_t>() >= 2 * cycle_ns && s.at("state") != "running") {
+  const nlohmann::json tm = nlohmann::json::parse(read_bytes(dir_ / "twin" / "metrics.json"));
+  const double twin_late_ns = tm.at("realtime").at("jitter_max_us").get<double>() * 1e3;
+  const double stalled_ns = static_cast<double>(s.at("wake_late_max_ns").get<std::int64_t>()) + twin_late_ns;
+  if (stalled_ns >= 2.0 * static_cast<double>(cycle_ns) && s.at("state") != "running") {
     EXPECT_GE(s.at("lost_axis").get<int>(), 1) << s.dump(2);
     EXPECT_EQ(s.at("platform_stopped"), true) << s.dump(2);
     GTEST_SKIP() << "the host stalled the master " << s.at("wake_late_max_ns").get<std::int64_t>() / 1e6
-                 << " ms (two cycles or more): its servos alarmed, as they must; not judged as a start-up";
+                 << " ms and the twin " << twin_late_ns / 1e6
+                 << " ms (two cycles or more together): its servos alarmed, as they must; not judged as a start-up";
   }
   EXPECT_EQ(s.at("state"), "running") << "every servo in operation, none lost: " << s.dump(2);
   EXPECT_LE(s.at("wakes_late").get<std::uint64_t>(), s.at("cycles").get<std::uint64_t>()) << s.dump(2);
