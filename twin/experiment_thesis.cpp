@@ -67,8 +67,10 @@ std::array<ClockReading, 2> clock_readings(const Scenario& s) {
   const double drift_us = d * s.controller.period * 1e6;  // what the oscillator gains or loses per interrupt
   const double isr_us = s.bus.can.isr_us;                 // what a software reload loses per interrupt
   // Resync before the slip eats the T_post margin the resync leaves (can-dropout's rule).
+  // (No slip never eats it: the scenario's K.)
   const auto k_for = [&](double slip_us) {
-    return std::max(1, static_cast<int>(std::floor(s.bus.can.t_post_us / std::fabs(slip_us))));
+    const double k = s.bus.can.t_post_us / std::fabs(slip_us);
+    return k < s.bus.can.sync_interval ? std::max(1, static_cast<int>(std::floor(k))) : s.bus.can.sync_interval;
   };
   const int k_fast = k_for(isr_us - drift_us);
   const int k_slow = isr_us > 0 ? k_for(isr_us + drift_us) : s.bus.can.sync_interval;

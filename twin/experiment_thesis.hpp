@@ -49,7 +49,8 @@ struct ClockReading {
 // slave's slip per interrupt eats the T_post margin) for the fast reading, and for both when
 // the slaves reload their timer at the routine's end (bus.isr_us > 0: each interrupt then
 // slips by the routine, and l.962 asks for the resync before the clocks part by a period);
-// a hardware-reloaded slow reading keeps the scenario's K.
+// a hardware-reloaded slow reading keeps the scenario's K, which also bounds the rule's K (a
+// slip of zero never eats the margin).
 std::array<ClockReading, 2> clock_readings(const Scenario& s);
 
 // The thesis's node firmware as these experiments run it, applied before the experiment's

@@ -127,6 +127,11 @@ TEST(ThesisRig, TheResyncIntervalKeepsTheSlipPerInterruptWithinTPostCountingASof
   const auto b = thesis::clock_readings(sw);
   EXPECT_EQ(b[0].sync_interval, 1);
   EXPECT_EQ(b[1].sync_interval, 1);
+  // A slip of zero never eats the margin: the scenario's K (the rule once divided by zero).
+  const Scenario still = thesis::load_with_sets(thesis::plain_scenario(), {{"bus.isr_us", "0"}, {"bus.drift", "0"}});
+  const auto c = thesis::clock_readings(still);
+  EXPECT_EQ(c[0].sync_interval, 20);
+  EXPECT_EQ(c[1].sync_interval, 20);
 }
 
 }  // namespace
