@@ -395,9 +395,8 @@ std::string hardware_reload_why(const std::vector<Effect>& fast, const std::vect
              "the integral carries it past zero before the path ends (thesis_platform_time.png). Its size is set by "
              "the gains whatever the drives do, and the odometry is summed from every feedback frame, so lost or late "
              "commands hardly change it: the drift of 0.362 % costs one command in 276. The thesis's X "
-             "fell by 25 … 39 % with sync, so its lag depended on the bus in a way this model does not have (a "
-             "master that integrates only the latest feedback per tick, losing what a dropout overwrites, would "
-             "be one; the thesis does not describe its odometry).\n",
+             "fell by 25 … 39 % with sync, so its lag depended on the bus in a way a hardware-reloaded timer does "
+             "not give (reading_sync.md: the slaves' routine, `bus.isr_us`, does).\n",
              span(fast, 0), span(fast, 2), span(slow, 2), span(fast, 2, true, 250),
              fast.empty() ? 0.0 : fast.back().without->std_c, sc.controller.kp[0], sc.controller.ki[0])
       << fmt::format(
@@ -411,14 +410,14 @@ std::string hardware_reload_why(const std::vector<Effect>& fast, const std::vect
   return out.str();
 }
 
-// The slowest and fastest of a figure over a clock reading's runs with or without sync.
-std::string range_of(const std::vector<Effect>& es, bool sync, double Result::*f, const char* fmt_one) {
+// The smallest and largest of a figure over a clock reading's runs with or without sync.
+std::string range_of(const std::vector<Effect>& es, bool sync, double Result::*f) {
   double lo = 1e300, hi = -1e300;
   for (const Effect& e : es) {
     const double v = (sync ? e.with : e.without)->*f;
     lo = std::min(lo, v), hi = std::max(hi, v);
   }
-  return lo > hi ? "-" : fmt::format(fmt::runtime(fmt_one), lo) + " … " + fmt::format(fmt::runtime(fmt_one), hi);
+  return lo > hi ? "-" : fmt::format("{:.1f} … {:.1f}", lo, hi);
 }
 
 // Why, for slaves that reload their timer at the end of their control routine (bus.isr_us > 0,
@@ -458,7 +457,7 @@ std::string routine_why(const std::vector<Effect>& fast, const std::vector<Effec
       << fmt::format(
              "- **Dropouts.** With the thesis's definition (2-2-1: the command held does not belong to the sample) "
              "{} % of the samples are dropouts without sync (fast reading), {} % with it.\n",
-             range_of(fast, false, &Result::dropout_pct, "{:.1f}"), range_of(fast, true, &Result::dropout_pct, "{:.1f}"));
+             range_of(fast, false, &Result::dropout_pct), range_of(fast, true, &Result::dropout_pct));
   return out.str();
 }
 

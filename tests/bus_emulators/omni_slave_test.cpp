@@ -449,6 +449,17 @@ TEST(OmniSlave, HoldPolicyRunsTheLoopAgainWithTheOldCommand) {
   EXPECT_STREQ(to_string(MissingCommand::skip), "skip");
 }
 
+// A 10 ms slave without drift whose 3.3 ms routine reloads its timer at its end (isr_ns),
+// resyncing after every timer interrupt when `sync` is set.
+OmniSlaveConfig long_routine_config(bool sync) {
+  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
+  cfg.drift = 0.0;
+  cfg.isr_ns = 3'300'000;
+  cfg.sync_enabled = sync;
+  cfg.sync_interval = 1;
+  return cfg;
+}
+
 TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsAtItsEnd) {
   // isr_ns > 0: the firmware reloads its timer when the control routine ends, so the next
   // interrupt comes a period after that; the feedback leaves at the routine's end; an
@@ -456,10 +467,7 @@ TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsA
   // interrupt zeroes the count as it takes the command (l.962), T_post in, not at its routine's
   // end. isr_ns = 0 keeps the hardware-reloaded timer.
   Wire wire;
-  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
-  cfg.drift = 0.0;
-  cfg.isr_ns = 3'300'000;
-  cfg.sync_interval = 1;
+  const auto cfg = long_routine_config(false);
   OmniSlave slave(cfg, wire.fn());
   slave.on_frame(start_all(), 0);
   slave.on_frame(command({7, 0, 0, 0}), 100);
@@ -470,7 +478,7 @@ TEST(OmniSlave, ATimerReloadedAtTheRoutinesEndAddsTheRoutineToThePeriodAndSendsA
   EXPECT_EQ(slave.on_timer(23'300'000, 0.0), (TimerAction{TimerRequest::restart, 23'300'000 + cfg.t_post_ns + 10'000'000}));
   EXPECT_EQ(wire.sent.size(), 1u);
   // The resync: timer off at the interrupt, the command's arrival runs the routine.
-  OmniSlave synced([&] { auto c = cfg; c.sync_enabled = true; return c; }(), wire.fn());
+  OmniSlave synced(long_routine_config(true), wire.fn());
   synced.on_frame(start_all(), 0);
   EXPECT_EQ(synced.on_timer(10'000'000, 0.0).request, TimerRequest::stop);
   EXPECT_EQ(synced.on_frame(command({7, 0, 0, 0}), 10'200'000),
@@ -500,11 +508,7 @@ TEST(OmniSlave, AResyncEveryInterruptWithALongRoutineKeepsEachWindowAtTheCommand
   // routine, and the counter windows stay at the master's period to within T_post: the slave
   // runs one step per command and none is lost. (Restarted at the routine's end instead, the
   // windows alternate 13.3 and 6.7 ms and every short one under-reads its command.)
-  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
-  cfg.drift = 0.0;
-  cfg.isr_ns = 3'300'000;
-  cfg.sync_enabled = true;
-  cfg.sync_interval = 1;
+  const auto cfg = long_routine_config(true);
   const TwoClockRun r = run_two_clocks(cfg, 60, 200'000);
   ASSERT_GE(r.feedback_at.size(), 59u);
   for (std::size_t i = 2; i < r.feedback_at.size(); ++i) {
@@ -514,9 +518,7 @@ TEST(OmniSlave, AResyncEveryInterruptWithALongRoutineKeepsEachWindowAtTheCommand
   EXPECT_EQ(r.stats.stale_samples, 0u);
   EXPECT_GT(r.stats.event_samples, 25u);  // every second step is a resync
   // Without sync the same slave samples every 13.3 ms: it runs fewer steps than commands.
-  auto plain = cfg;
-  plain.sync_enabled = false;
-  const TwoClockRun p = run_two_clocks(plain, 60, 200'000);
+  const TwoClockRun p = run_two_clocks(long_routine_config(false), 60, 200'000);
   EXPECT_LT(p.feedback, 50u);
   EXPECT_GT(p.feedback, 40u);
 }
@@ -527,11 +529,7 @@ TEST(OmniSlave, ACommandDuringTheResyncsTimerRoutineRunsTheEventStepWhenTheRouti
   // and its pending interrupt runs the event step at the routine's end, never a second routine
   // inside the first. Without a command by then the node waits with the timer off.
   Wire wire;
-  auto cfg = make_slave_config(node::axis1, params_with_period(10e-3));
-  cfg.drift = 0.0;
-  cfg.isr_ns = 3'300'000;
-  cfg.sync_enabled = true;
-  cfg.sync_interval = 1;
+  const auto cfg = long_routine_config(true);
   OmniSlave slave(cfg, wire.fn());
   slave.on_frame(start_all(), 0);
   slave.on_frame(command({7, 0, 0, 0}), 100);
