@@ -1,5 +1,6 @@
 // twin layer — the master program as a child process; see master_process.hpp.
 #include "twin/master_process.hpp"
+#include "twin/process_tree.hpp"
 #include "controller/master_bounds.hpp"
 
 #include "twin/canopen_network.hpp"
@@ -22,6 +23,7 @@
 #include <thread>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 extern char** environ;
 
@@ -66,10 +68,44 @@ MasterProcess::MasterProcess(const std::string& program, const std::vector<std::
     pid_ = -1;
     throw std::runtime_error(fmt::format("cannot start the master '{}': {}", program, std::strerror(rc)));
   }
+  start_guard();
+}
+
+void MasterProcess::start_guard() {
+  std::string dir;
+  const std::string guard =
+      find_beside_executable({"omnitwin-guard", "../twin/omnitwin-guard"}, OMNITWIN_BINARY_DIR "/twin/omnitwin-guard", X_OK, dir);
+  if (guard.empty()) {
+    spdlog::warn("omnitwin-guard not found beside {}: a master behind a wrapper outlives a killed twin", dir);
+    return;
+  }
+  // Who the master is: pid and start time (posix_spawn returned after its exec).
+  const std::vector<ProcessEntry> all = process_table();
+  const auto self = std::find_if(all.begin(), all.end(), [&](const ProcessEntry& p) { return p.pid == pid_; });
+  if (self == all.end()) return;  // it has ended already
+  std::vector<std::string> argv_s{guard, std::to_string(::getpid()), std::to_string(pid_), std::to_string(self->start),
+                                  std::to_string(kGuardGrace.count())};
+  std::vector<char*> argv;
+  for (std::string& a : argv_s) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  for (int fd = 0; fd < 3; ++fd) posix_spawn_file_actions_addopen(&fa, fd, "/dev/null", fd == 0 ? O_RDONLY : O_WRONLY, 0);
+  if (posix_spawn(&guard_pid_, guard.c_str(), &fa, nullptr, argv.data(), environ) != 0) guard_pid_ = -1;
+  posix_spawn_file_actions_destroy(&fa);
+}
+
+void MasterProcess::end_guard() {
+  if (guard_pid_ <= 0) return;
+  ::kill(guard_pid_, SIGKILL);
+  while (waitpid(guard_pid_, nullptr, 0) < 0 && errno == EINTR) {
+  }
+  guard_pid_ = -1;
 }
 
 MasterProcess::~MasterProcess() {
-  if (pid_ > 0 && (exit_code_ < 0 || descendants_alive())) stop(std::chrono::milliseconds(2000));
+  if (pid_ > 0 && (exit_code_ < 0 || descendants_alive())) stop(kGuardGrace);
+  end_guard();
 }
 
 void MasterProcess::reap(int status) {
@@ -84,51 +120,11 @@ bool MasterProcess::running() {
   return exit_code_ < 0;
 }
 
-namespace {
-
-using ProcEntry = MasterProcess::ProcessEntry;
-
-// Every process as /proc/PID/stat has it.
-std::vector<ProcEntry> processes() {
-  std::vector<ProcEntry> all;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator("/proc", ec)) {
-    const std::string name = e.path().filename().string();
-    if (name.empty() || name.find_first_not_of("0123456789") != std::string::npos) continue;
-    std::ifstream f(e.path() / "stat");
-    std::string stat;
-    if (!std::getline(f, stat)) continue;
-    const auto close = stat.rfind(')');
-    if (close == std::string::npos || close + 2 >= stat.size()) continue;
-    std::istringstream rest(stat.substr(close + 2));
-    ProcEntry p;
-    p.pid = static_cast<pid_t>(std::stol(name));
-    rest >> p.state >> p.ppid;
-    std::string skip;
-    for (int field = 5; field < 22 && rest; ++field) rest >> skip;  // pgrp … itrealvalue
-    rest >> p.start;
-    all.push_back(p);
-  }
-  return all;
-}
-
-// The descendants of `root` (not root itself), zombies left out.
-std::vector<ProcEntry> descendants_of(pid_t root, const std::vector<ProcEntry>& all) {
-  std::vector<ProcEntry> found{ProcEntry{root, 0, 0, 0}};
-  for (std::size_t k = 0; k < found.size(); ++k)
-    for (const ProcEntry& p : all)
-      if (p.ppid == found[k].pid && p.state != 'Z') found.push_back(p);
-  found.erase(found.begin());
-  return found;
-}
-
-bool same_process(const ProcEntry& a, const ProcEntry& b) { return a.pid == b.pid && a.start == b.start; }
-
-}  // namespace
+using ProcEntry = ProcessEntry;
 
 bool MasterProcess::descendants_alive() const {
   if (pid_ <= 0) return false;
-  const std::vector<ProcEntry> all = processes();
+  const std::vector<ProcEntry> all = process_table();
   // A process it started that was orphaned (its parent ended first) is still one of them.
   for (const ProcEntry& p : all)
     for (const ProcEntry& s : signalled_)
@@ -138,7 +134,7 @@ bool MasterProcess::descendants_alive() const {
 }
 
 void MasterProcess::signal_all(int sig) {
-  const std::vector<ProcEntry> all = processes();
+  const std::vector<ProcEntry> all = process_table();
   if (exit_code_ < 0)
     for (const ProcEntry& p : descendants_of(pid_, all))
       if (std::none_of(signalled_.begin(), signalled_.end(), [&](const ProcEntry& s) { return same_process(p, s); }))

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "controller/master_config.hpp"
+#include "twin/process_tree.hpp"
 #include "twin/scenario.hpp"
 
 namespace omnitwin::twin {
@@ -51,22 +52,26 @@ class MasterProcess {
   // Whether a process it started is left (one signalled by terminate(), or a descendant of the
   // program now); zombies do not count. Scans /proc: not real-time safe.
   bool descendants_alive() const;
-  // A process as /proc/PID/stat has it: its parent, state and start time (clock ticks after
-  // boot: with the pid, who it is, so that a pid taken again is never mistaken for it).
-  struct ProcessEntry {
-    pid_t pid = 0, ppid = 0;
-    char state = 0;
-    unsigned long long start = 0;
-  };
+  using ProcessEntry = twin::ProcessEntry;
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"
   pid_t pid() const { return pid_; }
+  // omnitwin-guard's pid while it has not been reaped (-1: none).
+  pid_t guard_pid() const { return guard_pid_; }
 
  private:
+  // The grace the destructor and omnitwin-guard give it between SIGTERM and SIGKILL.
+  static constexpr std::chrono::milliseconds kGuardGrace{2000};
   void reap(int status);
   void signal_all(int sig);
+  // omnitwin-guard (twin/guard_main.cpp) beside it: it ends the master and what it started when
+  // this process is killed outright; killed and reaped by end_guard(). Without the program
+  // found: a warning, and no guard.
+  void start_guard();
+  void end_guard();
   pid_t pid_ = -1;
+  pid_t guard_pid_ = -1;
   int exit_code_ = -1;
   std::vector<ProcessEntry> signalled_;  // its descendants when a signal went out
 };

@@ -1,13 +1,20 @@
 // Tests twin/master_process: log_tail(), the last words of a master's log that the twin puts
-// in its error when the master exits before joining the clock.
+// in its error when the master exits before joining the clock; and the omnitwin-guard started
+// beside each master (it ends on its own with the master, and is reaped with the object).
 #include "twin/master_process.hpp"
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <fstream>
 #include <string>
+#include <thread>
 
 #include "tests/support/temp_dir.hpp"
+#include "twin/process_tree.hpp"
 
 namespace omnitwin::twin {
 namespace {
@@ -39,6 +46,53 @@ TEST(MasterLogTail, ReadsOnlyTheEndOfALongLog) {
     out << "the last line\n";
   }
   EXPECT_EQ(log_tail(log, 2), "tick 99999 | the last line");
+}
+
+// The state /proc gives `pid` ('Z' zombie), 0 when it has no entry.
+char state_of(pid_t pid) {
+  for (const ProcessEntry& p : process_table())
+    if (p.pid == pid) return p.state;
+  return 0;
+}
+
+// Waits up to `timeout` for `pid` to be a zombie or gone.
+bool ends_within(pid_t pid, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (state_of(pid) != 0 && state_of(pid) != 'Z') {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return true;
+}
+
+TEST(MasterGuard, WatchesWhileTheMasterRunsEndsWithItAndIsReapedWithTheObject) {
+  const TempDir dir;
+  pid_t guard = -1;
+  {
+    MasterProcess m("sh", {"-c", "sleep 0.5"}, (dir.path() / "master.log").string());
+    guard = m.guard_pid();
+    ASSERT_GT(guard, 0) << "no omnitwin-guard was started";
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    EXPECT_NE(state_of(guard), 'Z') << "the guard ended while its master ran";
+    EXPECT_NE(state_of(guard), 0);
+    ASSERT_TRUE(m.wait(std::chrono::milliseconds(5000)));
+    // The master reaped: the guard sees it gone and ends by itself (it polls every 50 ms).
+    EXPECT_TRUE(ends_within(guard, std::chrono::milliseconds(1000)));
+  }
+  EXPECT_EQ(state_of(guard), 0) << "the guard was not reaped";
+}
+
+TEST(MasterGuard, AMasterStoppedByTheTwinTakesItsGuardAlong) {
+  const TempDir dir;
+  pid_t guard = -1;
+  {
+    MasterProcess m("sh", {"-c", "sleep 30; :"}, (dir.path() / "master.log").string());
+    guard = m.guard_pid();
+    ASSERT_GT(guard, 0);
+    m.stop(std::chrono::milliseconds(2000));
+    EXPECT_EQ(m.exit_code(), 128 + SIGTERM);
+  }
+  EXPECT_EQ(state_of(guard), 0);
 }
 
 }  // namespace
