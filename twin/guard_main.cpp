@@ -4,13 +4,13 @@
 // the kernel for a SIGTERM at their parent's death, but a master started through a wrapper (a
 // shell script that does not exec) has the wrapper as its parent, and the wrapper is not told:
 // the master ran on with nobody serving it. So MasterProcess starts this small program beside
-// each master, as the twin's child: it watches its parent (every 50 ms) and, once the twin is
-// gone, gives the master 1 s to end by itself (ours do, on the kernel's SIGTERM; a second one
-// could cut their end sequence short), then sends SIGTERM (and SIGCONT) to the master and every
-// process it started, waits up to the grace for them to end, and SIGKILLs those left. It ends on its own as soon as the master
-// has ended; the twin kills it when it has stopped the master itself. It ignores SIGINT,
-// SIGTERM and SIGHUP, so that it outlives the twin to do its work (a Ctrl-C at the terminal
-// reaches the master itself).
+// each master, as the twin's child. It reads the master's /proc entry every 50 ms and ends as
+// soon as the master has; the twin kills it when it has stopped the master itself. Once the
+// twin is gone it gives the master the grace to end by itself (ours do, on the kernel's
+// SIGTERM; a second one would read as a second Ctrl-C), then sends SIGTERM (and SIGCONT) to the
+// master and every process it started, waits the grace again, and SIGKILLs those left. It
+// ignores SIGINT, SIGTERM and SIGHUP, so that it outlives the twin to do its work (a Ctrl-C at
+// the terminal reaches the master itself).
 //
 // Usage (MasterProcess's, not a user's): omnitwin-guard TWIN_PID MASTER_PID MASTER_START GRACE_MS
 #include <signal.h>
@@ -58,11 +58,11 @@ bool all_end_within(const std::vector<ProcessEntry>& procs, std::chrono::millise
   }
 }
 
-// Ends the master's processes: 1 s to end by themselves, then SIGTERM and SIGCONT, up to
-// `grace` for them to end, then SIGKILL.
+// Ends the master's processes: `grace` to end by themselves, then SIGTERM and SIGCONT, `grace`
+// again, then SIGKILL.
 void end_master(const ProcessEntry& master, std::chrono::milliseconds grace) {
   const std::vector<ProcessEntry> procs = master_processes(master);
-  if (all_end_within(procs, std::chrono::milliseconds(1000))) return;
+  if (all_end_within(procs, grace)) return;
   signal_each(procs, SIGTERM);
   signal_each(procs, SIGCONT);  // a stopped master acts on SIGTERM only when continued
   if (all_end_within(procs, grace)) return;
