@@ -420,6 +420,17 @@ std::string range_of(const std::vector<Effect>& es, bool sync, double Result::*f
   return lo > hi ? "-" : fmt::format("{:.1f} … {:.1f}", lo, hi);
 }
 
+// The master's position loop in x as the report names it: a P loop (integral 0, the fit's
+// reading of D1) or a PI, without feed-forward either way (fig. 4-13), with its gains.
+std::string master_loop(const Scenario& sc) {
+  if (sc.controller.ki[0] == 0)
+    return fmt::format("a P loop without feed-forward: fig. 4-13 names the controller, and the tables' lag asks for no "
+                       "integral, reading_sync.md D1; kp {:g}/s in x, {:g}/s in y",
+                       sc.controller.kp[0], sc.controller.kp[1]);
+  return fmt::format("a PI without feed-forward, fig. 4-13; kp {:g}/s, ki {:g}/s²", sc.controller.kp[0],
+                     sc.controller.ki[0]);
+}
+
 // Why, for slaves that reload their timer at the end of their control routine (bus.isr_us > 0,
 // reading_sync.md H9): without sync each samples every period + routine; the resync zeroes the
 // count on the command (l.962).
@@ -435,20 +446,20 @@ std::string routine_why(const std::vector<Effect>& fast, const std::vector<Effec
              "3.1 … 3.5 ms after the command), so without sync it samples every {:.1f} ms and takes the latest "
              "command: {:.0f} % of the commands are overwritten, the thesis's \"lost commands\" (l.1452). Its wheel "
              "turns a command's counts per {:.1f} ms, {:.0f} % of what the master asked, and the master's position "
-             "loop (a PI without feed-forward, fig. 4-13; kp {:g}/s) lags by that much more. The resync (K = {}) "
+             "loop ({}) lags by that much more. The resync (K = {}) "
              "takes every other command in the receive interrupt, which zeroes the timer count as it takes the frame "
              "(l.962), so every counter window is the command period to within T_post and the wheels deliver the "
              "whole command: the lag falls as the thesis's did (its X error is a speed-proportional lag whose gain "
              "rises with sync, reading_sync.md D1).\n",
              span(fast, 0), span(fast, 2), span(slow, 2), span(fast, 2, true, 250), isr_ms, period_ms + isr_ms,
-             100 * (1 - share), period_ms + isr_ms, 100 * share, sc.controller.kp[0], clocks[0].sync_interval)
+             100 * (1 - share), period_ms + isr_ms, 100 * share, master_loop(sc), clocks[0].sync_interval)
       << fmt::format(
              "- **Axis velocity IAE: sync {} ({}; slow reading {}; the thesis: {}).** The master compares each "
              "command with the latest feedback it holds a period later (l.1339). Without sync that feedback is a "
              "count over {:.1f} ms against a command per {:.0f} ms, and a period in four brings none (the value "
              "before is held); with sync every window is the command's. The thesis's synchronised axes still rang, "
              "with a pulse at every forced resync (l.1500: a shortened sample); resynced every interrupt, ours have "
-             "no such pulse, so they gain more than the thesis's.\n",
+             "no such pulse, and they gain alike at every bit rate where the thesis's gains scatter.\n",
              verdict(fast, 3), span(fast, 3), span(slow, 3), span(fast, 3, true), period_ms + isr_ms, period_ms)
       << fmt::format(
              "- **Y IAE: {:.1f} … {:.1f} % of the thesis's**; sync changes it by {} under the fast reading (the "
