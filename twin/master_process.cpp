@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -80,9 +81,8 @@ void MasterProcess::start_guard() {
     return;
   }
   // Who the master is: pid and start time (posix_spawn returned after its exec).
-  const std::vector<ProcessEntry> all = process_table();
-  const auto self = std::find_if(all.begin(), all.end(), [&](const ProcessEntry& p) { return p.pid == pid_; });
-  if (self == all.end()) return;  // it has ended already
+  const std::optional<ProcessEntry> self = process_entry(pid_);
+  if (!self) return;  // it has ended already
   std::vector<std::string> argv_s{guard, std::to_string(::getpid()), std::to_string(pid_), std::to_string(self->start),
                                   std::to_string(kGuardGrace.count())};
   std::vector<char*> argv;
@@ -120,29 +120,28 @@ bool MasterProcess::running() {
   return exit_code_ < 0;
 }
 
-using ProcEntry = ProcessEntry;
 
 bool MasterProcess::descendants_alive() const {
   if (pid_ <= 0) return false;
-  const std::vector<ProcEntry> all = process_table();
+  const std::vector<ProcessEntry> all = process_table();
   // A process it started that was orphaned (its parent ended first) is still one of them.
-  for (const ProcEntry& p : all)
-    for (const ProcEntry& s : signalled_)
+  for (const ProcessEntry& p : all)
+    for (const ProcessEntry& s : signalled_)
       if (p.state != 'Z' && same_process(p, s)) return true;
   // Once it is reaped its pid may be another process's: only those signalled count then.
   return exit_code_ < 0 && !descendants_of(pid_, all).empty();
 }
 
 void MasterProcess::signal_all(int sig) {
-  const std::vector<ProcEntry> all = process_table();
+  const std::vector<ProcessEntry> all = process_table();
   if (exit_code_ < 0)
-    for (const ProcEntry& p : descendants_of(pid_, all))
-      if (std::none_of(signalled_.begin(), signalled_.end(), [&](const ProcEntry& s) { return same_process(p, s); }))
+    for (const ProcessEntry& p : descendants_of(pid_, all))
+      if (std::none_of(signalled_.begin(), signalled_.end(), [&](const ProcessEntry& s) { return same_process(p, s); }))
         signalled_.push_back(p);
   if (exit_code_ < 0) ::kill(pid_, sig);
   // Only a process that is still the one it started (its pid may have been taken again).
-  for (const ProcEntry& s : signalled_)
-    if (std::any_of(all.begin(), all.end(), [&](const ProcEntry& p) { return same_process(p, s); })) ::kill(s.pid, sig);
+  for (const ProcessEntry& s : signalled_)
+    if (std::any_of(all.begin(), all.end(), [&](const ProcessEntry& p) { return same_process(p, s); })) ::kill(s.pid, sig);
 }
 
 bool MasterProcess::wait(std::chrono::milliseconds timeout) {

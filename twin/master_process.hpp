@@ -52,7 +52,6 @@ class MasterProcess {
   // Whether a process it started is left (one signalled by terminate(), or a descendant of the
   // program now); zombies do not count. Scans /proc: not real-time safe.
   bool descendants_alive() const;
-  using ProcessEntry = twin::ProcessEntry;
   // Exit code (0…255), 128 + signal when killed, -1 while it runs.
   int exit_code() const { return exit_code_; }
   std::string describe_exit() const;  // "exit 0", "killed by signal 9", "running"

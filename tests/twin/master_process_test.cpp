@@ -10,6 +10,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -50,9 +51,8 @@ TEST(MasterLogTail, ReadsOnlyTheEndOfALongLog) {
 
 // The state /proc gives `pid` ('Z' zombie), 0 when it has no entry.
 char state_of(pid_t pid) {
-  for (const ProcessEntry& p : process_table())
-    if (p.pid == pid) return p.state;
-  return 0;
+  const std::optional<ProcessEntry> p = process_entry(pid);
+  return p ? p->state : 0;
 }
 
 // Waits up to `timeout` for `pid` to be a zombie or gone.
