@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "tests/bus_emulators/small_tmpfs.hpp"
+#include "tests/support/dds_domain.hpp"
 #include "tests/twin/cli_support.hpp"
 
 namespace omnitwin::twin {
@@ -27,7 +28,7 @@ using namespace omnitwin::twin::cli;
 using omnitwin::testing::lines_of;
 
 // A DDS domain of our own (parallel ctest processes must not hear each other).
-int own_domain(int offset) { return 1 + (static_cast<int>(::getpid()) * 7 + offset) % 200; }
+int own_domain(int k) { return omnitwin::testing::owned_dds_domain(k); }
 
 // ffprobe's view of a video stream: codec, pixel format, frames decoded, duration.
 struct Probe {
@@ -128,7 +129,7 @@ TEST_F(CliOutputs, EchoInAnotherProcessReceivesTheRunsStates) {
 TEST_F(CliOutputs, TheVerdictOnDdsIsTheRunsFinalOneAfterItsRecords) {
   omnitwin::testing::SmallTmpfs disk("16k");
   if (!disk.mounted()) GTEST_SKIP() << disk.skip_reason();
-  const std::string domain = std::to_string(own_domain(3));
+  const std::string domain = std::to_string(own_domain(1));
   Child echo(omnitwin_binary(), {"echo", "--json", "--domain", domain, "--interface", "lo", "--timeout", "4"}, work(),
              io(), "echo-");
   const Finished f = run({"run", test_scenario("run_short_line.yaml"), "--out", (disk / "run").string(),

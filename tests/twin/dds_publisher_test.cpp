@@ -4,9 +4,12 @@
 // stamps), cmd_vel is skipped while the command is unknown, 1 kHz offered at 100 Hz
 // publishes every 10th sample, a late reader still gets the run's events, a full ring drops
 // (and counts) instead of blocking, set-up errors throw DdsError, and two publishers on two
-// domains in one process stay apart.
+// domains in one process stay apart; the test domains of two processes never meet.
 #include <gtest/gtest.h>
+#include <fcntl.h>
 #include <stdlib.h>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <fstream>
@@ -417,6 +420,25 @@ TEST(DdsPublisher, TwoPublishersOnTwoDomainsInOneProcessStayApart) {
   rb.take<omnitwin_msg_dds__PlatformState_>(2, [&](const auto& m) { sb_seen.push_back(m.seq); }, 0.2);
   EXPECT_EQ(sa, std::vector<std::uint64_t>{1});
   EXPECT_EQ(sb_seen, std::vector<std::uint64_t>{2});
+}
+
+// The test domains: a process keeps its ids, and no other process (parallel ctest) can take
+// one of them while this one lives, because it cannot lock the id's file; pid mod 230 gave
+// two processes one domain in CI.
+TEST(DdsTestDomain, AnotherProcessCannotTakeADomainThisOneOwns) {
+  const int mine0 = test_domain(0), mine1 = test_domain(1);
+  EXPECT_NE(mine0, mine1);
+  EXPECT_EQ(test_domain(0), mine0);
+  for (int id : {mine0, mine1}) {
+    EXPECT_GE(id, 1);
+    EXPECT_LE(id, 232);
+    // What another process's owned_dds_domain does: a new open of the file, a try-lock.
+    const std::string path = "/tmp/omnitwin-dds-domain/" + std::to_string(id);
+    const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+    ASSERT_GE(fd, 0) << path;
+    EXPECT_NE(::flock(fd, LOCK_EX | LOCK_NB), 0) << "domain " << id << " is free to others";
+    ::close(fd);
+  }
 }
 
 }  // namespace

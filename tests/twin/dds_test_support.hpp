@@ -11,13 +11,14 @@
 #include <string>
 #include <thread>
 
+#include "tests/support/dds_domain.hpp"
 #include "twin/dds/dds_common.hpp"
 #include "twin/run_state.hpp"
 
 namespace omnitwin::twin::ddstest {
 
-// A domain in 1..230 for this process; k picks a further one (several per test).
-inline int test_domain(int k = 0) { return 1 + static_cast<int>((::getpid() + 61 * k) % 230); }
+// A domain this test process alone uses; k picks a further one (several per test).
+inline int test_domain(int k = 0) { return omnitwin::testing::owned_dds_domain(k); }
 
 inline std::string loopback_config() {
   return std::string(OMNITWIN_SOURCE_DIR) + "/tests/data/dds/cyclonedds-loopback.xml";
