@@ -10,12 +10,11 @@
 // came in the meantime to the handler.
 #include <limits.h>
 #include <signal.h>
+#include <string.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
-#include <cstring>
-#include <string>
 
 int main(int argc, char** argv) {
   // From here on until the CLI's handlers exist, SIGINT/SIGTERM wait.
@@ -24,16 +23,20 @@ int main(int argc, char** argv) {
   sigaddset(&block, SIGINT);
   sigaddset(&block, SIGTERM);
   sigprocmask(SIG_BLOCK, &block, nullptr);
-  // The CLI lives beside this program (build tree and install alike).
-  char self[PATH_MAX];
-  const ssize_t n = ::readlink("/proc/self/exe", self, sizeof self - 1);
-  std::string cli = "omnitwin-cli";
+  // The CLI lives beside this program (build tree and install alike). Plain C buffers: no
+  // libstdc++, whose loading alone took longer than the window this program closes.
+  static const char kCli[] = "omnitwin-cli";
+  char cli[PATH_MAX + sizeof kCli] = "omnitwin-cli";
+  const ssize_t n = ::readlink("/proc/self/exe", cli, PATH_MAX);
   if (n > 0) {
-    const std::string exe(self, static_cast<std::size_t>(n));
-    cli = exe.substr(0, exe.rfind('/') + 1) + "omnitwin-cli";
+    cli[n] = '\0';
+    char* slash = strrchr(cli, '/');
+    strcpy(slash ? slash + 1 : cli, kCli);
+  } else {
+    strcpy(cli, kCli);
   }
   (void)argc;
-  ::execv(cli.c_str(), argv);
-  std::fprintf(stderr, "omnitwin: cannot start %s: %s\n", cli.c_str(), std::strerror(errno));
+  ::execv(cli, argv);
+  std::fprintf(stderr, "omnitwin: cannot start %s: %s\n", cli, strerror(errno));
   return 3;
 }

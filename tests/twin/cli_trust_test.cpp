@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <fstream>
 
 #include "tests/bus_emulators/small_tmpfs.hpp"
 #include "tests/twin/cli_support.hpp"
@@ -133,12 +134,24 @@ TEST_F(CliTrust, ARecordedMasterLossLetsTheScenarioJudgeTheReaction) {
   EXPECT_EQ(m.at("interrupted"), false);
 }
 
+// Whether process `pid` has signal `sig` blocked (the SigBlk mask of /proc/PID/status).
+bool blocks(pid_t pid, int sig) {
+  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("SigBlk:", 0) == 0) return (std::stoull(line.substr(7), nullptr, 16) >> (sig - 1)) & 1;
+  return false;
+}
+
 // A signal at once (before the scenario is even read) is handled: exit 3, not death by it.
+// It is sent as soon as the launcher holds SIGINT, while the CLI's ~160 libraries are still
+// loading (tens of ms). A fixed 2 ms wait instead sometimes hit the launcher before its first
+// instruction on a loaded machine (killed: 130).
 TEST_F(CliTrust, ASignalInTheFirstMillisecondsGivesExit3) {
   Child c({"run", test_scenario("run_short_line.yaml"), "--out", (dir_ / "early").string(), "--no-progress"}, work(),
           io());
-  // 2 ms: the CLI's ~160 libraries are still loading (tens of ms); the launcher holds it.
-  std::this_thread::sleep_for(2ms);
+  const auto limit = std::chrono::steady_clock::now() + 5s;
+  while (!blocks(c.pid(), SIGINT) && std::chrono::steady_clock::now() < limit) std::this_thread::sleep_for(50us);
+  ASSERT_TRUE(blocks(c.pid(), SIGINT)) << "the launcher never blocked SIGINT";
   c.signal(SIGINT);
   EXPECT_EQ(c.wait(30s), 3) << c.out() << c.err();
   EXPECT_EQ(metrics(dir_ / "early").at("interrupted"), true);
