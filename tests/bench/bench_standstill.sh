@@ -7,13 +7,17 @@
 # Prints each run's real-time factor, how far the true pose moved from 22 s (path end plus the
 # scenario's 2 s settle) to the end [mm], and the true final error [cm]; then the medians.
 # Usage: tests/bench/bench_standstill.sh [BUILD_DIR]   (default: build)
+#   SCENARIO=FILE  another scenario (default models/scenarios/thesis_line.yaml), e.g. the fitted
+#                  line, which hunts on direct (docs/platform.md, "Standstill")
+#   BUS=can        the thesis's bus instead of direct (the master program beside the twin)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/../.."
 B=${1:-build}
 OUT=$(mktemp -d /tmp/omnitwin-bench-standstill.XXXXXX)
 trap 'rm -rf "$OUT"' EXIT
-SC=models/scenarios/thesis_line.yaml
-COMMON=(--bus direct --set duration=62 --no-video --no-report --no-progress)
+SC=${SCENARIO:-models/scenarios/thesis_line.yaml}
+COMMON=(--bus "${BUS:-direct}" --set duration=62 --no-video --no-report --no-progress)
+echo "$SC on bus ${BUS:-direct}"
 run() {  # name, extra args…
   local name=$1; shift
   "$B/twin/omnitwin" run "$SC" "${COMMON[@]}" --out "$OUT/$name" "$@" >/dev/null 2>&1 || true
