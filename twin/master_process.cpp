@@ -120,7 +120,6 @@ bool MasterProcess::running() {
   return exit_code_ < 0;
 }
 
-
 bool MasterProcess::descendants_alive() const {
   if (pid_ <= 0) return false;
   const std::vector<ProcessEntry> all = process_table();

@@ -21,6 +21,9 @@
 
 namespace omnitwin::testing {
 
+// Where the lock files are: one per domain id, named by the id.
+inline constexpr char kDdsDomainLockDir[] = "/tmp/omnitwin-dds-domain";
+
 // The k-th domain this process owns (k = 0, 1, ...): the same k gives the same id for the
 // life of the process; different k give different ids. Thread-safe. Throws when every id is
 // held by other processes.
@@ -29,7 +32,7 @@ inline int owned_dds_domain(int k = 0) {
   static std::mutex mutex;
   static std::vector<int> owned;  // ids, in the order of k; their lock fds stay open
   const std::lock_guard<std::mutex> lock(mutex);
-  const std::string dir = "/tmp/omnitwin-dds-domain";
+  const std::string dir = kDdsDomainLockDir;
   if (::mkdir(dir.c_str(), 0777) == 0) ::chmod(dir.c_str(), 01777);  // like /tmp; exists: fine
   // Start the scan at a pid-based id so that concurrent processes rarely race for one file.
   int next = kFirst + static_cast<int>(::getpid() % (kLast - kFirst + 1));

@@ -433,7 +433,7 @@ TEST(DdsTestDomain, AnotherProcessCannotTakeADomainThisOneOwns) {
     EXPECT_GE(id, 1);
     EXPECT_LE(id, 232);
     // What another process's owned_dds_domain does: a new open of the file, a try-lock.
-    const std::string path = "/tmp/omnitwin-dds-domain/" + std::to_string(id);
+    const std::string path = std::string(omnitwin::testing::kDdsDomainLockDir) + "/" + std::to_string(id);
     const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
     ASSERT_GE(fd, 0) << path;
     EXPECT_NE(::flock(fd, LOCK_EX | LOCK_NB), 0) << "domain " << id << " is free to others";
