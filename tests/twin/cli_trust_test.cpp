@@ -30,7 +30,7 @@ class CliTrust : public CliTest {
   // `n` lockstep runs of `scenario` on `bus` at once; each must pass with the trajectory of
   // a run alone.
   void expect_concurrent_runs_match_alone(const std::string& bus, int n);
-  // Realtime run on `bus`; `sig` to the master after 1.5 s; exit 3 within `limit_s` + 1 s.
+  // Realtime run on `bus`; `sig` to the master 1 s after it runs; exit 3 within `limit_s` + 1 s.
   void expect_master_loss_ends_run(const std::string& bus, int sig, double limit_s);
 };
 
@@ -87,15 +87,26 @@ void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, doub
   if (bus == "can") args.insert(args.end(), {"--set", kOwnCanBus});
   Child c(args, work(), io());
   const pid_t pid = master_pid(out, c);
-  ASSERT_GT(pid, 0) << c.out() << c.err();
-  std::this_thread::sleep_for(1500ms);
+  ASSERT_GT(pid, 0) << c.out() << c.err() << read_bytes(out / ".events.log.part");
+  // The loss is of a master that was running: one stopped before its first frame is a start
+  // that never came (handshake_timeout), a different verdict. Its log says when it runs.
+  const fs::path master_log = out / ".master.log.part";
+  ASSERT_TRUE(wait_for_text(master_log, bus == "can" ? "-> running" : "platform loop running", c))
+      << c.out() << c.err() << read_bytes(master_log);
+  std::this_thread::sleep_for(1000ms);
   ASSERT_TRUE(c.running()) << c.out() << c.err();
   ::kill(pid, sig);
   const auto t0 = std::chrono::steady_clock::now();
   const int code = c.wait(std::chrono::milliseconds(static_cast<int>((limit_s + 5) * 1000)));
   const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // Where a twin that did not end was (its wait channel, its lateness per second of sim time).
+  const std::string where = code == -1 ? "twin still running, waiting in " +
+                                             read_bytes("/proc/" + std::to_string(c.pid()) + "/wchan") +
+                                             "\nrealtime.csv so far:\n" + read_bytes(out / ".realtime.csv.part") +
+                                             "events so far:\n" + read_bytes(out / ".events.log.part")
+                                       : std::string();
   if (sig == SIGSTOP) ::kill(pid, SIGCONT);
-  EXPECT_EQ(code, 3) << c.out() << c.err();
+  EXPECT_EQ(code, 3) << c.out() << c.err() << where;
   EXPECT_LT(took, limit_s + 1.0) << c.out();
   EXPECT_TRUE(contains(c.out(), "master lost")) << c.out();
   const nlohmann::json m = metrics(out);
