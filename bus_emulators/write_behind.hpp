@@ -45,7 +45,7 @@ struct WriteBehindOptions {
   // bytes the file gets, appended to `out` (e.g. binary rows into CSV text, so formatting
   // leaves the caller's loop too). Called with whatever was committed, which may end inside
   // one of the caller's records: an encoder keeps such a tail for its next call.
-  std::function<void(const char* in, std::size_t n, std::vector<char>& out)> encode;
+  std::function<void(const char* in, std::size_t n, std::vector<char>& out)> encode{};
 };
 
 // One write-behind file. States: closed (default, or after close()) → open (open() succeeded:

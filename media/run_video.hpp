@@ -42,7 +42,7 @@ struct VideoResult {
   double duration_s = 0;     // frames / fps [s]
   bool stopped_early = false;  // `stop` was set before the last frame
   double render_s = 0;       // wall time spent [s]
-  std::string renderer;      // the GL that drew it: vendor / renderer / version (backend)
+  std::string renderer{};    // the GL that drew it: vendor / renderer / version (backend)
 };
 
 // A run directory's record that render_run needs is missing or malformed (trajectory.csv,

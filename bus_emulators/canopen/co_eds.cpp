@@ -168,7 +168,7 @@ struct IniSection {
   std::string name;  // as written
   int line = 0;
   std::vector<IniKey> keys;
-  std::unordered_map<std::string, std::size_t> by_name;  // lower-case key → its place in keys
+  std::unordered_map<std::string, std::size_t> by_name{};  // lower-case key → its place in keys
 };
 
 // Context of one parse: the name used in messages.

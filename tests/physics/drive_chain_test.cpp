@@ -134,7 +134,7 @@ TEST(Counter, IndexCountFollowsTheResetReference) {
 // shaft angle integrates it. Stepped at 1 ms under the slave's 10 ms loop.
 struct MotorPlant {
   DriverParams driver;
-  MotorParams motor;
+  MotorParams motor{};
   double tau = 0.02, gain = 1.0, speed = 0.0, angle = 0.0;
   double setpoint(double volts) const { return driver_setpoint(driver, motor, volts); }
   void step(double setpoint, double dt) {

@@ -102,7 +102,9 @@ TEST(Clock, LatenessBinsCoverEveryValueOnce) {
     const std::size_t b = LatenessHistogram::bin_of(us);
     ASSERT_GE(b, last) << us;
     ASSERT_LT(us, LatenessHistogram::upper_edge_us(b)) << us;
-    if (b > 0) ASSERT_GE(us, LatenessHistogram::upper_edge_us(b - 1)) << us;
+    if (b > 0) {
+      ASSERT_GE(us, LatenessHistogram::upper_edge_us(b - 1)) << us;
+    }
     last = b;
   }
   EXPECT_EQ(LatenessHistogram::bin_of(~0ull), LatenessHistogram::kBins - 1) << "beyond the last octave";
