@@ -15,7 +15,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <regex>
@@ -25,6 +24,7 @@
 
 #include "tests/support/mujoco_fixture.hpp"
 #include "tests/support/temp_dir.hpp"
+#include "twin/process_tree.hpp"
 
 extern char** environ;
 
@@ -239,17 +239,6 @@ inline bool wait_for_text(const fs::path& file, const std::string& text, Child& 
   return false;
 }
 
-// The parent of process `pid` (field 4 of /proc/PID/stat), or -1 when it is gone.
-inline pid_t parent_of(pid_t pid) {
-  const std::string stat = read_bytes("/proc/" + std::to_string(pid) + "/stat");
-  const std::size_t close = stat.rfind(')');  // the name may hold spaces and parentheses
-  if (close == std::string::npos) return -1;
-  char state = 0;
-  int ppid = -1;
-  if (std::sscanf(stat.c_str() + close + 1, " %c %d", &state, &ppid) != 2) return -1;
-  return static_cast<pid_t>(ppid);
-}
-
 // The master's pid, from the run's event log while it is written (.events.log.part); -1
 // unless it names a child of the twin `c` (a signal to any other process would test nothing).
 inline pid_t master_pid(const fs::path& run_dir, Child& c) {
@@ -257,9 +246,10 @@ inline pid_t master_pid(const fs::path& run_dir, Child& c) {
   if (!wait_for_text(log, "started (pid ", c)) return -1;
   std::smatch m;
   const std::string text = read_bytes(log);
-  if (!std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)\\b"))) return -1;
+  if (!std::regex_search(text, m, std::regex("started \\(pid ([0-9]+)"))) return -1;
   const auto pid = static_cast<pid_t>(std::stol(m[1]));
-  return parent_of(pid) == c.pid() ? pid : -1;
+  const auto entry = omnitwin::twin::process_entry(pid);
+  return entry && entry->ppid == c.pid() ? pid : -1;
 }
 
 }  // namespace omnitwin::twin::cli
