@@ -176,6 +176,11 @@ Command Cia402Drive::step(SimTime t, const Feedback& fb) {
 
   // ---- Software position limits in the physical frame.
   const bool limits_on = obj_.sw_limit_min != 0 || obj_.sw_limit_max != 0;
+  // A min above the max is taken as the range between them, as the physical limits below take
+  // it (a controller warns and swaps them; found by fuzzing: std::clamp with its bounds the
+  // wrong way round is undefined).
+  const double user_lo = std::min<double>(obj_.sw_limit_min, obj_.sw_limit_max);
+  const double user_hi = std::max<double>(obj_.sw_limit_min, obj_.sw_limit_max);
   double lim_lo = 0, lim_hi = 0;
   if (limits_on) {
     const double a = sp * (obj_.sw_limit_min - offset_), b = sp * (obj_.sw_limit_max - offset_);
@@ -223,8 +228,8 @@ Command Cia402Drive::step(SimTime t, const Feedback& fb) {
         in.dec = obj_.profile_deceleration;
         in.halt_dec = halt_dec;
         in.limits = limits_on;
-        in.min_pos = obj_.sw_limit_min;
-        in.max_pos = obj_.sw_limit_max;
+        in.min_pos = user_lo;
+        in.max_pos = user_hi;
         const PpOutput o = pp_.step(in, dt);
         dpos = sp * (o.demand_pos - offset_);
         dvel = sp * o.demand_vel;
@@ -318,8 +323,7 @@ Command Cia402Drive::step(SimTime t, const Feedback& fb) {
       case Mode::csp: {
         double target = obj_.target_position;
         if (limits_on) {
-          const double cl = std::clamp(target, static_cast<double>(obj_.sw_limit_min),
-                                       static_cast<double>(obj_.sw_limit_max));
+          const double cl = std::clamp(target, user_lo, user_hi);
           internal_limit_ = cl != target;
           target = cl;
         }

@@ -185,6 +185,37 @@ TEST(Cia402Drive, SoftwareLimitsClipPpTargetAndSetInternalLimit) {
   EXPECT_EQ(r.sw() & sw::internal_limit, 0);
 }
 
+// 0x607D written with min above max (found by fuzzing: the CSP clamp was undefined then): the
+// drive takes the range between the two, in PP and CSP alike, as it does for its physical limits.
+TEST(Cia402Drive, SoftwareLimitsWrittenTheWrongWayRoundAreTheRangeBetweenThem) {
+  Rig r;
+  r.enable();
+  r.set_mode(Mode::pp);
+  r.o().sw_limit_min = 8000;
+  r.o().sw_limit_max = -5000;
+  r.o().target_position = 20000;
+  r.o().controlword = cw::kEnableOperation | cw::new_set_point;
+  r.step();
+  r.o().controlword = cw::kEnableOperation;
+  ASSERT_TRUE(r.run_until([&] { return (r.sw() & sw::target_reached) != 0; }, 2.0));
+  r.run(0.05);
+  EXPECT_NEAR(r.o().position_actual, 8000, 1);
+  EXPECT_NE(r.sw() & sw::internal_limit, 0);
+  // CSP: a ramp of set-points out past the range stops at its edge.
+  Rig c;
+  c.enable();
+  c.o().sw_limit_min = 8000;
+  c.o().sw_limit_max = -5000;
+  c.set_mode(Mode::csp);
+  for (int k = 1; k <= 1000; ++k) {
+    c.o().target_position = static_cast<std::int32_t>(-20.0 * k);  // to -20000 at 20000 counts/s
+    c.step();
+  }
+  c.run(0.2);
+  EXPECT_NEAR(c.o().position_actual, -5000, 1);
+  EXPECT_NE(c.sw() & sw::internal_limit, 0);
+}
+
 TEST(Cia402Drive, SoftwareLimitsStopCsvAtTheLimit) {
   Rig r;
   r.enable();
