@@ -201,18 +201,26 @@ TEST(Cia402Drive, SoftwareLimitsWrittenTheWrongWayRoundAreTheRangeBetweenThem) {
   r.run(0.05);
   EXPECT_NEAR(r.o().position_actual, 8000, 1);
   EXPECT_NE(r.sw() & sw::internal_limit, 0);
-  // CSP: a ramp of set-points out past the range stops at its edge.
+  // CSP: a set-point inside the range is followed as it is; a ramp out past the range stops
+  // at its edge. (The clamp taken as given answered the max, -5000, whatever the set-point.)
   Rig c;
   c.enable();
   c.o().sw_limit_min = 8000;
   c.o().sw_limit_max = -5000;
   c.set_mode(Mode::csp);
-  for (int k = 1; k <= 1000; ++k) {
-    c.o().target_position = static_cast<std::int32_t>(-20.0 * k);  // to -20000 at 20000 counts/s
+  for (int k = 1; k <= 100; ++k) {
+    c.o().target_position = static_cast<std::int32_t>(20.0 * k);  // to 2000 at 20000 counts/s
     c.step();
   }
   c.run(0.2);
-  EXPECT_NEAR(c.o().position_actual, -5000, 1);
+  EXPECT_NEAR(c.o().position_actual, 2000, 1);
+  EXPECT_EQ(c.sw() & sw::internal_limit, 0);
+  for (int k = 101; k <= 1000; ++k) {
+    c.o().target_position = static_cast<std::int32_t>(20.0 * k);  // on to 20000
+    c.step();
+  }
+  c.run(0.2);
+  EXPECT_NEAR(c.o().position_actual, 8000, 1);
   EXPECT_NE(c.sw() & sw::internal_limit, 0);
 }
 
