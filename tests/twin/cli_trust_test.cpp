@@ -84,7 +84,11 @@ void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, doub
   const fs::path out = dir_ / "rt";
   std::vector<std::string> args{"run", source_path("models/scenarios/thesis_line.yaml"), "--bus", bus, "--clock",
                                 "realtime", "--no-video", "--no-report", "--no-progress", "--out", out.string()};
-  if (bus == "can") args.insert(args.end(), {"--set", kOwnCanBus});
+  // Node detection off: with the thesis's (every sample, one miss stops) a host stall of about
+  // a sample (docs/reliability.md, sixteenth round) makes the master stop the bus itself, NMT
+  // stop, and a master that stopped its bus may be silent: the SIGSTOP then ends nothing and the
+  // run goes on to its end (the failure of the fourteenth round and of a fresh-clone run here).
+  if (bus == "can") args.insert(args.end(), {"--set", kOwnCanBus, "--set", "bus.detect_every=0"});
   Child c(args, work(), io());
   const pid_t pid = master_pid(out, c);
   ASSERT_GT(pid, 0) << c.out() << c.err() << read_bytes(out / ".events.log.part");
@@ -103,7 +107,8 @@ void CliTrust::expect_master_loss_ends_run(const std::string& bus, int sig, doub
   const std::string where = code == -1 ? "twin still running, waiting in " +
                                              read_bytes("/proc/" + std::to_string(c.pid()) + "/wchan") +
                                              "\nrealtime.csv so far:\n" + read_bytes(out / ".realtime.csv.part") +
-                                             "events so far:\n" + read_bytes(out / ".events.log.part")
+                                             "events so far:\n" + read_bytes(out / ".events.log.part") +
+                                             "master log so far:\n" + read_bytes(master_log)
                                        : std::string();
   if (sig == SIGSTOP) ::kill(pid, SIGCONT);
   EXPECT_EQ(code, 3) << c.out() << c.err() << where;
