@@ -168,20 +168,12 @@ TEST(Cia402Drive, SoftwareLimitsClipPpTargetAndSetInternalLimit) {
   r.set_mode(Mode::pp);
   r.o().sw_limit_min = -5000;
   r.o().sw_limit_max = 8000;
-  r.o().target_position = 20000;
-  r.o().controlword = cw::kEnableOperation | cw::new_set_point;
-  r.step();
-  r.o().controlword = cw::kEnableOperation;
-  ASSERT_TRUE(r.run_until([&] { return (r.sw() & sw::target_reached) != 0; }, 2.0));
+  ASSERT_TRUE(r.pp_move(20000));
   r.run(0.05);
   EXPECT_NEAR(r.o().position_actual, 8000, 1);
   EXPECT_NE(r.sw() & sw::internal_limit, 0);
   // A target inside: bit 11 clears.
-  r.o().target_position = 0;
-  r.o().controlword = cw::kEnableOperation | cw::new_set_point;
-  r.step();
-  r.o().controlword = cw::kEnableOperation;
-  ASSERT_TRUE(r.run_until([&] { return (r.sw() & sw::target_reached) != 0; }, 2.0));
+  ASSERT_TRUE(r.pp_move(0));
   EXPECT_EQ(r.sw() & sw::internal_limit, 0);
 }
 
@@ -193,11 +185,7 @@ TEST(Cia402Drive, SoftwareLimitsWrittenTheWrongWayRoundAreTheRangeBetweenThem) {
   r.set_mode(Mode::pp);
   r.o().sw_limit_min = 8000;
   r.o().sw_limit_max = -5000;
-  r.o().target_position = 20000;
-  r.o().controlword = cw::kEnableOperation | cw::new_set_point;
-  r.step();
-  r.o().controlword = cw::kEnableOperation;
-  ASSERT_TRUE(r.run_until([&] { return (r.sw() & sw::target_reached) != 0; }, 2.0));
+  ASSERT_TRUE(r.pp_move(20000));
   r.run(0.05);
   EXPECT_NEAR(r.o().position_actual, 8000, 1);
   EXPECT_NE(r.sw() & sw::internal_limit, 0);
@@ -250,11 +238,7 @@ TEST(Cia402Drive, PolarityInvertsPositionAndVelocity) {
   r.o().polarity = 0xC0;
   r.enable();
   r.set_mode(Mode::pp);
-  r.o().target_position = 10000;
-  r.o().controlword = cw::kEnableOperation | cw::new_set_point;
-  r.step();
-  r.o().controlword = cw::kEnableOperation;
-  ASSERT_TRUE(r.run_until([&] { return (r.sw() & sw::target_reached) != 0; }, 2.0));
+  ASSERT_TRUE(r.pp_move(10000));
   r.run(0.05);
   EXPECT_NEAR(r.o().position_actual, 10000, 1);
   EXPECT_NEAR(r.load_counts(), -10000, 1);  // the physical axis turned the other way

@@ -51,6 +51,15 @@ struct Rig {
     o().mode = static_cast<std::int8_t>(m);
     step();
   }
+  // PP: a new set-point to `target` (bit 4 raised for one period, then cleared), then steps
+  // until the drive reports target reached; false after max_s seconds.
+  bool pp_move(std::int32_t target, double max_s = 2.0) {
+    o().target_position = target;
+    o().controlword = cw::kEnableOperation | cw::new_set_point;
+    step();
+    o().controlword = cw::kEnableOperation;
+    return run_until([&] { return (sw() & sw::target_reached) != 0; }, max_s);
+  }
   std::uint16_t sw() { return o().statusword; }
   double load_counts() const { return axis.position_rad() * drive.counts_per_load_rad(); }
 
