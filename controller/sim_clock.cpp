@@ -17,6 +17,7 @@
 #include <limits>
 #include <system_error>
 #include <thread>
+#include <utility>
 
 namespace omnitwin::simclock {
 
@@ -507,32 +508,39 @@ Server::Server(std::string_view address) : address_(address), path_(parse_addres
 }
 
 Server::~Server() {
+  close_fd(pending_fd_);
   close_fd(conn_fd_);
   if (listen_fd_ >= 0 && !is_abstract(path_)) ::unlink(path_.c_str());
   close_fd(listen_fd_);
 }
 
 WaitStatus Server::accept(std::chrono::milliseconds timeout, Hello* hello) {
-  // A new master replaces any earlier connection.
+  // A new master replaces any earlier connection; one that connected in an earlier call but
+  // has not said Hello yet is still waited for (closing it at the end of a short slice broke a
+  // master that was descheduled between connect() and its Hello: "Broken pipe").
   const Clock::time_point deadline = deadline_after(timeout);
-  close_fd(conn_fd_);
-  rcvtimeo_us_ = 0;  // a new socket has no receive timeout
-  while (conn_fd_ < 0) {
+  if (pending_fd_ < 0) {
+    close_fd(conn_fd_);
+    rcvtimeo_us_ = 0;  // a new socket has no receive timeout
+  }
+  while (pending_fd_ < 0) {
     const WaitStatus w = wait_readable(listen_fd_, deadline);
     if (w != WaitStatus::ok) return w;
-    conn_fd_ = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (conn_fd_ < 0 && errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK &&
+    pending_fd_ = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
+    if (pending_fd_ < 0 && errno != EINTR && errno != EAGAIN && errno != EWOULDBLOCK &&
         errno != ECONNABORTED)
       throw ChannelError("sim-clock: accept on " + path_ + " failed: " + errno_text(errno));
   }
   // Its first message must be Hello; anything else drops the connection.
   Message m;
-  WaitStatus w = receive_message(conn_fd_, deadline, m);
+  WaitStatus w = receive_message(pending_fd_, deadline, m);
+  if (w == WaitStatus::timeout) return w;  // still connected: the next call waits on
   if (w == WaitStatus::ok && !std::holds_alternative<Hello>(m)) w = WaitStatus::protocol;
   if (w != WaitStatus::ok) {
-    close_fd(conn_fd_);
+    close_fd(pending_fd_);
     return w;
   }
+  conn_fd_ = std::exchange(pending_fd_, -1);
   if (hello != nullptr) *hello = std::get<Hello>(m);
   return WaitStatus::ok;
 }

@@ -161,8 +161,10 @@ class Server {
   Server& operator=(const Server&) = delete;
 
   // Waits for the master to connect and say Hello (a message other than Hello is protocol and
-  // drops the connection). Not real-time safe; throws ChannelError only when accept() itself
-  // fails (no descriptors left).
+  // drops the connection). A master that connected but has not said Hello by the timeout stays
+  // connected: the next call waits on for its Hello, so short calls in a loop never cut a slow
+  // master off. Not real-time safe; throws ChannelError only when accept() itself fails (no
+  // descriptors left).
   WaitStatus accept(std::chrono::milliseconds timeout, Hello* hello = nullptr);
   // One tick: sends the grant and waits for the matching Done (a Done for another tick is a
   // protocol error). Real-time safe apart from the system calls.
@@ -186,6 +188,7 @@ class Server {
   std::string path_;
   int listen_fd_ = -1;
   int conn_fd_ = -1;
+  int pending_fd_ = -1;  // accepted, Hello not yet read (accept() timed out waiting for it)
   std::int64_t rcvtimeo_us_ = 0;  // SO_RCVTIMEO now set on conn_fd_ [µs]; 0 = none
   const std::atomic<bool>* stop_ = nullptr;  // set_stop_flag()
   const std::atomic<bool>* stop_for_grant() const;

@@ -544,6 +544,24 @@ TEST(SimClockChannel, AcceptWantsHelloFirst) {
   EXPECT_EQ(server.accept(1s), WaitStatus::closed);
 }
 
+// Found in a CI run of `check`: the twin polls accept() in 100 ms slices, and a master that
+// connected near a slice's end and was descheduled before its Hello found the connection closed
+// under it ("cannot send Hello: Broken pipe"). The connection now outlives the slice.
+TEST(SimClockChannel, AMasterSlowToSayHelloIsStillWaitedForInTheNextAccept) {
+  Fixture f;
+  Server server(f.address);
+  const int fd = raw_connect(f.path);
+  EXPECT_EQ(server.accept(50ms), WaitStatus::timeout);
+  EXPECT_EQ(server.fd(), -1);  // not connected until its Hello
+  const Bytes hello = encode(Hello{7});
+  ASSERT_EQ(::send(fd, hello.data(), hello.size(), MSG_NOSIGNAL), static_cast<ssize_t>(kMessageSize));
+  Hello h;
+  ASSERT_EQ(server.accept(1s, &h), WaitStatus::ok);
+  EXPECT_EQ(h.pid, 7u);
+  EXPECT_GE(server.fd(), 0);
+  ::close(fd);
+}
+
 TEST(SimClockChannel, UndecodableDoneIsAProtocolError) {
   Fixture f;
   Server server(f.address);
