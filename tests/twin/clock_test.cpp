@@ -165,7 +165,7 @@ TEST(Clock, RealtimePacerHandsOverEachWindow) {
   p.set_window(5'000'000, [&](const LatenessWindow& w) { got.push_back(w); });
   p.start();
   for (SimTime t = 0; t < 12'000'000; t += 1'000'000) {
-    if (t == 6'000'000) std::this_thread::sleep_for(std::chrono::milliseconds(3));  // one late tick
+    if (t == 6'000'000) std::this_thread::sleep_for(std::chrono::milliseconds(30));  // one very late tick
     p.wait_until(t);
     p.tick(t);
   }
@@ -177,9 +177,12 @@ TEST(Clock, RealtimePacerHandsOverEachWindow) {
   EXPECT_EQ(got[2].start, 10'000'000);
   EXPECT_EQ(got[0].ticks + got[1].ticks + got[2].ticks, 12u);
   EXPECT_EQ(got[2].ticks, 2u);
-  EXPECT_EQ(got[0].overruns, 0u);
+  // The late tick is the second window's: at least 29 ms late there. The first window is not
+  // asserted free of overruns (one is only 0.5 ms late, and this host can stall for longer:
+  // docs/reliability.md, sixteenth round), only free of a tick that late.
   EXPECT_GE(got[1].overruns, 1u);
-  EXPECT_GE(got[1].max_us, 1000.0);
+  EXPECT_GE(got[1].max_us, 29'000.0);
+  EXPECT_LT(got[0].max_us, 29'000.0);
   EXPECT_EQ(got[1].overruns + got[0].overruns + got[2].overruns, p.stats().overruns);
   p.flush_window();
   EXPECT_EQ(got.size(), 3u) << "an empty window is not handed over";
