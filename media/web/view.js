@@ -496,10 +496,20 @@ function play() {
 
 function stopPlaying() {
   if (!state.playing) return;
+  // Where playback stands now, not at the last animation frame (which a busy machine may have
+  // drawn a third of a second ago): the display stops on the frame the video stops on, or at the
+  // play clock's time without a video. A video that had already stopped leaves it where it is.
+  const videoPlaying = video && !video.paused && !video.ended;
+  const clockT = playClock.t + (performance.now() - playClock.wall) / 1000 * state.speed;
   state.playing = false;
   setText($('#play'), 'Play');
   $('#play').classList.remove('active');
-  if (video && !video.paused) video.pause();
+  if (videoPlaying) {
+    video.pause();
+    seek(video.currentTime, { fromVideo: true });
+  } else if (!video) {
+    seek(clockT);
+  }
 }
 
 function playbackStep(now) {

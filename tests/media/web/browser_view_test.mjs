@@ -119,7 +119,9 @@ async function main() {
   await sleep(100);
   const afterPlay = await view(() => ({ t: window.omnitwinView.time, v: document.querySelector('#video').currentTime, playing: window.omnitwinView.playing, paused: document.querySelector('#video').paused }));
   check(advanced && afterPlay.t > before.t, '#play: the sim time advances', `${before.t.toFixed(2)} → ${afterPlay.t.toFixed(2)} s`);
-  check(afterPlay.v > before.v && Math.abs(afterPlay.v - afterPlay.t) <= 0.25, '#play: the video plays in step', `video ${before.v.toFixed(2)} → ${afterPlay.v.toFixed(2)} s`);
+  // Paused, the display stands on the video's frame, not on the last animation frame drawn
+  // (a loaded machine drew that 0.33 s earlier once: a CI-style run failed the old 0.25 s bound).
+  check(afterPlay.v > before.v && Math.abs(afterPlay.v - afterPlay.t) <= 0.01, '#play: the video plays in step, and pauses on the displayed time', `video ${before.v.toFixed(2)} → ${afterPlay.v.toFixed(3)} s, display ${afterPlay.t.toFixed(3)} s`);
   check(!afterPlay.playing && afterPlay.paused, '#play again: paused');
 
   check(pageErrors.length === 0, 'no page errors and no console errors', pageErrors.slice(0, 5).join(' | '));
