@@ -476,6 +476,8 @@ function markFutureEvents(t) {
 }
 
 const playClock = { t: 0, wall: 0 };
+// The sim time playback without a video stands at, at performance.now() == now [s].
+function playClockTime(now) { return playClock.t + (now - playClock.wall) / 1000 * state.speed; }
 function play() {
   if (!state.scrub || state.playing) return;
   const [t0, t1] = timeRange();
@@ -500,7 +502,6 @@ function stopPlaying() {
   // drawn a third of a second ago): the display stops on the frame the video stops on, or at the
   // play clock's time without a video. A video that had already stopped leaves it where it is.
   const videoPlaying = video && !video.paused && !video.ended;
-  const clockT = playClock.t + (performance.now() - playClock.wall) / 1000 * state.speed;
   state.playing = false;
   setText($('#play'), 'Play');
   $('#play').classList.remove('active');
@@ -508,7 +509,7 @@ function stopPlaying() {
     video.pause();
     seek(video.currentTime, { fromVideo: true });
   } else if (!video) {
-    seek(clockT);
+    seek(playClockTime(performance.now()));
   }
 }
 
@@ -520,7 +521,7 @@ function playbackStep(now) {
   } else if (video && !video.paused && !video.ended) {
     return;                                  // the video is buffering: wait for it
   } else {
-    t = playClock.t + (now - playClock.wall) / 1000 * state.speed;
+    t = playClockTime(now);
   }
   if (t >= t1) { seek(t1, { fromVideo: !!video }); stopPlaying(); return; }
   seek(t, { fromVideo: !!video && !video.paused });
