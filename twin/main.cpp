@@ -343,6 +343,7 @@ int cmd_run(const RunArgs& a) {
       return 2;
     }
     Scenario s = load_scenario(a.scenario, collect_overrides(a));
+    for (const std::string& n : s.notes) std::cerr << "omnitwin: note: " << n << "\n";
     if (a.loopback) confine_to_loopback(s);
     RunOptions o;
     o.out_dir = a.out.empty() ? (fs::path("out") / s.name).string() : a.out;

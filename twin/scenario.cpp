@@ -8,8 +8,10 @@
 #include "twin/scenario.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
@@ -166,10 +168,68 @@ void check_override_key(const std::string& key) {
   }
 }
 
+// The settings a bus of each kind takes under `bus:` (its `type` included), in the order the
+// "unknown key" message lists them.
+std::vector<std::string_view> bus_setting_keys(BusKind kind) {
+  switch (kind) {
+    case BusKind::can:
+      return {"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "isr_us", "drift", "sync", "sync_interval",
+              "missing_command", "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision",
+              "refuse_foreign"};
+    case BusKind::canopen:
+      return {"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
+              "eds", "mode", "cycle", "sync_producer", "drive_period", "counts_per_rev", "heartbeat_ms", "drift",
+              "startup", "refuse_foreign"};
+    case BusKind::tml:
+      return {"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
+              "protocol", "cycle", "drive_period", "counts_per_rev", "drift", "startup", "refuse_foreign"};
+    case BusKind::ethercat:
+      return {"type", "transport", "master_iface", "esi", "extra_axes", "mode", "drive_period", "counts_per_rev", "dc",
+              "drift", "t_pre_us", "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"};
+    case BusKind::m3:
+      return {"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "communication", "mode",
+              "topology", "stations", "cable_m", "response_us", "margin_us", "drive_period", "counts_per_rev",
+              "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"};
+    case BusKind::direct: return {"type"};
+  }
+  return {"type"};
+}
+
+// The bus kind named `name`; false when it names none.
+bool bus_kind_named(const std::string& name, BusKind& kind) {
+  for (BusKind b : {BusKind::direct, BusKind::can, BusKind::canopen, BusKind::ethercat, BusKind::m3, BusKind::tml}) {
+    if (name == to_string(b)) {
+      kind = b;
+      return true;
+    }
+  }
+  return false;
+}
+
+// `--bus NEW` over a file's `bus: {type: OLD, …}`: the settings NEW takes stay (a CAN bit rate
+// carries over to CANopen), the others are left out, since they belong to the file's bus, not
+// to a misspelling, and are named in a note so that nothing goes quietly.
+void switch_bus_type(YAML::Node& bus, const std::string& to, std::vector<std::string>& notes) {
+  BusKind from_kind{}, to_kind{};
+  const std::string from = bus["type"] && bus["type"].IsScalar() ? bus["type"].as<std::string>() : "";
+  if (from == to || !bus_kind_named(from, from_kind) || !bus_kind_named(to, to_kind)) return;
+  const std::vector<std::string_view> keep = bus_setting_keys(to_kind);
+  std::vector<std::string> left_out;
+  for (const auto& kv : bus) {
+    const std::string k = kv.first.as<std::string>();
+    if (std::find(keep.begin(), keep.end(), k) == keep.end()) left_out.push_back(k);
+  }
+  for (const std::string& k : left_out) bus.remove(k);
+  if (!left_out.empty())
+    notes.push_back(fmt::format("bus {} instead of the file's {}: its {} setting{} {} left out ({} does not take {})",
+                                to, from, fmt::format("{}", fmt::join(left_out, ", ")), left_out.size() == 1 ? "" : "s",
+                                left_out.size() == 1 ? "is" : "are", to, left_out.size() == 1 ? "it" : "them"));
+}
+
 // Applies one override to the scenario tree (see Override in scenario.hpp); returns the
 // dotted key whose value it replaced, so only that key (and what lies below it) is blamed
 // on --set and everything else keeps its file and line.
-std::string apply_override(YAML::Node& root, const Override& o) {
+std::string apply_override(YAML::Node& root, const Override& o, std::vector<std::string>& notes) {
   const auto parts = group_expect_key(split_key(o.key));
   YAML::Node value;
   try {
@@ -180,6 +240,8 @@ std::string apply_override(YAML::Node& root, const Override& o) {
   // `bus` is a name or a mapping of settings: --bus can keeps the settings, and a setting
   // given for a bus written by name turns the name into {type: name}.
   if (!parts.empty() && parts[0] == "bus" && root["bus"].IsMap() && parts.size() == 1 && value.IsScalar()) {
+    YAML::Node bus = root["bus"];
+    switch_bus_type(bus, value.as<std::string>(), notes);
     root["bus"]["type"] = value;
     return "bus.type";
   }
@@ -606,37 +668,24 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
     if (k == to_string(b)) bus.kind = b;
   }
   if (!settings) return bus;
+  f.allow_keys(bus_setting_keys(bus.kind));
   if (bus.kind == BusKind::can) {
-    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "t_post_us", "isr_us", "drift", "sync", "sync_interval", "missing_command",
-                  "start_phase", "detect_every", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_can(f, bus.can);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::canopen) {
-    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
-                  "eds", "mode", "cycle", "sync_producer", "drive_period", "counts_per_rev", "heartbeat_ms", "drift",
-                  "startup", "refuse_foreign"});
     read_can_wire(f, bus.can);
     read_canopen(f, bus.canopen, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::tml) {
-    f.allow_keys({"type", "bit_rate", "transport", "t_pre_us", "master", "seed", "handshake_timeout", "supervision",
-                  "protocol", "cycle", "drive_period", "counts_per_rev", "drift", "startup", "refuse_foreign"});
     read_can_wire(f, bus.can);
     read_tml(f, bus.tml);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::ethercat) {
-    f.allow_keys({"type", "transport", "master_iface", "esi", "extra_axes", "mode", "drive_period", "counts_per_rev", "dc", "drift",
-                  "t_pre_us", "startup", "master", "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_ethercat(f, bus.ethercat, scenario_file);
     read_supervision(f["supervision"], bus.supervision);
   } else if (bus.kind == BusKind::m3) {
-    f.allow_keys({"type", "transport", "master_iface", "cycle", "retry_slots", "data_bytes", "communication", "mode", "topology", "stations",
-                  "cable_m", "response_us", "margin_us", "drive_period", "counts_per_rev", "startup", "master",
-                  "seed", "handshake_timeout", "supervision", "refuse_foreign"});
     read_m3(f, bus.m3);
     read_supervision(f["supervision"], bus.supervision);
-  } else {
-    f.allow_keys({"type"});
   }
   return bus;
 }
@@ -996,14 +1045,15 @@ Scenario load_scenario(const std::string& path, const std::vector<Override>& ove
   if (!root.IsDefined() || root.IsNull()) throw ScenarioError(path, 0, "", "empty scenario file");
   if (!root.IsMap()) throw ScenarioError(path, root.Mark().line + 1, "", "expected a mapping at the top level");
   // Overrides edit the tree first, so they are checked exactly like file values.
-  std::vector<std::string> overridden;
+  std::vector<std::string> overridden, notes;
   for (const auto& o : overrides) {
     check_override_key(o.key);
-    overridden.push_back(apply_override(root, o));
+    overridden.push_back(apply_override(root, o, notes));
   }
   const YamlDoc doc(path, overridden);
   Scenario s = read_scenario(YamlField::root(doc, root), path);
   for (const auto& o : overrides) s.overrides.push_back(o.key + "=" + o.value);
+  s.notes = std::move(notes);
   return s;
 }
 

@@ -324,6 +324,9 @@ struct Scenario {
   OutputsSpec outputs;
   MasterSpec master;
   std::vector<std::string> overrides;  // "key=value" applied over the file, in order (run.json)
+  // What the overrides changed beyond their own keys, for the user to read (e.g. settings of
+  // the file's bus that a --bus to another kind left out). One sentence each, no prefix.
+  std::vector<std::string> notes;
   // Lockstep with a master we did not write: it lives on the virtual clock.
   bool virtual_time_master() const { return !master.command.empty() && clock == ClockMode::lockstep; }
 };

@@ -555,6 +555,38 @@ TEST(ScenarioCan, SettingsAndFaultsAreRead) {
   EXPECT_EQ(by_name.bus.can.bit_rate, 125000);
 }
 
+// --bus to another kind over a file's `bus: {type: can, …}`: the settings the new bus takes
+// stay, the others are left out and named in a note (they are the file's bus's, not typos); a
+// --bus to the same kind, a setting given with --set, or a misspelt key is handled as before.
+TEST(ScenarioBus, SwitchingToAnotherBusKeepsTheSettingsItTakesAndNamesTheRest) {
+  const std::string f = scenario("can_settings.yaml");
+  const Scenario as_written = load_scenario(f);
+  EXPECT_EQ(as_written.bus.kind, BusKind::can);
+  EXPECT_DOUBLE_EQ(as_written.bus.can.isr_us, 3300.0);
+  EXPECT_TRUE(as_written.notes.empty());
+  const Scenario direct = load_scenario(f, {{"bus", "direct"}});
+  EXPECT_EQ(direct.bus.kind, BusKind::direct);
+  ASSERT_EQ(direct.notes.size(), 1u);
+  EXPECT_EQ(direct.notes[0],
+            "bus direct instead of the file's can: its bit_rate, drift, isr_us, sync, seed settings are left out "
+            "(direct does not take them)");
+  // CANopen shares the wire's settings: the bit rate and the seed carry over.
+  const Scenario canopen = load_scenario(f, {{"bus", "canopen"}});
+  EXPECT_EQ(canopen.bus.kind, BusKind::canopen);
+  EXPECT_EQ(canopen.bus.can.bit_rate, 250000);
+  ASSERT_EQ(canopen.notes.size(), 1u);
+  EXPECT_DOUBLE_EQ(canopen.bus.canopen.drift[0], 0.0005);
+  EXPECT_NE(canopen.notes[0].find("its isr_us, sync settings are left out (canopen"), std::string::npos) << canopen.notes[0];
+  // The same kind: nothing changes.
+  const Scenario can = load_scenario(f, {{"bus", "can"}});
+  EXPECT_TRUE(can.notes.empty());
+  EXPECT_DOUBLE_EQ(can.bus.can.isr_us, 3300.0);
+  // A setting the new bus does not take, given on the command line, is still an error.
+  EXPECT_EQ(load_error(f, {{"bus", "direct"}, {"bus.isr_us", "10"}}).key(), "bus.isr_us");
+  // An unknown bus name is refused at bus.type, the file's settings untouched.
+  EXPECT_EQ(load_error(f, {{"bus", "cann"}}).key(), "bus.type");
+}
+
 // isr_us: the slaves' control routine [µs], read as written; it must end within the slaves'
 // period (the velocity loop's), else the scenario is refused at that key.
 TEST(ScenarioCan, TheInterruptRoutineIsReadAndMustEndWithinThePeriod) {
