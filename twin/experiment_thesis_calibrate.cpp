@@ -147,7 +147,7 @@ std::vector<double> values_at(const std::vector<double>& u) {
 
 // The fitted scenario: the thesis line with the fitted values.
 std::string fitted_yaml(const std::vector<double>& v, double phi_kp, const std::array<double, 3>& ki, double kff,
-                        double j, int evals, const Figures& f, const std::string& params_path) {
+                        double j, int evals, const Figures& f, const std::string& params_path, const std::string& bus) {
   std::ostringstream out;
   out << "# The thesis line (seed 002, 4-4-2) with the parameters the thesis does not give, fitted by\n"
       << "# `omnitwin experiment thesis-calibrate` to ONE configuration: no sync, 1000 kbit/s, the\n"
@@ -168,7 +168,10 @@ std::string fitted_yaml(const std::vector<double>& v, double phi_kp, const std::
       << fmt::format("  velocity_loop: {{kp: {:.4g}, ki: {:.4g}, kff: {:.4g}}}\n", v[2], v[3], kff)
       << fmt::format("  driver: {{dead_band: {:.4g}, gain_error: {}}}\n", v[4], diagonal_pairs(v[7]))
       << fmt::format("  motor: {{friction_torque: {:.4g}, backlash: {:.4g}}}\n", v[5], v[6])
-      << "bus: direct\nclock: lockstep\ncontroller:\n  period: 0.010\n"
+      << "# The fitted row's bus, as its first trial ran (the fit averaged seeds 1 and 2), so that a plain run\n"
+      << "# reproduces it; `--bus direct` runs the platform without the bus (it hunts there after the\n"
+      << "# path, docs/platform.md).\n"
+      << "bus: " << bus << "\nclock: lockstep\ncontroller:\n  period: 0.010\n"
       << fmt::format("  kp: [{:.4g}, {:.4g}, {:.4g}]\n  ki: [{:.4g}, {:.4g}, {:.4g}]\n", v[0], v[1], phi_kp, ki[0], ki[1],
                      ki[2])
       << "path:\n  start: {x: 0, y: 0, phi_deg: 0}\n  segments:\n    - line: {dx: 2.0, dy: 0.0, duration: 20}\n"
@@ -209,7 +212,9 @@ std::string report_md(const std::vector<Evaluation>& evals, const NelderMeadResu
          "(the fast reading, docs/experiments.md), with the thesis's node firmware as thesis-platform runs it: "
          "a velocity PI without feed-forward (fig. 4-16; `platform.velocity_loop.kff: 0`, written into the fit) "
          "and a 3.3 ms timer routine that reloads the timer at its end (fig. 4-20; `bus.isr_us: 3300`, which "
-         "thesis-platform applies itself, as it does the drift).\n\n"
+         "thesis-platform applies itself, as it does the drift). The written scenario carries this "
+         "configuration's bus (`bus: {type: can, bit_rate: 1000000, …}`), so that a plain `omnitwin run` of it is the "
+         "row's first trial.\n\n"
       << "## Method\n\n"
       << fmt::format(
              "- **Objective**: J = mean over eight figures of (ln(ours / thesis))²: IAE and σ of X, Y and "
@@ -351,8 +356,12 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   // The trace and report first: should the fit file still fail, the search is not lost.
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
   experiment::write_text(dir / "thesis_calibrate.md", thesis::note_sets(report_md(evals, r, *best, model, trials, options.quick), options.sets, false));
+  // The fitted configuration's bus (thesis::run_one's settings but the transport's port).
+  const std::string bus = fmt::format(
+      "{{type: can, bit_rate: {}, drift: {}, isr_us: {:g}, sync: false, start_phase: random, seed: 1}}",
+      thesis::kFitRateKbps * 1000, fast.drift, base.bus.can.isr_us);
   experiment::write_text(model,
-                         thesis::note_sets(fitted_yaml(best->values, phi_kp, ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params),
+                         thesis::note_sets(fitted_yaml(best->values, phi_kp, ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params, bus),
                                            options.sets, true));
   std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
                            r.evaluations, evals.front().j, best->j, model, dir.string());

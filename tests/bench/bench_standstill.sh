@@ -9,7 +9,8 @@
 # Usage: tests/bench/bench_standstill.sh [BUILD_DIR]   (default: build)
 #   SCENARIO=FILE  another scenario (default models/scenarios/thesis_line.yaml), e.g. the fitted
 #                  line, which hunts on direct (docs/platform.md, "Standstill")
-#   BUS=can        the thesis's bus instead of direct (the master program beside the twin)
+#   BUS=can        the thesis's bus instead of direct (the master program beside the twin; on
+#                  the fitted line, the CAN settings of its fitted row, which its file carries)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/../.."
 B=${1:-build}

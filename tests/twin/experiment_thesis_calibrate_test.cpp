@@ -77,7 +77,14 @@ TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAnd
   // fit; the platform file's default (the plain line's) has one.
   EXPECT_EQ(fitted.platform.velocity_loop.kff, 0.0);
   EXPECT_EQ(defaults.platform.velocity_loop.kff, 1.0);
-  // Every run had the thesis's 3.3 ms timer routine (fig. 4-20), a bus setting the file lacks.
+  // The file carries the fitted row's bus, so that a plain run of it is that row's first trial:
+  // 1000 kbit/s, no sync, the slaves' timers gaining 0.362 %, the 3.3 ms timer routine.
+  EXPECT_EQ(fitted.bus.kind, BusKind::can);
+  EXPECT_EQ(fitted.bus.can.bit_rate, 1000000);
+  for (double d : fitted.bus.can.drift) EXPECT_DOUBLE_EQ(d, -0.00362);
+  EXPECT_DOUBLE_EQ(fitted.bus.can.isr_us, 3300.0);
+  EXPECT_FALSE(fitted.bus.can.sync);
+  // Every run had that routine (fig. 4-20).
   int runs = 0;
   for (const auto& e : fs::directory_iterator(dir.path() / "runs")) {
     const nlohmann::json m = nlohmann::json::parse(omnitwin::testing::read_bytes(e.path() / "metrics.json"));
@@ -116,6 +123,11 @@ TEST(ThesisCalibrate, TheCommittedFitLoadsInsideItsBoundsAndSaysWhatItWasFittedT
   EXPECT_EQ(s.platform.velocity_loop.kff, 0.0);
   EXPECT_EQ(s.controller.ki[0], 0.0);
   EXPECT_EQ(s.controller.ki[1], 0.0);
+  // Its bus is the fitted row's (thesis-calibrate writes it so).
+  EXPECT_EQ(s.bus.kind, BusKind::can);
+  EXPECT_EQ(s.bus.can.bit_rate, 1000000);
+  EXPECT_DOUBLE_EQ(s.bus.can.isr_us, 3300.0);
+  EXPECT_FALSE(s.bus.can.sync);
 }
 
 TEST(ThesisRig, TheResyncIntervalKeepsTheSlipPerInterruptWithinTPostCountingASoftwareReloadsRoutine) {

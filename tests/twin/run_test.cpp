@@ -173,7 +173,9 @@ TEST_F(RunThesisLine, ADiagonalPairMismatchUnderAWeakVelocityIntegralMakesAYErro
   // Odometric Y IAE / X IAE of the fitted line on bus direct with `overrides`.
   auto y_over_x = [](const std::vector<Override>& overrides) {
     TempDir dir("omnitwin-run-pairs");
-    const RunResult r = run_into(models_scenario("thesis_line_fitted.yaml"), dir / "run", overrides);
+    std::vector<Override> sets{{"bus", "direct"}};  // the file's bus is the fitted row's (can)
+    sets.insert(sets.end(), overrides.begin(), overrides.end());
+    const RunResult r = run_into(models_scenario("thesis_line_fitted.yaml"), dir / "run", sets);
     const nlohmann::json& o = r.metrics.at("platform_odometry");
     EXPECT_EQ(r.metrics["physics"]["warnings"], 0);
     return o.at("iae_y_cm").get<double>() / o.at("iae_x_cm").get<double>();
