@@ -940,7 +940,8 @@ void PlatformRun::write_run_description() const {
                             {"model_variant", model_name(s_.platform)}, {"control_period_s", s_.controller.period},
                             {"physics_timestep_s", s_.platform.sim.timestep}, {"duration_s", s_.duration},
                             {"start_pose", {s_.path.x0, s_.path.y0, s_.path.phi0_deg * kDeg}},
-                            {"overrides", s_.overrides}, {"controller", controller_json(s_.controller)},
+                            {"overrides", s_.overrides}, {"notes", s_.notes},
+                            {"controller", controller_json(s_.controller)},
                             {"drive_chain", drive_chain_json(s_.platform)}, {"master_kind", master_kind()},
                             {"faults", faults}, {"expectations", expect}};
   write_json_atomic((dir / "run.json").string(), j);

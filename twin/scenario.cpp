@@ -206,30 +206,50 @@ bool bus_kind_named(const std::string& name, BusKind& kind) {
   return false;
 }
 
-// `--bus NEW` over a file's `bus: {type: OLD, …}`: the settings NEW takes stay (a CAN bit rate
-// carries over to CANopen), the others are left out, since they belong to the file's bus, not
-// to a misspelling, and are named in a note so that nothing goes quietly.
-void switch_bus_type(YAML::Node& bus, const std::string& to, std::vector<std::string>& notes) {
+// Whether a bus setting means the same, within the same limits, on bus `to` as on `from`: the
+// run's own (seed, start-up handshake, supervision, foreign senders) on every bus but direct;
+// the CAN wire's (bit rate, transport, T_pre) among can, canopen and tml. Everything else
+// (drift, mode, cycle, master, start-up …) is a bus's own, with its own limits or meaning.
+bool carries_over(std::string_view key, BusKind from, BusKind to) {
+  static constexpr std::string_view kRun[] = {"seed", "handshake_timeout", "supervision", "refuse_foreign"};
+  static constexpr std::string_view kWire[] = {"bit_rate", "transport", "t_pre_us"};
+  const auto can_family = [](BusKind b) { return b == BusKind::can || b == BusKind::canopen || b == BusKind::tml; };
+  if (std::find(std::begin(kRun), std::end(kRun), key) != std::end(kRun)) return to != BusKind::direct;
+  return can_family(from) && can_family(to) && std::find(std::begin(kWire), std::end(kWire), key) != std::end(kWire);
+}
+
+// `--bus NEW` over a file's `bus: {type: OLD, …}`: the settings that carry over stay (a CAN bit
+// rate on CANopen), the file's others are left out, since they are OLD's, not misspellings, and
+// named in a note so that nothing goes quietly. A setting an earlier override gave
+// (`set_keys`, dotted) stays, so that NEW refuses it and the refusal names --set.
+void switch_bus_type(YAML::Node& bus, const std::string& to, const std::vector<std::string>& set_keys,
+                     std::vector<std::string>& notes) {
   BusKind from_kind{}, to_kind{};
   const std::string from = bus["type"] && bus["type"].IsScalar() ? bus["type"].as<std::string>() : "";
   if (from == to || !bus_kind_named(from, from_kind) || !bus_kind_named(to, to_kind)) return;
-  const std::vector<std::string_view> keep = bus_setting_keys(to_kind);
+  const auto set_here = [&](const std::string& k) {
+    const std::string key = "bus." + k;
+    return std::any_of(set_keys.begin(), set_keys.end(),
+                       [&](const std::string& s) { return s == key || s.rfind(key + ".", 0) == 0; });
+  };
   std::vector<std::string> left_out;
   for (const auto& kv : bus) {
+    if (!kv.first.IsScalar()) continue;  // not a name: read_bus refuses it
     const std::string k = kv.first.as<std::string>();
-    if (std::find(keep.begin(), keep.end(), k) == keep.end()) left_out.push_back(k);
+    if (k != "type" && !carries_over(k, from_kind, to_kind) && !set_here(k)) left_out.push_back(k);
   }
   for (const std::string& k : left_out) bus.remove(k);
   if (!left_out.empty())
-    notes.push_back(fmt::format("bus {} instead of the file's {}: its {} setting{} {} left out ({} does not take {})",
-                                to, from, fmt::format("{}", fmt::join(left_out, ", ")), left_out.size() == 1 ? "" : "s",
-                                left_out.size() == 1 ? "is" : "are", to, left_out.size() == 1 ? "it" : "them"));
+    notes.push_back(fmt::format("bus {} instead of the file's {}: the file's {} setting{} {} {} left out", to, from,
+                                from, left_out.size() == 1 ? "" : "s", fmt::format("{}", fmt::join(left_out, ", ")),
+                                left_out.size() == 1 ? "is" : "are"));
 }
 
 // Applies one override to the scenario tree (see Override in scenario.hpp); returns the
 // dotted key whose value it replaced, so only that key (and what lies below it) is blamed
 // on --set and everything else keeps its file and line.
-std::string apply_override(YAML::Node& root, const Override& o, std::vector<std::string>& notes) {
+std::string apply_override(YAML::Node& root, const Override& o, const std::vector<std::string>& set_keys,
+                           std::vector<std::string>& notes) {
   const auto parts = group_expect_key(split_key(o.key));
   YAML::Node value;
   try {
@@ -241,7 +261,7 @@ std::string apply_override(YAML::Node& root, const Override& o, std::vector<std:
   // given for a bus written by name turns the name into {type: name}.
   if (!parts.empty() && parts[0] == "bus" && root["bus"].IsMap() && parts.size() == 1 && value.IsScalar()) {
     YAML::Node bus = root["bus"];
-    switch_bus_type(bus, value.as<std::string>(), notes);
+    switch_bus_type(bus, value.as<std::string>(), set_keys, notes);
     root["bus"]["type"] = value;
     return "bus.type";
   }
@@ -1048,7 +1068,7 @@ Scenario load_scenario(const std::string& path, const std::vector<Override>& ove
   std::vector<std::string> overridden, notes;
   for (const auto& o : overrides) {
     check_override_key(o.key);
-    overridden.push_back(apply_override(root, o, notes));
+    overridden.push_back(apply_override(root, o, overridden, notes));
   }
   const YamlDoc doc(path, overridden);
   Scenario s = read_scenario(YamlField::root(doc, root), path);
