@@ -85,7 +85,7 @@ double mean(const std::array<double, 4>& v) { return (v[0] + v[1] + v[2] + v[3])
 
 }  // namespace
 
-Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, bool sync, int trial, int port) {
+std::vector<Override> bus_overrides(const ClockReading& clock, int rate_kbps, bool sync, int trial, int port) {
   std::vector<Override> o{{"bus", "can"},
                           {"bus.bit_rate", std::to_string(rate_kbps * 1000)},
                           {"bus.drift", fmt::format("{}", clock.drift)},
@@ -95,6 +95,11 @@ Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, 
                           {"bus.seed", std::to_string(trial + 1)},
                           {"bus.transport", fmt::format("udp:239.74.163.2:{}", port)}};
   for (const auto& f : firmware_overrides()) o.push_back(f);
+  return o;
+}
+
+Result run_one(const RunSetup& setup, const ClockReading& clock, int rate_kbps, bool sync, int trial, int port) {
+  std::vector<Override> o = bus_overrides(clock, rate_kbps, sync, trial, port);
   if (setup.quick) o.push_back({"path.segments.0.line.duration", "4"}), o.push_back({"path.segments.0.line.dx", "0.4"});
   o.insert(o.end(), setup.overrides.begin(), setup.overrides.end());
   Scenario s = load_scenario(setup.scenario, o);

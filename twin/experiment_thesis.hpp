@@ -56,9 +56,14 @@ std::array<ClockReading, 2> clock_readings(const Scenario& s);
 // The thesis's node firmware as these experiments run it, applied before the experiment's
 // --set (which may change it): the timer routine's run time (bus.isr_us, seed 002 fig. 4-20:
 // the four feedback frames leave 3.1 … 3.5 ms after the command; the 8051's 16-bit timer
-// reloads in software at the routine's end). A bus setting, so it is not in the scenario
-// file, as the drift is not.
+// reloads in software at the routine's end). A bus setting; thesis-calibrate writes it into
+// the fit with the fitted row's other bus settings (bus_overrides).
 std::vector<Override> firmware_overrides();
+
+// The bus of one run (run_one): CAN at `rate_kbps`, every slave at the clock reading's drift,
+// sync or not at its K, random start phases from seed trial + 1, UDP port `port`; then
+// firmware_overrides(). The experiment's --set go after these. Not real-time safe.
+std::vector<Override> bus_overrides(const ClockReading& clock, int rate_kbps, bool sync, int trial, int port);
 
 // One run's figures, or the mean of a configuration's trials.
 struct Result {

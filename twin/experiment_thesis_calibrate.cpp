@@ -17,6 +17,7 @@
 #include <fmt/ranges.h>
 
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cmath>
@@ -177,6 +178,40 @@ std::string fitted_yaml(const std::vector<double>& v, double phi_kp, const std::
       << "path:\n  start: {x: 0, y: 0, phi_deg: 0}\n  segments:\n    - line: {dx: 2.0, dy: 0.0, duration: 20}\n"
       << "settle: 2.0\n";
   return out.str();
+}
+
+// The fitted row's bus as its first trial ran, for the fit's file: thesis::bus_overrides (but
+// the transport, whose port was the run's own), then the experiment's --set of bus settings,
+// which the runs applied last. One YAML flow mapping; the settings in a reading order (rate,
+// clocks, routine, sync, phases), sync_interval only with sync (it means nothing without).
+std::string fitted_bus(const thesis::ClockReading& clock, const std::vector<Override>& sets) {
+  std::vector<Override> o = thesis::bus_overrides(clock, thesis::kFitRateKbps, false, 0, 0);
+  for (const Override& x : sets)
+    if (x.key.rfind("bus.", 0) == 0) o.push_back(x);
+  YAML::Node bus(YAML::NodeType::Map);
+  for (const char* k : {"type", "bit_rate", "drift", "isr_us", "sync", "sync_interval", "start_phase", "seed"})
+    bus[k] = YAML::Node();  // the order; settings no override gives are dropped below
+  for (const Override& x : o) {
+    if (x.key == "bus") {
+      bus["type"] = x.value;
+      continue;
+    }
+    YAML::Node cur = bus;
+    std::string rest = x.key.substr(4);
+    for (std::size_t dot; (dot = rest.find('.')) != std::string::npos; rest = rest.substr(dot + 1)) {
+      const std::string part = rest.substr(0, dot);
+      if (!cur[part].IsMap()) cur[part] = YAML::Node(YAML::NodeType::Map);
+      cur.reset(cur[part]);
+    }
+    cur[rest] = YAML::Load(x.value);
+  }
+  bus.remove("transport");
+  if (!bus["sync"].IsScalar() || bus["sync"].as<std::string>() != "true") bus.remove("sync_interval");
+  for (const char* k : {"bit_rate", "drift", "isr_us", "sync", "sync_interval", "start_phase", "seed"})
+    if (bus[k] && bus[k].IsNull()) bus.remove(k);
+  YAML::Emitter e;
+  e << YAML::Flow << bus;
+  return e.c_str();
 }
 
 struct Evaluation {
@@ -356,10 +391,7 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   // The trace and report first: should the fit file still fail, the search is not lost.
   experiment::write_text(dir / "thesis_calibrate.csv", trace_csv(evals));
   experiment::write_text(dir / "thesis_calibrate.md", thesis::note_sets(report_md(evals, r, *best, model, trials, options.quick), options.sets, false));
-  // The fitted configuration's bus (thesis::run_one's settings but the transport's port).
-  const std::string bus = fmt::format(
-      "{{type: can, bit_rate: {}, drift: {}, isr_us: {:g}, sync: false, start_phase: random, seed: 1}}",
-      thesis::kFitRateKbps * 1000, fast.drift, base.bus.can.isr_us);
+  const std::string bus = fitted_bus(fast, options.sets);
   experiment::write_text(model,
                          thesis::note_sets(fitted_yaml(best->values, phi_kp, ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params, bus),
                                            options.sets, true));

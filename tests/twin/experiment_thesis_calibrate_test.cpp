@@ -47,6 +47,7 @@ TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAnd
   omnitwin::testing::TempDir dir("omnitwin-cal");
   ExperimentOptions o{dir.path().string(), true};
   o.budget = 10;
+  o.sets = {{"bus.t_post_us", "100"}};  // a bus setting of the experiment's own: in every run and in the fit's bus
   ASSERT_EQ(run_experiment("thesis-calibrate", o), kExperimentOk);
   // The trace: one row per evaluation, the first at the start.
   const auto rows = csv_rows(dir.path() / "thesis_calibrate.csv");
@@ -84,6 +85,7 @@ TEST(ThesisCalibrate, AQuickFitWritesTheBestEvaluationAsAScenarioWithItsTraceAnd
   for (double d : fitted.bus.can.drift) EXPECT_DOUBLE_EQ(d, -0.00362);
   EXPECT_DOUBLE_EQ(fitted.bus.can.isr_us, 3300.0);
   EXPECT_FALSE(fitted.bus.can.sync);
+  EXPECT_DOUBLE_EQ(fitted.bus.can.t_post_us, 100.0);
   // Every run had that routine (fig. 4-20).
   int runs = 0;
   for (const auto& e : fs::directory_iterator(dir.path() / "runs")) {

@@ -176,6 +176,10 @@ TEST_F(RunThesisLine, ADiagonalPairMismatchUnderAWeakVelocityIntegralMakesAYErro
     std::vector<Override> sets{{"bus", "direct"}};  // the file's bus is the fitted row's (can)
     sets.insert(sets.end(), overrides.begin(), overrides.end());
     const RunResult r = run_into(models_scenario("thesis_line_fitted.yaml"), dir / "run", sets);
+    // run.json says what the switch to bus direct left out of the file's bus.
+    const nlohmann::json notes = read_json(dir / "run/run.json").at("notes");
+    EXPECT_EQ(notes.size(), 1u);
+    EXPECT_NE(notes.dump().find("bus direct instead of the file's can"), std::string::npos) << notes.dump();
     const nlohmann::json& o = r.metrics.at("platform_odometry");
     EXPECT_EQ(r.metrics["physics"]["warnings"], 0);
     return o.at("iae_y_cm").get<double>() / o.at("iae_x_cm").get<double>();
@@ -515,6 +519,7 @@ TEST_F(RunShort, RunJsonRecordsTheOverridesAndTheFirmwareTheyChanged) {
   EXPECT_DOUBLE_EQ(j["drive_chain"]["driver"]["dead_band_v"].get<double>(), 0.1);
   EXPECT_EQ(j["drive_chain"]["velocity_loop"]["arithmetic"], "int16");
   EXPECT_DOUBLE_EQ(j["controller"]["kp"][0].get<double>(), 3.0);
+  EXPECT_EQ(j["notes"], nlohmann::json::array());  // nothing changed beyond the keys set
 }
 
 // A wheel_slip fault on wheel 2 (friction ×0.05 from 1 s to 2 s) changes the physics:
