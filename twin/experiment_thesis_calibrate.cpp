@@ -11,7 +11,8 @@
 // (twin/nelder_mead.hpp) minimises the mean squared log ratio of our eight figures (IAE and σ of
 // X, Y, contour and the axes' velocity) to the thesis's, each the mean of two runs with their own
 // random slave phases. The result
-// is written as a scenario file (models/scenarios/thesis_line_fitted.yaml by default) with
+// is written as a scenario file (models/scenarios/thesis_line_fitted.yaml by default) that
+// carries the fitted row's bus as its first trial ran, so a plain run of it is that trial, with
 // the method, the bounds and the whole trace in the output folder.
 #include <fmt/format.h>
 #include <fmt/ranges.h>
