@@ -189,9 +189,9 @@ std::string fitted_bus(const thesis::ClockReading& clock, const std::vector<Over
   std::vector<Override> o = thesis::bus_overrides(clock, thesis::kFitRateKbps, false, 0, 0);
   for (const Override& x : sets)
     if (x.key.rfind("bus.", 0) == 0) o.push_back(x);
+  static constexpr const char* kOrder[] = {"type", "bit_rate", "drift", "isr_us", "sync", "sync_interval", "start_phase", "seed"};
   YAML::Node bus(YAML::NodeType::Map);
-  for (const char* k : {"type", "bit_rate", "drift", "isr_us", "sync", "sync_interval", "start_phase", "seed"})
-    bus[k] = YAML::Node();  // the order; settings no override gives are dropped below
+  for (const char* k : kOrder) bus[k] = YAML::Node();  // the order; settings no override gives are dropped below
   for (const Override& x : o) {
     if (x.key == "bus") {
       bus["type"] = x.value;
@@ -208,7 +208,7 @@ std::string fitted_bus(const thesis::ClockReading& clock, const std::vector<Over
   }
   bus.remove("transport");
   if (!bus["sync"].IsScalar() || bus["sync"].as<std::string>() != "true") bus.remove("sync_interval");
-  for (const char* k : {"bit_rate", "drift", "isr_us", "sync", "sync_interval", "start_phase", "seed"})
+  for (const char* k : kOrder)
     if (bus[k] && bus[k].IsNull()) bus.remove(k);
   YAML::Emitter e;
   e << YAML::Flow << bus;

@@ -635,7 +635,9 @@ int main(int argc, char** argv) {
   CLI::App* run = app.add_subcommand("run", "run one scenario and write its records");
   run->add_option("scenario", ra.scenario, "scenario file (YAML)")->required();
   run->add_option("--out", ra.out, "run directory (default out/<scenario name>/)");
-  run->add_option("--bus", ra.bus, "bus between master and devices")
+  run->add_option("--bus", ra.bus,
+                  "bus between master and devices; settings the file gives for another kind of bus are left out, "
+                  "with a note (docs/scenarios.md)")
       ->check(CLI::IsMember({"direct", "can", "canopen", "ethercat", "m3", "tml"}));
   run->add_option("--clock", ra.clock, "clock mode")->check(CLI::IsMember({"lockstep", "realtime"}));
   run->add_option("--set", ra.sets, "override a scenario key, e.g. --set controller.period=0.005")

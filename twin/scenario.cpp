@@ -241,7 +241,7 @@ void switch_bus_type(YAML::Node& bus, const std::string& to, const std::vector<s
   for (const std::string& k : left_out) bus.remove(k);
   if (!left_out.empty())
     notes.push_back(fmt::format("bus {} instead of the file's {}: the file's {} setting{} {} {} left out", to, from,
-                                from, left_out.size() == 1 ? "" : "s", fmt::format("{}", fmt::join(left_out, ", ")),
+                                from, left_out.size() == 1 ? "" : "s", fmt::join(left_out, ", "),
                                 left_out.size() == 1 ? "is" : "are"));
 }
 
@@ -682,11 +682,7 @@ BusSpec read_bus(const YamlField& f, const std::string& scenario_file) {
   // a yaml-cpp node overwrites the node it refers to.)
   const bool settings = f.node().IsMap();
   const std::string k = (settings ? f.required("type") : f).choice({"direct", "can", "canopen", "ethercat", "m3", "tml"});
-  const BusKind all[] = {BusKind::direct, BusKind::can, BusKind::canopen,
-                         BusKind::ethercat, BusKind::m3, BusKind::tml};
-  for (BusKind b : all) {
-    if (k == to_string(b)) bus.kind = b;
-  }
+  bus_kind_named(k, bus.kind);  // choice() took only these names
   if (!settings) return bus;
   f.allow_keys(bus_setting_keys(bus.kind));
   if (bus.kind == BusKind::can) {
