@@ -18,6 +18,7 @@
 #include <iostream>
 #include <mutex>
 #include <random>
+#include <set>
 #include <thread>
 
 #include "media/run_report.hpp"
@@ -183,9 +184,12 @@ std::string csv_quoted(const std::string& v) {
 
 fs::path point_dir(const fs::path& out, int k) { return out / "points" / fmt::format("{:04d}", k); }
 
-// Runs point k (1-based) into its directory and writes point.json; returns its exit code.
-// `realtime`: RunOptions::realtime_turn (realtime points go one at a time).
-int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt, std::mutex& realtime) {
+// Runs point k (1-based) into its directory and writes point.json; returns its exit code and
+// sets *notes to what its overrides changed beyond their own keys (Scenario::notes: a `bus` axis
+// over a file's settings for another bus). `realtime`: RunOptions::realtime_turn (realtime points
+// go one at a time).
+int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<bool>* interrupt, std::mutex& realtime,
+              std::vector<std::string>* notes) {
   const Point& p = s.points[static_cast<std::size_t>(k - 1)];
   nlohmann::json pj = {{"point", k}, {"params", nlohmann::json::object()}};
   for (const auto& [key, v] : p) pj["params"][key] = v;
@@ -194,6 +198,8 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
     std::vector<Override> o;
     for (const auto& [key, v] : p) o.push_back({key, v});
     const Scenario sc = load_scenario(s.scenario, o);
+    pj["notes"] = sc.notes;
+    *notes = sc.notes;
     RunOptions ro;
     ro.out_dir = point_dir(out, k).string();
     ro.interrupt = interrupt;
@@ -217,15 +223,21 @@ int run_point(const SweepSpec& s, int k, const fs::path& out, const std::atomic<
   return code;
 }
 
-// Every point locally, `jobs` at a time; prints one line per point.
+// Every point locally, `jobs` at a time; prints one line per point, and each distinct note once,
+// on stderr with the first point that gave it (every point's own are in its point.json and run.json).
 void run_local(const SweepSpec& s, const fs::path& out, const SweepOptions& opt) {
   const std::size_t n = s.points.size();
   std::mutex print;
   std::mutex realtime;  // RunOptions::realtime_turn: realtime points one at a time
+  std::set<std::string> noted;
   run_jobs(n, jobs_or_cores(opt.jobs), opt.interrupt, [&](std::size_t i) {
     const int k = static_cast<int>(i) + 1;
-    const int code = run_point(s, k, out, opt.interrupt, realtime);
+    std::vector<std::string> notes;
+    const int code = run_point(s, k, out, opt.interrupt, realtime, &notes);
     const std::lock_guard lock(print);
+    for (const std::string& note : notes)
+      if (noted.insert(note).second)
+        std::cerr << fmt::format("omnitwin sweep: note (point {}, printed once for the sweep): {}\n", k, note);
     std::cout << fmt::format("point {}/{}: exit {}\n", k, n, code) << std::flush;
   });
 }
@@ -420,7 +432,10 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
       return 2;
     }
     std::mutex alone;
-    return run_point(s, opt.point, out, opt.interrupt, alone);
+    std::vector<std::string> notes;
+    const int code = run_point(s, opt.point, out, opt.interrupt, alone, &notes);
+    for (const std::string& note : notes) std::cerr << "omnitwin sweep: note: " << note << "\n";
+    return code;
   }
   std::cout << fmt::format("sweep {}: {} points of {} ({})\n", s.name, s.points.size(), s.scenario,
                            opt.slurm ? "Slurm job array" : "local");

@@ -2,7 +2,8 @@
 // seeded random draws that repeat, both combined), its refusals naming line and key, and
 // `omnitwin sweep` through the real program with -j 2: one run directory and point.json per
 // point, sweep.csv with every parameter and metric, the plot, `--point K` running one point
-// (what a Slurm task does). The Slurm path itself: sweep_slow_test.cpp.
+// (what a Slurm task does), the notes a `bus` axis over another bus's settings gives. The
+// Slurm path itself: sweep_slow_test.cpp.
 #include "twin/sweep.hpp"
 
 #include <fmt/format.h>
@@ -240,6 +241,37 @@ TEST_F(Sweep, TheSlurmScriptQuotesWhatItIsGiven) {
       << read_bytes(out / "sweep.sbatch");
   EXPECT_TRUE(contains(read_bytes(dir_ / "args"), "--output=" + (out / "slurm-%A_%a.out").string()))
       << read_bytes(dir_ / "args");
+}
+
+// A `bus` axis over a file with another bus's settings: each point's run leaves those settings
+// out (scenario.cpp's switch_bus_type); the sweep says so once, not once per point, and each
+// point.json keeps its notes. It used to say nothing (the notes were only in each run.json).
+TEST_F(Sweep, ABusAxisOverAnotherBussSettingsSaysWhatItLeftOutOnce) {
+  fs::create_directories(dir_ / "s");
+  std::ofstream(dir_ / "s" / "can_line.yaml") << "platform: {variant: capsule}\n"
+                                                 "bus: {type: can, bit_rate: 250000, isr_us: 3300, seed: 4}\n"
+                                                 "path: {segments: [{line: {dx: 0.2, duration: 1}}]}\n"
+                                                 "outputs: {video: false, report: false}\n";
+  std::ofstream(dir_ / "s" / "bus.yaml") << "scenario: can_line.yaml\n"
+                                            "grid: {bus: [direct], settle: [0.1, 0.2]}\n"
+                                            "metrics: [platform.final_error_cm]\n";
+  const fs::path out = dir_ / "bus_out";
+  const Finished f = run({"sweep", (dir_ / "s" / "bus.yaml").string(), "-j", "2", "--out", out.string()});
+  ASSERT_EQ(f.code, 0) << f.out << f.err;
+  const std::string note = "bus direct instead of the file's can: the file's can settings bit_rate, isr_us, seed are left out";
+  const std::string said = "omnitwin sweep: note (point ";
+  ASSERT_TRUE(contains(f.err, said)) << f.err;
+  EXPECT_EQ(f.err.find(said), f.err.rfind(said)) << f.err;  // once for both points
+  EXPECT_TRUE(contains(f.err, note)) << f.err;
+  for (int k = 1; k <= 2; ++k) {
+    const nlohmann::json pj = nlohmann::json::parse(read_bytes(out / "points" / fmt::format("{:04d}", k) / "point.json"));
+    EXPECT_EQ(pj.at("notes"), nlohmann::json::array({note})) << pj.dump();
+    EXPECT_EQ(pj.at("exit_code"), 0);
+  }
+  // One point alone (a Slurm task) prints its own.
+  const Finished g = run({"sweep", (dir_ / "s" / "bus.yaml").string(), "--point", "2", "--out", (dir_ / "one").string()});
+  ASSERT_EQ(g.code, 0) << g.out << g.err;
+  EXPECT_TRUE(contains(g.err, "omnitwin sweep: note: " + note)) << g.err;
 }
 
 TEST_F(Sweep, PointRunsOnlyThatPoint) {
