@@ -10,7 +10,10 @@
 //  - a ScenarioError's message is one line that begins with the path of the file at fault (the
 //    scenario, or the parameter file it names), and a line in the scenario is 0 or within it
 //    (+1 for an error at the end of the input);
-//  - an accepted scenario is sane: a positive control period and duration, finite path times.
+//  - an accepted scenario is sane: a positive control period and duration, finite path times;
+//  - the same with `--bus K` (an override of `bus`, K picked by the input's first byte), which
+//    keeps or leaves out the file's bus settings (switch_bus_type): the same properties, every
+//    note one line, and a switch to the file's own kind gives no note.
 // Seeds: models/scenarios and tests/regression (the ctest passes both directories).
 //
 //   ./scenario_fuzz -max_total_time=60 -dict=fuzz/scenario.dict /tmp/scn models/scenarios tests/regression
@@ -71,6 +74,20 @@ void check_error(const ScenarioError& e, const std::string& file, std::size_t li
 void check_scenario(const Scenario& s) {
   CHECK(s.controller.period > 0 && std::isfinite(s.controller.period));
   CHECK(s.duration > 0 && std::isfinite(s.duration));
+  for (const std::string& n : s.notes) CHECK(!n.empty() && n.find('\n') == std::string::npos);
+}
+
+// Loads the file as `omnitwin run FILE --bus kind` does; `base`: the plain load's result, or
+// null if it was refused.
+void check_bus_switch(const std::string& file, std::size_t lines, const char* kind, const Scenario* base) {
+  try {
+    const Scenario s = load_scenario(file, {{"bus", kind}});
+    check_scenario(s);
+    CHECK(std::string(to_string(s.bus.kind)) == kind);
+    if (base && base->bus.kind == s.bus.kind) CHECK(s.notes.empty());
+  } catch (const ScenarioError& e) {
+    check_error(e, file, lines);
+  }
 }
 
 }  // namespace
@@ -83,10 +100,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
   }
   const std::size_t lines = static_cast<std::size_t>(std::count(data, data + size, '\n'));
+  static const char* const kBuses[] = {"direct", "can", "canopen", "ethercat", "m3", "tml"};
+  const char* kind = kBuses[size > 0 ? data[0] % 6 : 0];
   try {
-    check_scenario(load_scenario(t.file));
+    const Scenario s = load_scenario(t.file);
+    check_scenario(s);
+    check_bus_switch(t.file, lines, kind, &s);
   } catch (const ScenarioError& e) {
     check_error(e, t.file, lines);
+    check_bus_switch(t.file, lines, kind, nullptr);
   }
   return 0;
 }
