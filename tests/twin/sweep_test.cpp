@@ -272,6 +272,12 @@ TEST_F(Sweep, ABusAxisOverAnotherBussSettingsSaysWhatItLeftOutOnce) {
   const Finished g = run({"sweep", (dir_ / "s" / "bus.yaml").string(), "--point", "2", "--out", (dir_ / "one").string()});
   ASSERT_EQ(g.code, 0) << g.out << g.err;
   EXPECT_TRUE(contains(g.err, "omnitwin sweep: note: " + note)) << g.err;
+  // Through Slurm (a stand-in sbatch that runs both tasks), the sweep gathers the tasks' notes
+  // from their point.json and says each once, with how many points gave it.
+  stand_in_sbatch(dir_ / "bin", "for a; do last=$a; done\nfor t in 1 2; do SLURM_ARRAY_TASK_ID=$t sh \"$last\"; done\n");
+  const Finished h = run({"sweep", (dir_ / "s" / "bus.yaml").string(), "--slurm", "--out", (dir_ / "slurm").string()});
+  ASSERT_EQ(h.code, 0) << h.out << h.err;
+  EXPECT_TRUE(contains(h.err, "omnitwin sweep: note (2 of 2 points, the first point 1): " + note)) << h.err;
 }
 
 TEST_F(Sweep, PointRunsOnlyThatPoint) {
