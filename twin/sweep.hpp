@@ -17,7 +17,8 @@
 //   plot: {x: controller.period, y: platform.final_error_cm}   # default: first param, first metric
 //
 // Output (--out, default out/sweep/NAME): points/NNNN/ the run directory of point NNNN (1-based)
-// with point.json {point, params, exit_code, passed, error}; sweep.csv (point, each param, each
+// with point.json {point, params, notes, exit_code, passed, error} (notes: what the point's
+// overrides changed beyond their own keys, said once per distinct note on stderr); sweep.csv (point, each param, each
 // metric, passed, exit_code); sweep.png (plot.y against plot.x, one line per combination of
 // the other parameters, failed expectations marked). Locally the points run -j at a time;
 // --slurm writes sweep.sbatch (a job array, one task per point, each `omnitwin sweep SPEC
