@@ -199,6 +199,7 @@ class PlatformRun {
   double master_grace_s() const;
   void stop_master();
   void rename_master_log();
+  std::string why_not_joined(bool timed_out, const std::string& status, double limit_s);
   void on_master_bus(SimTime t);
   static simclock::Horizon answer_sent(void* self, const simclock::Sent& sent);
   // How often the master is met: its bus cycle on M-III (a polling master exchanges with
@@ -422,12 +423,23 @@ void PlatformRun::start_master() {
     while (st == simclock::WaitStatus::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
       st = clock_server_->accept(std::chrono::milliseconds(100));
     if (st != simclock::WaitStatus::ok)
-      throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; {}; see master.log){}",
-                                           simclock::to_string(st), master_->describe_exit(),
+      throw std::runtime_error(fmt::format("the master did not connect to the sim clock ({}; see master.log){}",
+                                           why_not_joined(st == simclock::WaitStatus::timeout, simclock::to_string(st),
+                                                          handshake_timeout_s_),
                                            last_words(*master_, (dir / ".master.log.part").string())));
   }
   log_event(0, "master", fmt::format("{} started (pid {}, clock {})", master_program_, master_->pid(),
                                      lockstep ? "sim" : "wall"));
+}
+
+// Why a master started in lockstep did not join its clock, for the start error: it ended first
+// (with its exit), it was still running when `limit_s` ran out (it is then stopped with the short
+// grace, stop_master), or the connection's own status (`status`: refused, closed, a protocol error).
+std::string PlatformRun::why_not_joined(bool timed_out, const std::string& status, double limit_s) {
+  if (!master_->running()) return "it ended first: " + master_->describe_exit();
+  if (!timed_out) return status + "; " + master_->describe_exit();
+  master_hung_ = true;
+  return fmt::format("none within {:g} s; it was still running and was stopped", limit_s);
 }
 
 // A master the user brings: its command line with {iface}, {ifname} and {out} filled in, started under
@@ -472,8 +484,9 @@ void PlatformRun::start_own_master(const std::string& dir) {
   while (st == VtimeServer::Status::timeout && master_->running() && std::chrono::steady_clock::now() < deadline)
     st = vtime_server_->accept(std::chrono::milliseconds(100), 0);
   if (st != VtimeServer::Status::ok)
-    throw std::runtime_error(fmt::format("master: {} did not join the virtual clock ({}; {}; see master.log){}",
-                                         master_program_, to_string(st), master_->describe_exit(),
+    throw std::runtime_error(fmt::format("master: {} did not join the virtual clock ({}; see master.log){}",
+                                         master_program_,
+                                         why_not_joined(st == VtimeServer::Status::timeout, to_string(st), s_.master.watchdog),
                                          last_words(*master_, log)));
   log_event(0, "master", fmt::format("{} started (pid {}, clock virtual)", master_command_, master_->pid()));
 }
@@ -1100,6 +1113,7 @@ RunResult PlatformRun::execute() {
       if (!o_.external_master) start_master();
     } catch (const std::exception& e) {
       error_ = e.what();
+      stop_master();  // a master that started: waited for or stopped, its log named master.log
       return finish(0.0, nullptr);
     }
   }

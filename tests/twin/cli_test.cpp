@@ -1223,7 +1223,11 @@ TEST_F(CliCan, ASlowRoutineWithAResyncEveryThirdInterruptKeepsEveryNodeAnswering
 }
 
 // A master program that cannot be found is bad input (exit 2, nothing written); one that
-// starts but never joins the sim clock is a runtime failure (exit 3) with the reason recorded.
+// starts but never joins the sim clock is a runtime failure (exit 3) with the reason recorded:
+// that it ended first (it was called a timeout), or that it was still running when the
+// handshake timeout ran out, and then stopped. Either way its log is master.log: it was left as
+// .master.log.part and reported PARTIAL, though nothing failed to write (found by a docs
+// walkthrough).
 TEST_F(CliCan, MasterProgramProblems) {
   const Finished missing = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47603),
                                 "--set", "bus.master=/nonexistent/omni-master", "--out", (dir_ / "never").string()});
@@ -1236,7 +1240,28 @@ TEST_F(CliCan, MasterProgramProblems) {
                                out.string(), "--no-progress"});
   EXPECT_EQ(silent.code, 3) << silent.out << silent.err;
   const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "metrics.json"));
-  EXPECT_TRUE(contains(m.at("error").get<std::string>(), "did not connect")) << m.at("error");
+  EXPECT_TRUE(contains(m.at("error").get<std::string>(), "did not connect to the sim clock (it ended first: exit 1"))
+      << m.at("error");
+  EXPECT_FALSE(contains(silent.out, "PARTIAL")) << silent.out;
+  EXPECT_TRUE(fs::is_regular_file(out / "master.log"));
+  EXPECT_FALSE(fs::exists(out / ".master.log.part"));
+  EXPECT_TRUE(contains(read_bytes(out / "events.log"), "master      ended: exit 1")) << read_bytes(out / "events.log");
+  // Still running at the timeout: said so, and stopped at once (not after its 3 s grace).
+  const fs::path hang = dir_ / "hanging-master";
+  std::ofstream(hang) << "#!/bin/sh\nexec sleep 30\n";
+  fs::permissions(hang, fs::perms::owner_all);
+  const fs::path out2 = dir_ / "hang";
+  const auto t0 = std::chrono::steady_clock::now();
+  const Finished hung = run({"run", test_scenario("run_short_line.yaml"), "--bus", "can", "--set", transport(47604),
+                             "--set", "bus.master=" + hang.string(), "--set", "bus.handshake_timeout=1", "--out",
+                             out2.string(), "--no-progress"});
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(hung.code, 3) << hung.out << hung.err;
+  EXPECT_TRUE(contains(hung.out, "did not connect to the sim clock (none within 1 s; it was still running and was stopped"))
+      << hung.out;
+  EXPECT_TRUE(fs::is_regular_file(out2 / "master.log"));
+  EXPECT_FALSE(contains(hung.out, "PARTIAL")) << hung.out;
+  EXPECT_LT(took, 2.9) << hung.out;
 }
 
 // Found in review: a master that refused its configuration and exited was reported only as
