@@ -129,8 +129,10 @@ OutputPlan output_plan(const RunArgs& a, const Scenario& s) {
 // Renders and reports after the run; prints where they are. Returns false if one failed;
 // *bad_record (may be null) then says the video failed on a missing or malformed record.
 // `before_report` (may be empty) runs between the video and the report.
+// `earlier_signals_stop`: a signal that came before the rendering began stops it too (`render`,
+// which has no run before it; a run's own signal still lets the part recorded be rendered).
 bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<void()> before_report = {},
-                  bool* bad_record = nullptr) {
+                  bool* bad_record = nullptr, bool earlier_signals_stop = false) {
   plan.before_report = std::move(before_report);
   if (!plan.video && !plan.report) return true;
   if (plan.video)
@@ -141,6 +143,7 @@ bool make_outputs(const std::string& run_dir, OutputPlan plan, std::function<voi
   // still goes ahead, and a new signal stops it.
   g_render_stop.store(false);
   g_rendering.store(true);
+  if (earlier_signals_stop && g_signals.load() > 0) g_render_stop.store(true);  // after: none is missed
   const OutputsResult o = make_run_outputs(run_dir, plan, &g_render_stop);
   g_rendering.store(false);
   if (!o.video.empty())
@@ -528,13 +531,16 @@ int cmd_render(const std::string& run_dir, const std::string& out, const VideoSp
   plan.video_file = out;
   plan.video_spec = v;
   plan.report = report;
-  const int signals_before = g_signals.load();
   bool bad_record = false;
-  const bool ok = make_outputs(run_dir, plan, {}, &bad_record);
+  const bool ok = make_outputs(run_dir, plan, {}, &bad_record, true);
   // Ctrl-C or SIGTERM stops the rendering with a playable but shorter video: exit 3, as the
-  // README says for a signal in any phase (it was 0; found in review).
-  if (g_signals.load() > signals_before) {
-    std::cout << "  INTERRUPTED: the video holds the frames rendered so far\n";
+  // README says for a signal in any phase (it was 0; found in review). Any signal since main()
+  // began counts: one that came while the arguments were read was let through (exit 0, the
+  // whole video).
+  if (g_signals.load() > 0) {
+    std::error_code ec;
+    std::cout << (fs::exists(file, ec) ? "  INTERRUPTED: the video holds the frames rendered so far\n"
+                                       : "  INTERRUPTED: no video\n");
     return 3;
   }
   // A missing or malformed trajectory.csv or platform.xml is bad input (exit 2, as for a

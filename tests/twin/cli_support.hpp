@@ -18,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -234,6 +235,31 @@ inline bool wait_for_text(const fs::path& file, const std::string& text, Child& 
   for (int i = 0; i < 6000; ++i) {
     if (contains(read_bytes(file), text)) return true;
     if (!c.running()) return contains(read_bytes(file), text);
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+// The CPU time a process has used (user and system, all its threads) [s]; -1 once it is gone.
+inline double cpu_seconds(pid_t pid) {
+  const std::string stat = read_bytes("/proc/" + std::to_string(pid) + "/stat");
+  const std::size_t close = stat.rfind(')');  // the name may hold spaces and parentheses
+  if (close == std::string::npos) return -1;
+  std::istringstream fields(stat.substr(close + 2));
+  std::string f;
+  double ticks = 0;
+  for (int i = 3; fields >> f && i <= 15; ++i)  // fields 14 and 15: utime, stime
+    if (i >= 14) ticks += std::stod(f);
+  return ticks / static_cast<double>(::sysconf(_SC_CLK_TCK));
+}
+
+// Waits until the child has used `more` seconds of CPU beyond what it had used when called
+// (or it ends, or 60 s of wall time pass): a point in its work that a loaded machine moves in
+// wall time but not in CPU time (e.g. the first frames of a video rendered).
+inline bool wait_for_cpu(Child& c, double more) {
+  const double from = cpu_seconds(c.pid());
+  for (int i = 0; i < 6000 && c.running(); ++i) {
+    if (cpu_seconds(c.pid()) >= from + more) return true;
     std::this_thread::sleep_for(10ms);
   }
   return false;

@@ -177,7 +177,9 @@ TEST_F(CliTrust, ASignalInTheFirstMillisecondsGivesExit3) {
 // interrupted in the outputs phase, and the video is a finished MP4 of the frames so far.
 void expect_video_interrupt(const fs::path& io, const fs::path& out, Child& c, bool twice) {
   ASSERT_TRUE(wait_for_text(io / "stdout", "rendering the video", c)) << c.out() << c.err();
-  std::this_thread::sleep_for(1500ms);  // frames are being encoded
+  // Frames are being encoded: 1.5 s of CPU gives a dozen on this machine. It was 1.5 s of wall
+  // time, which a loaded machine spent before the first frame (a ctest run beside another job).
+  ASSERT_TRUE(wait_for_cpu(c, 1.5)) << c.out() << c.err();
   c.signal(SIGINT);
   if (twice) {
     std::this_thread::sleep_for(50ms);
@@ -231,10 +233,36 @@ TEST_F(CliTrust, SigintDuringRenderGivesExit3) {
             0);
   Child c({"render", run_out.string(), "--out", (dir_ / "r.mp4").string()}, work(), io());
   ASSERT_TRUE(wait_for_text(io() / "stdout", "rendering the video", c)) << c.out() << c.err();
-  std::this_thread::sleep_for(1500ms);
+  ASSERT_TRUE(wait_for_cpu(c, 1.5)) << c.out() << c.err();  // frames are being encoded (expect_video_interrupt)
   c.signal(SIGINT);
   EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
   EXPECT_TRUE(video_decodes(dir_ / "r.mp4"));
+}
+
+// A signal that comes before `render` has begun (here while the CLI's libraries load, held
+// pending by the launcher until the handlers exist) stops it too: exit 3 and no video. It was
+// let through (exit 0 and the whole video), as a signal before a run's outputs is meant to be.
+TEST_F(CliTrust, ASignalBeforeRenderBeginsStopsItToo) {
+  const fs::path run_out = dir_ / "early";
+  ASSERT_EQ(run({"run", test_scenario("run_short_line.yaml"), "--no-video", "--no-report", "--no-progress", "--out",
+                 run_out.string()})
+                .code,
+            0);
+  Child c({"render", run_out.string(), "--out", (dir_ / "e.mp4").string()}, work(), io());
+  // Once SIGTERM is blocked (the launcher, then the CLI until its handlers are in place).
+  bool blocked = false;
+  for (int i = 0; i < 2000 && !blocked && c.running(); ++i) {
+    const std::string status = read_bytes("/proc/" + std::to_string(c.pid()) + "/status");
+    const std::size_t at = status.find("SigBlk:\t");
+    blocked = at != std::string::npos && (std::stoull(status.substr(at + 8, 16), nullptr, 16) & (1ull << (SIGTERM - 1)));
+    if (!blocked) std::this_thread::sleep_for(1ms);
+  }
+  ASSERT_TRUE(blocked) << c.out() << c.err();
+  c.signal(SIGTERM);
+  EXPECT_EQ(c.wait(60s), 3) << c.out() << c.err();
+  EXPECT_TRUE(contains(c.out(), "INTERRUPTED: no video")) << c.out();
+  EXPECT_FALSE(fs::exists(dir_ / "e.mp4"));
+  EXPECT_FALSE(fs::exists(dir_ / ".e.mp4.part"));
 }
 
 // `render --out` naming a record of the run (or any file that is not a video) is bad usage,
