@@ -510,9 +510,17 @@ int run_drive(const Options& o) {
     }
     pty.wait(now, std::min({next, pty.next_due(), bus ? now + 200'000 : next}) - now);  // the CAN side: polled every 0.2 ms
   }
+  // Each drive on the line its own counts, and the relay what it carried (they were missing:
+  // a relayed or multi-drop exchange ended "0 messages handled"; found in a docs walkthrough).
   const DriveStats& s = drive.stats();
   fmt::print("omni-tml: drive end: {} messages handled, {} answers, {} checksum errors\n", s.handled, s.answers_sent,
              pty.checksum_errors());
+  for (std::size_t k = 0; k < drops.size(); ++k)
+    fmt::print("omni-tml: drive end, axis {} (drop): {} messages handled, {} answers\n", o.drops[k],
+               drops[k]->stats().handled, drops[k]->stats().answers_sent);
+  if (relay)
+    fmt::print("omni-tml: relay end: {} messages onto CAN, {} answers back to the host\n", relay->stats().to_can,
+               relay->stats().to_host);
   return kExitOk;
 }
 

@@ -7,7 +7,8 @@
 // --script with another bus or a directory. Each is exit 2 with a short message (3 for
 // --stats; 0 for the signal, as for any signal), within a second or two; --sim-clock with the wall clock
 // on every bus, and --stats on bus can. omni-tml send on CAN prints only the answer to its
-// query (not a running master's traffic), and names the recovery of its link. A signal in
+// query (not a running master's traffic), and names the recovery of its link; omni-tml drive
+// counts every drive on its line and its relay at the end. A signal in
 // lockstep: the Omni master's NMT stop goes out in the next granted tick. UDP ports
 // 48310-48320.
 #include <gtest/gtest.h>
@@ -309,6 +310,41 @@ TEST_F(ProgramsCli, TmlSendNamesTheSyncRecoveryOfItsLink) {
   EXPECT_EQ(r.code, 3) << r.out;
   EXPECT_TRUE(contains(r.out, "15 SYNC bytes sent, command sent again")) << r.out;
   EXPECT_FALSE(contains(r.out, "echo")) << r.out;
+}
+
+// `omni-tml drive`'s end counts each drive on its RS-485 line and what its RS-232 relay axis
+// carried to CAN. It said "0 messages handled" after exchanges with a dropped drive or through
+// the relay, counting only its own axis (found in a docs walkthrough).
+TEST_F(ProgramsCli, TmlDriveEndCountsEveryDriveOnTheLineAndTheRelay) {
+  // The pseudo-terminal the drive named in its first line, "… on /dev/pts/N[,| ]…".
+  const auto port_of = [](const std::string& banner) {
+    const std::size_t on = banner.find(" on /dev/pts/");
+    return on == std::string::npos ? std::string() : banner.substr(on + 4, banner.find_first_of(", ", on + 4) - on - 4);
+  };
+  Child line(binary_path("controller/omni-tml"),
+             {"drive", "-p", "rs485", "--axis", "1", "--host", "15", "--drop", "3", "--duration", "1.5"}, dir_.path(),
+             dir_.path(), "line-");
+  line.wait_for_output("Ctrl-C ends");
+  const std::string port = port_of(line.out());
+  ASSERT_FALSE(port.empty()) << line.out() << line.err();
+  const Result dropped = run("omni-tml", {"send", "-p", "rs485", "--port", port, "--axis", "3", "--host", "15",
+                                          "--timeout-ms", "500", "?KPP"});
+  EXPECT_EQ(dropped.code, 0) << dropped.out << dropped.err;
+  EXPECT_EQ(line.wait(10s), 0) << line.out() << line.err();
+  EXPECT_TRUE(contains(line.out(), "omni-tml: drive end, axis 3 (drop): 1 messages handled, 1 answers")) << line.out();
+  // The relay: a write for axis 7 goes onto CAN (nobody answers there).
+  Child relay(binary_path("controller/omni-tml"),
+              {"drive", "-p", "rs232", "--axis", "20", "--host", "20", "--relay", "udp:239.74.163.9:48319", "--duration",
+               "1.5"},
+              dir_.path(), dir_.path(), "relay-");
+  relay.wait_for_output("Ctrl-C ends");
+  const std::string port2 = port_of(relay.out());
+  ASSERT_FALSE(port2.empty()) << relay.out() << relay.err();
+  const Result relayed = run("omni-tml", {"send", "-p", "rs232", "--port", port2, "--axis", "7", "--host", "20",
+                                          "--timeout-ms", "300", "KPP=5"});
+  EXPECT_EQ(relayed.code, 0) << relayed.out << relayed.err;
+  EXPECT_EQ(relay.wait(10s), 0) << relay.out() << relay.err();
+  EXPECT_TRUE(contains(relay.out(), "omni-tml: relay end: 1 messages onto CAN")) << relay.out();
 }
 
 }  // namespace
