@@ -216,6 +216,21 @@ void print_summary(const RunResult& r) {
                              rt.value("scheduling", "?"), rt.value("ticks", 0), rt.value("overruns", 0), rt.value("jitter_mean_us", 0.0),
                              rt.value("jitter_p99_us", 0.0), rt.value("jitter_max_us", 0.0));
   }
+  // The master's state and stop reason: the sim clock's report; for a master on its own clock
+  // (realtime, or a program of the user's), what it wrote to master-stats.json at its exit, or
+  // that it reports none ("unreported (unreported)" before).
+  const auto master_state = [](const nlohmann::json& ms) {
+    const auto text = [&ms](const char* k) { return ms.contains(k) && ms[k].is_string() ? ms[k].get<std::string>() : "?"; };
+    if (text("state") != "unreported") return fmt::format("{} ({})", text("state"), text("stop_reason"));
+    // Each master names these its own way: state (EtherCAT, M-III) or phase (CANopen, TML);
+    // stop_reason (EtherCAT), reason (CANopen) or why (M-III), where empty is none.
+    const char* state = ms.contains("stats_state") ? "stats_state" : ms.contains("phase") ? "phase" : nullptr;
+    if (!state) return std::string("on its own clock (state not reported)");
+    for (const char* k : {"stats_stop_reason", "reason", "why"})
+      if (ms.contains(k) && ms[k].is_string())
+        return fmt::format("{} ({}; from its own stats at its exit)", text(state), text(k).empty() ? "none" : text(k));
+    return fmt::format("{} (from its own stats at its exit)", text(state));
+  };
   // A master's own counter as metrics.json holds it; "?" where it has none (a master the twin
   // did not start, or one that keeps no counters: zeros were printed as if counted).
   const auto counter = [](const nlohmann::json& ms, const char* k) {
@@ -224,9 +239,9 @@ void print_summary(const RunResult& r) {
   if (m.contains("master") && m["bus"].value("name", "") == "ethercat") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
-    std::cout << fmt::format("  master {} ({}), {}; {} cycles, WKC errors {}, lost frames {}, recoveries {}; "
+    std::cout << fmt::format("  master {}, {}; {} cycles, WKC errors {}, lost frames {}, recoveries {}; "
                              "segment {} frames in, {} returned, {} lost\n",
-                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             master_state(ms), ms.value("exit", "?"),
                              counter(ms, "cycles"), counter(ms, "wkc_errors"), counter(ms, "lost_frames"),
                              counter(ms, "recoveries"), b.value("frames_rx", 0), b.value("frames_tx", 0),
                              b.value("dropouts", 0));
@@ -241,9 +256,9 @@ void print_summary(const RunResult& r) {
       late += sl.value("late", std::uint64_t{0});
     }
     const auto sum = [counted](std::uint64_t n) { return counted ? std::to_string(n) : std::string("?"); };
-    std::cout << fmt::format("  master {} ({}), {}; {} cycles, retries {}, missed {}, late {}; "
+    std::cout << fmt::format("  master {}, {}; {} cycles, retries {}, missed {}, late {}; "
                              "line {} frames in, {} answered, {} lost, {} corrupted\n",
-                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             master_state(ms), ms.value("exit", "?"),
                              counter(ms, "cycles"), sum(retries), sum(missed), sum(late), b.value("frames_rx", 0),
                              b.value("frames_tx", 0), b.value("lost_frames", 0), b.value("corrupted_frames", 0));
     // A master on the wall clock that the host stalled: its late SYNCs explain the servos' alarms.
@@ -254,23 +269,23 @@ void print_summary(const RunResult& r) {
   } else if (m.contains("master") && m["bus"].value("name", "") == "canopen") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
-    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} % (budget {:.1f} %), "
+    std::cout << fmt::format("  master {}, {}; bus {} frames, {} error frames, load {:.1f} % (budget {:.1f} %), "
                              "EMCY {}, SDO aborts {}\n",
-                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+                             master_state(ms), ms.value("exit", "?"),
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              100.0 * b.value("load_budget", 0.0), b.value("emcy", 0), b.value("sdo_aborts", 0));
   } else if (m.contains("master") && m["bus"].value("name", "") == "tml") {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
-    std::cout << fmt::format("  master {} ({}), {}; {} bus {} frames, {} error frames, load {:.1f} %, answers {}, axes lost {}\n",
-                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+    std::cout << fmt::format("  master {}, {}; {} bus {} frames, {} error frames, load {:.1f} %, answers {}, axes lost {}\n",
+                             master_state(ms), ms.value("exit", "?"),
                              b.value("protocol", "?"), b.value("frames", 0), b.value("error_frames", 0),
                              100.0 * b.value("load", 0.0), counter(ms, "answers"), counter(ms, "axes_lost"));
   } else if (m.contains("master")) {
     const auto& ms = m["master"];
     const auto& b = m["bus"];
-    std::cout << fmt::format("  master {} ({}), {}; bus {} frames, {} error frames, load {:.1f} %, dropouts {} ({:.2f} %)\n",
-                             ms.value("state", "?"), ms.value("stop_reason", "?"), ms.value("exit", "?"),
+    std::cout << fmt::format("  master {}, {}; bus {} frames, {} error frames, load {:.1f} %, dropouts {} ({:.2f} %)\n",
+                             master_state(ms), ms.value("exit", "?"),
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              b.value("dropouts", 0), 100.0 * b.value("dropout_rate", 0.0));
   }
