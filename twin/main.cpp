@@ -203,13 +203,17 @@ void print_summary(const RunResult& r) {
                            m.value("sim_time_s", 0.0), m.value("wall_time_s", 0.0),
                            m.value("real_time_factor", 0.0));
   const auto& p = m["platform"];
-  // A figure without samples is null in metrics.json: printed as nan.
+  // A figure without samples is null in metrics.json: printed as nan, and a run that ended
+  // before its first sample says so instead of four nans.
   const auto figure = [&p](const char* k) {
     return p.contains(k) && p[k].is_number() ? p[k].get<double>() : std::nan("");
   };
-  std::cout << fmt::format("  final error {:.3f} cm, max error {:.3f} cm, IAE contour {:.1f} cm, sigma contour {:.3f} cm\n",
-                           figure("final_error_cm"), figure("max_error_cm"), figure("iae_contour_cm"),
-                           figure("std_contour_cm"));
+  if (std::isnan(figure("final_error_cm")) && std::isnan(figure("max_error_cm")))
+    std::cout << "  no pose error: the run ended before its first control sample\n";
+  else
+    std::cout << fmt::format("  final error {:.3f} cm, max error {:.3f} cm, IAE contour {:.1f} cm, sigma contour {:.3f} cm\n",
+                             figure("final_error_cm"), figure("max_error_cm"), figure("iae_contour_cm"),
+                             figure("std_contour_cm"));
   if (m.contains("realtime")) {
     const auto& rt = m["realtime"];
     std::cout << fmt::format("  realtime ({}): {} ticks, {} overruns, jitter mean {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",

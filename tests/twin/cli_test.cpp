@@ -1246,6 +1246,9 @@ TEST_F(CliCan, MasterProgramProblems) {
   EXPECT_TRUE(contains(m.at("error").get<std::string>(), "did not connect to the sim clock (it ended first: exit 1"))
       << m.at("error");
   EXPECT_FALSE(contains(silent.out, "PARTIAL")) << silent.out;
+  // No sample was taken: the summary says so, not "final error nan cm, …".
+  EXPECT_TRUE(contains(silent.out, "no pose error: the run ended before its first control sample")) << silent.out;
+  EXPECT_FALSE(contains(silent.out, "nan cm")) << silent.out;
   EXPECT_TRUE(fs::is_regular_file(out / "master.log"));
   EXPECT_FALSE(fs::exists(out / ".master.log.part"));
   EXPECT_TRUE(contains(read_bytes(out / "events.log"), "master      ended: exit 1")) << read_bytes(out / "events.log");
