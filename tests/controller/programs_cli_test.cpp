@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -316,35 +317,33 @@ TEST_F(ProgramsCli, TmlSendNamesTheSyncRecoveryOfItsLink) {
 // carried to CAN. It said "0 messages handled" after exchanges with a dropped drive or through
 // the relay, counting only its own axis (found in a docs walkthrough).
 TEST_F(ProgramsCli, TmlDriveEndCountsEveryDriveOnTheLineAndTheRelay) {
-  // The pseudo-terminal the drive named in its first line, "… on /dev/pts/N[,| ]…".
-  const auto port_of = [](const std::string& banner) {
+  // A drive for 1.5 s, and the pseudo-terminal it names in its first line ("… on /dev/pts/N…").
+  const auto start_drive = [this](std::vector<std::string> args, const std::string& tag, std::string& port) {
+    args.insert(args.end(), {"--duration", "1.5"});
+    auto c = std::make_unique<Child>(binary_path("controller/omni-tml"), args, dir_.path(), dir_.path(), tag);
+    c->wait_for_output("Ctrl-C ends");
+    const std::string banner = c->out();
     const std::size_t on = banner.find(" on /dev/pts/");
-    return on == std::string::npos ? std::string() : banner.substr(on + 4, banner.find_first_of(", ", on + 4) - on - 4);
+    port = on == std::string::npos ? "" : banner.substr(on + 4, banner.find_first_of(", ", on + 4) - on - 4);
+    return c;
   };
-  Child line(binary_path("controller/omni-tml"),
-             {"drive", "-p", "rs485", "--axis", "1", "--host", "15", "--drop", "3", "--duration", "1.5"}, dir_.path(),
-             dir_.path(), "line-");
-  line.wait_for_output("Ctrl-C ends");
-  const std::string port = port_of(line.out());
-  ASSERT_FALSE(port.empty()) << line.out() << line.err();
+  std::string port;
+  const auto line = start_drive({"drive", "-p", "rs485", "--axis", "1", "--host", "15", "--drop", "3"}, "line-", port);
+  ASSERT_FALSE(port.empty()) << line->out() << line->err();
   const Result dropped = run("omni-tml", {"send", "-p", "rs485", "--port", port, "--axis", "3", "--host", "15",
                                           "--timeout-ms", "500", "?KPP"});
   EXPECT_EQ(dropped.code, 0) << dropped.out << dropped.err;
-  EXPECT_EQ(line.wait(10s), 0) << line.out() << line.err();
-  EXPECT_TRUE(contains(line.out(), "omni-tml: drive end, axis 3 (drop): 1 messages handled, 1 answers")) << line.out();
+  EXPECT_EQ(line->wait(10s), 0) << line->out() << line->err();
+  EXPECT_TRUE(contains(line->out(), "omni-tml: drive end, axis 3 (drop): 1 messages handled, 1 answers")) << line->out();
   // The relay: a write for axis 7 goes onto CAN (nobody answers there).
-  Child relay(binary_path("controller/omni-tml"),
-              {"drive", "-p", "rs232", "--axis", "20", "--host", "20", "--relay", "udp:239.74.163.9:48319", "--duration",
-               "1.5"},
-              dir_.path(), dir_.path(), "relay-");
-  relay.wait_for_output("Ctrl-C ends");
-  const std::string port2 = port_of(relay.out());
-  ASSERT_FALSE(port2.empty()) << relay.out() << relay.err();
-  const Result relayed = run("omni-tml", {"send", "-p", "rs232", "--port", port2, "--axis", "7", "--host", "20",
+  const auto relay = start_drive(
+      {"drive", "-p", "rs232", "--axis", "20", "--host", "20", "--relay", "udp:239.74.163.9:48319"}, "relay-", port);
+  ASSERT_FALSE(port.empty()) << relay->out() << relay->err();
+  const Result relayed = run("omni-tml", {"send", "-p", "rs232", "--port", port, "--axis", "7", "--host", "20",
                                           "--timeout-ms", "300", "KPP=5"});
   EXPECT_EQ(relayed.code, 0) << relayed.out << relayed.err;
-  EXPECT_EQ(relay.wait(10s), 0) << relay.out() << relay.err();
-  EXPECT_TRUE(contains(relay.out(), "omni-tml: relay end: 1 messages onto CAN")) << relay.out();
+  EXPECT_EQ(relay->wait(10s), 0) << relay->out() << relay->err();
+  EXPECT_TRUE(contains(relay->out(), "omni-tml: relay end: 1 messages onto CAN")) << relay->out();
 }
 
 }  // namespace
