@@ -24,7 +24,10 @@ std::optional<ProcessEntry> process_entry(pid_t pid) {
   p.pid = pid;
   rest >> p.state >> p.ppid;
   std::string skip;
-  for (int field = 5; field < 22 && rest; ++field) rest >> skip;  // pgrp … itrealvalue
+  for (int field = 5; field < 22 && rest; ++field) {  // pgrp … itrealvalue
+    rest >> skip;
+    if ((field == 14 || field == 15) && rest) p.cpu += std::stoull(skip);  // utime, stime
+  }
   rest >> p.start;
   return p;
 }

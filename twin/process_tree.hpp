@@ -14,11 +14,13 @@
 namespace omnitwin::twin {
 
 // A process as /proc/PID/stat has it: its parent, state and start time (clock ticks after
-// boot: with the pid, who it is, so that a pid taken again is never mistaken for it).
+// boot: with the pid, who it is, so that a pid taken again is never mistaken for it), and the
+// CPU time it has used, user and system, all its threads [clock ticks].
 struct ProcessEntry {
   pid_t pid = 0, ppid = 0;
   char state = 0;
   unsigned long long start = 0;
+  unsigned long long cpu = 0;
 };
 
 // One process as /proc/PID/stat has it; none when it has no entry (gone).

@@ -18,7 +18,6 @@
 #include <cstring>
 #include <filesystem>
 #include <regex>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -242,15 +241,8 @@ inline bool wait_for_text(const fs::path& file, const std::string& text, Child& 
 
 // The CPU time a process has used (user and system, all its threads) [s]; -1 once it is gone.
 inline double cpu_seconds(pid_t pid) {
-  const std::string stat = read_bytes("/proc/" + std::to_string(pid) + "/stat");
-  const std::size_t close = stat.rfind(')');  // the name may hold spaces and parentheses
-  if (close == std::string::npos) return -1;
-  std::istringstream fields(stat.substr(close + 2));
-  std::string f;
-  double ticks = 0;
-  for (int i = 3; fields >> f && i <= 15; ++i)  // fields 14 and 15: utime, stime
-    if (i >= 14) ticks += std::stod(f);
-  return ticks / static_cast<double>(::sysconf(_SC_CLK_TCK));
+  const auto p = omnitwin::twin::process_entry(pid);
+  return p ? static_cast<double>(p->cpu) / static_cast<double>(::sysconf(_SC_CLK_TCK)) : -1;
 }
 
 // Waits until the child has used `more` seconds of CPU beyond what it had used when called

@@ -1,5 +1,6 @@
 // Tests twin/process_tree: the process table from /proc (this process and its parent in it,
-// one entry read alone, none for a pid that cannot exist) and the walks over it (descendants
+// one entry read alone, none for a pid that cannot exist; its CPU time grows as it works) and
+// the walks over it (descendants
 // over generations without zombies; a pid taken again is another process).
 #include "twin/process_tree.hpp"
 
@@ -36,6 +37,17 @@ TEST(ProcessTree, TheTableAndOneEntryHoldThisProcessAndItsParent) {
   ASSERT_TRUE(me.has_value());
   EXPECT_TRUE(alive_in(*me, all));
   EXPECT_FALSE(process_entry(1 << 23).has_value());
+}
+
+TEST(ProcessTree, AnEntrysCpuTimeGrowsAsTheProcessWorks) {
+  const unsigned long long before = process_entry(::getpid())->cpu;
+  const unsigned long long tick = static_cast<unsigned long long>(::sysconf(_SC_CLK_TCK));
+  volatile unsigned long long sink = 0;
+  // Work until the kernel has counted at least five more ticks, or 5 s of work.
+  for (int round = 0; round < 5000 && process_entry(::getpid())->cpu < before + 5; ++round)
+    for (int i = 0; i < 200000; ++i) sink = sink + static_cast<unsigned long long>(i);
+  const unsigned long long after = process_entry(::getpid())->cpu;
+  EXPECT_GE(after, before + 5) << "ticks of " << 1.0 / static_cast<double>(tick) << " s";
 }
 
 }  // namespace
