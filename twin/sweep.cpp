@@ -330,9 +330,9 @@ std::string clear_points(const fs::path& out) {
 }
 
 // sweep.csv over every point's point.json and metrics.json; returns how many points lack a
-// result or failed to run. `notes` (if given) gets each distinct note of the points' point.json
-// with how many points gave it and the first of them.
-int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, std::pair<int, std::size_t>>* notes) {
+// result or failed to run. `notes` gets each distinct note of the points' point.json with how
+// many points gave it and the first of them.
+int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, std::pair<int, std::size_t>>& notes) {
   std::ofstream f(out / "sweep.csv");
   f << "point";
   for (const auto& p : s.params) f << "," << csv_field(p);
@@ -348,9 +348,8 @@ int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, s
       pj = {{"exit_code", 3}, {"passed", false}};  // no result: the task never ran
     }
     const int code = pj.value("exit_code", 3);
-    if (notes && pj.contains("notes") && pj["notes"].is_array())
-      for (const auto& n : pj["notes"])
-        if (n.is_string()) notes->try_emplace(n.get<std::string>(), 0, k).first->second.first++;
+    for (const auto& n : pj.value("notes", nlohmann::json::array()))
+      if (n.is_string()) notes.try_emplace(n.get<std::string>(), 0, k).first->second.first++;
     // Metrics only of a point that ran (clear_points() removed what an earlier sweep left).
     try {
       mj = code <= 1 ? nlohmann::json::parse(std::ifstream(d / "metrics.json")) : nlohmann::json::object();
@@ -457,7 +456,7 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
     run_local(s, out, opt);
   }
   std::map<std::string, std::pair<int, std::size_t>> notes;
-  const int bad_points = write_table(s, out, &notes);
+  const int bad_points = write_table(s, out, notes);
   // The tasks said theirs in their Slurm logs only; a local sweep said each as it came.
   if (opt.slurm)
     for (const auto& [note, seen] : notes)
