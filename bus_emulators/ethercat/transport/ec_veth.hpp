@@ -10,7 +10,8 @@
 // ran) is deleted by the next VethPair made in the same PID namespace (sweep_stale()), so killed
 // runs do not pile up interfaces. A pair of another PID namespace (a container sharing the
 // host's network) is never judged: its pid means nothing here. Both ends are brought up with IPv6 disabled on them (no router
-// solicitations or DAD frames on the wire). The destructor deletes the pair (deleting one end
+// solicitations or DAD frames on the wire), and the constructor returns once the kernel has
+// them operationally up with their queue discipline (before that, frames sent are dropped). The destructor deletes the pair (deleting one end
 // deletes both), also when the test fails, since a failed assertion returns from the test body
 // and unwinds the fixture.
 //
@@ -29,12 +30,14 @@
 
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 namespace omnitwin::ethercat {
 
@@ -65,6 +68,10 @@ class VethPair {
         run(ip() + " link del " + a_);
         throw std::runtime_error("cannot bring up " + n + ": " + *err);
       }
+    }
+    if (const auto err = wait_until_ready()) {
+      run(ip() + " link del " + a_);
+      throw std::runtime_error("veth pair " + a_ + "/" + b_ + " did not come up: " + *err);
     }
   }
   ~VethPair() { run(ip() + " link del " + a_); }
@@ -107,18 +114,54 @@ class VethPair {
   }
 
  private:
+  // Waits (up to 5 s) until both ends are operationally up and have their transmit queue
+  // discipline. `ip link set up` returns before the kernel's link-watch work has run; until it
+  // runs an end keeps the "noop" qdisc, which drops every frame sent through it (a packet socket
+  // without qdisc bypass), so a test's or master's first frames could vanish when that work is
+  // held up (other processes adding and deleting interfaces under the same lock). Nothing when
+  // ready, else what was last seen.
+  std::optional<std::string> wait_until_ready() const {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    std::string seen;
+    for (;;) {
+      seen.clear();
+      bool ready = true;
+      for (const std::string& n : {a_, b_}) {
+        std::string state;
+        std::getline(std::ifstream("/sys/class/net/" + n + "/operstate"), state);
+        std::string link;
+        if (state == "up") capture(ip() + " -o link show dev " + n, link);
+        const bool no_qdisc = link.empty() || link.find("qdisc noop") != std::string::npos;
+        if (state != "up" || no_qdisc) ready = false;
+        seen += n + ": operstate " + (state.empty() ? "?" : state) + (state == "up" && no_qdisc ? ", qdisc noop; " : "; ");
+      }
+      if (ready) return std::nullopt;
+      if (std::chrono::steady_clock::now() > deadline) return seen;
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  }
+
   // Runs a shell command (our own names and addresses only: no quoting needed); nothing on
   // success, else its output and exit status.
   static std::optional<std::string> run(const std::string& cmd) {
-    FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
-    if (!p) return "popen failed for: " + cmd;
     std::string out;
-    std::array<char, 256> buf{};
-    while (std::fgets(buf.data(), static_cast<int>(buf.size()), p)) out += buf.data();
-    const int status = ::pclose(p);
+    const int status = capture(cmd, out);
     if (status == 0) return std::nullopt;
     while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
     return "'" + cmd + "' failed (status " + std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "): " + out;
+  }
+
+  // Runs a shell command, its output (stdout and stderr) into `out`; returns pclose's status
+  // (-1 when it could not start).
+  static int capture(const std::string& cmd, std::string& out) {
+    FILE* p = ::popen((cmd + " 2>&1").c_str(), "r");
+    if (!p) {
+      out = "popen failed for: " + cmd;
+      return -1;
+    }
+    std::array<char, 256> buf{};
+    while (std::fgets(buf.data(), static_cast<int>(buf.size()), p)) out += buf.data();
+    return ::pclose(p);
   }
 
   // The `ip` program's path (PATH may lack the sbin folders), "ip" when none was found.

@@ -1,5 +1,6 @@
 // Tests bus_emulators/ethercat/transport/ec_veth.hpp: a VethPair creates two connected, up
-// interfaces with unique names of at most 15 characters and IPv6 off, and deletes them when it goes away (also when
+// interfaces (up as the kernel sees it: operstate up and a queue discipline, so the first frame
+// sent is not dropped) with unique names of at most 15 characters and IPv6 off, and deletes them when it goes away (also when
 // the test using it fails: destruction is all it takes); a pair left by a process that is gone
 // (SIGKILL) is deleted by the next one made, a live process's is not.
 #include "tests/support/veth.hpp"
@@ -10,6 +11,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -17,6 +19,17 @@
 
 namespace omnitwin::testing {
 namespace {
+
+// The output of a shell command.
+std::string output_of(const std::string& cmd) {
+  std::string out;
+  if (FILE* p = ::popen((cmd + " 2>&1").c_str(), "r")) {
+    char buf[256];
+    while (std::fgets(buf, sizeof buf, p)) out += buf;
+    ::pclose(p);
+  }
+  return out;
+}
 
 std::string read_line(const std::string& path) {
   std::ifstream f(path);
@@ -45,6 +58,11 @@ TEST(VethPair, CreatedUpUniqueAndGoneAfterwards) {
     EXPECT_EQ(read_line("/sys/class/net/" + b + "/iflink"), read_line("/sys/class/net/" + a + "/ifindex"));
     EXPECT_EQ(read_line("/sys/class/net/" + a + "/operstate"), "up");
     EXPECT_EQ(read_line("/sys/class/net/" + b + "/operstate"), "up");
+    for (const std::string& n : {a, b}) {  // the kernel's "noop" until its link-watch work ran
+      const std::string link = output_of("PATH=/usr/sbin:/sbin:$PATH ip -o link show dev " + n);
+      EXPECT_NE(link.find(" qdisc "), std::string::npos) << link;
+      EXPECT_EQ(link.find("qdisc noop"), std::string::npos) << link;
+    }
     if (std::filesystem::exists("/proc/sys/net/ipv6")) {  // only where the kernel has IPv6
       EXPECT_EQ(read_line("/proc/sys/net/ipv6/conf/" + a + "/disable_ipv6"), "1");
       EXPECT_EQ(read_line("/proc/sys/net/ipv6/conf/" + b + "/disable_ipv6"), "1");
