@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <fstream>
 #include <optional>
 #include <thread>
 #include <vector>
@@ -109,6 +110,21 @@ class Wire {
  private:
   int fd_ = -1;
 };
+
+// An interface's kernel counters, for failure messages: where a frame that never came was lost.
+std::string counters(const std::string& ifname) {
+  std::string out = ifname + ":";
+  for (const char* c : {"tx_packets", "tx_dropped", "rx_packets", "rx_dropped"}) {
+    std::ifstream f("/sys/class/net/" + ifname + "/statistics/" + c);
+    std::string v;
+    std::getline(f, v);
+    out += std::string(" ") + c + " " + v;
+  }
+  std::ifstream f("/sys/class/net/" + ifname + "/operstate");
+  std::string state;
+  std::getline(f, state);
+  return out + ", operstate " + state;
+}
 
 class M3RawTransport : public ::testing::Test {
  protected:
@@ -271,7 +287,9 @@ TEST_F(M3RawTransport, ForeignAndMalformedFramesAreDroppedAndCounted) {
     const auto good = command(48);
     inject_bad_then_good(wire_a, good);
     std::array<std::uint8_t, kMaxFrame> buf{};
-    ASSERT_EQ(slaves.receive(buf, 1s), static_cast<int>(good.size()));
+    ASSERT_EQ(slaves.receive(buf, 1s), static_cast<int>(good.size()))
+        << "dropped here: " << slaves.stats().dropped_malformed << " malformed, " << slaves.stats().dropped_foreign
+        << " foreign; " << counters(veth_->a()) << "; " << counters(veth_->b());
     EXPECT_TRUE(std::equal(good.begin(), good.end(), buf.begin()));
     EXPECT_EQ(slaves.receive(buf, 100ms), 0);
     const auto s = slaves.stats();
