@@ -391,15 +391,22 @@ namespace {
 // The index page, the summary line, the JUnit report and the exit code of a check (or merge).
 int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
                  const CheckOptions& opt) {
-  int passed = 0, failed = 0;
-  for (const JunitCase& c : cases) (c.passed ? passed : failed)++;
+  // Failed counts every case that did not pass; of those, the ones that could not run (bad
+  // input, a runtime failure: JUnit's errors) are named apart, so "failed" is never read as
+  // "expectations not met" alone.
+  int passed = 0, failed = 0, could_not_run = 0;
+  for (const JunitCase& c : cases) {
+    (c.passed ? passed : failed)++;
+    if (!c.passed && c.error) ++could_not_run;
+  }
   // The index first: the summary stays the last line, where CI logs show it.
   std::string index_error;
   if (opt.report) {
     index_error = write_check_index(opt.out_root, "omnitwin check", index);
     if (index_error.empty()) std::cout << "index: " << (fs::path(opt.out_root) / "index.html").string() << "\n";
   }
-  std::cout << passed << " passed, " << failed << " failed\n";
+  std::cout << passed << " passed, " << failed << " failed"
+            << (could_not_run ? fmt::format(" ({} of them could not run)", could_not_run) : "") << "\n";
   if (!index_error.empty()) {
     std::cerr << "omnitwin check: cannot write the index page: " << index_error << "\n";
     return 3;

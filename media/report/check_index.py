@@ -114,6 +114,8 @@ def build_page(summary, index_dir):
     results = [r for r in summary["results"] if isinstance(r, dict)]
     passed = sum(1 for r in results if status_of(r) == "PASS")
     failed = len(results) - passed
+    errors = sum(1 for r in results if status_of(r) == "ERROR")
+    could_not_run = f" ({errors} of them could not run)" if errors else ""
     head = "".join(f"<th>{esc(h)}</th>" for h in
                    ["status", "scenario", "file"] + [k for k, _ in KEY_METRICS]
                    + ["exit", "failures"])
@@ -122,7 +124,7 @@ def build_page(summary, index_dir):
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>{esc(title)}</title><style>{CSS}</style></head>\n<body>\n"
             f"<h1>{esc(title)}</h1>\n<div class=\"totals {cls}\">{passed} passed, {failed} failed"
-            f"</div>\n<table><tr>{head}</tr>\n{rows}</table>\n</body></html>\n")
+            f"{could_not_run}</div>\n<table><tr>{head}</tr>\n{rows}</table>\n</body></html>\n")
 
 
 def write_atomic(path, text):

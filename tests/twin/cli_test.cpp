@@ -376,7 +376,8 @@ TEST_F(CliCheck, VideoSaysWhichGlDrewIt) {
 }
 
 // A directory holding a bad scenario: check exits 2 and the bad file is an <error> case
-// (errors="1") naming its line and key, while the good one still runs and passes.
+// (errors="1") naming its line and key, while the good one still runs and passes; the summary
+// line and the index page say that the failed case could not run.
 TEST_F(CliCheck, BadScenarioIsAnError) {
   const fs::path scenarios = scenario_dir(dir_, "scenarios", {"bad_unknown_top.yaml", "run_short_line.yaml"});
   const fs::path junit = dir_ / "report.xml";
@@ -384,13 +385,14 @@ TEST_F(CliCheck, BadScenarioIsAnError) {
   EXPECT_EQ(f.code, 2) << f.out << f.err;
   const auto lines = lines_of(f.out);
   ASSERT_FALSE(lines.empty());
-  EXPECT_EQ(lines.back(), "1 passed, 1 failed");
+  EXPECT_EQ(lines.back(), "1 passed, 1 failed (1 of them could not run)");
   EXPECT_TRUE(contains(f.out, "ERROR bad_unknown_top")) << f.out;
   const std::string xml = read_bytes(junit);
   EXPECT_TRUE(contains(xml, "tests=\"2\" failures=\"0\" errors=\"1\"")) << xml;
   EXPECT_TRUE(contains(xml, "<error message=\"" + (scenarios / "bad_unknown_top.yaml").string() + ":4: setle:"))
       << xml;
   EXPECT_FALSE(fs::exists(dir_ / "runs/bad_unknown_top"));
+  EXPECT_TRUE(contains(read_bytes(dir_ / "runs/index.html"), "1 passed, 1 failed (1 of them could not run)"));
 }
 
 // A bad scenario file and a run that could not finish in one suite: exit 3 (no verdict, the
@@ -417,7 +419,7 @@ TEST_F(CliCheck, DuplicateScenarioNamesAreAnError) {
   EXPECT_EQ(f.code, 2) << f.out << f.err;
   EXPECT_TRUE(contains(f.out, "ERROR")) << f.out;
   EXPECT_TRUE(contains(f.out, "is already the name of " + (scenarios / "run_short_line.yaml").string())) << f.out;
-  EXPECT_EQ(lines_of(f.out).back(), "1 passed, 1 failed");
+  EXPECT_EQ(lines_of(f.out).back(), "1 passed, 1 failed (1 of them could not run)");
 }
 
 // A --junit FILE that cannot be written (its directory does not exist) ends `check` with a
