@@ -131,6 +131,16 @@ class Runner {
     return started_ ? "running" : "starting";
   }
 
+  // Why the program stopped, as the sim clock's report names it and with what: "" while it
+  // has not stopped (running, finished), else e.g. "feedback_missing: axis 2 (…)" — for
+  // --stats, where a master on its own clock (realtime) reports its end.
+  std::string stop_reason() const {
+    const simclock::MasterReport r = report();
+    if (r.state != simclock::MasterState::stopped) return "";
+    std::string what = failure_.value_or(halted_ ? halt_detail_ : master_->why());
+    return what.empty() ? simclock::to_string(r.reason) : fmt::format("{}: {}", simclock::to_string(r.reason), what);
+  }
+
   simclock::MasterReport report() const {
     simclock::MasterReport r;
     if (failed()) {
@@ -174,7 +184,7 @@ class Runner {
                         {"bad", c.bad}, {"axis_step", to_string(a.step())}, {"recoveries", a.recoveries()},
                         {"device", a.device()}});
     }
-    return {{"driver_state", to_string(m.state())}, {"state", state()}, {"why", m.why()},
+    return {{"driver_state", to_string(m.state())}, {"state", state()}, {"stop_reason", stop_reason()}, {"why", m.why()},
             {"failure", failure_.value_or("")}, {"cycles", m.cycles()}, {"cycle_ns", std::llround(pc_.cycle * 1e9)},
             {"int_offset_ns", m.int_offset_ns()}, {"min_cycle_ns", m.min_cycle_ns()},
             {"foreign_master_frames", m.foreign_master_frames()}, {"platform_stopped", halted_},
@@ -229,12 +239,14 @@ class Runner {
   void halt(int k, SimTime t) {
     halted_ = true;
     lost_axis_ = k;
+    halt_detail_ = fmt::format("axis {} lost ({}, {} cycles without a response)", k + 1, to_string(axis(k).step()),
+                               misses_[static_cast<std::size_t>(k)]);
     const controller::WheelCounts c = counts();
     for (std::size_t i = 0; i < 4; ++i) target_[i] = c[i];
     command({0, 0, 0, 0});
     for (auto& a : axes_) a.hold();
-    spdlog::error("{} {} stopped: axis {} lost ({}, {} cycles without a response); wheels commanded to zero", stamp(t),
-                  loop_ ? "platform loop" : "servos", k + 1, to_string(axis(k).step()), misses_[static_cast<std::size_t>(k)]);
+    spdlog::error("{} {} stopped: {}; wheels commanded to zero", stamp(t), loop_ ? "platform loop" : "servos",
+                  halt_detail_);
   }
   // Without a platform loop (servos only, commissioning): running once every servo is on;
   // then a lost axis (the line gone, a servo off) stops them all, as the loop would.
@@ -304,6 +316,7 @@ class Runner {
   int lost_axis_ = -1;
   SimTime start_ns_ = 0, origin_ = -1;
   std::optional<std::string> failure_;
+  std::string halt_detail_;  // which axis was lost and how, once halted
 };
 
 void log_shutdown(const Runner& r) {

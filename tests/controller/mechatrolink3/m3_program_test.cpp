@@ -28,6 +28,8 @@
 #include "controller/sim_clock.hpp"
 #include "tests/support/temp_dir.hpp"
 
+#include <nlohmann/json.hpp>
+
 namespace omnitwin::m3 {
 namespace {
 
@@ -104,16 +106,18 @@ class WallTwin {
 
 // The twin's side in lockstep: a sim-clock server granting 1 ms ticks, each Sent answered by
 // the segment, the slaves' timers and drives run between ticks. Once the master reports every
-// servo on for `signal_after` ticks, SIGINT goes to the process; the twin grants on until the
-// master closes the channel or `max_ticks`.
+// servo on for `signal_after` ticks, SIGINT goes to the process (or, with `lose_axis` ≥ 0,
+// that servo drops off the line: power lost); the twin grants on until the master closes the
+// channel or `max_ticks`.
 class LockstepTwin {
  public:
-  LockstepTwin(const std::string& iface, const std::string& clock, int signal_after, int max_ticks)
+  LockstepTwin(const std::string& iface, const std::string& clock, int signal_after, int max_ticks, int lose_axis = -1)
       : tr_(open_transport(iface, Role::slaves)),
         segment_(segment_config(), *tr_),
         server_(clock),
         signal_after_(signal_after),
-        max_ticks_(max_ticks) {
+        max_ticks_(max_ticks),
+        lose_axis_(lose_axis) {
     thread_ = std::thread([this] { serve(); });
   }
   ~LockstepTwin() { join(); }
@@ -158,7 +162,10 @@ class LockstepTwin {
       running = d.report.state == simclock::MasterState::running ? running + 1 : 0;
       if (signalled_tick < 0 && running >= signal_after_) {
         signalled_tick = k;
-        ::kill(::getpid(), SIGINT);
+        if (lose_axis_ >= 0)
+          segment_.line().set_reachable(lose_axis_, false);
+        else
+          ::kill(::getpid(), SIGINT);
       }
     }
     server_.end(max_ticks_ * kMs);
@@ -167,7 +174,7 @@ class LockstepTwin {
   M3Segment segment_;
   simclock::Server server_;
   std::vector<drive::AxisModel> axes_ = std::vector<drive::AxisModel>(kServos);
-  int signal_after_, max_ticks_;
+  int signal_after_, max_ticks_, lose_axis_;
   std::thread thread_;
 };
 
@@ -224,6 +231,48 @@ TEST_F(M3Program, SigintInLockstepSwitchesEveryServoOffAndDisconnectsItBeforeItE
     EXPECT_EQ(s.phase, Phase::p1) << "servo " << k + 1 << ": disconnected";
     EXPECT_EQ(s.comm_alarms, 0u) << "servo " << k + 1;
   }
+}
+
+// A servo lost while the servos run (its station off the line): the master stops them all,
+// and its --stats, where a master on its own clock reports its end, say why and which axis
+// (the state said "stopped" and the reason nothing: found by a walkthrough of the docs).
+TEST_F(M3Program, ALostAxisStopsTheServosAndTheStatsSayWhichAndWhy) {
+  const std::string clock = "unix:" + (dir_ / "clock").string();
+  LockstepTwin twin("mem:m3_program_lost", clock, 50, 400, 1);
+  ProgramOptions o;
+  o.iface = "mem:m3_program_lost";
+  o.config = config("cycle: 0.001\n");
+  o.clock = "sim";
+  o.sim_clock = clock;
+  o.stats = (dir_ / "stats.json").string();
+  run_m3_program(o);
+  twin.join();
+  ASSERT_GE(twin.signalled_tick, 0) << "the servos never all ran";
+  std::ifstream f(o.stats);
+  ASSERT_TRUE(f) << "no stats file";
+  const nlohmann::json s = nlohmann::json::parse(f);
+  EXPECT_EQ(s.at("state"), "stopped") << s.dump(2);
+  EXPECT_EQ(s.at("lost_axis"), 2) << s.dump(2);
+  const std::string why = s.at("stop_reason").get<std::string>();
+  EXPECT_EQ(why.rfind("feedback_missing: axis 2 lost (", 0), 0u) << why;
+  EXPECT_NE(why.find("cycles without a response"), std::string::npos) << why;
+}
+
+// A run that ends as planned has no stop reason.
+TEST_F(M3Program, ARunThatEndsAsPlannedHasNoStopReason) {
+  WallTwin twin("mem:m3_program_plain");
+  ProgramOptions o;
+  o.iface = "mem:m3_program_plain";
+  o.config = config("cycle: 0.01\nmargin_us: 1000\ndetect_timeout_ms: 20\n");
+  o.duration = 0.5;
+  o.stats = (dir_ / "stats.json").string();
+  EXPECT_EQ(run_m3_program(o), 0);
+  twin.stop();
+  std::ifstream f(o.stats);
+  ASSERT_TRUE(f) << "no stats file";
+  const nlohmann::json s = nlohmann::json::parse(f);
+  EXPECT_NE(s.at("state"), "stopped") << s.dump(2);
+  EXPECT_EQ(s.at("stop_reason"), "") << s.dump(2);
 }
 
 }  // namespace
