@@ -383,6 +383,7 @@ bool shutdown_cycle(Runner& r, SimTime t, std::int64_t elapsed) {
 }
 
 void log_shutdown(const EcMaster& m) {
+  if (m.slave_count() == 0) return;  // nothing was brought up; the master said "shutdown: no slaves"
   if (m.shutdown_done()) spdlog::info("shutdown: drives stopped, slaves in INIT");
   else spdlog::warn("shutdown: not every slave confirmed INIT within {} ms", kShutdownNs / 1'000'000);
 }

@@ -271,7 +271,14 @@ class EcProgram : public ::testing::Test {
     o.config = cfg;
     o.duration = duration;
     o.stats = (dir_ / "stats.json").string();
+    capture_log();
     return run_ethercat_program(o);
+  }
+  // The program's log lines from now on land in log().
+  void capture_log() {
+    log_.str("");
+    auto& sinks = spdlog::default_logger()->sinks();
+    if (std::find(sinks.begin(), sinks.end(), log_sink_) == sinks.end()) sinks.push_back(log_sink_);
   }
   // Runs a --script with the drives-only configuration; its log lines land in log().
   int run_script(const std::string& iface, const std::string& script_text, double duration = 5.0) {
@@ -283,9 +290,7 @@ class EcProgram : public ::testing::Test {
     o.config = config(kDrivesOnly);
     o.duration = duration;
     o.script = script_;
-    log_.str("");
-    auto& sinks = spdlog::default_logger()->sinks();
-    if (std::find(sinks.begin(), sinks.end(), log_sink_) == sinks.end()) sinks.push_back(log_sink_);
+    capture_log();
     return run_ethercat_program(o);
   }
   std::string log() const { return log_.str(); }
@@ -378,6 +383,10 @@ TEST_F(EcProgram, NoSlaveAnsweringFailsAfterTheStartupTimeout) {
 TEST_F(EcProgram, ADurationEndingBeforeOpIsARuntimeFailure) {
   EXPECT_EQ(run("mem:ec_program_short", config(kDrivesOnly), 0.3), 3);
   EXPECT_EQ(stats().at("state"), "starting");
+  // No slave was found: its shutdown says so, and nothing claims slaves taken to INIT (found by
+  // a walkthrough of the docs: both lines came).
+  EXPECT_NE(log().find("shutdown: no slaves"), std::string::npos) << log();
+  EXPECT_EQ(log().find("slaves in INIT"), std::string::npos) << log();
 }
 
 TEST_F(EcProgram, ASlaveLostAfterOpMakesTheSegmentDegradedNotStarting) {
