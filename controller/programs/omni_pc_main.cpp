@@ -136,6 +136,9 @@ int cmd_detect(can::Transport& tr, const Options& o, int sigfd) {
     if (a == nullptr || !seen.insert(a->node).second) continue;
     std::cout << fmt::format("0x{:02X} {}\n", a->node, role_of(a->node)) << std::flush;
   }
+  if (seen.empty() && !stop)
+    std::cerr << fmt::format("omni-pc: no node answered the detection request within {} ms on {}\n", o.timeout_ms,
+                             tr.spec());
   return seen.empty() ? kExitNoAnswer : kExitOk;
 }
 

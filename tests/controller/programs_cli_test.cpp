@@ -9,8 +9,8 @@
 // on every bus, and --stats on bus can. omni-tml send on CAN prints only the answer to its
 // query (not a running master's traffic), and names the recovery of its link; omni-tml drive
 // counts every drive on its line and its relay at the end. A signal in
-// lockstep: the Omni master's NMT stop goes out in the next granted tick. UDP ports
-// 48310-48320.
+// lockstep: the Omni master's NMT stop goes out in the next granted tick. omni-pc detect with
+// no node on the bus says so (exit 1). UDP ports 48310-48321.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>
@@ -75,6 +75,16 @@ class ProgramsCli : public ::testing::Test {
   TempDir dir_{"omni-programs-cli"};
   int n_ = 0;
 };
+
+// omni-pc detect on a bus where no node answers: exit 1, as documented, and a line saying so
+// (it printed nothing at all; found by a walkthrough of the docs).
+TEST_F(ProgramsCli, PcDetectWithNoNodeSaysSo) {
+  const Result r = run("omni-pc", {"--iface", "udp:239.74.163.9:48321", "detect", "--timeout-ms", "100"});
+  EXPECT_EQ(r.code, 1) << r.err;
+  EXPECT_TRUE(contains(r.err, "no node answered the detection request within 100 ms on udp:239.74.163.9:48321"))
+      << r.err;
+  EXPECT_EQ(r.out, "");
+}
 
 // Found in review: run_send lacked encode's check; group_mask(9) is 0, a broadcast.
 TEST_F(ProgramsCli, TmlSendRefusesAGroupNumberOver8) {
