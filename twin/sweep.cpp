@@ -307,7 +307,16 @@ std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOption
   const int rc = spawn_wait({opt.sbatch, "--wait", "--output=" + (out / "slurm-%A_%a.out").string(), script.string()},
                             opt.interrupt);
   if (rc < 0) return "cannot start '" + opt.sbatch + "' (is Slurm installed? scripts/slurm-local)";
-  if (rc != 0) std::cout << fmt::format("sbatch --wait ended with {} (some tasks failed); collecting what they wrote\n", rc);
+  if (rc == 0) return "";
+  // No task wrote a result: the array never ran (a refused submission, Slurm unreachable), or
+  // every task failed before its point began; either way there is nothing to collect.
+  std::size_t wrote = 0;
+  for (std::size_t k = 1; k <= s.points.size(); ++k) wrote += fs::exists(point_dir(out, static_cast<int>(k)) / "point.json", ec);
+  if (wrote == 0 && !(opt.interrupt && opt.interrupt->load()))
+    return fmt::format("sbatch --wait ended with {} and none of the {} tasks wrote a result: the job array did not "
+                       "run (see sbatch's message above)",
+                       rc, s.points.size());
+  std::cout << fmt::format("sbatch --wait ended with {} (some tasks failed); collecting what they wrote\n", rc);
   return "";
 }
 
@@ -463,9 +472,17 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
       std::cerr << fmt::format("omnitwin sweep: note ({} of {} points, the first point {}): {}\n", seen.first,
                                s.points.size(), seen.second, note);
   std::cout << "table: " << (out / "sweep.csv").string() << "\n";
-  media::ReportTools tools = report_tools();
-  const media::ReportResult plot = media::write_sweep_plot((out / "sweep.csv").string(), (out / "sweep.png").string(),
-                                                           s.plot_x, s.plot_y, s.params, tools);
+  // A plot of no point is no plot (an empty frame passed for one).
+  media::ReportResult plot;
+  if (bad_points < static_cast<int>(s.points.size())) {
+    media::ReportTools tools = report_tools();
+    plot = media::write_sweep_plot((out / "sweep.csv").string(), (out / "sweep.png").string(), s.plot_x, s.plot_y,
+                                   s.params, tools);
+  } else {
+    std::error_code ec;
+    fs::remove(out / "sweep.png", ec);  // an earlier sweep's
+    plot.error = "no point ran";
+  }
   if (plot.ok) std::cout << "plot: " << plot.path << "\n";
   else std::cerr << "omnitwin sweep: no plot: " << plot.error << "\n";
   std::cout << fmt::format("{} points, {} ran, {} failed to run\n", s.points.size(), s.points.size() - bad_points, bad_points);

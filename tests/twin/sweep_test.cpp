@@ -167,6 +167,38 @@ TEST_F(Sweep, SigtermDuringSlurmPassesOnToSbatchAndEnds) {
   EXPECT_TRUE(fs::exists(dir_ / "sbatch-term")) << "sbatch was not told to stop";
 }
 
+// An sbatch that could not submit (Slurm unreachable): the sweep says that the array did not
+// run and ends with exit 3, writing no table or plot. It said "some tasks failed", then wrote a
+// table of four failed points and an empty plot (found by a walkthrough of the docs).
+TEST_F(Sweep, ASubmissionSbatchRefusedIsSaidAsSuch) {
+  stand_in_sbatch(dir_ / "bin", "echo 'sbatch: error: Batch job submission failed: Unable to contact slurm controller' >&2\n"
+                                "exit 1\n");
+  const fs::path out = dir_ / "refused";
+  const Finished f = run({"sweep", source_path("tests/data/sweeps/short_grid.yaml"), "--slurm", "--out", out.string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "sbatch --wait ended with 1 and none of the 4 tasks wrote a result: the job array did "
+                              "not run"))
+      << f.err;
+  EXPECT_FALSE(contains(f.out, "some tasks failed")) << f.out;
+  EXPECT_FALSE(fs::exists(out / "sweep.csv"));
+  EXPECT_FALSE(fs::exists(out / "sweep.png"));
+}
+
+// A local sweep whose every point failed to run (masters that end at once): the table says so,
+// and there is no plot of no point (an empty frame was written as sweep.png).
+TEST_F(Sweep, NoPointRanNoPlot) {
+  const fs::path spec = write_spec(dir_ / "nopoint", "s.yaml",
+                                   "scenario: line.yaml\ngrid: {bus: [can], bus.master: [/bin/false, /bin/true]}\n"
+                                   "metrics: [platform.final_error_cm]\n");
+  const fs::path out = dir_ / "nopoint-out";
+  const Finished f = run({"sweep", spec.string(), "--out", out.string()});
+  EXPECT_EQ(f.code, 3) << f.out << f.err;
+  EXPECT_TRUE(contains(f.out, "2 points, 0 ran, 2 failed to run")) << f.out;
+  EXPECT_TRUE(contains(f.err, "no plot: no point ran")) << f.err;
+  EXPECT_TRUE(fs::exists(out / "sweep.csv"));
+  EXPECT_FALSE(fs::exists(out / "sweep.png"));
+}
+
 // A random real keeps every digit it was drawn with and stays in [min, max]; whole-number
 // bounds draw whole numbers. The draws were printed with 6 digits: two of three equal and
 // one below min in this range (found in review).
