@@ -2,8 +2,9 @@
 // seeded random draws that repeat, both combined), its refusals naming line and key, and
 // `omnitwin sweep` through the real program with -j 2: one run directory and point.json per
 // point, sweep.csv with every parameter and metric, the plot, `--point K` running one point
-// (what a Slurm task does), the notes a `bus` axis over another bus's settings gives. The
-// Slurm path itself: sweep_slow_test.cpp.
+// (what a Slurm task does), the notes a `bus` axis over another bus's settings gives, no plot
+// when no point ran; with a stand-in sbatch, a SIGTERM passed on and a refused submission said
+// as such. The Slurm path itself: sweep_slow_test.cpp.
 #include "twin/sweep.hpp"
 
 #include <fmt/format.h>
