@@ -477,8 +477,8 @@ int cmd_run(const RunArgs& a) {
       web->wait_streams_drained(3.0);
       const WebRunObserver::Stats st = web_observer->stats();
       const WebServer::Stats ws = web->stats();
-      std::cout << fmt::format("  web view: {} samples published, {} lost (ring full), {} pages opened\n",
-                               st.published, st.ring_full, ws.streams_opened);
+      std::cout << fmt::format("  web view: {} samples published, {} lost (ring full), {} {} opened\n",
+                               st.published, st.ring_full, ws.streams_opened, ws.streams_opened == 1 ? "page" : "pages");
     }
     if (dds) {
       const DdsPublisher::Stats st = dds->stats();

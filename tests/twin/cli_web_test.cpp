@@ -215,7 +215,7 @@ TEST_F(CliWeb, RunWaitsForAPageNotAHeadAndEndsWhateverClientsDo) {
   const int code = c.wait(5s);
   slow.stop();
   EXPECT_EQ(code, 0) << "not ended 5 s after its page's stream\n" << c.out() << c.err();
-  EXPECT_TRUE(contains(c.out(), "1 pages opened")) << c.out();
+  EXPECT_TRUE(contains(c.out(), "1 page opened")) << c.out();
 }
 
 }  // namespace
