@@ -111,8 +111,8 @@ std::string Status::to_string() const {
 
 std::string Status::located(std::string_view file) const {
   if (ok) return fmt::format("{}: ok", file);
-  if (line == 0) return fmt::format("{}: {}", file, to_string());
-  return fmt::format("{}:{}:{}: error: `{}`: {}", file, line, position + 1, word, message);
+  if (line == 0) return fmt::format("{}: `{}` at position {}: {}", file, word, position, message);
+  return fmt::format("{}:{}:{}: `{}`: {}", file, line, position + 1, word, message);
 }
 
 Status Interpreter::check_script(std::span<const std::string> lines) {

@@ -47,8 +47,9 @@ struct Status {
   explicit operator bool() const noexcept { return ok; }
   // "ok", or "error: `word` at position P: message".
   std::string to_string() const;
-  // "FILE:LINE:COLUMN: error: `word`: message" (column = position + 1); without a line
-  // number "FILE: error: `word` at position P: message".
+  // "FILE:LINE:COLUMN: `word`: message" (column = position + 1); without a line number
+  // "FILE: `word` at position P: message". No "error:" of its own: the program's log line
+  // that prints it says that (omni-master printed "error: FILE:…: error: …").
   std::string located(std::string_view file) const;
 };
 

@@ -403,7 +403,7 @@ TEST_F(BotnanaLanguage, ATaskErrorSaysTheLineItsWordCameFrom) {
   EXPECT_EQ(in.last_task_error().word, "drop");
   EXPECT_EQ(in.last_task_error().line, 7u);
   EXPECT_EQ(in.last_task_error().position, 9u);
-  EXPECT_EQ(in.last_task_error().located("a.fs").rfind("a.fs:7:10: error: `drop`: stack underflow", 0), 0u)
+  EXPECT_EQ(in.last_task_error().located("a.fs").rfind("a.fs:7:10: `drop`: stack underflow", 0), 0u)
       << in.last_task_error().located("a.fs");
 }
 
@@ -422,7 +422,7 @@ TEST(BotnanaScriptCheck, FindsBadInputWithItsLineWithoutRunningAnything) {
   EXPECT_EQ(s.line, 3u);
   EXPECT_EQ(s.position, 4u);
   EXPECT_EQ(s.message, "unknown word");
-  EXPECT_EQ(s.located("x.fs"), "x.fs:3:5: error: `drvie-on`: unknown word");
+  EXPECT_EQ(s.located("x.fs"), "x.fs:3:5: `drvie-on`: unknown word");
   s = Interpreter::check_script(L{"", ": move1", "  1 1 drive-on", "  1000 1 1 target-p!"});
   EXPECT_FALSE(s.ok);
   EXPECT_EQ(s.line, 2u);

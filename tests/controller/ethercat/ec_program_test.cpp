@@ -429,7 +429,7 @@ TEST_F(EcProgram, AnUnknownWordInAScriptIsBadInputNamingFileLineAndWord) {
   Segment seg("mem:ec_program_unknown");
   const std::string text = "\\ line 1 comment\n: t1 1 1 drive-on ;\nvariable v  1 1 t1 1 v !\n1 1 drvie-on\n";
   EXPECT_EQ(run_script("mem:ec_program_unknown", text), 2) << log();
-  EXPECT_NE(log().find(script_ + ":4:5: error: `drvie-on`: unknown word"), std::string::npos) << log();
+  EXPECT_NE(log().find(script_ + ":4:5: `drvie-on`: unknown word"), std::string::npos) << log();
 }
 
 // A task's runtime error (here stack underflow) stays a runtime failure (exit 3) and names the
@@ -437,7 +437,7 @@ TEST_F(EcProgram, AnUnknownWordInAScriptIsBadInputNamingFileLineAndWord) {
 TEST_F(EcProgram, ARuntimeErrorInAScriptTaskNamesTheWordAndItsPlaceInTheFile) {
   Segment seg("mem:ec_program_task_error");
   EXPECT_EQ(run_script("mem:ec_program_task_error", "deploy\n    1 drop drop\n;deploy\n"), 3) << log();
-  EXPECT_NE(log().find(script_ + ":2:12: error: `drop`: stack underflow"), std::string::npos) << log();
+  EXPECT_NE(log().find(script_ + ":2:12: `drop`: stack underflow"), std::string::npos) << log();
 }
 
 // Found in review: an SDO download the drive aborted (homing method 99) never reached the
