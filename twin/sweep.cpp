@@ -340,8 +340,9 @@ std::string clear_points(const fs::path& out) {
 
 // sweep.csv over every point's point.json and metrics.json; returns how many points lack a
 // result or failed to run. `notes` gets each distinct note of the points' point.json with how
-// many points gave it and the first of them.
-int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, std::pair<int, std::size_t>>& notes) {
+// many points gave it and the first of them; `found` each metric some run's metrics.json has.
+int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, std::pair<int, std::size_t>>& notes,
+                std::set<std::string>& found) {
   std::ofstream f(out / "sweep.csv");
   f << "point";
   for (const auto& p : s.params) f << "," << csv_field(p);
@@ -368,10 +369,40 @@ int write_table(const SweepSpec& s, const fs::path& out, std::map<std::string, s
     if (code >= 2) ++bad_points;
     f << k;
     for (const auto& [key, v] : s.points[k - 1]) f << "," << csv_quoted(v);
-    for (const auto& m : s.metrics) f << "," << csv_field(metric_text(mj, m));
+    for (const auto& m : s.metrics) {
+      if (find_metric(mj, m) != nullptr) found.insert(m);
+      f << "," << csv_field(metric_text(mj, m));
+    }
     f << "," << (pj.value("passed", false) ? "true" : "false") << "," << code << "\n";
   }
   return bad_points;
+}
+
+// The points must load: unknown keys and bad values show now, not in a run. The first point
+// whole, then each other value of each parameter in the first point's company, each distinct
+// (key, value) once, up to kMaxChecks loads (a point beyond that fails when it runs).
+constexpr std::size_t kMaxChecks = 1000;
+void check_points(const SweepSpec& s, const std::string& path) {
+  std::vector<Override> first;
+  for (const auto& [key, v] : s.points.front()) first.push_back({key, v});
+  std::set<std::pair<std::string, std::string>> checked;
+  const auto load = [&](const std::vector<Override>& o, std::size_t k) {
+    try {
+      (void)load_scenario(s.scenario, o);
+    } catch (const ScenarioError& e) {
+      throw ScenarioError(path, 0, e.key(), fmt::format("point {} does not load: {}", k, e.what()));
+    }
+  };
+  load(first, 1);
+  for (const auto& [key, v] : s.points.front()) checked.insert({key, v});
+  for (std::size_t k = 2; k <= s.points.size() && checked.size() < kMaxChecks; ++k)
+    for (std::size_t i = 0; i < s.points[k - 1].size(); ++i) {
+      const auto& [key, v] = s.points[k - 1][i];
+      if (!checked.insert({key, v}).second) continue;
+      std::vector<Override> o = first;
+      o[i].value = v;
+      load(o, k);
+    }
 }
 
 SweepSpec load_sweep_tree(const std::string& path) {
@@ -402,14 +433,7 @@ SweepSpec load_sweep_tree(const std::string& path) {
       s.points.push_back(std::move(p));
     }
   read_metrics_and_plot(s, root);
-  // The first point must load: unknown keys and bad values show now, not in every run.
-  std::vector<Override> first;
-  for (const auto& [key, v] : s.points.front()) first.push_back({key, v});
-  try {
-    (void)load_scenario(s.scenario, first);
-  } catch (const ScenarioError& e) {
-    throw ScenarioError(path, 0, e.key(), std::string("point 1 does not load: ") + e.what());
-  }
+  check_points(s, path);
   return s;
 }
 
@@ -465,7 +489,18 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
     run_local(s, out, opt);
   }
   std::map<std::string, std::pair<int, std::size_t>> notes;
-  const int bad_points = write_table(s, out, notes);
+  std::set<std::string> found;
+  const int bad_points = write_table(s, out, notes, found);
+  // A metric no run has is a typo or a path metrics.json does not hold (an empty column and
+  // an empty plot passed for a result): bad input, found once the runs are there.
+  std::vector<std::string> missing;
+  if (bad_points < static_cast<int>(s.points.size()))
+    for (const auto& m : s.metrics)
+      if (!found.count(m)) missing.push_back(m);
+  for (const auto& m : missing)
+    std::cerr << fmt::format("omnitwin sweep: {}: metrics: '{}' is in none of the runs' metrics.json (its dotted "
+                             "path, as `expect` takes it: docs/run-directory.md)\n",
+                             s.file, m);
   // The tasks said theirs in their Slurm logs only; a local sweep said each as it came.
   if (opt.slurm)
     for (const auto& [note, seen] : notes)
@@ -487,7 +522,8 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   else std::cerr << "omnitwin sweep: no plot: " << plot.error << "\n";
   std::cout << fmt::format("{} points, {} ran, {} failed to run\n", s.points.size(), s.points.size() - bad_points, bad_points);
   if (opt.interrupt && opt.interrupt->load()) return 3;
-  return bad_points > 0 || !plot.ok ? 3 : 0;
+  if (bad_points > 0 || !plot.ok) return 3;
+  return missing.empty() ? 0 : 2;
 }
 
 }  // namespace omnitwin::twin

@@ -3,7 +3,7 @@
 // `omnitwin sweep` through the real program with -j 2: one run directory and point.json per
 // point, sweep.csv with every parameter and metric, the plot, `--point K` running one point
 // (what a Slurm task does), the notes a `bus` axis over another bus's settings gives, no plot
-// when no point ran; with a stand-in sbatch, a SIGTERM passed on and a refused submission said
+// when no point ran, a metric no run has and a bad value anywhere in the grid (exit 2); with a stand-in sbatch, a SIGTERM passed on and a refused submission said
 // as such. The Slurm path itself: sweep_slow_test.cpp.
 #include "twin/sweep.hpp"
 
@@ -200,6 +200,31 @@ TEST_F(Sweep, NoPointRanNoPlot) {
   EXPECT_FALSE(fs::exists(out / "sweep.png"));
 }
 
+// A metric that no run's metrics.json holds (a typo) is bad input, exit 2 naming it, once the
+// runs are there; it passed with an empty column and an empty plot (found in review).
+TEST_F(Sweep, AMetricNoRunHasIsBadInput) {
+  const fs::path spec = write_spec(dir_ / "typo", "s.yaml",
+                                   "scenario: line.yaml\ngrid: {controller.period: [0.01]}\n"
+                                   "metrics: [platform.final_error_cm, platform.final_eror_cm]\n");
+  const Finished f = run({"sweep", spec.string(), "--out", (dir_ / "typo-out").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "metrics: 'platform.final_eror_cm' is in none of the runs' metrics.json")) << f.err;
+  EXPECT_FALSE(contains(f.err, "'platform.final_error_cm'")) << f.err;
+}
+
+// Every value of the grid is loaded before any run: a bad second value is exit 2 naming the
+// point and the key, and nothing runs (only the first point was checked: point 1 ran, then
+// point 2 failed with its reason in point.json only; found in review).
+TEST_F(Sweep, ABadValueAnywhereInTheGridStopsTheSweepBeforeItRuns) {
+  const fs::path spec = write_spec(dir_ / "badval", "s.yaml",
+                                   "scenario: line.yaml\ngrid: {settle: [0.5, -1]}\nmetrics: [platform.final_error_cm]\n");
+  const fs::path out = dir_ / "badval-out";
+  const Finished f = run({"sweep", spec.string(), "--out", out.string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "settle: point 2 does not load: --set: settle: -1 is out of range")) << f.err;
+  EXPECT_FALSE(fs::exists(out / "points")) << "a point ran";
+}
+
 // A random real keeps every digit it was drawn with and stays in [min, max]; whole-number
 // bounds draw whole numbers. The draws were printed with 6 digits: two of three equal and
 // one below min in this range (found in review).
@@ -226,26 +251,30 @@ TEST_F(Sweep, RandomDrawsKeepTheirDigitsAndTheirRange) {
   EXPECT_EQ(seen.size(), 20u) << "draws collapsed onto each other";
 }
 
-// A second sweep into the same folder never reports the first one's results: point 2 does
-// not load this time, and its row read the earlier run's metrics (found in review). A string
-// metric holding a comma (the scenario's path here) is quoted in the table.
+// A second sweep into the same folder never reports the first one's results: point 2 cannot
+// run this time (its master ends at once), and its row read the earlier run's metrics (found in
+// review). A string metric holding a comma (the scenario's path here) is quoted in the table.
 TEST_F(Sweep, AnEarlierSweepsResultsAreNotReadAsThisOnesAndStringsAreQuoted) {
   const fs::path spec_dir = dir_ / "d,1";
+  const std::string master = omnitwin::testing::binary_path("controller/omni-master");
   const auto spec = [&](const std::string& second) {
     return write_spec(spec_dir, "s.yaml",
-                      "name: s\nscenario: line.yaml\ngrid: {controller.period: [0.005, " + second +
+                      "name: s\nscenario: line.yaml\ngrid: {bus: [can], bus.master: [" + master + ", " + second +
                           "]}\nmetrics: [platform.final_error_cm, scenario_file]\n");
   };
   const fs::path out = dir_ / "out";
-  const Finished first = run({"sweep", spec("0.010").string(), "--out", out.string()});
+  const Finished first = run({"sweep", spec(master).string(), "--out", out.string()});
   ASSERT_EQ(first.code, 0) << first.out << first.err;
-  const Finished second = run({"sweep", spec("\"bogus\"").string(), "--out", out.string()});
+  const Finished second = run({"sweep", spec("/bin/false").string(), "--out", out.string()});
   EXPECT_EQ(second.code, 3) << second.out << second.err;
   EXPECT_TRUE(contains(second.out, "2 points, 1 ran, 1 failed to run")) << second.out;
   const auto rows = lines_of(read_bytes(out / "sweep.csv"));
   ASSERT_EQ(rows.size(), 3u);
-  EXPECT_TRUE(rows[2].starts_with("2,\"bogus\",,,false,2")) << rows[2];
-  EXPECT_FALSE(fs::exists(out / "points/0002/metrics.json")) << "the earlier sweep's point 2 is still there";
+  EXPECT_TRUE(rows[2].starts_with("2,\"can\",\"/bin/false\",,,false,3")) << rows[2];
+  // What point 2's folder holds is this sweep's failed run, not the earlier one's.
+  const nlohmann::json m = nlohmann::json::parse(read_bytes(out / "points/0002/metrics.json"));
+  EXPECT_TRUE(contains(m.value("error", ""), "the master did not connect to the sim clock (it ended first: exit 1"))
+      << m.dump(2);
   // Every row has the header's number of fields for a CSV reader.
   const std::string parse = "python3 -c \"import csv, sys; r = list(csv.reader(open(sys.argv[1]))); "
                             "sys.exit(0 if all(len(x) == len(r[0]) for x in r) else 1)\" '" +
