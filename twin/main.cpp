@@ -579,6 +579,15 @@ int cmd_echo(const EchoOptions& o) {
   }
 }
 
+// Whether a file holds a MuJoCo model: "<mujoco" among its first 4 KiB.
+bool looks_like_mjcf(const fs::path& file) {
+  std::ifstream f(file, std::ios::binary);
+  std::string head(4096, '\0');
+  f.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(f.gcount()));
+  return head.find("<mujoco") != std::string::npos;
+}
+
 int cmd_model(const std::string& scenario, const std::string& variant, const std::string& out) {
   try {
     physics::PlatformParams p;
@@ -610,6 +619,13 @@ int cmd_model(const std::string& scenario, const std::string& variant, const std
     if (fs::exists(parent / kRunMarker, ec)) {
       std::cerr << "omnitwin model: --out " << out << " is inside a run directory (" << parent.string()
                 << " holds " << kRunMarker << "); its records are not overwritten\n";
+      return 2;
+    }
+    // An existing file is replaced only when it is a MuJoCo model (an earlier `model --out`):
+    // a typo must not turn a scenario or a note into MJCF, as `render` keeps a non-MP4 file.
+    if (fs::exists(target, ec) && !looks_like_mjcf(target)) {
+      std::cerr << "omnitwin model: --out " << out << " exists and is not a MuJoCo model: not replacing it (give "
+                   "another file)\n";
       return 2;
     }
     try {

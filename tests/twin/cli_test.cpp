@@ -1042,8 +1042,9 @@ TEST_F(CliModel, RollersMatchesCheckedInMjcf) { expect_checked_in_mjcf("rollers"
 TEST_F(CliModel, CapsuleMatchesCheckedInMjcf) { expect_checked_in_mjcf("capsule"); }
 
 // Found in review: `model --out FILE` overwrote anything in place (a run's metrics.json too)
-// and an unusable path was a runtime failure (3). A file in a run directory, a folder and a
-// missing parent are bad input (2), and nothing is touched.
+// and an unusable path was a runtime failure (3). A file in a run directory, a folder, a
+// missing parent and an existing file that is not a model are bad input (2), and nothing is
+// touched; an earlier model is replaced.
 TEST_F(CliModel, OutIntoARunDirectoryAFolderOrAMissingFolderIsRefused) {
   const fs::path run_dir = dir_ / "run";
   ASSERT_EQ(run_test_scenario("run_short_line.yaml", run_dir).code, 0);
@@ -1065,6 +1066,14 @@ TEST_F(CliModel, OutIntoARunDirectoryAFolderOrAMissingFolderIsRefused) {
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(out)) names.push_back(e.path().filename().string());
   EXPECT_EQ(names, std::vector<std::string>{"m.xml"});
+  // An earlier model is replaced; any other file is kept (a typo'd --out scenario.yaml became
+  // MJCF; found in review).
+  EXPECT_EQ(run({"model", "--variant", "capsule", "--out", (out / "m.xml").string()}).code, 0);
+  std::ofstream(out / "notes.txt") << "keep\n";
+  f = run({"model", "--out", (out / "notes.txt").string()});
+  EXPECT_EQ(f.code, 2) << f.err;
+  EXPECT_TRUE(contains(f.err, "exists and is not a MuJoCo model: not replacing it")) << f.err;
+  EXPECT_EQ(read_bytes(out / "notes.txt"), "keep\n");
 }
 
 // Found in review: CLI11's Range lets NaN through, so `twin --duration nan` started a twin
