@@ -108,7 +108,10 @@ std::vector<Fault> read_faults(const fs::path& p) {
       out.push_back(std::move(fault));
     }
   } catch (const std::exception& e) {
-    throw std::runtime_error(fmt::format("{}: {}", p.string(), e.what()));
+    // Without nlohmann::json's "[json.exception.…] " tag: the file's problem, not the library's class.
+    std::string what = e.what();
+    if (what.rfind("[json.exception.", 0) == 0 && what.find("] ") != std::string::npos) what.erase(0, what.find("] ") + 2);
+    throw std::runtime_error(fmt::format("{}: {}", p.string(), what));
   }
   return out;
 }

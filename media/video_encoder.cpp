@@ -104,7 +104,8 @@ struct VideoEncoder::Impl {
     return err;
   }
   [[noreturn]] void fail(const std::string& why) const {
-    throw std::runtime_error("video " + path + ": " + why + " (written as " + part + ")" +
+    // The temporary file is removed when the encoder goes (or was never made): not kept.
+    throw std::runtime_error("video " + path + ": " + why + " (through the temporary " + part + ", not kept)" +
                              (removed_old ? "; the older " + path + " was removed" : ""));
   }
 

@@ -1,6 +1,8 @@
 // twin layer — `omnitwin check` (see check.hpp).
 #include "twin/check.hpp"
 
+#include "twin/json_problem.hpp"
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -229,7 +231,7 @@ std::string read_shard(const std::string& dir, nlohmann::json& results, ShardInf
       ++info.results;
     }
   } catch (const std::exception& e) {
-    return file.string() + ": " + e.what();
+    return file.string() + ": " + json_problem(e);
   }
   return "";
 }

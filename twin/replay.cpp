@@ -1,6 +1,8 @@
 // twin layer — `omnitwin replay` (see replay.hpp).
 #include "twin/replay.hpp"
 
+#include "twin/json_problem.hpp"
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -103,7 +105,7 @@ RunRecord read_run_json(const fs::path& file) {
   } catch (const BadRun&) {
     throw;
   } catch (const std::exception& e) {
-    throw BadRun(file.string() + ": " + e.what());
+    throw BadRun(file.string() + ": " + json_problem(e));
   }
   return r;
 }

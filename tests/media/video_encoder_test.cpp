@@ -169,6 +169,9 @@ TEST(VideoEncoder, FullDiskLeavesNothingUnderTheFinalNameAndNamesTheFile) {
   ASSERT_NE(msg, "") << "no error on a full disk";
   EXPECT_NE(msg.find(file), std::string::npos) << msg;
   EXPECT_NE(msg.find("the older " + file + " was removed"), std::string::npos) << msg;
+  // It names its temporary file as gone, not as where the video was "written" (found in review).
+  EXPECT_NE(msg.find("(through the temporary " + (disk / ".video.mp4.part").string() + ", not kept)"), std::string::npos)
+      << msg;
   EXPECT_FALSE(std::filesystem::exists(file));
   EXPECT_FALSE(std::filesystem::exists(disk / ".video.mp4.part"));
 }

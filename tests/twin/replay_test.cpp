@@ -2,7 +2,7 @@
 // physics alone (its platform.xml, its scenario's parameters and start pose, the recorded
 // wheel set-points) ends where the run ended (within 0.05 cm) and reports its real-time
 // factor; a folder that is not a run directory, or a trajectory without the set-point
-// columns, is bad input (exit 2) naming what is missing.
+// columns, or a torn run.json, is bad input (exit 2) naming what is missing or where.
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -41,6 +41,13 @@ TEST_F(Replay, NotARunDirectoryOrNoSetpointsIsBadInput) {
   p = run({"replay", test_scenario("run_short_line.yaml"), run_dir.string()});
   EXPECT_EQ(p.code, 2);
   EXPECT_TRUE(contains(p.err, "has no column w1_setpoint_rad_s")) << p.err;
+  // A torn run.json: the file and the place, without the JSON library's exception tag.
+  const std::string run_json = read_bytes(run_dir / "run.json");
+  std::ofstream(run_dir / "run.json", std::ios::trunc) << run_json.substr(0, run_json.size() / 2);
+  p = run({"replay", test_scenario("run_short_line.yaml"), run_dir.string()});
+  EXPECT_EQ(p.code, 2);
+  EXPECT_TRUE(contains(p.err, (run_dir / "run.json").string() + ": parse error at line")) << p.err;
+  EXPECT_FALSE(contains(p.err, "json.exception")) << p.err;
 }
 
 // The "apart X cm" figure of a replay's output (-1 when absent).
