@@ -44,6 +44,18 @@ int case_exit_code(const JunitCase& c) { return c.passed ? 0 : (runtime_failure(
 int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& index, bool bad_input,
                  const CheckOptions& opt);
 
+// Why the --junit file cannot be written, found before any scenario runs ("" when it can be
+// tried): a folder in its place, or no folder to hold it. The suite ran whole first, then
+// failed on the rename (found in review).
+std::string junit_problem(const std::string& junit) {
+  if (junit.empty()) return "";
+  std::error_code ec;
+  if (fs::is_directory(junit, ec)) return "--junit " + junit + " is a folder, not a file";
+  const fs::path parent = fs::absolute(junit, ec).parent_path();
+  if (!fs::is_directory(parent, ec)) return "--junit " + junit + ": no such folder " + parent.string();
+  return "";
+}
+
 // The output folder exists (made if needed), or why not, as one line for the user.
 std::string make_out_root(const std::string& out_root) {
   std::error_code ec;
@@ -317,6 +329,10 @@ bool parse_shard(const std::string& text, int& k, int& n) {
 }
 
 int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
+  if (const std::string e = junit_problem(opt.junit); !e.empty()) {
+    std::cerr << "omnitwin check: " << e << "\n";
+    return 2;
+  }
   const auto all = scenario_files(paths);
   if (all.empty()) {
     std::cerr << "omnitwin check: no scenario files under the given paths\n";
@@ -342,6 +358,10 @@ int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
 
 
 int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& opt) {
+  if (const std::string e = junit_problem(opt.junit); !e.empty()) {
+    std::cerr << "omnitwin check --merge: " << e << "\n";
+    return 2;
+  }
   if (const std::string e = make_out_root(opt.out_root); !e.empty()) {
     std::cerr << "omnitwin check --merge: " << e << "\n";
     return 2;

@@ -998,7 +998,9 @@ Scenario read_scenario(const YamlField& root, const std::string& file) {
                     s.name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
                         std::string::npos;
   if (!safe) {
-    if (root["name"].exists()) root["name"].fail("must be letters, digits, '_', '-' or '.' (it names the run directory)");
+    if (root["name"].exists())
+      root["name"].fail("must be letters, digits, '_', '-' or '.', not empty and not starting with '.' (it names the run "
+                        "directory)");
     throw ScenarioError(file, 0, "name", "the file name does not make a safe scenario name; set name:");
   }
   if (root["description"].exists()) s.description = root["description"].string();

@@ -395,6 +395,20 @@ TEST_F(CliCheck, BadScenarioIsAnError) {
   EXPECT_TRUE(contains(read_bytes(dir_ / "runs/index.html"), "1 passed, 1 failed (1 of them could not run)"));
 }
 
+// A --junit path that is a folder is bad input before any scenario runs, for a check and a
+// merge: the suite ran whole, then failed to write its report (found in review). A missing
+// folder: UnwritableJunitFailsCleanly.
+TEST_F(CliCheck, AJunitPathThatCannotBeAFileIsRefusedBeforeTheSuiteRuns) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  Finished f = run({"check", scenarios.string(), "--junit", dir_.path().string(), "--out", (dir_ / "runs").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "is a folder, not a file")) << f.err;
+  EXPECT_FALSE(fs::exists(dir_ / "runs")) << "the suite ran";
+  f = run({"check", "--merge", (dir_ / "none").string(), "--junit", dir_.path().string(), "--out", (dir_ / "m").string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "is a folder, not a file")) << f.err;
+}
+
 // A bad scenario file and a run that could not finish in one suite: exit 3 (no verdict, the
 // machinery failed), not 2 — a script keying on 3 missed the runtime failure (found in review).
 TEST_F(CliCheck, ARuntimeFailureOutranksBadInputInTheExitCode) {
@@ -423,12 +437,14 @@ TEST_F(CliCheck, DuplicateScenarioNamesAreAnError) {
 }
 
 // A --junit FILE that cannot be written (its directory does not exist) ends `check` with a
-// clear one-line error and exit code 3 (runtime failure), never an abort.
+// clear one-line error, never an abort: bad input (2), found before the suite runs (it was a
+// runtime failure, 3, after the whole suite had run).
 TEST_F(CliCheck, UnwritableJunitFailsCleanly) {
   const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
   const fs::path junit = dir_ / "missing/report.xml";
   const Finished f = run({"check", scenarios.string(), "--junit", junit.string(), "--out", (dir_ / "runs").string()});
-  EXPECT_EQ(f.code, 3) << "stderr: " << f.err;
+  EXPECT_EQ(f.code, 2) << "stderr: " << f.err;
+  EXPECT_TRUE(contains(f.err, "no such folder")) << f.err;
   EXPECT_FALSE(contains(f.err, "terminate called")) << f.err;
   EXPECT_TRUE(contains(f.err, (dir_ / "missing").string())) << f.err;
   EXPECT_EQ(count_char(f.err, '\n'), 1u) << f.err;
