@@ -3,6 +3,8 @@
 // file and line of anything wrong, since run directories may come from another machine.
 #include "media/run_video.hpp"
 
+#include "media/json_problem.hpp"
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -108,10 +110,7 @@ std::vector<Fault> read_faults(const fs::path& p) {
       out.push_back(std::move(fault));
     }
   } catch (const std::exception& e) {
-    // Without nlohmann::json's "[json.exception.…] " tag: the file's problem, not the library's class.
-    std::string what = e.what();
-    if (what.rfind("[json.exception.", 0) == 0 && what.find("] ") != std::string::npos) what.erase(0, what.find("] ") + 2);
-    throw std::runtime_error(fmt::format("{}: {}", p.string(), what));
+    throw std::runtime_error(fmt::format("{}: {}", p.string(), json_problem(e)));
   }
   return out;
 }

@@ -1,7 +1,7 @@
 // twin layer — `omnitwin check` (see check.hpp).
 #include "twin/check.hpp"
 
-#include "twin/json_problem.hpp"
+#include "media/json_problem.hpp"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -243,7 +243,7 @@ std::string read_shard(const std::string& dir, nlohmann::json& results, ShardInf
       ++info.results;
     }
   } catch (const std::exception& e) {
-    return file.string() + ": " + json_problem(e);
+    return file.string() + ": " + media::json_problem(e);
   }
   return "";
 }

@@ -1,7 +1,7 @@
 // twin layer — `omnitwin replay` (see replay.hpp).
 #include "twin/replay.hpp"
 
-#include "twin/json_problem.hpp"
+#include "media/json_problem.hpp"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -105,7 +105,7 @@ RunRecord read_run_json(const fs::path& file) {
   } catch (const BadRun&) {
     throw;
   } catch (const std::exception& e) {
-    throw BadRun(file.string() + ": " + json_problem(e));
+    throw BadRun(file.string() + ": " + media::json_problem(e));
   }
   return r;
 }

@@ -491,10 +491,11 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   std::map<std::string, std::pair<int, std::size_t>> notes;
   std::set<std::string> found;
   const int bad_points = write_table(s, out, notes, found);
+  const bool any_ran = bad_points < static_cast<int>(s.points.size());
   // A metric no run has is a typo or a path metrics.json does not hold (an empty column and
   // an empty plot passed for a result): bad input, found once the runs are there.
   std::vector<std::string> missing;
-  if (bad_points < static_cast<int>(s.points.size()))
+  if (any_ran)
     for (const auto& m : s.metrics)
       if (!found.count(m)) missing.push_back(m);
   for (const auto& m : missing)
@@ -509,7 +510,7 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   std::cout << "table: " << (out / "sweep.csv").string() << "\n";
   // A plot of no point is no plot (an empty frame passed for one).
   media::ReportResult plot;
-  if (bad_points < static_cast<int>(s.points.size())) {
+  if (any_ran) {
     media::ReportTools tools = report_tools();
     plot = media::write_sweep_plot((out / "sweep.csv").string(), (out / "sweep.png").string(), s.plot_x, s.plot_y,
                                    s.params, tools);

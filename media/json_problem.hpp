@@ -1,12 +1,13 @@
-// twin — one line for a user about a JSON file we could not read: nlohmann::json's exception
+// media (shared with twin) — one line for a user about a JSON file we could not read: nlohmann::json's exception
 // text without its "[json.exception.parse_error.101] " tag, which names the library's error
-// class, not the file's problem. Used where a record (run.json, check.json) is read back.
+// class, not the file's problem. Used where a record (run.json, its faults, check.json) is read back; here, below the twin
+// layer, so that both can call it.
 #pragma once
 
 #include <exception>
 #include <string>
 
-namespace omnitwin::twin {
+namespace omnitwin::media {
 
 // e.what() less a leading "[json.exception.…] " tag; other exceptions' text unchanged.
 inline std::string json_problem(const std::exception& e) {
@@ -16,4 +17,4 @@ inline std::string json_problem(const std::exception& e) {
   return text;
 }
 
-}  // namespace omnitwin::twin
+}  // namespace omnitwin::media
