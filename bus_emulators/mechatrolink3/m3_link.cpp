@@ -117,9 +117,12 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
   if (s_.phase == Phase::p3 && !f.retry()) check_watchdog(h.wdt, t);
   s_.last_command = t;
   if (s_.phase == Phase::p3) s_.command_misses = 0, s_.commanded = true;
-  // ALM_CLR (the command or CMD_CTRL.ALM_CLR) clears COMM_ALM only in a phase it is allowed in.
+  // ALM_CLR (the command or CMD_CTRL.ALM_CLR) clears COMM_ALM, only in a phase it is allowed in;
+  // CMD_CTRL.ALM_CLR rising also resets the device's alarm (the command does that itself).
   const bool clear = allowed_in(Command::alm_clr, s_.phase);
   if (clear && (ctrl.alm_clr || h.code == static_cast<std::uint8_t>(Command::alm_clr))) s_.comm_alm = CommAlarm::normal;
+  if (clear && ctrl.alm_clr && !s_.alm_clr_bit) profile_.clear_alarms();
+  s_.alm_clr_bit = ctrl.alm_clr;
   const auto rsp = std::span(rsp_).first(f.data.size());
   std::fill(rsp.begin(), rsp.end(), std::uint8_t{0});
   write_header(rsp, CommandHeader{h.code, static_cast<std::uint8_t>((h.wdt & 0xF0) | (s_.own_count++ & 0x0F)), 0});
@@ -128,8 +131,10 @@ void SlaveLink::on_command(const FrameView& f, SimTime t) {
     run_subcommand(static_cast<Command>(h.code), f.data, rsp);
   if (s_.cmd_alm == CmdAlarm::phase_error) ++s_.stats.phase_errors;
   if (s_.cmd_alm == CmdAlarm::unsupported) ++s_.stats.unsupported;
-  CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(), clear && ctrl.alm_clr,
-             ctrl.cmd_id, s_.cmd_alm, s_.comm_alm};
+  // ALM_CLR_CMP: the clear is complete, COMM_ALM at once, a device alarm once the device has
+  // reset it (a drive period later; never while its cause persists).
+  CmdStat st{profile_.device_alarm(), profile_.device_warning(), profile_.ready(),
+             clear && ctrl.alm_clr && !profile_.device_alarm(), ctrl.cmd_id, s_.cmd_alm, s_.comm_alm};
   put_u16(rsp, 2, pack(st));
   s_.last_sequence = f.sequence();
   s_.last_length = f.data.size();

@@ -80,6 +80,9 @@ class Profile {
   virtual CmdAlarm execute_sub(Command, std::span<const std::uint8_t>, std::span<std::uint8_t>) {
     return CmdAlarm::unsupported;
   }
+  // ALM_CLR for the device: the command ALM_CLR, or CMD_CTRL.ALM_CLR rising. The link clears
+  // COMM_ALM itself; a profile resets its device alarm (D_ALM) here.
+  virtual void clear_alarms() {}
   // A communication alarm stopped cyclic operation: servo off.
   virtual void stop(SimTime t) = 0;
   // DISCONNECT ended the connection: after it the slave's state is unknown to the master, which
@@ -162,6 +165,7 @@ class SlaveLink {
     int sync_misses = 0, command_misses = 0, fcs_in_row = 0;
     std::uint8_t last_wdt = 0, own_count = 0;
     bool wdt_seen = false;
+    bool alm_clr_bit = false;         // CMD_CTRL.ALM_CLR of the last command (a clear on its rising edge)
     int last_sequence = -1;           // of the command last executed (it is in cmd_, its response in rsp_)
     bool cycle_open = false;          // phase 3: a communication cycle was opened by a SYNC
     bool commanded = false;           // and a command has come in it

@@ -4,36 +4,41 @@
 // phase allows; this class turns them into the drive core's objects (controlword, mode,
 // targets) and answers with CMD_STAT's device bits, the servo status and the monitors.
 //
-// Command and response fields after the 4-byte header are ours, modelled on the public
-// standard servo profile (docs/protocols/mechatrolink3.md has the table):
-//   command  bytes 4-7 SVCMD_CTRL (bit 0 CMD_PAUSE, bit 1 CMD_CANCEL, bits 12-15/16-19/20-23
-//            SEL_MON1/2/3), 8-11 SVCMD_IO (reserved), 12… per command (below)
-//   response bytes 4-7 SVCMD_STAT (bit 0 CMD_PAUSE_CMP, bit 1 CMD_CANCEL_CMP, bit 10 POS_RDY,
-//            bit 11 PON, bit 12 M_RDY, bit 13 SV_ON, bits 16-19/20-23/24-27 SEL_MON echo),
-//            8-11 SVCMD_IO (bit 0 DEC, 1 P_OT, 2 N_OT, 9 PSET: POSING/INTERPOLATE within the
-//            position window of its target, 11 ZPOINT, 12 BRK_ON),
-//            12-15/16-19/20-23 MONITOR1/2/3 (motion, servo and SMON commands; SVPRM_RD/WR,
-//            ID_RD and ALM_RD carry SVCMD_STAT and SVCMD_IO but their own fields from 12 on)
-//   VELCTRL 16 VREF [ref/s] 20 P_TLIM u16 [0.1 %]; INTERPOLATE 16 TPOS [ref] 20 VFF [ref/s];
-//   POSING 16 TPOS 20 TSPD 24 ACCR 28 DECR [ref/s²] (0: the parameter); FEED 20 TSPD 24 ACCR
-//   28 DECR; TRQCTRL 16 TQREF [0.1 %]; POS_SET 12 PS_SUBCMD (bit 7 REFE) 16 POS_DATA;
-//   SVPRM_RD/WR 12 NO u16, 14 SIZE (4), 15 MODE, 16 PARAMETER i32; ID_RD 12 ID_CODE 13 OFFSET
-//   14 SIZE → 16… ASCII; ALM_RD 12 ALM_RD_MOD (0 now, 1 history) → 16… alarm codes u16;
-//   ALM_CLR 12 ALM_CLR_MOD.
+// Command and response fields after the 4-byte header follow the public command format of the
+// standard servo profile (byte by byte in m3_servo_format.hpp, shared with our master):
+//   command  bytes 4-7 SVCMD_CTRL (bit 0 CMD_PAUSE, bit 1 CMD_CANCEL, bits 16-19/20-23/24-27
+//            SEL_MON1/2/3), 8-11 SVCMD_IO (reserved here), 12/16/20/24/28 the command's fields
+//   response bytes 4-7 SVCMD_STAT (bit 0 CMD_PAUSE_CMP, bit 1 CMD_CANCEL_CMP, bit 8 L_CMP1,
+//            bit 10 POS_RDY, bit 11 PON, bit 12 M_RDY, bit 13 SV_ON, bits 16-27 SEL_MON echo),
+//            8-11 SVCMD_IO (bit 1 DEC, 2 P_OT, 3 N_OT, 9 BRK_ON, 12 DEN, 14 PSET, 15 ZPOINT,
+//            19 ZSPD), 12/16 CPRM_SEL_MON1/2 (parameters 0111h/0112h, ours), 20/24/28
+//            MONITOR1/2/3 (every servo command but SVPRM_RD/WR, whose fields start at 12)
+//   INTERPOLATE 12 TPOS [ref] 16 VFF [ref/s] 28 TLIM [0.1 %]; POSING and EX_POSING 12 TPOS
+//   16 TSPD 20 ACCR 24 DECR [ref/s²] (0: the parameter) 28 TLIM; FEED 16 TSPD 20 ACCR 24 DECR
+//   28 TLIM; VELCTRL 16 VREF 20 ACCR 24 DECR (0: at once) 28 TLIM; TRQCTRL 16 TQREF [0.1 %];
+//   ZRET 12 the homing method (ours: the CiA 402 number; 0 the parameter) 16 TSPD 20 ACCR
+//   28 TLIM; POS_SET 12 PS_SUBCMD (bit 7 REFE) 16 POS_DATA; SVPRM_RD/WR 12 NO u16, 14 SIZE
+//   (4), 15 MODE, 16 PARAMETER. TLIM 0 leaves parameter 0101h, a larger one is capped at it.
+//   The common commands keep the common format, no SVCMD_STAT/IO in their answers: ID_RD 4
+//   ID_CODE 5 OFFSET 6 SIZE u16 → 8… ASCII; ALM_RD 4 ALM_RD_MOD u16 (0 now, 1 history) → 8…
+//   up to 12 codes u16; ALM_CLR 4 ALM_CLR_MOD u16 (1 also clears the history); CONFIG.
+// CMD_PAUSE and CMD_CANCEL act on POSING, FEED, EX_POSING, ZRET and VELCTRL (the profile):
+// pause decelerates the motion to a stop and holds it (PAUSE_CMP once it stands), resuming when
+// the bit clears; cancel does not take the command, decelerates the motion to a stop and ends
+// it there (CANCEL_CMP once it stands). STOP_MODE is not modelled: both decelerate.
 // Reference units [ref] are the drive's counts; monitors: 0 APOS, 1 CPOS, 2 PERR, 3 LPOS1,
 // 5 FSPD, 6 CSPD, 7 TRQ, 8 ALARM, 9 MPOS (others read 0).
 //
 // Rules: SV_ON needs SENS_ON first and CMDRDY stays 0 until the drive is enabled (one FSA
 // step per drive period); motion commands need the servo on, BRK_ON/BRK_OFF and SENS_OFF
 // need it off (else CMD_ALM condition error); a drive fault is D_ALM and servo off until
-// ALM_CLR; a communication alarm (stop()) is servo off at once, and SV_ON is refused (condition
+// ALM_CLR (the command, or CMD_CTRL.ALM_CLR rising: clear_alarms()); a communication alarm (stop()) is servo off at once, and SV_ON is refused (condition
 // error, by the link: needs_alarm_cleared()) until ALM_CLR clears COMM_ALM; DISCONNECT (disconnect())
 // is servo off and SENS_ON, POS_SET, the latch and the home forgotten. Subcommands (48-byte mode, region
 // bytes 32-47: 0 SUB_CMD, 1-3 SUB_CTRL with SEL_MON4/5/6 in bits 12-15/16-19/20-23): SMON →
 // monitors at 4/8/12; SVPRM_RD/WR → NO 4, SIZE 6, MODE 7, PARAMETER 8; ALM_RD → MOD 4, four
-// codes from 8; ALM_CLR → MOD 4. ZRET 12 homing method (CiA 402 number; 0: the parameter)
-// 20 TSPD 24 ACCR runs the drive core's homing; ZPOINT says it is done. EX_POSING (16 TPOS,
-// 20 TSPD, 24 ACCR, 28 DECR) positions towards TPOS until the latch input (the DEC input: the
+// codes from 8; ALM_CLR → MOD 4. ZRET runs the drive core's homing; ZPOINT says it
+// is done. EX_POSING positions towards TPOS until the latch input (the DEC input: the
 // drive core's home switch or scenario bit 2) rises, then stops at the latched position +
 // parameter 0107h; LPOS1 (monitor 3) is the latched position and SVCMD_STAT bit 8 L_CMP1 says
 // it latched (within one drive period). CONFIG answers normal (our parameters take effect
@@ -46,6 +51,7 @@
 
 #include "bus_emulators/drive/cia402_drive.hpp"
 #include "bus_emulators/mechatrolink3/m3_link.hpp"
+#include "bus_emulators/mechatrolink3/m3_servo_format.hpp"
 
 namespace omnitwin::m3 {
 
@@ -65,6 +71,8 @@ enum class ServoParam : std::uint16_t {
   position_window = 0x0106,         // [ref]
   ex_posing_distance = 0x0107,      // EX_POSING: travel after the latch [ref] (signed)
   counts_per_rev = 0x0110,          // read only
+  cprm_sel_mon1 = 0x0111,           // the monitor code CPRM_SEL_MON1 (response byte 12) reads, 0…F
+  cprm_sel_mon2 = 0x0112,           // the monitor code CPRM_SEL_MON2 (response byte 16) reads, 0…F
 };
 
 class ServoProfile final : public Profile {
@@ -78,6 +86,9 @@ class ServoProfile final : public Profile {
   CmdAlarm execute(Command c, std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, SimTime t) override;
   CmdAlarm execute_sub(Command c, std::span<const std::uint8_t> sub, std::span<std::uint8_t> rsp) override;
   void stop(SimTime t) override;
+  // ALM_CLR (the command, or a rising CMD_CTRL.ALM_CLR): a drive fault is reset in the next
+  // drive period (D_ALM then clears unless the cause persists).
+  void clear_alarms() override;
   // Servo off, and the encoder (SENS_ON), POS_SET's offset, the target, CMD_PAUSE, the latch
   // and the home (ZPOINT) forgotten: a reconnected servo needs SENS_ON before SV_ON again.
   void disconnect(SimTime t) override;
@@ -113,6 +124,8 @@ class ServoProfile final : public Profile {
   CmdAlarm alarm_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp, std::size_t at,
                       std::size_t codes, std::size_t count) const;
   CmdAlarm id_read(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
+  void apply_tlim(std::span<const std::uint8_t> cmd, std::size_t at);
+  bool stopped() const;
   void fill_status(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   void fill_monitors(std::span<const std::uint8_t> cmd, std::span<std::uint8_t> rsp) const;
   std::uint16_t controlword();
@@ -121,6 +134,13 @@ class ServoProfile final : public Profile {
   ServoConfig cfg_;
   drive::Cia402Drive drive_;
   bool want_on_ = false, sensor_on_ = false, paused_ = false, fault_reset_ = false;
+  bool cancelled_ = false;         // the last servo command carried CMD_CANCEL
+  std::uint16_t max_torque_;       // parameter 0101h [0.1 %]; a command's TLIM caps it
+  std::int32_t vref_ = 0;          // VELCTRL: VREF [ref/s]
+  double vel_acc_ = 0, vel_dec_ = 0;  // VELCTRL: ACCR, DECR [ref/s²] (0: at once)
+  double vel_ramp_ = 0;            // VELCTRL: the velocity set-point on its ramp [ref/s]
+  SimTime last_step_ = -1;         // the last drive period's time [ns]
+  std::array<std::uint8_t, 2> cprm_sel_mon_{0x0, 0x5};  // parameters 0111h/0112h: APOS, FSPD
   Motion motion_ = Motion::none;
   std::int8_t motion_mode_ = 0;    // see motion_mode()
   bool new_set_point_ = false;     // POSING/FEED: pulse controlword bit 4 once

@@ -5,12 +5,19 @@
 
 #include <algorithm>
 
+#include "bus_emulators/mechatrolink3/m3_servo_format.hpp"
+
 namespace omnitwin::m3 {
 
 namespace {
 
-// SVCMD_CTRL with the monitors the axis reads: SEL_MON1 APOS (0), SEL_MON2 FSPD (5).
-constexpr std::uint32_t kSelMon = (0x0u << 12) | (0x5u << 16);
+using namespace servo;  // the profile's field layout (bus_emulators/mechatrolink3/m3_servo_format.hpp)
+
+// ID_RD: the first 16 characters of the device name.
+constexpr std::uint16_t kIdSizeRead = 16;
+
+// SVCMD_CTRL with the monitors the axis reads: SEL_MON1 APOS, SEL_MON2 FSPD.
+constexpr std::uint32_t kSelMon = sel_mon(static_cast<std::uint32_t>(Monitor::apos), static_cast<std::uint32_t>(Monitor::fspd));
 
 Command command_of(AxisStep s, bool position_mode) {
   switch (s) {
@@ -79,8 +86,8 @@ bool ServoAxis::accepted(Command c, std::span<const std::uint8_t> rsp, SimTime t
 void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std::span<std::uint8_t> cmd, SimTime t) {
   if (fresh) {
     stat_ = unpack_stat(get_u16(rsp, 2));
-    apos_ = get_i32(rsp, 12);
-    fspd_ = get_i32(rsp, 16);
+    apos_ = get_i32(rsp, kMonitor1);
+    fspd_ = get_i32(rsp, kMonitor2);
     if (recover(rsp, t)) return write(cmd);
     const Command c = command_of(step_, cfg_.position_mode);
     const bool ok = step_ != AxisStep::released && step_ != AxisStep::failed && accepted(c, rsp, t);
@@ -90,7 +97,7 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
       case AxisStep::sync_set: go(recovering_ ? AxisStep::sens_on : AxisStep::id_rd, t); break;
       case AxisStep::alm_clr: go(cfg_.synchronous ? AxisStep::sync_set : AxisStep::sens_on, t); break;
       case AxisStep::id_rd:
-        device_.assign(rsp.begin() + 16, std::find(rsp.begin() + 16, rsp.begin() + 32, std::uint8_t{0}));
+        device_.assign(rsp.begin() + kIdData, std::find(rsp.begin() + kIdData, rsp.begin() + kIdData + kIdSizeRead, std::uint8_t{0}));
         if (log_) log_(t, fmt::format("{}: device \"{}\"", name_, device_));
         go(AxisStep::params, t);
         break;
@@ -99,7 +106,7 @@ void ServoAxis::on_interrupt(std::span<const std::uint8_t> rsp, bool fresh, std:
         break;
       case AxisStep::sens_on: go(AxisStep::sv_on, t); break;
       case AxisStep::sv_on:
-        if (stat_.cmdrdy && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) != 0) {
+        if (stat_.cmdrdy && (get_u32(rsp, kSvcmdStat) & kSvOn) != 0) {
           recovering_ = false;
           vff_ = 0, anchor_ = true;  // INTERPOLATE from where the servo stands, not from an old target
           go(AxisStep::running, t);
@@ -143,7 +150,7 @@ bool ServoAxis::recover(std::span<const std::uint8_t> rsp, SimTime t) {
   if (stat_.cmd_alm == CmdAlarm::phase_error) {
     why_ = fmt::format("{} answered with a phase error: the slave lost power, its connection or phase 3",
                        to_string(static_cast<Command>(rsp[0])));
-  } else if (step_ == AxisStep::running && (static_cast<std::uint32_t>(get_i32(rsp, 4)) & (1u << 13)) == 0) {
+  } else if (step_ == AxisStep::running && (get_u32(rsp, kSvcmdStat) & kSvOn) == 0) {
     why_ = fmt::format("the servo went off (COMM_ALM {:X}h, D_ALM {})", static_cast<int>(stat_.comm_alm), stat_.d_alm);
   } else if (step_ < AxisStep::running && is_alarm(stat_.comm_alm)) {
     // During start-up: the slave refuses SV_ON until the alarm is cleared. (While running, an
@@ -173,25 +180,29 @@ void ServoAxis::write(std::span<std::uint8_t> cmd) const {
       cmd[7] = 0x10;  // PROFILE_TYPE: standard servo
       return;
     case AxisStep::id_rd:
-      cmd[14] = 16;  // SIZE: the first 16 characters of the device name
+      put_u16(cmd, kIdSize, kIdSizeRead);  // ID_CODE 0 from OFFSET 0: the device name
       return;
     case AxisStep::params:
       if (param_ >= cfg_.params.size()) return;
-      put_u16(cmd, 12, cfg_.params[param_].first);
-      cmd[14] = 4;
-      put_i32(cmd, 16, cfg_.params[param_].second);
+      put_u16(cmd, kPrmNo, cfg_.params[param_].first);
+      cmd[kPrmSize] = 4;
+      put_i32(cmd, kPrmData, cfg_.params[param_].second);
       return;
     case AxisStep::running:
-      put_i32(cmd, 4, static_cast<std::int32_t>(kSelMon));
-      put_i32(cmd, 16, cfg_.position_mode ? position_ : velocity_);
-      if (cfg_.position_mode) put_i32(cmd, 20, vff_);
+      put_u32(cmd, kSvcmdCtrl, kSelMon);
+      if (cfg_.position_mode) {
+        put_i32(cmd, kIpTpos, position_);
+        put_i32(cmd, kIpVff, vff_);
+      } else {
+        put_i32(cmd, kVelVref, velocity_);
+      }
       return;
     case AxisStep::alm_clr:
       put_u16(cmd, 2, pack(CmdCtrl{.alm_clr = true, .cmd_id = 0}));  // the communication alarm too
       return;
     case AxisStep::sens_on:
     case AxisStep::sv_on:
-    case AxisStep::sv_off: put_i32(cmd, 4, static_cast<std::int32_t>(kSelMon)); return;
+    case AxisStep::sv_off: put_u32(cmd, kSvcmdCtrl, kSelMon); return;
     default: return;
   }
 }

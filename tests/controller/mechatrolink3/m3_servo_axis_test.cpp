@@ -12,14 +12,18 @@
 #include <string>
 #include <vector>
 
+#include "bus_emulators/mechatrolink3/m3_servo_format.hpp"
+
 namespace omnitwin::m3 {
 namespace {
+
+using namespace servo;
 
 // The response a slave gives to `cmd` (RCMD echoed) with this CMD_STAT and SVCMD_STAT.
 std::array<std::uint8_t, 32> answer(std::span<const std::uint8_t> cmd, CmdStat st = {}, std::uint32_t svstat = 0) {
   std::array<std::uint8_t, 32> r{};
   write_header(r, CommandHeader{cmd[0], 0, pack(st)});
-  put_i32(r, 4, static_cast<std::int32_t>(svstat));
+  put_u32(r, kSvcmdStat, svstat);
   return r;
 }
 
@@ -42,11 +46,12 @@ TEST(M3ServoAxis, WalksFigure8AndRunsTheSetPoint) {
   EXPECT_EQ(static_cast<Command>(cmd[0]), Command::connect) << "a stale response moves nothing";
   EXPECT_EQ(next(), Command::sync_set);
   EXPECT_EQ(next(), Command::id_rd);
+  EXPECT_EQ(get_u16(cmd, kIdSize), 16) << "ID_RD in the common format: SIZE at byte 6";
   EXPECT_EQ(next(), Command::svprm_wr);
-  EXPECT_EQ(get_u16(cmd, 12), 0x0102);
+  EXPECT_EQ(get_u16(cmd, kPrmNo), 0x0102);
   EXPECT_EQ(next(), Command::svprm_wr);
-  EXPECT_EQ(get_u16(cmd, 12), 0x0103);
-  EXPECT_EQ(get_i32(cmd, 16), 6000);
+  EXPECT_EQ(get_u16(cmd, kPrmNo), 0x0103);
+  EXPECT_EQ(get_i32(cmd, kPrmData), 6000);
   EXPECT_EQ(next(), Command::sens_on);
   EXPECT_EQ(next(), Command::sv_on);
   EXPECT_EQ(next(CmdStat{.cmdrdy = false}), Command::sv_on) << "CMDRDY 0: still switching on";
@@ -54,10 +59,11 @@ TEST(M3ServoAxis, WalksFigure8AndRunsTheSetPoint) {
   axis.set_velocity(1234);
   EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::velctrl);
   EXPECT_EQ(axis.step(), AxisStep::running);
-  EXPECT_EQ(get_i32(cmd, 16), 1234);
+  EXPECT_EQ(get_i32(cmd, kVelVref), 1234);
+  EXPECT_EQ(get_u32(cmd, kSvcmdCtrl), sel_mon(0x0, 0x5)) << "SEL_MON1 APOS, SEL_MON2 FSPD (bits 16-23)";
   axis.shutdown(0);
   EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::velctrl) << "zero speed first";
-  EXPECT_EQ(get_i32(cmd, 16), 0);
+  EXPECT_EQ(get_i32(cmd, kVelVref), 0);
   EXPECT_EQ(next(CmdStat{}, 1u << 13), Command::sv_off);
   EXPECT_EQ(next(), Command::disconnect);
   next();
@@ -196,8 +202,8 @@ TEST(M3ServoAxis, PositionModeSendsInterpolate) {
   rsp = answer(cmd, CmdStat{}, 1u << 13);
   axis.on_interrupt(rsp, true, cmd, 0);
   EXPECT_EQ(static_cast<Command>(cmd[0]), Command::interpolate);
-  EXPECT_EQ(get_i32(cmd, 16), 777);
-  EXPECT_EQ(get_i32(cmd, 20), 11);
+  EXPECT_EQ(get_i32(cmd, kIpTpos), 777) << "TPOS at byte 12, as the public command format";
+  EXPECT_EQ(get_i32(cmd, kIpVff), 11) << "VFF at byte 16";
 }
 
 // INTERPOLATE after a recovery: the servo lost power while running to target 100000 and was
@@ -209,29 +215,29 @@ TEST(M3ServoAxis, InterpolateTargetsFollowTheServoWhenItIsSwitchedOnAgainAndWhen
   std::array<std::uint8_t, 32> cmd{}, rsp{};
   auto next = [&](std::int32_t apos, CmdStat st = {}, std::uint32_t svstat = 1u << 13) {
     rsp = answer(cmd, st, svstat);
-    put_i32(rsp, 12, apos);
+    put_i32(rsp, kMonitor1, apos);
     axis.on_interrupt(rsp, true, cmd, 0);
     return static_cast<Command>(cmd[0]);
   };
   axis.on_interrupt(rsp, false, cmd, 0);
   for (int i = 0; i < 10 && axis.step() != AxisStep::running; ++i) next(5000);
   ASSERT_EQ(axis.step(), AxisStep::running) << axis.why();
-  EXPECT_EQ(get_i32(cmd, 16), 5000) << "the first INTERPOLATE holds the servo where it is";
+  EXPECT_EQ(get_i32(cmd, kIpTpos), 5000) << "the first INTERPOLATE holds the servo where it is";
   axis.set_position(100000, 2000);
   EXPECT_EQ(next(99000), Command::interpolate);
-  EXPECT_EQ(get_i32(cmd, 16), 100000);
+  EXPECT_EQ(get_i32(cmd, kIpTpos), 100000);
   ASSERT_EQ(next(0, CmdStat{.cmd_alm = CmdAlarm::phase_error}, 0), Command::disconnect) << "power lost: recovering";
   for (int i = 0; i < 10 && axis.step() != AxisStep::running; ++i) next(98826);
   ASSERT_EQ(axis.step(), AxisStep::running) << axis.why();
   EXPECT_EQ(static_cast<Command>(cmd[0]), Command::interpolate);
-  EXPECT_EQ(get_i32(cmd, 16), 98826) << "switched on again: held where it stands, not driven to 100000";
-  EXPECT_EQ(get_i32(cmd, 20), 0) << "no feed-forward";
+  EXPECT_EQ(get_i32(cmd, kIpTpos), 98826) << "switched on again: held where it stands, not driven to 100000";
+  EXPECT_EQ(get_i32(cmd, kIpVff), 0) << "no feed-forward";
   axis.set_position(120000, 2000);
   next(98900);
   axis.hold();
   EXPECT_EQ(next(99100), Command::interpolate);
-  EXPECT_EQ(get_i32(cmd, 16), 99100) << "held at the APOS of the next response";
-  EXPECT_EQ(get_i32(cmd, 20), 0);
+  EXPECT_EQ(get_i32(cmd, kIpTpos), 99100) << "held at the APOS of the next response";
+  EXPECT_EQ(get_i32(cmd, kIpVff), 0);
 }
 
 }  // namespace
