@@ -232,7 +232,7 @@ TEST_F(CliEthercat, AMasterStillOnItsPathWhenTheRunEndsIsNotAtTheGoal) {
 // segment saw up to the stop.
 TEST_F(CliEthercat, SigintHalfWayLeavesAValidCapture) {
   const fs::path out = dir_ / "long";
-  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "ethercat", "--set", "bus.transport=udp:127.0.0.1:47614",
+  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "ethercat", "--set", "bus.transport=udp:127.0.0.1:47615",
            "--out", out.string(), "--no-progress"},
           work(), io());
   const fs::path part = out / ".trajectory.csv.part";

@@ -219,7 +219,7 @@ TEST_F(CliOutputs, RunVideoAndRenderAgree) {
 // 1/fps of the simulated time reached, and the capture decodes in tshark with every frame.
 TEST_F(CliOutputs, SigintHalfWayLeavesPlayableVideo) {
   const fs::path out = dir_ / "run";
-  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", "bus.transport=udp:239.74.163.2:47607",
+  Child c({"run", test_scenario("run_long_line.yaml"), "--bus", "can", "--set", "bus.transport=udp:239.74.163.2:47616",
            "--out", out.string(), "--no-progress", "--set", "outputs.video={enabled: true, width: 160, height: 120, fps: 5}"},
           work(), io());
   // Wait until a few seconds of the run are recorded, then interrupt.
