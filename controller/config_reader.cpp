@@ -57,7 +57,7 @@ double number(const std::string& file, const Val& v, const std::string& key) {
   if (!v.node.IsScalar()) fail(file, v, key, "expected a number");
   double d = 0;
   if (!YAML::convert<double>::decode(v.node, d) || !std::isfinite(d))
-    fail(file, v, key, fmt::format("'{}' is not a number", v.node.Scalar()));
+    fail(file, v, key, not_a_number(v.node.Scalar()));
   return d;
 }
 
@@ -111,8 +111,9 @@ YAML::Node load_document(std::string_view yaml, const std::string& file) {
     // Every document counted, so one after a '---' is refused rather than silently dropped.
     d = load_yaml_document(yaml);
   } catch (const YAML::Exception& e) {
-    if (e.mark.is_null()) throw ConfigFileError(fmt::format("{}: {}", file, e.msg));
-    throw ConfigFileError(fmt::format("{}:{}: {}", file, e.mark.line + 1, e.msg));
+    const YamlSyntaxError se = describe_syntax_error(yaml, e);
+    if (se.line == 0) throw ConfigFileError(fmt::format("{}: {}", file, se.message));
+    throw ConfigFileError(fmt::format("{}:{}: {}", file, se.line, se.message));
   }
   const int line = d.second.is_null() ? 0 : d.second.line + 1;
   if (d.stray) throw ConfigFileError(fmt::format("{}:{}: not YAML: a ',' outside any [ ] or {{ }}", file, line));

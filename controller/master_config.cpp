@@ -91,7 +91,7 @@ class Reader {
     const std::string text = scalar(it);
     double v = 0;
     if (!YAML::convert<double>::decode(it.node, v) || !std::isfinite(v)) {
-      fail(it, fmt::format("expected a number, got '{}'", text));
+      fail(it, not_a_number(text));
     }
     if (lo_open ? !(v > lo) : !(v >= lo)) fail(it, fmt::format("must be {} {}", lo_open ? ">" : ">=", lo));
     return v;
@@ -370,7 +370,8 @@ MasterConfig parse_master_config(std::string_view yaml, const std::string& file)
       throw MasterConfigError(file, line, "", std::to_string(d.count) + " YAML documents; a configuration file holds one");
     root = d.node;
   } catch (const YAML::Exception& e) {
-    throw MasterConfigError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
+    const YamlSyntaxError se = describe_syntax_error(yaml, e);
+    throw MasterConfigError(file, se.line, "", se.message);
   }
   if (!root.IsDefined() || root.IsNull()) throw MasterConfigError(file, 0, "", "empty configuration file");
   if (!root.IsMap()) throw MasterConfigError(file, root.Mark().line + 1, "", "expected a mapping at the top level");

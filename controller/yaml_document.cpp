@@ -4,6 +4,10 @@
 #include <yaml-cpp/eventhandler.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
 #include <sstream>
 #include <string>
 
@@ -62,6 +66,42 @@ YamlDocument load_yaml_document(std::string_view text) {
   }
   if (d.count <= 1) d.node = YAML::Load(std::string(text));
   return d;
+}
+
+YamlSyntaxError describe_syntax_error(std::string_view text, const YAML::Exception& e) {
+  YamlSyntaxError out{e.mark.is_null() ? 0 : e.mark.line + 1, e.msg};
+  if (e.mark.is_null()) return out;
+  // The last line up to the error's whose indentation holds a tab.
+  int line = 1, tab_line = 0;
+  bool indenting = true;
+  for (const char c : text) {
+    if (line > out.line) break;
+    if (c == '\n') {
+      ++line, indenting = true;
+      continue;
+    }
+    if (indenting && c == '\t') tab_line = line;
+    if (c != ' ' && c != '\t') indenting = false;
+  }
+  if (tab_line == 0) return out;
+  return {tab_line, "indented with a tab; YAML indents with spaces only (the parser says: " + e.msg + ")"};
+}
+
+std::string not_a_number(const std::string& text) {
+  // YAML's own spellings of infinity and not-a-number, in any case yaml-cpp accepts.
+  std::string t = text;
+  if (!t.empty() && (t[0] == '+' || t[0] == '-')) t.erase(0, 1);
+  std::transform(t.begin(), t.end(), t.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (t == ".inf" || t == ".nan") return "'" + text + "' is not a finite number";
+  // A literal that parses whole but overflows (or underflows) a double.
+  errno = 0;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  const bool whole = !text.empty() && end == text.c_str() + text.size();
+  if (whole && (std::isinf(v) || errno == ERANGE)) {
+    return "'" + text + (std::fabs(v) > 1.0 ? "' is too large to be a number" : "' is too small to be a number");
+  }
+  return "expected a number, got '" + text + "'";
 }
 
 }  // namespace omnitwin::controller

@@ -11,6 +11,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cstddef>
+#include <string>
 #include <string_view>
 
 namespace omnitwin::controller {
@@ -24,5 +25,20 @@ struct YamlDocument {
 
 // Parses `text`; throws YAML::Exception (with its mark) on a syntax error.
 YamlDocument load_yaml_document(std::string_view text);
+
+// A syntax error of `text` as one message and its 1-based line (0: none known). yaml-cpp's own
+// words ("illegal map value", "end of map not found") do not say that a tab in a line's
+// indentation is the cause, which it often is: when a line up to the error's indents with a
+// tab, the message says so and the line is that one. Not real-time safe.
+struct YamlSyntaxError {
+  int line = 0;
+  std::string message;
+};
+YamlSyntaxError describe_syntax_error(std::string_view text, const YAML::Exception& e);
+
+// Why the scalar `text` is not a usable number, for a reader's error message: "'1e400' is too
+// large to be a number", "'.inf' is not a finite number", else "expected a number, got
+// 'text'". Not real-time safe.
+std::string not_a_number(const std::string& text);
 
 }  // namespace omnitwin::controller

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "media/scene_render.hpp"
+#include "physics/mujoco_message.hpp"
 #include "media/video_encoder.hpp"
 
 namespace omnitwin::media {
@@ -119,7 +120,7 @@ physics::ModelPtr load_model(const fs::path& p) {
   if (!fs::exists(p)) throw BadRunRecord(fmt::format("cannot read {}", p.string()));
   char err[1024] = "";
   physics::ModelPtr m(mj_loadXML(p.string().c_str(), nullptr, err, sizeof err));
-  if (!m) throw BadRunRecord(fmt::format("{}: MuJoCo cannot load the model: {}", p.string(), err));
+  if (!m) throw BadRunRecord(fmt::format("{}: MuJoCo cannot load the model: {}", p.string(), physics::one_line(err)));
   return m;
 }
 

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "physics/amplifier.hpp"
+#include "physics/mujoco_message.hpp"
 #include "physics/platform_mjcf.hpp"
 #include "physics/wheel_contact.hpp"
 
@@ -42,7 +43,7 @@ mjModel* load_from_text(const std::string& xml) {
   std::array<char, kErrLen> err{};
   mjModel* m = mj_loadXML(name, vfs.get(), err.data(), kErrLen);
   if (!m) throw std::runtime_error("PlatformSim: generated MJCF failed to load: " +
-                                   std::string(err.data()));
+                                   one_line(err.data()));
   return m;
 }
 
@@ -106,7 +107,7 @@ mjModel* load_from_file(const std::string& mjcf_path) {
   mjModel* m = mj_loadXML(mjcf_path.c_str(), nullptr, err.data(), kErrLen);
   if (!m) {
     throw std::runtime_error("PlatformSim: cannot load MJCF '" + mjcf_path +
-                             "': " + std::string(err.data()));
+                             "': " + one_line(err.data()));
   }
   return m;
 }

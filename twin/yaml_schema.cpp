@@ -1,5 +1,6 @@
 // twin layer — the validating YAML walker; see yaml_schema.hpp.
 #include "twin/yaml_schema.hpp"
+#include "controller/yaml_document.hpp"
 
 #include <fmt/format.h>
 
@@ -216,7 +217,7 @@ double YamlField::number(const Bounds& bounds) const {
   const std::string text = scalar_text();
   double v = 0;
   if (!YAML::convert<double>::decode(node_, v) || !std::isfinite(v)) {
-    fail(fmt::format("expected a number, got '{}'", text));
+    fail(controller::not_a_number(text));
   }
   if (!bounds.contains(v)) fail(fmt::format("{} is out of range (must be {})", text, bounds.describe()));
   return v;

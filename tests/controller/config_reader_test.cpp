@@ -41,7 +41,7 @@ TEST(ConfigReader, ValuesAreChecked) {
   EXPECT_EQ(number("f.yaml", *m.get("x"), "x"), 2.5);
   EXPECT_TRUE(boolean("f.yaml", *m.get("b"), "b"));
   EXPECT_EQ(error_of([&] { integer("f.yaml", *m.get("w"), "w"); }), "f.yaml:4: w: 'word' is not an integer");
-  EXPECT_EQ(error_of([&] { number("f.yaml", *m.get("w"), "w"); }), "f.yaml:4: w: 'word' is not a number");
+  EXPECT_EQ(error_of([&] { number("f.yaml", *m.get("w"), "w"); }), "f.yaml:4: w: expected a number, got 'word'");
   EXPECT_EQ(error_of([&] { boolean("f.yaml", *m.get("w"), "w"); }), "f.yaml:4: w: expected true or false");
 }
 

@@ -54,5 +54,49 @@ TEST(YamlDocument, SyntaxErrorsThrowWithTheirMark) {
   EXPECT_THROW(load_yaml_document("a: [1, 2\n"), YAML::Exception);
 }
 
+// The syntax error yaml-cpp raises for `text`, described (fails the test if none is raised).
+YamlSyntaxError syntax_error_of(const std::string& text) {
+  try {
+    load_yaml_document(text);
+  } catch (const YAML::Exception& e) {
+    return describe_syntax_error(text, e);
+  }
+  ADD_FAILURE() << "no syntax error in: " << text;
+  return {};
+}
+
+// yaml-cpp says "illegal map value" or "end of map not found" for a tab in the indentation,
+// at a line that need not be the tab's; the description names the tab and its line.
+TEST(YamlDocument, ATabInTheIndentationIsNamedAtItsLine) {
+  const YamlSyntaxError a = syntax_error_of("name: t\npath:\n\tsegments: []\n");
+  EXPECT_EQ(a.line, 3);
+  EXPECT_TRUE(a.message.starts_with("indented with a tab; YAML indents with spaces only (the parser says: "))
+      << a.message;
+  const YamlSyntaxError b = syntax_error_of("c:\n  kp: 1\n\tki: 0\n");
+  EXPECT_EQ(b.line, 3) << b.message;
+  EXPECT_NE(b.message.find("tab"), std::string::npos) << b.message;
+  // Without a tab the parser's words and line stay as they are.
+  const YamlSyntaxError c = syntax_error_of("a: [1, 2\n");
+  EXPECT_EQ(c.message.find("tab"), std::string::npos) << c.message;
+  // A tab after the error's line is not blamed.
+  const YamlSyntaxError d = syntax_error_of("a: 1\n,\nb:\n\t- 1\n");
+  EXPECT_EQ(d.line, 2) << d.message;
+  EXPECT_EQ(d.message.find("tab"), std::string::npos) << d.message;
+}
+
+// A value that reads as a number but does not fit a double is named as such, not as text that
+// is no number at all (`--set settle=1e400` said "expected a number").
+TEST(YamlDocument, ANumberThatDoesNotFitIsSaidSo) {
+  EXPECT_EQ(not_a_number("1e400"), "'1e400' is too large to be a number");
+  EXPECT_EQ(not_a_number("-1e400"), "'-1e400' is too large to be a number");
+  EXPECT_EQ(not_a_number("1e-400"), "'1e-400' is too small to be a number");
+  EXPECT_EQ(not_a_number(".inf"), "'.inf' is not a finite number");
+  EXPECT_EQ(not_a_number("-.Inf"), "'-.Inf' is not a finite number");
+  EXPECT_EQ(not_a_number(".NaN"), "'.NaN' is not a finite number");
+  EXPECT_EQ(not_a_number("abc"), "expected a number, got 'abc'");
+  EXPECT_EQ(not_a_number("1e400x"), "expected a number, got '1e400x'");
+  EXPECT_EQ(not_a_number(""), "expected a number, got ''");
+}
+
 }  // namespace
 }  // namespace omnitwin::controller

@@ -1,6 +1,8 @@
 // twin/web — mjModel to the view's scene JSON (see web_scene.hpp).
 #include "twin/web/web_scene.hpp"
 
+#include "physics/mujoco_message.hpp"
+
 #include <memory>
 #include <stdexcept>
 
@@ -104,7 +106,7 @@ json web_scene_from_file(const std::string& mjcf_path) {
   char error[1000] = "";
   std::unique_ptr<mjModel, void (*)(mjModel*)> m(mj_loadXML(mjcf_path.c_str(), nullptr, error, sizeof error),
                                                  mj_deleteModel);
-  if (!m) throw std::runtime_error("cannot compile " + mjcf_path + ": " + error);
+  if (!m) throw std::runtime_error("cannot compile " + mjcf_path + ": " + physics::one_line(error));
   return web_scene(m.get());
 }
 

@@ -104,7 +104,7 @@ TEST(EcConfig, SegmentLossCyclesReachTheCore) {
 
 TEST(EcConfig, ErrorsNameFileLineAndKey) {
   EXPECT_EQ(error_of("cycle: 0.001\n"), "t.yaml:1: esi: required (the ESI files describing the slaves)");
-  EXPECT_EQ(error_of("esi: a.xml\ncycle: fast\n"), "t.yaml:2: cycle: 'fast' is not a number");
+  EXPECT_EQ(error_of("esi: a.xml\ncycle: fast\n"), "t.yaml:2: cycle: expected a number, got 'fast'");
   EXPECT_EQ(error_of("esi: a.xml\ncycle: 0\n"), "t.yaml:2: cycle: must be in (0, 1] s");
   EXPECT_EQ(error_of("esi: a.xml\nbogus: 1\n").rfind("t.yaml:2: bogus: unknown key", 0), 0u);
   EXPECT_EQ(error_of("esi: a.xml\nstartup:\n  - {index: 0x6060, size: 3, value: 1}\n"),
