@@ -283,8 +283,10 @@ void end_wall_clock(std::int64_t period_ns, Runner& r, can::Transport& tr, int s
   }
 }
 
-// The wall clock: a tick every period_ns until duration_s (< 0: until a signal); then the end
-// sequence (end_wall_clock). Returns 0.
+// The wall clock: a tick every period_ns until duration_s (< 0: until a signal) or until the
+// core has failed (its start-up gave up: nothing more would happen, found by a walkthrough:
+// `omni-master --bus canopen` with no drives ran on until killed); then the end sequence
+// (end_wall_clock). Returns 0.
 template <class Runner>
 int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Transport& tr, int sigfd) {
   try_realtime(40);
@@ -295,6 +297,12 @@ int run_wall_clock(std::int64_t period_ns, double duration_s, Runner& r, can::Tr
   for (;;) {
     const std::int64_t now = monotonic_ns();
     if (now >= end) break;
+    if constexpr (requires { r.failed(); }) {
+      if (r.failed()) {
+        spdlog::error("the master failed: ending the run");
+        break;
+      }
+    }
     if (now >= deadline) {
       // Late (this process did not run for a while: a host stall): the frames that came
       // meanwhile go first, stamped no later than the tick, as a controller's receive

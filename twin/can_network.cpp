@@ -275,6 +275,8 @@ nlohmann::json OmniCanNetwork::slave_json(int i) const {
           {"first_dropout_sample", st.first_dropout_sample},
           {"resyncs", st.resyncs},
           {"commands", st.commands},
+          {"commands_overwritten", st.commands_overwritten},
+          {"parameters_refused", st.parameters_refused},
           {"stale_samples", st.stale_samples},
           {"held_samples", st.held_samples},
           {"missing_command", omni::to_string(sl.config().missing_command)},

@@ -7,32 +7,40 @@
 #include "twin/experiment.hpp"
 
 #include "twin/records.hpp"
+#include "twin/run_directory.hpp"
 
 #include <sys/wait.h>
 #include <array>
 #include <cstdlib>
 #include <exception>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <stdexcept>
 
+#include <fmt/format.h>
+
 namespace omnitwin::twin {
+
+namespace fs = std::filesystem;
 
 namespace {
 
 struct Registered {
   const char* name;
   int (*run)(const ExperimentOptions&);
-  bool takes_sets = false;  // runs scenarios of the user's and applies --set to each
+  bool takes_sets = false;    // runs scenarios of the user's and applies --set to each
+  bool takes_model = false;   // --model
+  bool takes_budget = false;  // --budget
 };
 
 // The registry: one row per `omnitwin experiment NAME`.
 std::array<Registered, 6> registry() {
   return {{{"can-timing", run_can_timing},
            {"can-dropout", run_can_dropout},
-           {"thesis-platform", run_thesis_platform, true},
+           {"thesis-platform", run_thesis_platform, true, true},
            {"m3-cycle", run_m3_cycle},
-           {"thesis-calibrate", run_thesis_calibrate, true},
+           {"thesis-calibrate", run_thesis_calibrate, true, true, true},
            {"fast-model", run_fast_model}}};
 }
 
@@ -74,6 +82,26 @@ std::string find_plot_interpreter(bool& any_python) {
   return {};
 }
 
+// An experiment's folder must not be a run's (its files would mix with the run's records;
+// `model --out` refuses the same), and what an earlier experiment left under runs/ goes:
+// rows of this experiment must not sit beside 64 stale run folders of a longer earlier one
+// (both found by a walkthrough). Only folders holding a run's marker are removed.
+void clear_earlier_runs(const fs::path& out) {
+  std::error_code ec;
+  if (fs::exists(out / kRunMarker, ec))
+    throw experiment::BadInput(fmt::format("--out {} is a run directory; choose another folder", out.string()));
+  const fs::path runs = out / "runs";
+  if (!fs::is_directory(runs, ec)) return;
+  std::vector<fs::path> stale;
+  for (auto it = fs::recursive_directory_iterator(runs, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (!it->is_directory(ec) || !fs::exists(it->path() / kRunMarker, ec)) continue;
+    stale.push_back(it->path());
+    it.disable_recursion_pending();  // a run's own folders are the run's
+  }
+  for (const fs::path& d : stale) fs::remove_all(d, ec);
+}
+
 }  // namespace
 
 std::vector<std::string> experiment_names() {
@@ -87,8 +115,14 @@ int run_experiment(const std::string& name, const ExperimentOptions& options) {
     if (name != r.name) continue;
     // Any exception is a runtime failure (exit 3), never a crash of the CLI.
     try {
+      // An option the experiment has no use for is bad input, not silently dropped (--model
+      // and --budget were; found by a walkthrough).
       if (!options.sets.empty() && !r.takes_sets)
         throw experiment::BadInput("--set is for thesis-platform and thesis-calibrate only");
+      if (!options.model.empty() && !r.takes_model)
+        throw experiment::BadInput("--model is for thesis-platform and thesis-calibrate only");
+      if (options.budget != 0 && !r.takes_budget) throw experiment::BadInput("--budget is for thesis-calibrate only");
+      clear_earlier_runs(options.out_dir.empty() ? fs::path("out") / name : fs::path(options.out_dir));
       return r.run(options);
     } catch (const ScenarioError& e) {
       // A bad scenario (--model, a key) is bad input, as for run (found in review: it was 3).

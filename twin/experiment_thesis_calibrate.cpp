@@ -149,8 +149,13 @@ std::vector<double> values_at(const std::vector<double>& u) {
 
 // The fitted scenario: the thesis line with the fitted values.
 std::string fitted_yaml(const std::vector<double>& v, double phi_kp, const std::array<double, 3>& ki, double kff,
-                        double j, int evals, const Figures& f, const std::string& params_path, const std::string& bus) {
+                        double j, int evals, const Figures& f, const std::string& params_path, const std::string& bus,
+                        bool quick) {
   std::ostringstream out;
+  // A smoke run's file says so where a reader looks first (its md did, the file did not).
+  if (quick)
+    out << "# QUICK: a smoke run of thesis-calibrate (--quick: a short line, few evaluations), not a\n"
+        << "# calibration; do not use these values.\n";
   out << "# The thesis line (seed 002, 4-4-2) with the parameters the thesis does not give, fitted by\n"
       << "# `omnitwin experiment thesis-calibrate` to ONE configuration: no sync, 1000 kbit/s, the\n"
       << "# slaves' timers gaining 0.362 % (tables 4-3 … 4-6). `omnitwin experiment thesis-platform`\n"
@@ -164,8 +169,9 @@ std::string fitted_yaml(const std::vector<double>& v, double phi_kp, const std::
   for (std::size_t k = 0; k < 8; ++k)
     out << fmt::format("{} {} {:.4g}/{:.4g}", k ? "," : "", Figures::kNames[k], f.ours[k], f.thesis[k]);
   out << "\nname: thesis_line_fitted\n"
-      << "description: \"200 cm along world X in 20 s (seed 002, 4-4-2), parameters fitted to the no-sync 1000 kbit/s "
-         "row\"\n"
+      << (quick ? "description: \"QUICK smoke fit (not a calibration): 200 cm along world X in 20 s (seed 002, 4-4-2)\"\n"
+                : "description: \"200 cm along world X in 20 s (seed 002, 4-4-2), parameters fitted to the no-sync 1000 "
+                  "kbit/s row\"\n")
       << "platform:\n  params: " << params_path << "\n"
       << fmt::format("  velocity_loop: {{kp: {:.4g}, ki: {:.4g}, kff: {:.4g}}}\n", v[2], v[3], kff)
       << fmt::format("  driver: {{dead_band: {:.4g}, gain_error: {}}}\n", v[4], diagonal_pairs(v[7]))
@@ -394,7 +400,8 @@ int run_thesis_calibrate(const ExperimentOptions& options) {
   experiment::write_text(dir / "thesis_calibrate.md", thesis::note_sets(report_md(evals, r, *best, model, trials, options.quick), options.sets, false));
   const std::string bus = fitted_bus(fast, options.sets);
   experiment::write_text(model,
-                         thesis::note_sets(fitted_yaml(best->values, phi_kp, ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params, bus),
+                         thesis::note_sets(fitted_yaml(best->values, phi_kp, ki, base.platform.velocity_loop.kff, best->j, r.evaluations, best->figures, params, bus,
+                                                       options.quick),
                                            options.sets, true));
   std::cout << fmt::format("thesis-calibrate: {} evaluations, J {:.4f} → {:.4f}; fitted scenario {}; outputs in {}\n",
                            r.evaluations, evals.front().j, best->j, model, dir.string());

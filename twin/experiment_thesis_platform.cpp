@@ -552,8 +552,8 @@ std::string to_markdown(const std::vector<Result>& rs, const std::array<ClockRea
               ? routine_why(fast, slow, clocks, sc, y_lo, y_hi)
               : hardware_reload_why(fast, slow, clocks, sc, fast_skips, fast_sync_skips, slow_skips, y_lo, y_hi))
       << bit_rate_text(fast)
-      << "\nThe per-run folders (metrics.json, trajectory.csv, bus-can.pcap, master.log) are written beside this "
-         "file by `omnitwin experiment thesis-platform --out DIR` and are not committed.\n";
+      << "\nThe per-run folders (metrics.json, trajectory.csv, bus-can.pcap, master.log) are written under `runs/` "
+         "beside this file by `omnitwin experiment thesis-platform --out DIR` and are not committed.\n";
   return out.str();
 }
 

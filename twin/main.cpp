@@ -6,6 +6,7 @@
 // ended by SIGINT/SIGTERM, whose records are still closed and valid).
 #include <CLI/CLI.hpp>
 #include <mujoco/mujoco.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -293,6 +294,13 @@ void print_summary(const RunResult& r) {
                              b.value("frames", 0), b.value("error_frames", 0), 100.0 * b.value("load", 0.0),
                              b.value("dropouts", 0), 100.0 * b.value("dropout_rate", 0.0));
   }
+  // A CAN wire that could not carry what the master sent (a SYNC too fast for the bit rate):
+  // the refused frames are bus.errors, not error frames, so the line above read "0 error
+  // frames" on an overloaded bus (found by a walkthrough).
+  if (const auto refused = m.contains("bus") ? m["bus"].value("refused_from_transport", std::uint64_t{0}) : 0; refused > 0)
+    std::cout << fmt::format("  bus overloaded: {} frames from the master were refused, the wire could not carry "
+                             "them (bus.refused_from_transport; events.log says when)\n",
+                             refused);
   // Drives that never all ran: the run may still pass (no bound asks otherwise), but the
   // summary says so (a 1 s run whose master was still starting read as an ordinary pass;
   // found in review). drives.all_running_at_s is the bound to ask for.
@@ -664,6 +672,9 @@ void add_output_flags(CLI::App* cmd, RunArgs& a) {
 int main(int argc, char** argv) {
   // First of all: a signal in any later phase (even while parsing) is one we handle.
   install_signal_handlers();
+  // Logs (warnings; with -v progress too) go to stderr: stdout carries what a user or a script
+  // reads (summaries, `echo`'s samples, `check`'s verdict line).
+  spdlog::set_default_logger(spdlog::stderr_color_mt("omnitwin"));
   spdlog::set_level(spdlog::level::warn);
   mju_user_warning = mujoco_warning;
   mju_user_error = mujoco_error;

@@ -307,23 +307,8 @@ std::string find_vtime_library() {
 }
 
 std::string preload_obstacle(const std::string& program) {
-  std::string path = program;
-  if (program.find('/') == std::string::npos) {
-    path.clear();
-    const char* env = std::getenv("PATH");
-    std::string dirs = env ? env : "/usr/bin:/bin";
-    for (std::size_t b = 0; b <= dirs.size();) {
-      const std::size_t e = std::min(dirs.find(':', b), dirs.size());
-      const fs::path p = fs::path(dirs.substr(b, e - b)) / program;
-      if (access(p.c_str(), X_OK) == 0) {
-        path = p.string();
-        break;
-      }
-      b = e + 1;
-    }
-    if (path.empty()) return "not found on PATH";
-  }
-  if (access(path.c_str(), X_OK) != 0) return "not an executable file";
+  if (const std::string why = program_problem(program); !why.empty()) return why;
+  const std::string path = program_path(program);
   std::ifstream f(path, std::ios::binary);
   Elf64_Ehdr eh{};
   if (!f.read(reinterpret_cast<char*>(&eh), sizeof eh) || std::memcmp(eh.e_ident, ELFMAG, SELFMAG) != 0)
@@ -338,41 +323,5 @@ std::string preload_obstacle(const std::string& program) {
   return "statically linked (LD_PRELOAD cannot reach it)";
 }
 
-std::vector<std::string> split_command(const std::string& command) {
-  std::vector<std::string> words;
-  std::string cur;
-  bool in_word = false;
-  char quote = 0;
-  for (std::size_t i = 0; i < command.size(); ++i) {
-    const char c = command[i];
-    if (quote == '\'') {
-      if (c == '\'') quote = 0; else cur += c;
-      continue;
-    }
-    if (quote == '"') {
-      if (c == '"') quote = 0;
-      else if (c == '\\' && i + 1 < command.size() && std::strchr("\"\\$`", command[i + 1])) cur += command[++i];
-      else cur += c;
-      continue;
-    }
-    if (c == '\'' || c == '"') {
-      quote = c;
-      in_word = true;
-    } else if (c == '\\' && i + 1 < command.size()) {
-      cur += command[++i];
-      in_word = true;
-    } else if (c == ' ' || c == '\t' || c == '\n') {
-      if (in_word) words.push_back(cur);
-      cur.clear();
-      in_word = false;
-    } else {
-      cur += c;
-      in_word = true;
-    }
-  }
-  if (quote) throw std::invalid_argument("an unbalanced quote in the master command");
-  if (in_word) words.push_back(cur);
-  return words;
-}
 
 }  // namespace omnitwin::twin

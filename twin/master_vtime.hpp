@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "twin/master_command.hpp"
 #include "twin/scheduler.hpp"
 #include "twin/vtime/vt_protocol.hpp"
 
@@ -122,8 +123,6 @@ std::string find_vtime_library();
 // LD_PRELOAD reaches. "" when it is; else why not ("statically linked", "not found", …).
 std::string preload_obstacle(const std::string& program);
 
-// A command line split into words as a POSIX shell would (quotes, backslashes; no expansion
-// beyond that). Throws std::invalid_argument for an unbalanced quote.
-std::vector<std::string> split_command(const std::string& command);
+
 
 }  // namespace omnitwin::twin

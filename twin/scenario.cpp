@@ -24,6 +24,7 @@
 #include "controller/master_bounds.hpp"
 #include "controller/yaml_document.hpp"
 #include "twin/expectations.hpp"
+#include "twin/master_command.hpp"
 #include "twin/scheduler.hpp"
 #include "twin/yaml_schema.hpp"
 
@@ -88,6 +89,8 @@ long parse_index(const std::string& s) {
   return (!s.empty() && ec == std::errc() && p == s.data() + s.size() && v >= 0) ? v : -1;
 }
 
+}  // namespace
+
 // Parses the one YAML document of a file; syntax errors name the file and line. A second
 // document ('---' and anything after it) is an error, not silently ignored: yaml-cpp's
 // LoadFile reads the first document only, whatever follows.
@@ -99,7 +102,8 @@ YAML::Node load_yaml_file(const std::string& file) {
   try {
     d = controller::load_yaml_document(text);
   } catch (const YAML::Exception& e) {
-    throw ScenarioError(file, e.mark.is_null() ? 0 : e.mark.line + 1, "", e.msg);
+    const controller::YamlSyntaxError se = controller::describe_syntax_error(text, e);
+    throw ScenarioError(file, se.line, "", se.message);
   }
   const int line = d.second.is_null() ? 0 : d.second.line + 1;
   if (d.stray) throw ScenarioError(file, line, "", "not YAML: a ',' outside any [ ] or { }");
@@ -108,6 +112,8 @@ YAML::Node load_yaml_file(const std::string& file) {
                         fmt::format("{} YAML documents; a file holds one (remove the '---' and what follows)", d.count));
   return d.node;
 }
+
+namespace {
 
 // ---------------------------------------------------------------------------------------
 // --set overrides
@@ -976,6 +982,21 @@ MasterSpec read_master(const YamlField& f, const BusSpec& bus) {
   if (f["command"].exists()) m.command = f["command"].string();
   if (!m.command.empty() && bus.kind != BusKind::ethercat && bus.kind != BusKind::can)
     f["command"].fail("a master program of your own runs on bus ethercat or can");
+  // A program that is not there is bad input, found before the run begins (it was a runtime
+  // failure, exit 3, with advice about the virtual clock; found by a walkthrough). A program
+  // word holding a placeholder ({iface}, {out}) is left to the run.
+  if (f["command"].exists()) {
+    std::vector<std::string> words;
+    try {
+      words = split_command(m.command);
+    } catch (const std::invalid_argument& e) {
+      f["command"].fail(e.what());
+    }
+    if (words.empty()) f["command"].fail("an empty command");
+    if (words[0].find('{') == std::string::npos)
+      if (const std::string why = program_problem(words[0]); !why.empty())
+        f["command"].fail(fmt::format("{}: {}", words[0], why));
+  }
   if (f["on_static"].exists())
     m.on_static = f["on_static"].choice({"fail", "realtime"}) == "realtime" ? MasterSpec::OnStatic::realtime
                                                                            : MasterSpec::OnStatic::fail;

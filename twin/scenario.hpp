@@ -19,6 +19,10 @@
 #include "physics/platform_params.hpp"
 #include "twin/dds/dds_settings.hpp"
 
+namespace YAML {
+class Node;
+}
+
 namespace omnitwin::twin {
 
 // A bad scenario (or parameter file, or --set override). what() is one line:
@@ -351,6 +355,11 @@ void confine_to_loopback(Scenario& s);
 // Loads, merges (parameter file ← scenario platform section ← overrides) and validates.
 // Throws ScenarioError on any problem. Not real-time safe (file I/O).
 Scenario load_scenario(const std::string& path, const std::vector<Override>& overrides = {});
+
+// The one YAML document of a file (a scenario, a sweep spec). Throws ScenarioError naming the
+// file and line for a syntax error (a tab in the indentation named as such), a file that cannot
+// be opened, a stray ',' or a second document. Not real-time safe.
+YAML::Node load_yaml_file(const std::string& file);
 
 // Parses "key=value" (as given to --set). Throws ScenarioError naming "--set".
 Override parse_override(const std::string& text);

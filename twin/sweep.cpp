@@ -323,8 +323,10 @@ std::string run_slurm(const SweepSpec& s, const fs::path& out, const SweepOption
 // Removes what an earlier sweep into the same folder left under points/ (each point folder
 // that holds a point.json or a run), so that no point of this sweep can be read with an
 // earlier sweep's result: a point that fails to load starts no run that would clear it, and
-// a Slurm task that never ran writes nothing. "" or why not.
-std::string clear_points(const fs::path& out) {
+// a Slurm task that never ran writes nothing. A point folder this sweep will use that holds
+// something else (a user's files) is refused before anything runs: a run would refuse it as
+// its --out only after the points before it had run. "" or why not.
+std::string clear_points(const fs::path& out, std::size_t n_points) {
   std::error_code ec;
   const fs::path points = out / "points";
   if (!fs::is_directory(points, ec)) return "";
@@ -335,7 +337,14 @@ std::string clear_points(const fs::path& out) {
     fs::remove_all(d, ec);
     if (ec) return "cannot clear " + d.string() + " (an earlier sweep's point): " + ec.message();
   }
-  return ec ? "cannot read " + points.string() + ": " + ec.message() : "";
+  if (ec) return "cannot read " + points.string() + ": " + ec.message();
+  for (std::size_t k = 1; k <= n_points; ++k) {
+    const fs::path d = point_dir(out, static_cast<int>(k));
+    if (!fs::exists(d, ec)) continue;
+    if (!fs::is_directory(d, ec) || !fs::is_empty(d, ec))
+      return d.string() + " holds something that is not an earlier sweep's point; move it or choose another --out";
+  }
+  return "";
 }
 
 // sweep.csv over every point's point.json and metrics.json; returns how many points lack a
@@ -408,12 +417,7 @@ void check_points(const SweepSpec& s, const std::string& path) {
 SweepSpec load_sweep_tree(const std::string& path) {
   SweepSpec s;
   s.file = path;
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw ScenarioError(path, e.mark.line + 1, "", e.msg);
-  }
+  const YAML::Node root = load_yaml_file(path);
   if (!root.IsMap()) throw ScenarioError(path, 0, "", "expected a mapping at the top level");
   only_keys(s, root, {"name", "scenario", "grid", "random", "metrics", "plot"}, "");
   s.name = root["name"].IsDefined() ? root["name"].as<std::string>() : fs::path(path).stem().string();
@@ -476,7 +480,7 @@ int cmd_sweep(const std::string& spec_path, const SweepOptions& opt) {
   }
   std::cout << fmt::format("sweep {}: {} points of {} ({})\n", s.name, s.points.size(), s.scenario,
                            opt.slurm ? "Slurm job array" : "local");
-  if (const std::string e = clear_points(out); !e.empty()) {
+  if (const std::string e = clear_points(out, s.points.size()); !e.empty()) {
     std::cerr << "omnitwin sweep: " << e << "\n";
     return 2;
   }

@@ -250,6 +250,17 @@ TEST_F(ProgramsCli, AStatsFileThatCannotBeWrittenIsExit3WithoutAStrayTempFile) {
   EXPECT_FALSE(fs::exists(dir.string() + ".tmp"));
 }
 
+// Found by a walkthrough: on the wall clock with no drives on the bus, the CANopen master's
+// start-up failed after its timeout, and the program ran on until killed. It now ends the run
+// (exit 3) once its core has failed.
+TEST_F(ProgramsCli, AFailedStartUpEndsAWallClockRun) {
+  const Result r = run("omni-master", {"--bus", "canopen", "--config", data("canopen/drives_only.yaml"), "--iface",
+                                       "udp:239.74.163.9:48322"},
+                       20s);
+  EXPECT_EQ(r.code, 3) << r.err;
+  EXPECT_TRUE(contains(r.err, "the master failed: ending the run")) << r.err;
+}
+
 // Found in review: --script switched any --bus to EtherCAT, and a directory ran as an empty script.
 TEST_F(ProgramsCli, ScriptNeedsTheEthercatBusAndAFile) {
   expect_usage(run("omni-master", {"--bus", "canopen", "--config", data("canopen/drives_only.yaml"), "--iface",

@@ -876,7 +876,8 @@ TEST(OmniCanNetwork, MetricsJsonHasTheDocumentedKeysWithConsistentValues) {
     const omni::OmniSlaveStats& st = r.net->slave(i).stats();
     SCOPED_TRACE(i);
     for (const char* key : {"node", "state", "samples", "dropouts", "dropout_percent", "first_dropout_sample",
-                            "resyncs", "commands", "stale_samples", "frames_received", "frames_sent", "bad_frames",
+                            "resyncs", "commands", "commands_overwritten", "parameters_refused", "stale_samples",
+                            "frames_received", "frames_sent", "bad_frames",
                             "fifo_overruns", "can_state", "tec", "tx_errors", "bus_off_events"})
       EXPECT_TRUE(j.contains(key)) << key;
     EXPECT_EQ(j["node"].get<int>(), omni::slave_of_axis(i + 1));
@@ -884,6 +885,8 @@ TEST(OmniCanNetwork, MetricsJsonHasTheDocumentedKeysWithConsistentValues) {
     EXPECT_EQ(st.steps(), r.samples[static_cast<std::size_t>(i)].size());  // one axis sample per step
     EXPECT_EQ(j["samples"].get<std::uint64_t>(), st.samples);
     EXPECT_EQ(j["stale_samples"].get<std::uint64_t>(), st.stale_samples);
+    EXPECT_EQ(j["commands_overwritten"].get<std::uint64_t>(), st.commands_overwritten);
+    EXPECT_EQ(j["parameters_refused"].get<std::uint64_t>(), st.parameters_refused);
     EXPECT_EQ(j["dropouts"].get<std::uint64_t>(), st.dropouts);
     EXPECT_DOUBLE_EQ(j["dropout_percent"].get<double>(), st.dropout_percent());
     EXPECT_EQ(j["first_dropout_sample"].get<std::int64_t>(), st.first_dropout_sample);

@@ -124,10 +124,16 @@ TEST(DdsEcho, PlatformStateJsonCarriesTheExactValues) {
   EXPECT_LT(lines[0]["seq"].get<std::uint64_t>(), lines[4]["seq"].get<std::uint64_t>());
 }
 
+// ... and says why on stderr (it exited 1 without a word; found by a walkthrough).
 TEST(DdsEcho, TimeoutWithNoSampleReturnsOne) {
+  std::ostringstream err;
+  std::streambuf* const old = std::cerr.rdbuf(err.rdbuf());
   EchoThread echo(echo_options("odom", 0, 0.3));
-  EXPECT_EQ(echo.result.get(), kEchoTimeout);
+  const int code = echo.result.get();
+  std::cerr.rdbuf(old);
+  EXPECT_EQ(code, kEchoTimeout);
   EXPECT_EQ(echo.out.str(), "");
+  EXPECT_EQ(err.str(), "omnitwin echo: no sample within 0.3 s\n");
 }
 
 TEST(DdsEcho, TimeoutBeforeCountReturnsOneAndAQuietStreamReturnsZero) {

@@ -12,6 +12,8 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
@@ -64,6 +66,45 @@ TEST(Experiment, RegistryListsEveryExperimentAndRejectsUnknownNames) {
   omnitwin::testing::TempDir dir("omnitwin-exp");
   EXPECT_EQ(run_experiment("no-such-experiment", {dir.path().string(), true}), kExperimentUnknown);
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));  // nothing written for an unknown name
+}
+
+// Found by a walkthrough: --set was refused where it has no use, but --model and --budget were
+// dropped without a word. Each is bad input (exit 2) for an experiment that does not take it,
+// before anything is written.
+TEST(Experiment, AnOptionTheExperimentDoesNotTakeIsBadInput) {
+  omnitwin::testing::TempDir dir("omnitwin-exp");
+  ExperimentOptions model((dir.path() / "m").string(), true);
+  model.model = "models/scenarios/thesis_line.yaml";
+  EXPECT_EQ(run_experiment("m3-cycle", model), kExperimentUnknown);
+  ExperimentOptions budget((dir.path() / "b").string(), true);
+  budget.budget = 20;
+  EXPECT_EQ(run_experiment("can-timing", budget), kExperimentUnknown);
+  EXPECT_EQ(run_experiment("thesis-platform", budget), kExperimentUnknown);
+  ExperimentOptions sets((dir.path() / "s").string(), true);
+  sets.sets = {{"bus.drift", "0"}};
+  EXPECT_EQ(run_experiment("can-dropout", sets), kExperimentUnknown);
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+}
+
+// Found by a walkthrough: an experiment wrote its files among a run's records, and a rerun
+// left an earlier, longer one's run folders under runs/ beside its own. A run directory is
+// refused as --out; run folders (those holding a run's marker) under runs/ are removed first,
+// anything else there is kept.
+TEST(Experiment, ARunDirectoryIsRefusedAndEarlierRunsAreCleared) {
+  omnitwin::testing::TempDir dir("omnitwin-exp");
+  const std::filesystem::path run = dir.path() / "a-run";
+  std::filesystem::create_directories(run);
+  std::ofstream(run / ".omnitwin-run") << "1\n";
+  EXPECT_EQ(run_experiment("can-timing", {run.string(), true}), kExperimentUnknown);
+  EXPECT_FALSE(std::filesystem::exists(run / "can_timing.csv"));
+  const std::filesystem::path out = dir.path() / "exp";
+  std::filesystem::create_directories(out / "runs" / "old" / "sub");
+  std::ofstream(out / "runs" / "old" / ".omnitwin-run") << "1\n";
+  std::ofstream(out / "runs" / "notes.txt") << "mine\n";
+  EXPECT_EQ(run_experiment("can-timing", {out.string(), true}), kExperimentOk);
+  EXPECT_FALSE(std::filesystem::exists(out / "runs" / "old")) << "an earlier run folder stayed";
+  EXPECT_TRUE(std::filesystem::exists(out / "runs" / "notes.txt"));
+  EXPECT_TRUE(std::filesystem::exists(out / "can_timing.csv"));
 }
 
 // Found in review: write_text rewrote a file in place, so an interrupt or a full disk left

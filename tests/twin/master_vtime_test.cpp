@@ -95,13 +95,6 @@ TEST(VtimeCodec, RejectsWhatItCannotReencode) {
   EXPECT_FALSE(vt::decode(b.data(), b.size()));
 }
 
-TEST(VtimeCommand, SplitsAsAShellWould) {
-  EXPECT_EQ(split_command("a b  'c d' \"e \\\"f\\\"\" g\\ h"),
-            (std::vector<std::string>{"a", "b", "c d", "e \"f\"", "g h"}));
-  EXPECT_THROW(split_command("a 'b"), std::invalid_argument);
-  EXPECT_TRUE(split_command("   ").empty());
-}
-
 TEST(VtimeCommand, KnowsWhatThePreloadCannotReach) {
   EXPECT_EQ(preload_obstacle(OMNITWIN_BINARY_DIR "/tests/vt_probe"), "");
   EXPECT_TRUE(preload_obstacle(OMNITWIN_BINARY_DIR "/tests/vt_probe_static").starts_with("statically linked"));

@@ -345,6 +345,24 @@ TEST(ScenarioErrors, ARunLongerThanElevenDaysIsATypoNotASoak) {
   EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"duration", "3600"}}));  // an hour's soak
 }
 
+// Found by a walkthrough: a master program that is not there ran the scenario's set-up and
+// failed with exit 3 and advice about the virtual clock. It is bad input, named at load.
+TEST(ScenarioErrors, AMasterProgramThatIsNotThereIsNamedAtLoad) {
+  for (const std::string& prog : {std::string("/nonexistent/prog"), std::string("no-such-master-program-anywhere")}) {
+    const auto e = load_error(scenario("minimal.yaml"), {{"bus", "can"}, {"master.command", prog + " {iface}"}});
+    EXPECT_EQ(e.key(), "master.command") << e.what();
+    EXPECT_NE(std::string(e.what()).find(prog + ": "), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(load_scenario(scenario("minimal.yaml"), {{"bus", "can"}, {"master.command", "true {iface}"}}));
+}
+
+// Found by the bad-input round: `--set settle=1e400` said "expected a number, got '1e400'".
+TEST(ScenarioErrors, ANumberTooLargeForADoubleIsSaidSo) {
+  const auto e = load_error(scenario("minimal.yaml"), {{"settle", "1e400"}});
+  expect_error(e, "--set", 0, "settle");
+  EXPECT_NE(std::string(e.what()).find("'1e400' is too large to be a number"), std::string::npos) << e.what();
+}
+
 // Found in review: controller.period 0.00005 loaded, the run directory was written and the
 // master then refused its master.yaml (period in [0.0001, 1]): the loader now refuses what the
 // master programs refuse, with their bounds, before anything runs.

@@ -225,6 +225,21 @@ TEST_F(Sweep, ABadValueAnywhereInTheGridStopsTheSweepBeforeItRuns) {
   EXPECT_FALSE(fs::exists(out / "points")) << "a point ran";
 }
 
+// Found by the bad-input round: a point folder holding a user's file ran the points before it
+// and then failed that point's run with exit 3. It is refused before anything runs.
+TEST_F(Sweep, APointFolderHoldingSomethingElseIsRefusedBeforeAnythingRuns) {
+  const fs::path spec = write_spec(dir_ / "busy", "s.yaml",
+                                   "scenario: line.yaml\ngrid: {settle: [0.5, 0.6]}\nmetrics: [platform.final_error_cm]\n");
+  const fs::path out = dir_ / "busy-out";
+  fs::create_directories(out / "points" / "0002");
+  std::ofstream(out / "points" / "0002" / "notes.txt") << "mine\n";
+  const Finished f = run({"sweep", spec.string(), "--out", out.string()});
+  EXPECT_EQ(f.code, 2) << f.out << f.err;
+  EXPECT_TRUE(contains(f.err, "0002 holds something that is not an earlier sweep's point")) << f.err;
+  EXPECT_FALSE(fs::exists(out / "points" / "0001")) << "a point ran";
+  EXPECT_TRUE(fs::exists(out / "points" / "0002" / "notes.txt")) << "the user's file is gone";
+}
+
 // A random real keeps every digit it was drawn with and stays in [min, max]; whole-number
 // bounds draw whole numbers. The draws were printed with 6 digits: two of three equal and
 // one below min in this range (found in review).

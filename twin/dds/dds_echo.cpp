@@ -6,9 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <iostream>
 #include <stdexcept>
 #include <vector>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "twin/dds/dds_messages.hpp"
@@ -176,10 +178,12 @@ class Subscription {
 Subscription::Subscription(dds_entity_t participant, const std::vector<TopicInfo>& topics)
     : waitset_(dds_create_waitset(participant)) {
   if (waitset_.get() < 0) throw_dds("create_waitset", waitset_.release());
-  // Up to 1024 unread states per reader: a lockstep run publishes faster than real time
-  // (about a state per wall millisecond on the thesis line), and an echo that a loaded
-  // machine leaves unscheduled for tens of milliseconds must not lose them to a shallow cache.
-  const DdsQos state = state_qos(1024), events = event_qos(kEventHistory);
+  // Up to 65536 unread states per reader (memory only for what is unread): a lockstep run
+  // publishes faster than real time (about a state per wall millisecond on the thesis line),
+  // and an echo that a loaded machine leaves unscheduled must not lose them to a shallow
+  // cache. At 1024 a machine at load 5 on 2 cores dropped the first 1177 states of the thesis
+  // line, the reader keeping only the newest 1024 (found by a walkthrough).
+  const DdsQos state = state_qos(65536), events = event_qos(kEventHistory);
   for (const TopicInfo& t : topics) {
     const bool is_events = t.short_name == "events";
     const dds_entity_t topic = create_topic(participant, t);
@@ -241,7 +245,13 @@ int run_echo(const EchoOptions& o, std::ostream& out, const std::atomic<bool>* s
     dds_duration_t slice = kSlice;
     if (o.timeout_s > 0) {
       const auto left = timeout - (Clock::now() - last);
-      if (left.count() <= 0) return (o.count == 0 && printed > 0) ? kEchoOk : kEchoTimeout;
+      if (left.count() <= 0) {
+        if (o.count == 0 && printed > 0) return kEchoOk;
+        // Say why the exit is 1 (it said nothing; found by a walkthrough).
+        if (printed == 0) std::cerr << fmt::format("omnitwin echo: no sample within {:g} s\n", o.timeout_s);
+        else std::cerr << fmt::format("omnitwin echo: {} of {} samples, then none within {:g} s\n", printed, o.count, o.timeout_s);
+        return kEchoTimeout;
+      }
       slice = std::min<dds_duration_t>(slice, static_cast<dds_duration_t>(left.count() * 1e9) + 1);
     }
     const std::uint64_t got = sub.wait_and_print(slice, o.count ? o.count - printed : 0, o.json, out);

@@ -151,11 +151,15 @@ TEST(CoEds, ShippedFileIdentity) {
   EXPECT_EQ(id->entry(3)->default_value->number, d.device_info.revision_number);
   // Communication objects the brief asks for.
   for (std::uint16_t i : {0x1003, 0x1005, 0x1006, 0x1007, 0x1008, 0x1009, 0x100A, 0x100C, 0x100D, 0x1012, 0x1014,
-                          0x1015, 0x1016, 0x1017, 0x1019, 0x1200, 0x1400, 0x1403, 0x1600, 0x1603, 0x1800, 0x1803,
+                          0x1015, 0x1016, 0x1017, 0x1019, 0x1029, 0x1200, 0x1400, 0x1403, 0x1600, 0x1603, 0x1800, 0x1803,
                           0x1A00, 0x1A03})
     EXPECT_NE(d.object(i), nullptr) << std::hex << i;
   EXPECT_EQ(d.object(0x1003)->entries.size(), 9u);  // sub 0 + 8 error fields
   EXPECT_EQ(d.object(0x1016)->entries.size(), 2u);
+  // Error behaviour, which the node reads on a communication error (found by a walkthrough:
+  // the doc listed it, the EDS lacked it, an SDO upload got abort 0x06020000).
+  ASSERT_NE(d.object(0x1029), nullptr);
+  EXPECT_EQ(d.object(0x1029)->entries.size(), 2u);
 }
 
 // One field of drive::Objects: where it lives in the dictionary and its default there.
