@@ -68,6 +68,11 @@ EmcyProducer::Pending* EmcyProducer::find_active(std::uint16_t code) {
   return it == end ? nullptr : it;
 }
 
+bool EmcyProducer::active(std::uint16_t code) const {
+  const Pending* end = active_.begin() + active_n_;
+  return std::find_if(active_.begin(), end, [code](const Pending& p) { return p.code == code; }) != end;
+}
+
 bool EmcyProducer::raise(std::uint16_t code, SimTime now, const SendFn& send, std::array<std::uint8_t, 5> mfr) {
   if (find_active(code)) return true;
   if (active_n_ < kActive) active_[static_cast<std::size_t>(active_n_++)] = {code, 0, mfr};

@@ -66,6 +66,8 @@ class EmcyProducer {
 
   std::uint8_t error_register() const;
   int active_count() const { return active_n_; }
+  // Whether error `code` is active (raised, not cleared). Real-time safe.
+  bool active(std::uint16_t code) const;
   std::uint64_t sent() const { return sent_; }
   std::uint64_t dropped() const { return dropped_; }
 

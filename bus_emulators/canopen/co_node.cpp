@@ -58,9 +58,11 @@ bool Node::send(const can::Frame& f, SimTime t) {
 
 void Node::pdo_error(void* ctx, std::uint16_t code, SimTime now) {
   auto* n = static_cast<Node*>(ctx);
-  // Length errors are events, not lasting conditions: signalled, then cleared.
+  // A length error is a condition: signalled once when it begins and cleared by the next RPDO
+  // of the right length (as CANopenNode does). Raised and cleared per frame, a mis-sized RPDO
+  // at 1 kHz put two EMCYs per frame on the bus and flushed 0x1003 (found by a protocol review).
+  if (n->emcy_.active(code)) return;
   n->emcy_.raise(code, now, n->send_counted_);
-  n->emcy_.clear(code, now, n->send_counted_);
   ++n->stats_.emcy;
 }
 
@@ -169,12 +171,13 @@ void Node::on_frame(const can::Frame& f, SimTime now) {
   const auto overflow = static_cast<std::uint8_t>(sync_overflow_ ? sync_overflow_->as_int() : 0);
   switch (decode_sync(f, sync_id, overflow, counter)) {
     case SyncDecode::ok:
+      emcy_.clear(0x8240, now, send_counted_);  // the condition ends with a SYNC of the right length
       on_sync(counter, now);
       return;
     case SyncDecode::bad_length:
       ++stats_.sync_length_errors;
-      emcy_.raise(0x8240, now, send_counted_);  // unexpected SYNC data length
-      emcy_.clear(0x8240, now, send_counted_);
+      // Unexpected SYNC data length: signalled once while it lasts (see pdo_error).
+      if (!emcy_.active(0x8240)) emcy_.raise(0x8240, now, send_counted_);
       return;
     case SyncDecode::not_sync:
       break;
@@ -188,7 +191,10 @@ void Node::on_frame(const can::Frame& f, SimTime now) {
       return;
     }
   }
-  pdo_.on_frame(f, now, nmt_.state(), send_counted_);
+  if (pdo_.on_frame(f, now, nmt_.state(), send_counted_) == RpdoStatus::applied) {
+    emcy_.clear(0x8210, now, send_counted_);  // a length error ends with a frame of the right length
+    emcy_.clear(0x8220, now, send_counted_);
+  }
 }
 
 void Node::on_sync(std::uint8_t counter, SimTime now) {

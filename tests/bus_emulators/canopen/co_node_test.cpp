@@ -160,15 +160,45 @@ TEST_F(NodeTest, ConsumesTimeStamps) {
   EXPECT_EQ(node->last_time_at(), 5 * kMs);
 }
 
-TEST_F(NodeTest, WrongSyncLengthIsSignalled) {
+// A wrong SYNC length is a condition: one EMCY 0x8240 when it begins, nothing for the next
+// bad SYNC, the reset EMCY with the first SYNC of the right length (it was the error and its
+// end for every frame; found by a protocol review).
+TEST_F(NodeTest, WrongSyncLengthIsSignalledOnceUntilItEnds) {
   nmt(0x01);
   take();
   node->on_frame(can::make_data(0x80, {3}), kMs);  // no counter configured
-  const auto f = take();
-  ASSERT_EQ(f.size(), 2u);  // the error and its end
+  auto f = take();
+  ASSERT_EQ(f.size(), 1u);
+  EXPECT_EQ(f[0].id, 0x85u);
   EXPECT_EQ(f[0].data[0], 0x40);
   EXPECT_EQ(f[0].data[1], 0x82);
-  EXPECT_EQ(node->stats().sync_length_errors, 1u);
+  node->on_frame(can::make_data(0x80, {4}), 2 * kMs);
+  EXPECT_TRUE(take().empty()) << "the condition is still on: no second EMCY";
+  EXPECT_EQ(node->stats().sync_length_errors, 2u);
+  node->on_frame(can::make_data(0x80, {}), 3 * kMs);
+  f = take();
+  ASSERT_FALSE(f.empty());
+  EXPECT_EQ(f[0].id, 0x85u);
+  EXPECT_EQ(f[0].data[0], 0x00) << "error reset";
+  EXPECT_EQ(f[0].data[1], 0x00);
+}
+
+// A mis-sized RPDO likewise: one EMCY 0x8210 for a run of short frames, the reset EMCY with
+// the first frame of the right length.
+TEST_F(NodeTest, AMisSizedRpdoIsSignalledOnceUntilOneOfTheRightLength) {
+  nmt(0x01);
+  take();
+  for (int k = 1; k <= 100; ++k) node->on_frame(can::make_data(0x305, {0x34}), k * kMs);
+  auto f = take();
+  ASSERT_EQ(f.size(), 1u) << "one EMCY for 100 short frames";
+  EXPECT_EQ(f[0].id, 0x85u);
+  EXPECT_EQ(f[0].data[0], 0x10);
+  EXPECT_EQ(f[0].data[1], 0x82);
+  node->on_frame(can::make_data(0x305, {0x34, 0x12}), 101 * kMs);
+  f = take();
+  ASSERT_EQ(f.size(), 1u);
+  EXPECT_EQ(f[0].data[0], 0x00) << "error reset";
+  EXPECT_EQ(od.entry(0x2000, 0)->as_int(), 0x1234);
 }
 
 TEST_F(NodeTest, ProducesSyncWhenTheGenBitIsSet) {
