@@ -73,6 +73,7 @@ bool power_stage_on(State s) noexcept {
 
 void Fsa::reset() noexcept {
   state_ = State::not_ready_to_switch_on;
+  unpowered_fault_ = false;
   prev_reset_bit_ = true;
   n_last_ = 0;
 }
@@ -97,7 +98,7 @@ std::uint8_t Fsa::step(std::uint16_t controlword, const FsaEvents& ev, std::int1
     // Only these chain within one period: 3+4 (switch on + enable operation), 11+12 (quick
     // stop option 0), 13+14 (fault reaction option 0).
     const bool chain = (t == 3 && cmd == FsaCommand::enable_operation) ||
-                       (t == 11 && qs_option == 0) || (t == 13 && fr_option == 0);
+                       (t == 11 && qs_option == 0) || (t == 13 && (fr_option == 0 || unpowered_fault_));
     if (!chain) break;
   }
   return last;
@@ -107,6 +108,10 @@ std::uint8_t Fsa::apply(FsaCommand cmd, bool reset_edge, const FsaEvents& ev,
                         std::int16_t qs_option, std::int16_t fr_option) noexcept {
   if (ev.fault && state_ != State::fault && state_ != State::fault_reaction_active &&
       state_ != State::not_ready_to_switch_on) {
+    // With the power stage off there is no motion to stop: the reaction is complete at once
+    // (13 and 14 in one period), so the power stage is never switched on for a reaction (a
+    // fault in SWITCHED ON released the brake for a period; found by a protocol review).
+    unpowered_fault_ = !power_stage_on(state_);
     state_ = State::fault_reaction_active;
     return 13;
   }
@@ -156,7 +161,11 @@ std::uint8_t Fsa::apply(FsaCommand cmd, bool reset_edge, const FsaEvents& ev,
       return kNoTransition;
     }
     case State::fault_reaction_active:
-      if (fr_option == 0 || ev.stop_finished) { state_ = State::fault; return 14; }
+      if (fr_option == 0 || ev.stop_finished || unpowered_fault_) {
+        state_ = State::fault;
+        unpowered_fault_ = false;
+        return 14;
+      }
       return kNoTransition;
     case State::fault:
       if (reset_edge) { state_ = State::switch_on_disabled; return 15; }

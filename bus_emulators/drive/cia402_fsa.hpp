@@ -122,6 +122,7 @@ class Fsa {
   std::uint8_t apply(FsaCommand cmd, bool reset_edge, const FsaEvents& ev, std::int16_t qs_option,
                      std::int16_t fr_option) noexcept;
   State state_ = State::not_ready_to_switch_on;
+  bool unpowered_fault_ = false;  // transition 13 came from a state with the power stage off
   bool prev_reset_bit_ = true;  // a controlword with bit 7 already set at power-on is no edge
   std::uint8_t last_[3] = {255, 255, 255};
   int n_last_ = 0;

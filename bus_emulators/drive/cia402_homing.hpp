@@ -23,7 +23,10 @@
 //   attained    Legal: start.
 //   error       a limit switch hit that the method does not use, a search longer than
 //               max_search_counts, unknown method. Decelerates, then stands. Legal: start.
-// Every phase honours `abort` (start bit cleared or halt): decelerate to standstill → idle.
+// Every phase honours `abort`: decelerate to standstill → idle. The drive (cia402_drive) aborts
+// on halt only, not on controlword bit 4 falling, which CiA 402 also makes an abort: seed 004's
+// master clears bit 4 as soon as the drive has answered, so its homing would never run (a
+// deliberate departure; a master that aborts by dropping bit 4 must use halt here).
 // Edges are latched exactly (a touch-probe model): the drive hands in the position where an
 // input changed; index pulses lie at index_offset + k·counts_per_rev.
 #pragma once

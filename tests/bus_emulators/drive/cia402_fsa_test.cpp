@@ -139,6 +139,22 @@ TEST(Cia402Fsa, QuickStopOptionsDecideTransition12Or16) {
   EXPECT_EQ(transitions(c), (std::vector<int>{11, 12}));
 }
 
+// A fault with the power stage off (here SWITCHED ON) has no motion to stop: 13 and 14 in the
+// same period, so no period runs in FAULT REACTION ACTIVE, whose power stage is on (found by
+// a protocol review: a watchdog fault of a disabled drive released its brake for a period).
+TEST(Cia402Fsa, AFaultWithThePowerStageOffGoesToFaultAtOnce) {
+  for (const State from : {State::switch_on_disabled, State::ready_to_switch_on, State::switched_on}) {
+    Fsa f;
+    f.step(0, {}, 2, 2);
+    f.force(from);
+    FsaEvents err;
+    err.fault = true;
+    EXPECT_EQ(f.step(cw::kSwitchOn, err, 2, 2), 14) << static_cast<int>(from);
+    EXPECT_EQ(transitions(f), (std::vector<int>{13, 14}));
+    EXPECT_EQ(f.state(), State::fault);
+  }
+}
+
 TEST(Cia402Fsa, FaultReactionThenFaultThenResetOnRisingEdge) {
   Fsa f;
   f.step(0, {}, 2, 2);
