@@ -104,7 +104,10 @@ AlDecision al_decide(AlState current, bool error, std::uint16_t control) noexcep
     d.transition = AlTransition::ignored;
     return d;
   }
-  d.clear_error = error && ack;
+  // A request for INIT acknowledges the error too (Beckhoff's slave stack: "Error Acknowledge
+  // with 0xX1 is allowed"), so a master that writes 0x0001 finds INIT without the flag, as on
+  // real slaves (it kept the flag and the old code; found by a protocol review).
+  d.clear_error = error && (ack || req == static_cast<std::uint8_t>(AlState::init));
   if (!al_state_valid(req)) {
     d.transition = AlTransition::unknown_state;
     return d;

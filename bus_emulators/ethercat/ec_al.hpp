@@ -16,8 +16,9 @@
 // state change; a requested value outside {1, 2, 3, 4, 8} with 0x0012 unknown state. A refused
 // request sets the error flag (AL status bit 4) and the state stays.
 // While the error flag is set, a request without the acknowledge bit (0x0120 bit 4) is ignored,
-// except a request for INIT (always performed, the error flag stays until acknowledged). With the
-// acknowledge bit the flag and the code are cleared and the request is then evaluated.
+// except a request for INIT, which acknowledges the error as the bit does (the slave stack's
+// "error acknowledge with 0xX1 is allowed"). With either, the flag and the code are cleared and
+// the request is then evaluated.
 #pragma once
 
 #include <cstdint>

@@ -174,7 +174,9 @@ void CoeServer::upload_initiate(std::uint16_t index, std::uint8_t sub, bool ca, 
   std::size_t len = 0;
   SdoAbort a = ca ? od_.read_complete(index, sub, s, scratch_, len) : od_.read(index, sub, s, scratch_, len);
   if (a != SdoAbort::none) return abort(index, sub, a);
-  if (len <= 4 && !ca) {
+  // Expedited carries 1-4 bytes; an empty value goes the normal way with size 0 (0x43 with
+  // 4 - 0 in the size bits made 0x53: the complete-access bit; found by a protocol review).
+  if (len >= 1 && len <= 4 && !ca) {
     std::uint8_t* p = begin_reply(kCoeHeader + kSdoHeader, MailboxType::coe);
     if (!p) return;
     put_u16(p, static_cast<std::uint16_t>(coe::svc_sdo_response << 12));

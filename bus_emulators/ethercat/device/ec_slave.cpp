@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 #include "bus_emulators/ethercat/device/ec_sii.hpp"
 
@@ -411,6 +412,23 @@ AlStatusCode DriveSlave::on_al_request(AlState from, AlState to, SimTime t) {
     const bool in_ok = ib == 0 ? (!i.enabled || i.length == 0)
                                : (i.enabled && i.buffered() && !i.ecat_writes() && i.length == ib);
     if (!in_ok) return refuse(AlStatusCode::invalid_input_config);
+    // A buffered SyncManager takes three buffers of its length: the outputs' three must not run
+    // into the inputs' or a mailbox, nor the inputs' into a mailbox (the slave stack checks
+    // this; here a mapping larger than the gap the ESI leaves was taken into OP and the second
+    // and third output buffers overwrote the inputs; found by a protocol review).
+    const auto area = [&](int k) {  // [start, end) of SyncManager k's memory, 0 length when unused
+      const SyncManager& s = esc_->sm(k);
+      const std::uint32_t n = s.enabled ? (s.buffered() ? 3u : 1u) * s.length : 0u;
+      return std::pair<std::uint32_t, std::uint32_t>{s.start, s.start + n};
+    };
+    const auto clash = [&](int a, int b) {
+      const auto [a0, a1] = area(a);
+      const auto [b0, b1] = area(b);
+      return a1 > a0 && b1 > b0 && a0 < b1 && b0 < a1;
+    };
+    if (clash(sm_out_, sm_in_) || clash(sm_out_, sm_mbx_out_) || clash(sm_out_, sm_mbx_in_))
+      return refuse(AlStatusCode::invalid_output_config);
+    if (clash(sm_in_, sm_mbx_out_) || clash(sm_in_, sm_mbx_in_)) return refuse(AlStatusCode::invalid_input_config);
     if (!build_layout(true, rx_) || !build_layout(false, tx_) || ib > in_image_.size())
       return refuse(AlStatusCode::invalid_output_config);
     if (app_ == SlaveApp::multiaxis) multiaxis_status();

@@ -53,7 +53,7 @@ TEST(EcAl, ErrorNeedsAcknowledgeExceptForInit) {
   EXPECT_EQ(al_decide(AlState::safeop, true, 0x0004).transition, AlTransition::ignored);
   AlDecision d = al_decide(AlState::safeop, true, 0x0001);
   EXPECT_EQ(d.transition, AlTransition::legal);
-  EXPECT_FALSE(d.clear_error);
+  EXPECT_TRUE(d.clear_error) << "INIT acknowledges the error (0xX1 is an acknowledge)";
   d = al_decide(AlState::safeop, true, 0x0014);
   EXPECT_EQ(d.transition, AlTransition::stay);
   EXPECT_TRUE(d.clear_error);

@@ -226,13 +226,15 @@ TEST(EcEsc, AlTransitionsLegalIllegalAndAcknowledge) {
   EXPECT_EQ(app.requests.back(), std::make_pair(AlState::preop, AlState::safeop));
   go(e, AlState::op);
   EXPECT_EQ(u16(aprd(e, reg::kAlStatus, 2)), 0x0008);
-  // An error pending does not block INIT.
+  // An error pending does not block INIT, and INIT acknowledges it (the slave stack's "0xX1").
   e.set_al_error(AlState::safeop, AlStatusCode::synchronization_error);
   EXPECT_EQ(u16(aprd(e, reg::kAlStatus, 2)), 0x0014);
   EXPECT_EQ(u16(aprd(e, reg::kAlStatusCode, 2)), 0x001A);
   go(e, AlState::init);
   EXPECT_EQ(e.al_state(), AlState::init);
-  EXPECT_TRUE(e.al_error());
+  EXPECT_FALSE(e.al_error());
+  EXPECT_EQ(u16(aprd(e, reg::kAlStatus, 2)), 0x0001);
+  EXPECT_EQ(u16(aprd(e, reg::kAlStatusCode, 2)), 0x0000);
 }
 
 TEST(EcEsc, EepromReadsThroughTheInterfaceRegisters) {

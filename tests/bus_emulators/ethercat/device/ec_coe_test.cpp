@@ -121,6 +121,24 @@ class EcCoe : public ::testing::Test {
   std::uint8_t counter = 0;
 };
 
+// An empty value (an octet string of 0 bits) cannot go expedited (1-4 bytes): the normal
+// initiate response, 0x41 with size 0 (it was 0x53, which set the complete-access bit; found
+// by a protocol review).
+TEST_F(EcCoe, AnEmptyValueIsANormalUploadOfSizeZero) {
+  OdObject o;
+  o.index = 0x2202;
+  OdEntry e;
+  e.data_type = coe_type::octet_string;
+  e.bits = 0;
+  e.access = od_access::rw;
+  o.entries.push_back(e);
+  od.add(o);
+  auto r = one(sdo(0x40, 0x2202, 0));
+  EXPECT_EQ(r[8], 0x41) << "normal initiate, size indicated";
+  EXPECT_EQ(get_u16(r.data() + 9), 0x2202);
+  EXPECT_EQ(get_u32(r.data() + 12), 0u);
+}
+
 TEST_F(EcCoe, ExpeditedUploadAndDownload) {
   auto r = one(sdo(0x40, 0x6065, 0));
   EXPECT_EQ(get_u16(r.data()), 10);       // mailbox length

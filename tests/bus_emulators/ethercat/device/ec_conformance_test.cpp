@@ -189,16 +189,19 @@ TEST(EcConformance, EveryAlRequestFromEveryState) {
   }
 }
 
-// With the error flag set, requests without the acknowledge are ignored, except INIT.
-TEST(EcConformance, TheErrorFlagHoldsUntilAcknowledgedButInitIsAlwaysTaken) {
+// With the error flag set, requests without the acknowledge are ignored, except INIT, which
+// acknowledges the error as the bit does (Beckhoff's slave stack; the flag and the old code used
+// to stay, so a master that wrote 0x0001 and then PRE-OP found its request ignored).
+TEST(EcConformance, TheErrorFlagHoldsUntilAcknowledgedOrInit) {
   Segment seg(1);
   ASSERT_TRUE(seg.to_safeop(0));
   EXPECT_EQ(seg.request(0, OP | 0x00), OP);
   EXPECT_EQ(seg.request(0, BOOT), OP | 0x10);  // refused: error flag
   EXPECT_EQ(seg.request(0, SAFEOP), OP | 0x10);  // ignored without the ack
-  EXPECT_EQ(seg.request(0, INIT), INIT | 0x10);  // INIT is taken, the flag stays
   EXPECT_EQ(seg.read16(0, 0x0134), 0x0011);
-  EXPECT_EQ(seg.request(0, INIT | 0x10), INIT);
+  EXPECT_EQ(seg.request(0, INIT), INIT);  // INIT is taken and clears the flag and the code
+  EXPECT_EQ(seg.read16(0, 0x0134), 0x0000);
+  EXPECT_EQ(seg.request(0, PREOP), PREOP) << "no acknowledge needed any more";
 }
 
 // ---- SyncManager checks of the transitions ---------------------------------------------------
@@ -232,7 +235,9 @@ TEST(EcConformance, MailboxSyncManagerChecksOfInitToPreop) {
 }
 
 // PRE-OP → SAFE-OP needs SM2 (buffered, master writes, RxPDO length) → else 0x001D, and SM3
-// (buffered, master reads, TxPDO length) → else 0x001E.
+// (buffered, master reads, TxPDO length) → else 0x001E; a buffered SM takes three buffers of
+// its length, which must not reach another SM (SM2's into SM3 or a mailbox: 0x001D; SM3's into
+// a mailbox: 0x001E; found by a protocol review: SM2's second buffer overwrote the inputs).
 TEST(EcConformance, ProcessDataSyncManagerChecksOfPreopToSafeop) {
   struct Bad {
     const char* what;
@@ -248,6 +253,8 @@ TEST(EcConformance, ProcessDataSyncManagerChecksOfPreopToSafeop) {
       {"SM3 disabled", 0x0818, Segment::sm(0x1180, kIn, 0x20, false), 0x001E},
       {"SM3 wrong length", 0x0818, Segment::sm(0x1180, kIn + 2, 0x20, true), 0x001E},
       {"SM3 write direction", 0x0818, Segment::sm(0x1180, kIn, 0x24, true), 0x001E},
+      {"SM3 inside SM2's three buffers", 0x0818, Segment::sm(0x1100 + 2 * kOut, kIn, 0x20, true), 0x001D},
+      {"SM3's three buffers over a mailbox", 0x0818, Segment::sm(0x1080 - kIn, kIn, 0x20, true), 0x001E},
   };
   for (const Bad& b : bad) {
     SCOPED_TRACE(b.what);
