@@ -226,7 +226,17 @@ void print_summary(const RunResult& r) {
   // that it reports none ("unreported (unreported)" before).
   const auto master_state = [](const nlohmann::json& ms) {
     const auto text = [&ms](const char* k) { return ms.contains(k) && ms[k].is_string() ? ms[k].get<std::string>() : "?"; };
-    if (text("state") != "unreported") return fmt::format("{} ({})", text("state"), text("stop_reason"));
+    // The sim clock's reason is a code (node_missing); the master's own words, when its stats
+    // hold them, say what it saw ("segment lost: 10 consecutive cycles without a valid WKC"
+    // read as node_missing alone; found by a walkthrough).
+    if (text("state") != "unreported") {
+      const std::string own = ms.contains("stats_stop_reason") && ms["stats_stop_reason"].is_string()
+                                  ? ms["stats_stop_reason"].get<std::string>()
+                                  : "";
+      if (!own.empty() && own != text("stop_reason"))
+        return fmt::format("{} ({}: {})", text("state"), text("stop_reason"), own);
+      return fmt::format("{} ({})", text("state"), text("stop_reason"));
+    }
     // Each master names these its own way: state (EtherCAT, M-III) or phase (CANopen, TML);
     // stop_reason (EtherCAT), reason (CANopen) or why (M-III), where empty is none.
     const char* state = ms.contains("stats_state") ? "stats_state" : ms.contains("phase") ? "phase" : nullptr;
