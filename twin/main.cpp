@@ -397,37 +397,41 @@ int cmd_run(const RunArgs& a) {
       return v.rfind("duration=", 0) == 0;
     });
     o.until_stopped = a.external_master && a.duration <= 0 && !duration_set;
+    // How the twin ends, as its ready line says it: a length asked for ends it too (the line
+    // said "Ctrl-C ends" either way; found by a walkthrough).
+    const std::string ends =
+        o.until_stopped ? "Ctrl-C ends" : fmt::format("ends after {:g} s simulated, or Ctrl-C", s.duration);
     if (a.external_master && s.bus.kind == BusKind::ethercat) {
-      o.on_bus_ready = [&s](const std::string& iface) {
-        std::cout << fmt::format("twin {}: EtherCAT segment of 4 drives; a master connects on {} (Ctrl-C ends)\n",
-                                 s.name, iface)
+      o.on_bus_ready = [&s, ends](const std::string& iface) {
+        std::cout << fmt::format("twin {}: EtherCAT segment of 4 drives; a master connects on {} ({})\n",
+                                 s.name, iface, ends)
                   << std::flush;
       };
     } else if (a.external_master && s.bus.kind == BusKind::m3) {
-      o.on_bus_ready = [&s](const std::string& iface) {
+      o.on_bus_ready = [&s, ends](const std::string& iface) {
         std::cout << fmt::format("twin {}: MECHATROLINK-III line of 4 servos (03h-06h, {} µs cycle); a C1 master "
-                                 "connects on {} (Ctrl-C ends)\n",
-                                 s.name, std::llround(s.bus.m3.cycle * 1e6), iface)
+                                 "connects on {} ({})\n",
+                                 s.name, std::llround(s.bus.m3.cycle * 1e6), iface, ends)
                   << std::flush;
       };
     } else if (a.external_master && s.bus.kind == BusKind::canopen) {
-      o.on_bus_ready = [&s](const std::string& iface) {
+      o.on_bus_ready = [&s, ends](const std::string& iface) {
         std::cout << fmt::format("twin {}: CANopen bus of 4 CiA 402 drives (nodes 1-4) on {} at {} bit/s, waiting "
-                                 "for a master (Ctrl-C ends)\n",
-                                 s.name, iface, s.bus.can.bit_rate)
+                                 "for a master ({})\n",
+                                 s.name, iface, s.bus.can.bit_rate, ends)
                   << std::flush;
       };
     } else if (a.external_master && s.bus.kind == BusKind::tml) {
-      o.on_bus_ready = [&s](const std::string& iface) {
+      o.on_bus_ready = [&s, ends](const std::string& iface) {
         std::cout << fmt::format("twin {}: {} bus of 4 IDM drives (axes 1-4) on {} at {} bit/s, waiting for a master "
-                                 "(Ctrl-C ends)\n",
-                                 s.name, s.bus.tml.protocol == "techcan" ? "TechCAN" : "TMLCAN", iface, s.bus.can.bit_rate)
+                                 "({})\n",
+                                 s.name, s.bus.tml.protocol == "techcan" ? "TechCAN" : "TMLCAN", iface, s.bus.can.bit_rate, ends)
                   << std::flush;
       };
     } else if (a.external_master) {
-      o.on_bus_ready = [&s](const std::string& iface) {
-        std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master (Ctrl-C ends)\n", s.name,
-                                 iface, s.bus.can.bit_rate)
+      o.on_bus_ready = [&s, ends](const std::string& iface) {
+        std::cout << fmt::format("twin {}: CAN bus on {} at {} bit/s, waiting for a master ({})\n", s.name,
+                                 iface, s.bus.can.bit_rate, ends)
                   << std::flush;
       };
     } else if (s.clock == ClockMode::realtime && s.bus.kind == BusKind::can) {

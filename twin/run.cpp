@@ -1049,7 +1049,9 @@ nlohmann::json PlatformRun::metrics_json(double wall_s, bool interrupted) const 
                    {"ticks", tick_},
                    {"clock", clock_server_ ? "sim" : vtime_server_ ? "virtual" : "wall"},
                    {"command", master_command_},
-                   {"exit", master_ ? master_->describe_exit() : "not started"},
+                   // `omnitwin twin`: the master is the user's, started by them ("not started"
+                   // read as if it never ran; found by a walkthrough).
+                   {"exit", master_ ? master_->describe_exit() : o_.external_master ? "external" : "not started"},
                    {"exit_code", master_ ? master_->exit_code() : -1},  // 128 + N: killed by signal N
                    {"lost", master_lost_ns_ >= 0},
                    {"lost_at_s", master_lost_ns_ < 0 ? -1.0 : ns_to_seconds(master_lost_ns_)},

@@ -491,8 +491,9 @@ int run_drive(const Options& o) {
   drive.power_on(0);
   std::string more;
   for (const int a : o.drops) more += fmt::format(", {}", a);
-  fmt::print("omni-tml: drive axis {}{} ({}, 8N2 at {} bit/s) on {}{} (Ctrl-C ends)\n", o.axis, more, o.protocol, o.baud,
-             pty.slave_path(), bus ? fmt::format(", relay axis to {} on {}", o.relay_protocol, bus->spec()) : "");
+  fmt::print("omni-tml: drive axis {}{} ({}, 8N2 at {} bit/s) on {}{} ({})\n", o.axis, more, o.protocol, o.baud,
+             pty.slave_path(), bus ? fmt::format(", relay axis to {} on {}", o.relay_protocol, bus->spec()) : "",
+             o.duration < 0 ? std::string("Ctrl-C ends") : fmt::format("ends after {:g} s, or Ctrl-C", o.duration));
   std::fflush(stdout);
   std::int64_t next = t0;
   while (!g_stop && (o.duration < 0 || now_ns() - t0 < static_cast<std::int64_t>(o.duration * 1e9))) {

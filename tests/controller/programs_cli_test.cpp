@@ -342,8 +342,9 @@ TEST_F(ProgramsCli, TmlDriveEndCountsEveryDriveOnTheLineAndTheRelay) {
   const auto start_drive = [this](std::vector<std::string> args, const std::string& tag, std::string& port) {
     args.insert(args.end(), {"--duration", "1.5"});
     auto c = std::make_unique<Child>(binary_path("controller/omni-tml"), args, dir_.path(), dir_.path(), tag);
-    c->wait_for_output("Ctrl-C ends");
+    c->wait_for_output("or Ctrl-C)");  // with --duration: "(ends after 1.5 s, or Ctrl-C)"
     const std::string banner = c->out();
+    EXPECT_TRUE(contains(banner, "(ends after 1.5 s, or Ctrl-C)")) << banner;
     const std::size_t on = banner.find(" on /dev/pts/");
     port = on == std::string::npos ? "" : banner.substr(on + 4, banner.find_first_of(", ", on + 4) - on - 4);
     return c;

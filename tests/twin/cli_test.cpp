@@ -1352,6 +1352,8 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
   // while), and the twin outlives the master's 3 s.
   twin.wait_for_output("waiting for a master");
   ASSERT_TRUE(contains(twin.out(), "waiting for a master")) << twin.out() << twin.err();
+  // A length was asked for: the ready line says so (it said "Ctrl-C ends" either way).
+  EXPECT_TRUE(contains(twin.out(), "(ends after 5 s simulated, or Ctrl-C)")) << twin.out();
   Child master(binary_path("controller/omni-master"),
                {"--iface", spec, "--config", cfg.string(), "--clock", "wall", "--duration", "3"}, work(), io(), "m-");
   EXPECT_EQ(master.wait(20s), 0) << master.err();
@@ -1362,6 +1364,7 @@ TEST_F(CliCan, TwinAloneServesAnExternalMaster) {
   EXPECT_EQ(m.at("clock"), "realtime");
   EXPECT_GT(m.at("platform").at("iae_x_cm").get<double>(), 0.0);
   EXPECT_EQ(m.at("master").at("state"), "unreported");
+  EXPECT_EQ(m.at("master").at("exit"), "external") << "the user's master, not one that never started";
   EXPECT_GT(m.at("bus").at("frames_rx").get<int>(), 100);  // the external master's commands
   for (const auto& sl : m.at("slaves")) EXPECT_GT(sl.at("samples").get<int>(), 50) << sl;
   EXPECT_FALSE(fs::exists(out / "master.log"));  // the twin started no master
