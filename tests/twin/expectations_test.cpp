@@ -92,6 +92,20 @@ TEST(Expectations, FailureSentences) {
   EXPECT_EQ(j["failures"][0], "platform.final_error_cm = 0.73 > max 0.5");
 }
 
+// A master on its own clock reports no stop: its metrics are null, and a bound on one fails
+// saying so (they were 0 and -1, "never stopped", and passed; found by a walkthrough).
+TEST(Expectations, ABoundOnAMetricTheRunDoesNotKnowFails) {
+  nlohmann::json m = sample_metrics();
+  m["master"] = {{"state", "unreported"}, {"stop_reason_code", nullptr}, {"stopped_at_s", nullptr}};
+  const auto r = evaluate_expectations({bound("master.stop_reason_code", std::nullopt, 0.0),
+                                        bound("master.stopped_at_s", std::nullopt, -1.0)},
+                                       m);
+  EXPECT_FALSE(r.passed);
+  ASSERT_EQ(r.failures.size(), 2u);
+  EXPECT_EQ(r.failures[0], "master.stop_reason_code: not known in this run (a master on its own clock reports no "
+                           "state; judge it in lockstep)");
+}
+
 TEST(Expectations, NoExpectationsPass) {
   EXPECT_TRUE(evaluate_expectations({}, nlohmann::json::object()).passed);
 }
