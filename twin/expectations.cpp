@@ -136,8 +136,11 @@ ExpectationResult evaluate_expectations(const std::vector<Expectation>& expectat
       continue;
     }
     if (value->is_null()) {
-      result.failures.push_back(fmt::format(
-          "{}: not known in this run (a master on its own clock reports no state; judge it in lockstep)", e.metric));
+      // Null: the run has no value (no samples; a master that reports no state).
+      const bool master = e.metric.rfind("master.", 0) == 0;
+      result.failures.push_back(fmt::format("{}: not known in this run{}", e.metric,
+                                            master ? " (a master on its own clock reports no state; judge it in lockstep)"
+                                                   : " (null)"));
       continue;
     }
     if (!value->is_number()) {

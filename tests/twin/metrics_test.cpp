@@ -54,7 +54,7 @@ TEST(PoseErrorStats, EmptyIsNullAndFailsItsBounds) {
   const ExpectationResult r = evaluate_expectations({Expectation{.metric = "platform_odometry.max_error_cm", .min = {}, .max = 1e-4}}, metrics);
   EXPECT_FALSE(r.passed);
   ASSERT_EQ(r.failures.size(), 1u);
-  EXPECT_EQ(r.failures[0], "platform_odometry.max_error_cm: not a number (null)");
+  EXPECT_EQ(r.failures[0], "platform_odometry.max_error_cm: not known in this run (null)");
 }
 
 // A NaN error (a master's odometry can report one) makes the worst case NaN for good: the
