@@ -53,10 +53,11 @@ double wrap(double a) {
   return a <= -kPi ? a + 2 * kPi : a;
 }
 
-// Id of a named object, or -1 with the name appended to `missing`.
+// Id of a named object, or -1 with its kind and name ("joint wheel1") appended to `missing`:
+// a wheel's body and joint share a name, so the name alone listed "wheel1, wheel1".
 int require(const mjModel* m, mjtObj type, const std::string& name, std::string& missing) {
   const int id = mj_name2id(m, type, name.c_str());
-  if (id < 0) missing += (missing.empty() ? "" : ", ") + name;
+  if (id < 0) missing += (missing.empty() ? "" : ", ") + std::string(mju_type2Str(type)) + " " + name;
   return id;
 }
 

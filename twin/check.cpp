@@ -46,13 +46,16 @@ int finish_check(const std::vector<JunitCase>& cases, const nlohmann::json& inde
 
 // Why the --junit file cannot be written, found before any scenario runs ("" when it can be
 // tried): a folder in its place, or no folder to hold it. The suite ran whole first, then
-// failed on the rename (found in review).
-std::string junit_problem(const std::string& junit) {
+// failed on the rename (found in review). The --out folder counts as there: check makes it
+// (`--out D --junit D/junit.xml` was refused while D did not exist yet; found by a walkthrough).
+std::string junit_problem(const std::string& junit, const std::string& out_root) {
   if (junit.empty()) return "";
   std::error_code ec;
   if (fs::is_directory(junit, ec)) return "--junit " + junit + " is a folder, not a file";
-  const fs::path parent = fs::absolute(junit, ec).parent_path();
-  if (!fs::is_directory(parent, ec)) return "--junit " + junit + ": no such folder " + parent.string();
+  const fs::path parent = fs::absolute(junit, ec).parent_path().lexically_normal();
+  const bool made_by_check = !out_root.empty() && fs::absolute(out_root, ec).lexically_normal() == parent;
+  if (!made_by_check && !fs::is_directory(parent, ec))
+    return "--junit " + junit + ": no such folder " + parent.string();
   return "";
 }
 
@@ -329,7 +332,7 @@ bool parse_shard(const std::string& text, int& k, int& n) {
 }
 
 int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
-  if (const std::string e = junit_problem(opt.junit); !e.empty()) {
+  if (const std::string e = junit_problem(opt.junit, opt.out_root); !e.empty()) {
     std::cerr << "omnitwin check: " << e << "\n";
     return 2;
   }
@@ -358,7 +361,7 @@ int cmd_check(const std::vector<std::string>& paths, const CheckOptions& opt) {
 
 
 int cmd_check_merge(const std::vector<std::string>& dirs, const CheckOptions& opt) {
-  if (const std::string e = junit_problem(opt.junit); !e.empty()) {
+  if (const std::string e = junit_problem(opt.junit, opt.out_root); !e.empty()) {
     std::cerr << "omnitwin check --merge: " << e << "\n";
     return 2;
   }

@@ -419,8 +419,23 @@ TEST_F(PlatformSimTest, FromFileNamesWhatBreaksTheNamingContract) {
     FAIL() << "no exception";
   } catch (const std::runtime_error& e) {
     const std::string what = e.what();
-    EXPECT_NE(what.find("motor3"), std::string::npos) << what;
+    EXPECT_NE(what.find("missing: [actuator motor3]"), std::string::npos) << what;
     EXPECT_NE(what.find("wheel2"), std::string::npos) << what;
+  }
+}
+
+// A wheel's body and joint share a name: a missing pair is told apart by its kind.
+TEST_F(PlatformSimTest, FromFileNamesTheKindOfEachMissingObject) {
+  const omnitwin::testing::TempDir dir("omnitwin-physics");
+  const std::string path = dir / "omni4_bare.xml";
+  std::ofstream(path) << "<mujoco><worldbody><body name=\"chassis\"><freejoint name=\"root\"/>"
+                         "<geom size=\"0.1\" mass=\"1\"/></body></worldbody></mujoco>\n";
+  try {
+    PlatformSim::from_file(path, PlatformParams{});
+    FAIL() << "no exception";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("body wheel1, joint wheel1, actuator motor1"), std::string::npos) << what;
   }
 }
 

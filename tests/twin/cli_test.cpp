@@ -409,6 +409,17 @@ TEST_F(CliCheck, AJunitPathThatCannotBeAFileIsRefusedBeforeTheSuiteRuns) {
   EXPECT_TRUE(contains(f.err, "is a folder, not a file")) << f.err;
 }
 
+// --junit inside the --out folder that check makes was refused while that folder did not exist
+// yet (found by a walkthrough).
+TEST_F(CliCheck, AJunitFileInTheOutFolderItMakesIsFine) {
+  const fs::path scenarios = scenario_dir(dir_, "scenarios", {"run_short_line.yaml"});
+  const fs::path out = dir_ / "fresh-out";
+  const Finished f = run({"check", scenarios.string(), "--no-report", "--out", out.string(), "--junit",
+                          (out / "junit.xml").string()});
+  EXPECT_LE(f.code, 1) << f.out << f.err;
+  EXPECT_TRUE(fs::exists(out / "junit.xml")) << f.out << f.err;
+}
+
 // A bad scenario file and a run that could not finish in one suite: exit 3 (no verdict, the
 // machinery failed), not 2 — a script keying on 3 missed the runtime failure (found in review).
 TEST_F(CliCheck, ARuntimeFailureOutranksBadInputInTheExitCode) {
