@@ -69,8 +69,7 @@ EmcyProducer::Pending* EmcyProducer::find_active(std::uint16_t code) {
 }
 
 bool EmcyProducer::active(std::uint16_t code) const {
-  const Pending* end = active_.begin() + active_n_;
-  return std::find_if(active_.begin(), end, [code](const Pending& p) { return p.code == code; }) != end;
+  return const_cast<EmcyProducer*>(this)->find_active(code) != nullptr;  // a lookup; nothing changes
 }
 
 bool EmcyProducer::raise(std::uint16_t code, SimTime now, const SendFn& send, std::array<std::uint8_t, 5> mfr) {

@@ -54,6 +54,11 @@ bool is_subcommand(Command c) noexcept {
   }
 }
 
+bool common_format(Command c) noexcept {
+  return c == Command::id_rd || c == Command::config || c == Command::alm_rd || c == Command::alm_clr ||
+         c == Command::mem_rd || c == Command::mem_wr;
+}
+
 bool combines(Command main, Command sub) noexcept {
   if (sub == Command::nop) return true;
   if (!is_subcommand(sub)) return false;

@@ -38,6 +38,9 @@ bool is_subcommand(Command) noexcept;
 // other than NOP and ID_RD take only the NOP subcommand; NOP, ID_RD and the servo commands
 // take every subcommand). Real-time safe.
 bool combines(Command main, Command sub) noexcept;
+// The common commands that keep the common format: their fields start at byte 4 and their
+// answers carry no servo status (ID_RD, CONFIG, ALM_RD, ALM_CLR, MEM_RD, MEM_WR). Real-time safe.
+bool common_format(Command c) noexcept;
 
 
 // CMD_STAT.CMD_ALM: how the slave judged the command (profile codes).

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include "bus_emulators/drive/cia402_profile.hpp"
 
 namespace omnitwin::m3 {
 
@@ -14,25 +17,11 @@ using drive::State;
 
 bool faulted(State s) { return s == State::fault || s == State::fault_reaction_active; }
 
-// The common commands keep the common format: their fields start at byte 4, and their
-// responses carry no SVCMD_STAT, SVCMD_IO or monitors.
-bool common_format(Command c) {
-  return c == Command::id_rd || c == Command::config || c == Command::alm_rd || c == Command::alm_clr ||
-         c == Command::mem_rd || c == Command::mem_wr;
-}
-
 // The commands CMD_PAUSE and CMD_CANCEL act on (the profile: those that move by a profile of
 // their own); the others ignore both bits.
 bool stoppable(Command c) {
   return c == Command::posing || c == Command::feed || c == Command::ex_posing || c == Command::zret ||
          c == Command::velctrl;
-}
-
-// v moved towards `target` by at most rate·dt [ref/s]; rate 0: at once.
-double ramp(double v, double target, double rate, double dt) {
-  if (rate <= 0) return target;
-  const double step = rate * dt;
-  return target > v ? std::min(target, v + step) : std::max(target, v - step);
 }
 
 }  // namespace
@@ -463,12 +452,12 @@ drive::Command ServoProfile::step(SimTime t, const drive::Feedback& fb) {
   if (motion_ == Motion::velctrl) {
     // VELCTRL: VREF through ACCR/DECR (0: at once); a pause or a cancel decelerates to 0 at
     // DECR, or at the deceleration parameter (0103h) when DECR is 0.
+    // The drive core's PV ramp; a rate of 0 is a step (infinite rate).
     const bool stop = paused_ || cancelled_;
     const double target = stop ? 0.0 : static_cast<double>(vref_);
-    const bool faster = std::abs(target) > std::abs(vel_ramp_) && (target >= 0) == (vel_ramp_ >= 0);
-    double rate = faster ? vel_acc_ : vel_dec_;
-    if (stop && rate == 0) rate = o.profile_deceleration;
-    vel_ramp_ = ramp(vel_ramp_, target, rate, dt);
+    const auto rate = [](double r) { return r > 0 ? r : std::numeric_limits<double>::infinity(); };
+    const double dec = stop && vel_dec_ == 0 ? rate(o.profile_deceleration) : rate(vel_dec_);
+    vel_ramp_ = drive::ramp_velocity(vel_ramp_, target, rate(vel_acc_), dec, dt);
     o.target_velocity = static_cast<std::int32_t>(std::lround(vel_ramp_));
   }
   o.controlword = controlword();

@@ -37,9 +37,7 @@ std::vector<std::uint8_t> cmd(Command c, std::vector<std::pair<std::size_t, std:
                               std::uint32_t svcmd_ctrl = sel_mon(0x0, 0x5, 0x2)) {
   std::vector<std::uint8_t> f(32, 0);
   write_header(f, CommandHeader{static_cast<std::uint8_t>(c), 0, 0});
-  const bool common = c == Command::id_rd || c == Command::config || c == Command::alm_rd || c == Command::alm_clr ||
-                      c == Command::mem_rd || c == Command::mem_wr || c == Command::connect;
-  if (!common) put_u32(f, kSvcmdCtrl, svcmd_ctrl);
+  if (!common_format(c) && c != Command::connect) put_u32(f, kSvcmdCtrl, svcmd_ctrl);
   for (auto [at, v] : i32) put_i32(f, at, v);
   return f;
 }
